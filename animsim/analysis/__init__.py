@@ -1,0 +1,1 @@
+"""Analyses that read runs: energy, stability, check, compare, references."""

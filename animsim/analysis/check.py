@@ -1,0 +1,70 @@
+"""``animsim check``: validate, analyse and run each scene, report drift and stability.
+
+This is what CI runs over ``scenes/``: exit 0 only if every scene is valid and
+ran stable.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from animsim.errors import AnimsimError
+
+# Below this energy scale (J) a relative drift means nothing; report absolute.
+ENERGY_FLOOR = 1e-12
+
+
+def energy_drift(e0: float, e1: float) -> float:
+    """Relative energy change (e1 - e0)/|e0|, against a floor for scenes near zero energy."""
+    return (e1 - e0) / max(abs(e0), ENERGY_FLOOR)
+
+
+def check_scenes(
+    paths: Sequence[Path],
+    *,
+    quiet: bool = False,
+    echo: Callable[[str], None] = print,
+    echo_err: Callable[[str], None] = print,
+) -> bool:
+    from animsim.compile import compile_scene
+    from animsim.scene.loader import load_scene
+    from animsim.simulate import STATUS_OK, run
+
+    all_ok = True
+    for path in paths:
+        try:
+            loaded = load_scene(path)
+            compiled = compile_scene(loaded.scene, loaded.name)
+        except AnimsimError as exc:
+            echo_err(str(exc))
+            echo_err(f"{path}: INVALID")
+            all_ok = False
+            continue
+        notes = []
+        from animsim.analysis import stability
+
+        report = stability.analyse(compiled)
+        if report is not None:
+            notes.extend(report.lines())
+            if report.dt_exceeds_limit:
+                notes.append("warning: dt exceeds the stable limit for this integrator")
+        result = run(compiled)
+        drift = energy_drift(result.energy_start, result.energy_end)
+        kind = "conservative" if compiled.conservative else "not conservative"
+        head = (
+            f"{path}: {result.status} ({compiled.integrator_name}, dt {compiled.clock.dt:g}, "
+            f"{result.steps_taken} steps, {result.wall_time:.2f} s; energy {result.energy_start:.4g} -> "
+            f"{result.energy_end:.4g} J, drift {drift:+.2%} ({kind}))"
+        )
+        if result.status != STATUS_OK:
+            all_ok = False
+            echo_err(head)
+            if result.failure is not None:
+                echo_err("  " + result.failure.describe())
+        elif not quiet:
+            echo(head)
+        if not quiet or result.status != STATUS_OK:
+            for line in notes:
+                echo(f"  {line}")
+    return all_ok

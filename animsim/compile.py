@@ -1,0 +1,313 @@
+"""Compile a validated Scene into arrays and the stages this scene needs.
+
+Ids become indices here, once; structures expand here; each force family is
+built only when the scene uses it, and everything left out is named so
+``animsim explain`` can show it. The result (:class:`Compiled`) holds no
+strings that the step loop looks at.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from animsim.collisions import ImpulsePlane, PlaneColliders
+from animsim.dynamics import Dynamics
+from animsim.errors import UsageError
+from animsim.forces import ForceTerm
+from animsim.forces.attractor import Attractor
+from animsim.forces.drag import Drag, QuadraticDrag
+from animsim.forces.gravity import Gravity
+from animsim.forces.penalty import PenaltyPlane
+from animsim.forces.springs import Springs
+from animsim.forces.wind import Wind
+from animsim.integrators import integrator_class
+from animsim.integrators.base import Integrator
+from animsim.record import Clock, TrajectoryHeader, record_steps
+from animsim.scene import models as m
+from animsim.scene.structures import expand
+from animsim.system import State, System
+
+DEFAULT_PENALTY_STIFFNESS = 1e4
+
+
+@dataclass
+class Compiled:
+    """Everything a run needs, and a description of it for ``explain``."""
+
+    name: str
+    scene: m.Scene
+    system: System
+    initial: State
+    dynamics: Dynamics
+    integrator: Integrator
+    colliders: PlaneColliders | None
+    emitters: Any | None  # animsim.emitters.Emitters when the scene has emitters
+    clock: Clock
+    record_steps: np.ndarray
+    header: TrajectoryHeader
+    seed: int
+    stages: list[str] = field(default_factory=list)
+    left_out: list[str] = field(default_factory=list)
+    conservative: bool = False
+
+    @property
+    def integrator_name(self) -> str:
+        return self.integrator.name
+
+    def fresh_state(self) -> State:
+        return self.initial.copy()
+
+
+def with_overrides(
+    scene: m.Scene,
+    *,
+    integrator: str | None = None,
+    dt: float | None = None,
+    duration: float | None = None,
+    seed: int | None = None,
+) -> m.Scene:
+    """The scene with command-line overrides, checked by the same rules as the file."""
+    update: dict[str, Any] = {}
+    if integrator is not None:
+        if integrator not in m.INTEGRATOR_NAMES:
+            import difflib
+
+            close = difflib.get_close_matches(integrator, m.INTEGRATOR_NAMES, n=1)
+            hint = f"; did you mean '{close[0]}'?" if close else ""
+            raise UsageError(
+                f"--integrator: unknown method {integrator!r}{hint} (valid: {', '.join(m.INTEGRATOR_NAMES)})"
+            )
+        adaptive = scene.adaptive
+        update["integrator"] = (
+            integrator if adaptive is None else m.IntegratorSpec(method=integrator, adaptive=adaptive)
+        )
+    for key, value in (("dt", dt), ("duration", duration)):
+        if value is not None:
+            if not (np.isfinite(value) and value > 0):
+                raise UsageError(f"--{key}: must be a finite number > 0, not {value!r}")
+            update[key] = float(value)
+    if seed is not None:
+        if seed < 0:
+            raise UsageError(f"--seed: must be >= 0, not {seed}")
+        update["seed"] = seed
+    if not update:
+        return scene
+    new = scene.model_copy(update=update)
+    if new.dt > new.duration:
+        raise UsageError(f"dt = {new.dt!r} is longer than the duration {new.duration!r}")
+    return new
+
+
+def compile_scene(scene: m.Scene, name: str = "scene") -> Compiled:
+    stages: list[str] = []
+    left_out: list[str] = []
+
+    # --- particles: listed ones, then structures -------------------------------
+    ids: list[str] = [p.id for p in scene.particles]
+    pos = [np.array([p.position for p in scene.particles], dtype=np.float64).reshape(-1, 3)]
+    vel = [np.array([p.velocity for p in scene.particles], dtype=np.float64).reshape(-1, 3)]
+    mass = [np.array([p.mass or 0.0 for p in scene.particles], dtype=np.float64)]
+    pinned = [np.array([p.pinned for p in scene.particles], dtype=bool)]
+    spring_pairs: list[np.ndarray] = []
+    spring_ks: list[np.ndarray] = []
+    spring_kd: list[np.ndarray] = []
+    spring_rest: list[np.ndarray | None] = []  # None: auto
+    families: list[tuple[str, int, int]] = []
+    spring_total = 0
+
+    index_of = {pid: i for i, pid in enumerate(ids)}
+    expanded = []
+    for s in scene.structures:
+        e = expand(s)
+        base = len(ids)
+        for k, pid in enumerate(e.ids):
+            index_of[pid] = base + k
+        ids.extend(e.ids)
+        pos.append(e.position)
+        vel.append(e.velocity)
+        mass.append(e.mass)
+        pinned.append(e.pinned)
+        expanded.append((s, e, base))
+
+    if scene.springs:
+        pairs = np.array([[index_of[a], index_of[b]] for a, b in (sp.between for sp in scene.springs)], dtype=np.int64)
+        spring_pairs.append(pairs)
+        spring_ks.append(np.array([sp.ks for sp in scene.springs]))
+        spring_kd.append(np.array([sp.kd for sp in scene.springs]))
+        spring_rest.append(
+            np.array([np.nan if sp.rest == "auto" else sp.rest for sp in scene.springs])
+        )
+        families.append(("listed springs", 0, len(scene.springs)))
+        spring_total += len(scene.springs)
+    for s, e, base in expanded:
+        for group in e.springs:
+            k = len(group.index)
+            spring_pairs.append(group.index + base)
+            spring_ks.append(np.full(k, group.ks))
+            spring_kd.append(np.full(k, group.kd))
+            spring_rest.append(np.full(k, np.nan))
+            families.append((group.family, spring_total, spring_total + k))
+            spring_total += k
+
+    # --- emitter pools (issue 3) go after every fixed particle --------------------
+    emitters = None
+    fixed_count = len(ids)
+    particle_position = np.concatenate(pos) if pos else np.zeros((0, 3))
+    particle_velocity = np.concatenate(vel) if vel else np.zeros((0, 3))
+    particle_mass = np.concatenate(mass)
+    particle_pinned = np.concatenate(pinned)
+    particle_alive = None
+    if scene.emitters:
+        from animsim.emitters import build_emitters
+
+        emitters = build_emitters(scene, first_index=fixed_count)
+        extra = emitters.capacity
+        particle_position = np.concatenate([particle_position, np.zeros((extra, 3))])
+        particle_velocity = np.concatenate([particle_velocity, np.zeros((extra, 3))])
+        particle_mass = np.concatenate([particle_mass, np.zeros(extra)])
+        particle_pinned = np.concatenate([particle_pinned, np.zeros(extra, dtype=bool)])
+        particle_alive = np.concatenate([np.ones(fixed_count, dtype=bool), np.zeros(extra, dtype=bool)])
+        stages.extend(emitters.labels)
+    else:
+        left_out.append("emitters: no births, deaths, ageing or over-life attributes")
+
+    n = len(particle_mass)
+    particle_mass = np.where(particle_pinned, 0.0, particle_mass)
+    with np.errstate(divide="ignore"):
+        particle_inv_mass = np.where(particle_mass > 0, 1.0 / np.where(particle_mass > 0, particle_mass, 1.0), 0.0)
+
+    if spring_pairs:
+        spring_index = np.concatenate(spring_pairs)
+        rest = np.concatenate(spring_rest)
+        auto = np.isnan(rest)
+        d = particle_position[spring_index[auto, 0]] - particle_position[spring_index[auto, 1]]
+        rest[auto] = np.sqrt(np.einsum("ij,ij->i", d, d))
+        ks = np.concatenate(spring_ks)
+        kd = np.concatenate(spring_kd)
+    else:
+        spring_index = np.zeros((0, 2), dtype=np.int64)
+        rest = ks = kd = np.zeros(0)
+
+    system = System(
+        ids=ids,
+        particle_mass=particle_mass,
+        particle_inv_mass=particle_inv_mass,
+        particle_pinned=particle_pinned,
+        spring_index=spring_index,
+        spring_rest_length=rest,
+        spring_ks=ks,
+        spring_kd=kd,
+        spring_families=families,
+    )
+
+    # --- force terms: only those the scene uses -----------------------------------
+    terms: list[ForceTerm] = []
+    present = set()
+    for f in scene.forces:
+        present.add(f.type)
+        if isinstance(f, m.Gravity):
+            terms.append(Gravity(np.array(f.g), system.particle_mass))
+        elif isinstance(f, m.Drag):
+            terms.append(Drag(f.k))
+        elif isinstance(f, m.QuadraticDrag):
+            terms.append(QuadraticDrag(f.rho, f.cd, f.area))
+        elif isinstance(f, m.Wind):
+            terms.append(Wind(np.array(f.velocity), f.k))
+            if f.turbulence > 0:
+                from animsim.forces.turbulence import Turbulence
+
+                terms.append(Turbulence.from_scene(f, scene.seed, system.particle_mass))
+                present.add("turbulence")
+        elif isinstance(f, m.Attractor):
+            terms.append(Attractor(np.array(f.position), f.gm, f.softening, system.particle_mass))
+    for kind in m.FORCE_TYPES:
+        if kind not in present:
+            left_out.append(f"{kind}: not in the scene's forces")
+    if "wind" in present and "turbulence" not in present:
+        left_out.append("turbulence: the wind has none")
+
+    if system.spring_count:
+        label = f"springs: {system.spring_count} in {len(families)} famil{'y' if len(families) == 1 else 'ies'} ({', '.join(f'{name} {b - a}' for name, a, b in families)}), bincount scatter"
+        terms.append(Springs(spring_index, rest, ks, kd, n, label))
+    else:
+        left_out.append("springs: none, so no spring forces or scatter")
+
+    impulse: list[ImpulsePlane] = []
+    penalty = 0
+    for p in scene.planes:
+        normal = np.array(p.normal) / np.linalg.norm(p.normal)
+        if p.response == "penalty":
+            terms.append(
+                PenaltyPlane(
+                    np.array(p.point),
+                    normal,
+                    p.stiffness if p.stiffness is not None else DEFAULT_PENALTY_STIFFNESS,
+                    p.damping or 0.0,
+                )
+            )
+            penalty += 1
+        else:
+            impulse.append(ImpulsePlane(np.array(p.point), normal, p.restitution, p.friction))
+    colliders = PlaneColliders(impulse, system.particle_inv_mass) if impulse else None
+    if not impulse:
+        left_out.append("plane collisions: no impulse planes, so no collision detection")
+    if not penalty:
+        left_out.append("penalty contact: no penalty planes")
+
+    dynamics = Dynamics(system, terms)
+    name_ = scene.integrator_name
+    try:
+        integrator = integrator_class(name_)(dynamics)
+    except KeyError:
+        raise UsageError(f"integrator {name_!r} is not available in this build") from None
+
+    clock = Clock.make(scene.duration, scene.dt)
+    rec = record_steps(clock, every=scene.record.every, fps=scene.record.fps)
+
+    moving_anchor = bool(np.any(particle_pinned & np.any(particle_velocity != 0, axis=1)))
+    conservative = dynamics.conservative and not moving_anchor and not scene.emitters and not penalty
+
+    stages[:0] = [t.label for t in terms]
+    stages.append(f"integrator: {integrator.name} ({integrator.description})")
+    if colliders:
+        stages.append(colliders.label)
+    stages.append(
+        f"record: {len(rec)} frames of {clock.steps} steps"
+        + (f" (every {scene.record.every})" if scene.record.every else "")
+        + (f" ({scene.record.fps} fps)" if scene.record.fps else "")
+    )
+
+    header = TrajectoryHeader(
+        scene_name=name,
+        ids=list(ids),
+        spring_index=spring_index,
+        has_emitters=emitters is not None,
+        extra={"planes": [(np.array(p.point), np.array(p.normal) / np.linalg.norm(p.normal)) for p in scene.planes]},
+    )
+    initial = State(
+        particle_position=particle_position,
+        particle_velocity=particle_velocity,
+        time=0.0,
+        step=0,
+        particle_alive=particle_alive,
+    )
+    return Compiled(
+        name=name,
+        scene=scene,
+        system=system,
+        initial=initial,
+        dynamics=dynamics,
+        integrator=integrator,
+        colliders=colliders,
+        emitters=emitters,
+        clock=clock,
+        record_steps=rec,
+        header=header,
+        seed=scene.seed,
+        stages=stages,
+        left_out=left_out,
+        conservative=conservative,
+    )

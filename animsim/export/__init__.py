@@ -1,0 +1,1 @@
+"""Exporters: files, plots and animations made from recorded frames."""

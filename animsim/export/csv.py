@@ -1,0 +1,127 @@
+"""The trajectory CSV of ``scene-language.md``: long form, one row per alive
+particle per recorded frame, ``t,id,x,y,z,vx,vy,vz``, numbers as Python's
+``repr`` (the shortest string that reads back to the same float64).
+
+Ids are quoted by RFC 4180 rules when they hold a comma, a quote or a line
+break, so any id round-trips through a CSV reader.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+from animsim.atomic import AtomicFile
+from animsim.export.meta import meta_file
+from animsim.record import Frame, TrajectoryHeader
+
+HEADER = ("t", "id", "x", "y", "z", "vx", "vy", "vz")
+EXTRA_HEADER = ("age", "size", "r", "g", "b", "a")
+
+
+def quote_id(pid: str) -> str:
+    if any(c in pid for c in ',"\r\n'):
+        return '"' + pid.replace('"', '""') + '"'
+    return pid
+
+
+class CsvSink:
+    """Streams frames to ``path`` ("-" for stdout), renamed into place when whole.
+
+    ``extra_columns`` adds age, size and r,g,b,a for emitted particles (empty
+    for particles that have none).
+    """
+
+    def __init__(self, path: str | Path, *, extra_columns: bool = False, write_meta: bool = True):
+        self.path = str(path)
+        self.extra = extra_columns
+        self.write_meta = write_meta and self.path != "-"
+        self._file: AtomicFile | None = None
+        self._out: IO[str] | None = None
+        self._ids: list[str] = []
+
+    def begin(self, header: TrajectoryHeader) -> None:
+        if self.path == "-":
+            self._out = sys.stdout
+        else:
+            self._file = AtomicFile(self.path, "w", newline="")
+            self._out = self._file.handle
+        self._ids = [quote_id(i) for i in header.ids]
+        cols = HEADER + (EXTRA_HEADER if self.extra else ())
+        self._out.write(",".join(cols) + "\n")
+
+    def write(self, frame: Frame) -> None:
+        assert self._out is not None
+        self._ids.extend(quote_id(i) for i in frame.new_ids)
+        t = repr(float(frame.time))
+        ids = self._ids
+        rows = np.concatenate([frame.position, frame.velocity], axis=1).tolist()
+        index = frame.index.tolist()
+        if not self.extra:
+            lines = [
+                f"{t},{ids[k]},{a!r},{b!r},{c!r},{d!r},{e!r},{f!r}\n"
+                for k, (a, b, c, d, e, f) in zip(index, rows, strict=True)
+            ]
+        else:
+            extra = self._extra_cells(frame)
+            lines = [
+                f"{t},{ids[k]},{a!r},{b!r},{c!r},{d!r},{e!r},{f!r},{x}\n"
+                for k, (a, b, c, d, e, f), x in zip(index, rows, extra, strict=True)
+            ]
+        self._out.write("".join(lines))
+
+    @staticmethod
+    def _extra_cells(frame: Frame) -> list[str]:
+        n = len(frame.index)
+        cols: list[list[str]] = []
+        for arr in (frame.age, frame.size):
+            if arr is None:
+                cols.append([""] * n)
+            else:
+                cols.append(["" if np.isnan(v) else repr(v) for v in arr.tolist()])
+        if frame.color is None:
+            cols.extend([[""] * n] * 4)
+        else:
+            for ch in frame.color.T.tolist():
+                cols.append(["" if np.isnan(v) else repr(v) for v in ch])
+        return [",".join(cells) for cells in zip(*cols, strict=True)]
+
+    def close(self, meta: dict[str, Any]) -> None:
+        if self._file is None:
+            if self._out is not None:
+                self._out.flush()
+            return
+        data = self._file
+        m = meta_file(self.path, meta) if self.write_meta else None
+        try:
+            data.commit()
+        except BaseException:
+            if m is not None:
+                m.abort()
+            raise
+        if m is not None:
+            m.commit()
+
+    def abort(self) -> None:
+        if self._file is not None:
+            self._file.abort()
+
+
+def read_csv(path: str | Path) -> dict[str, Any]:
+    """Read a trajectory CSV back: columns as arrays, ids as a list of str."""
+    import csv
+
+    with open(path, newline="", encoding="utf-8") as fh:
+        reader = csv.reader(fh)
+        header = next(reader)
+        rows = list(reader)
+    cols: dict[str, Any] = {}
+    for j, name in enumerate(header):
+        if name == "id":
+            cols["id"] = [r[j] for r in rows]
+        else:
+            cols[name] = np.array([float(r[j]) if r[j] != "" else np.nan for r in rows])
+    return cols

@@ -1,0 +1,119 @@
+"""The NPZ trajectory: the CSV's long form as NumPy arrays.
+
+Arrays: ``t`` (R,), ``particle`` (R,) int64 index into ``ids`` (P,) str,
+``position`` (R, 3), ``velocity`` (R, 3), ``frame_time`` (F,) and
+``frame_start`` (F+1,) row offsets, so frame k is rows
+``frame_start[k]:frame_start[k+1]``.
+
+Frames stream to raw temporary files while the run goes; the ``.npz`` (an
+uncompressed zip of ``.npy`` files, as ``np.savez`` writes) is assembled at
+the end, so memory stays bounded by one frame.
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+import zipfile
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+from animsim.atomic import AtomicFile
+from animsim.export.meta import meta_file
+from animsim.record import Frame, TrajectoryHeader
+
+_COLUMNS = {
+    "t": ((), np.float64),
+    "particle": ((), np.int64),
+    "position": ((3,), np.float64),
+    "velocity": ((3,), np.float64),
+}
+
+
+class NpzSink:
+    def __init__(self, path: str | Path, *, write_meta: bool = True):
+        self.path = Path(path)
+        self.write_meta = write_meta
+        self._tmpdir: tempfile.TemporaryDirectory[str] | None = None
+        self._raw: dict[str, IO[bytes]] = {}
+        self._rows = 0
+        self._frame_time: list[float] = []
+        self._frame_start: list[int] = [0]
+        self._ids: list[str] = []
+
+    def begin(self, header: TrajectoryHeader) -> None:
+        self._tmpdir = tempfile.TemporaryDirectory(prefix=".animsim-npz-", dir=self.path.parent)
+        for name in _COLUMNS:
+            self._raw[name] = open(Path(self._tmpdir.name) / name, "wb")  # noqa: SIM115
+        self._ids = list(header.ids)
+
+    def write(self, frame: Frame) -> None:
+        self._ids.extend(frame.new_ids)
+        n = len(frame.index)
+        self._raw["t"].write(np.full(n, frame.time, dtype=np.float64).tobytes())
+        self._raw["particle"].write(np.asarray(frame.index, dtype=np.int64).tobytes())
+        self._raw["position"].write(np.ascontiguousarray(frame.position, dtype=np.float64).tobytes())
+        self._raw["velocity"].write(np.ascontiguousarray(frame.velocity, dtype=np.float64).tobytes())
+        self._rows += n
+        self._frame_time.append(frame.time)
+        self._frame_start.append(self._rows)
+
+    def close(self, meta: dict[str, Any]) -> None:
+        assert self._tmpdir is not None
+        for fh in self._raw.values():
+            fh.close()
+        out = AtomicFile(self.path, "wb")
+        try:
+            with zipfile.ZipFile(out.handle, "w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
+                for name, (shape, dtype) in _COLUMNS.items():
+                    _write_npy(zf, name, Path(self._tmpdir.name) / name, (self._rows, *shape), dtype)
+                _write_array(zf, "ids", np.array(self._ids, dtype=str))
+                _write_array(zf, "frame_time", np.array(self._frame_time, dtype=np.float64))
+                _write_array(zf, "frame_start", np.array(self._frame_start, dtype=np.int64))
+        except BaseException:
+            out.abort()
+            self._cleanup()
+            raise
+        m = meta_file(self.path, meta) if self.write_meta else None
+        try:
+            out.commit()
+        except BaseException:
+            if m is not None:
+                m.abort()
+            self._cleanup()
+            raise
+        if m is not None:
+            m.commit()
+        self._cleanup()
+
+    def abort(self) -> None:
+        for fh in self._raw.values():
+            fh.close()
+        self._cleanup()
+
+    def _cleanup(self) -> None:
+        if self._tmpdir is not None:
+            self._tmpdir.cleanup()
+            self._tmpdir = None
+
+
+def _write_npy(zf: zipfile.ZipFile, name: str, raw: Path, shape: tuple[int, ...], dtype: Any) -> None:
+    with zf.open(f"{name}.npy", "w", force_zip64=True) as dst:
+        np.lib.format.write_array_header_1_0(
+            dst,
+            {"descr": np.lib.format.dtype_to_descr(np.dtype(dtype)), "fortran_order": False, "shape": shape},
+        )
+        with open(raw, "rb") as src:
+            shutil.copyfileobj(src, dst, 1 << 20)
+
+
+def _write_array(zf: zipfile.ZipFile, name: str, arr: np.ndarray) -> None:
+    with zf.open(f"{name}.npy", "w", force_zip64=True) as dst:
+        np.lib.format.write_array(dst, arr, allow_pickle=False)
+
+
+def read_npz(path: str | Path) -> dict[str, Any]:
+    with np.load(path, allow_pickle=False) as z:
+        return {k: z[k] for k in z.files}

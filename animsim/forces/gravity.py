@@ -1,0 +1,19 @@
+"""Uniform gravity, f = m*g (course notes: "Forces - gravity")."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class Gravity:
+    def __init__(self, g: np.ndarray, particle_mass: np.ndarray):
+        self.g = np.asarray(g, dtype=np.float64)
+        self.mass = particle_mass  # shared with the System, so pool births are seen
+        self.label = f"gravity g = {self.g.tolist()} m/s^2"
+
+    def accumulate(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None:
+        out += self.mass[:, None] * self.g
+
+    def potential(self, x: np.ndarray) -> float:
+        # U = -sum m g.x (zero at the origin)
+        return float(-np.dot(self.mass, x @ self.g))

@@ -1,0 +1,40 @@
+"""The integrator contract.
+
+An integrator advances a :class:`~animsim.system.State` in place by one step
+of size ``dt``: it updates ``particle_position`` and ``particle_velocity``
+(never ``time`` or ``step``, which the simulation loop owns, so every method
+lands on the same clock). It evaluates accelerations only through
+:meth:`Dynamics.acceleration` so evaluations are counted, preallocates its work
+arrays in ``__init__``, and contains no per-particle Python loop.
+
+A method that caches anything between steps (Verlet's last acceleration) must
+drop the cache when ``state.revision`` has changed: collisions and births
+change the state behind the integrator's back.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import ClassVar
+
+from animsim.dynamics import Dynamics
+from animsim.system import State
+
+
+class Integrator(ABC):
+    name: ClassVar[str]
+    #: global order of accuracy on smooth problems (course notes, Hairer et al.)
+    order: ClassVar[int]
+    #: force evaluations per step (Verlet: 1 once warmed up)
+    evaluations_per_step: ClassVar[int]
+    description: ClassVar[str]
+
+    def __init__(self, dynamics: Dynamics):
+        self.dynamics = dynamics
+
+    @abstractmethod
+    def step(self, state: State, dt: float) -> None:
+        """Advance positions and velocities by dt, in place."""
+
+    def reset(self) -> None:
+        """Forget anything cached between steps."""

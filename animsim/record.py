@@ -1,0 +1,183 @@
+"""Recording: which steps become frames, and the contract every sink follows.
+
+The simulator hands each recorded :class:`Frame` to the sinks as soon as it
+exists, so memory stays bounded by one frame, never by the run's length.
+Sinks (CSV, NPZ, PLY, renderers, in-memory collectors) implement
+:class:`FrameSink`; they import nothing from the stepper.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+# Relative tolerance when deciding whether dt divides duration (spec:
+# "ceil(duration/dt) steps with a 1e-9 relative tolerance, so 0.5/0.1 is 5").
+STEP_COUNT_RTOL = 1e-9
+
+
+@dataclass(frozen=True)
+class Clock:
+    """The fixed step schedule of a run.
+
+    ``steps`` steps of ``dt``; when dt does not divide the duration the last
+    step is shortened to end exactly at ``duration``. When it does divide, the
+    times are ``duration * i / steps`` so that a 0.1 s grid prints as 0.3, not
+    0.30000000000000004.
+    """
+
+    duration: float
+    dt: float
+    steps: int
+    divides: bool
+
+    @classmethod
+    def make(cls, duration: float, dt: float) -> Clock:
+        q = duration / dt
+        nearest = round(q)
+        if nearest >= 1 and abs(q - nearest) <= STEP_COUNT_RTOL * q:
+            return cls(duration, duration / nearest, int(nearest), True)
+        return cls(duration, dt, max(1, math.ceil(q)), False)
+
+    def time(self, i: int) -> float:
+        """Time after ``i`` steps."""
+        if i >= self.steps:
+            return self.duration
+        if self.divides:
+            return self.duration * i / self.steps
+        return i * self.dt
+
+    def step_size(self, i: int) -> float:
+        """Size of step ``i`` (0-based), which goes from time(i) to time(i+1)."""
+        if self.divides or i < self.steps - 1:
+            return self.dt
+        return self.duration - (self.steps - 1) * self.dt
+
+
+def record_steps(clock: Clock, every: int | None = None, fps: float | None = None) -> np.ndarray:
+    """Sorted step indices (0..steps) whose states are recorded.
+
+    ``every=n`` records steps 0, n, 2n, ... and always the last step, so the
+    end of a run is never lost. ``fps=f`` records, for each multiple k/f of
+    the frame period up to the duration, the step whose time is closest (ties
+    to the earlier step), each step at most once, and always step 0.
+    """
+    n = clock.steps
+    if fps is None:
+        stride = every or 1
+        idx = np.arange(0, n + 1, stride, dtype=np.int64)
+        if idx[-1] != n:
+            idx = np.append(idx, n)
+        return idx
+    period = 1.0 / fps
+    count = int(math.floor(clock.duration / period * (1 + STEP_COUNT_RTOL))) + 1
+    targets = np.arange(count, dtype=np.float64) * period
+    if clock.divides:
+        idx = np.rint(targets / clock.duration * n)
+    else:
+        idx = np.rint(targets / clock.dt)
+    idx = np.clip(idx, 0, n).astype(np.int64)
+    return np.unique(idx)
+
+
+@dataclass(frozen=True)
+class TrajectoryHeader:
+    """What every sink learns before the first frame.
+
+    ``ids`` holds every particle id the run can ever produce in creation
+    order, as far as known up front (structures and listed particles); emitted
+    particles are appended through ``Frame.new_ids``.
+    """
+
+    scene_name: str
+    ids: Sequence[str]
+    spring_index: np.ndarray  # (S, 2) int64 particle indices, for drawing
+    has_emitters: bool
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One recorded instant: the alive particles in creation order.
+
+    Arrays are views or copies owned by the frame's receiver for the duration
+    of ``write`` only; a sink that keeps data must copy it.
+    """
+
+    step: int
+    time: float  # s
+    index: np.ndarray  # (n,) int64: row -> index into the id table (header.ids + new ids)
+    position: np.ndarray  # (n, 3) float64, m
+    velocity: np.ndarray  # (n, 3) float64, m/s
+    new_ids: Sequence[str] = ()  # ids first seen in this frame (emitted since the last frame)
+    age: np.ndarray | None = None  # (n,) s, emitted particles only (NaN for others)
+    size: np.ndarray | None = None  # (n,) m, for rendering
+    color: np.ndarray | None = None  # (n, 4) RGBA in [0, 1]
+
+
+class FrameSink(Protocol):
+    """Receives frames as they are made.
+
+    ``begin`` once, ``write`` per frame in time order, then exactly one of
+    ``close`` (the run ended; the metadata dict says how, including status
+    ``unstable`` or ``interrupted``) or ``abort`` (nothing must be left).
+    """
+
+    def begin(self, header: TrajectoryHeader) -> None: ...
+
+    def write(self, frame: Frame) -> None: ...
+
+    def close(self, meta: dict[str, Any]) -> None: ...
+
+    def abort(self) -> None: ...
+
+
+class MemorySink:
+    """Keeps every frame in memory (tests, compare, rendering short runs)."""
+
+    def __init__(self) -> None:
+        self.header: TrajectoryHeader | None = None
+        self.ids: list[str] = []
+        self.frames: list[Frame] = []
+        self.meta: dict[str, Any] | None = None
+
+    def begin(self, header: TrajectoryHeader) -> None:
+        self.header = header
+        self.ids = list(header.ids)
+
+    def write(self, frame: Frame) -> None:
+        self.ids.extend(frame.new_ids)
+        self.frames.append(
+            Frame(
+                step=frame.step,
+                time=frame.time,
+                index=frame.index.copy(),
+                position=frame.position.copy(),
+                velocity=frame.velocity.copy(),
+                new_ids=tuple(frame.new_ids),
+                age=None if frame.age is None else frame.age.copy(),
+                size=None if frame.size is None else frame.size.copy(),
+                color=None if frame.color is None else frame.color.copy(),
+            )
+        )
+
+    def close(self, meta: dict[str, Any]) -> None:
+        self.meta = meta
+
+    def abort(self) -> None:
+        self.frames.clear()
+
+    # Convenience views for fixed-population runs (no emitters).
+    def times(self) -> np.ndarray:
+        return np.array([f.time for f in self.frames])
+
+    def positions(self) -> np.ndarray:
+        """(F, N, 3) positions; only valid when every frame has the same rows."""
+        return np.stack([f.position for f in self.frames])
+
+    def velocities(self) -> np.ndarray:
+        return np.stack([f.velocity for f in self.frames])

@@ -1,0 +1,1 @@
+"""The scene language: models, YAML loader with line marks, semantic checks, structures."""

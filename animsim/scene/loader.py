@@ -1,0 +1,526 @@
+"""Load a scene file: YAML with line marks -> validated :class:`Scene`.
+
+PyYAML composes the node tree (safe, nothing is ever constructed from tags);
+this module turns nodes into plain Python data itself so that it can
+
+* resolve plain scalars by YAML 1.2's core schema (``1e4`` is a number,
+  ``yes`` is a string, ``010`` is refused where a number belongs),
+* refuse duplicate keys at any depth, and any tag but the standard ones,
+* honour anchors, aliases and merge keys while counting every node an alias
+  expands to (a "billion laughs" file is refused long before it is expanded),
+* remember the line and column of every key and value, so each problem is
+  reported as ``FILE:LINE:COLUMN: key.path: message`` (all of them at once).
+"""
+
+from __future__ import annotations
+
+import difflib
+import hashlib
+import re
+import stat
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Union, get_args, get_origin
+
+import yaml
+from pydantic import BaseModel, ValidationError
+from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
+
+from animsim.errors import Diagnostic, SceneError, UsageError
+from animsim.scene.models import Scene
+
+Path_ = tuple[str | int, ...]
+
+# Limits from the spec ("Errors and limits"); each can be raised from the CLI.
+DEFAULT_MAX_FILE_BYTES = 50 * 1024 * 1024
+DEFAULT_MAX_DEPTH = 100
+DEFAULT_MAX_NODES = 100_000
+
+_TAG = "tag:yaml.org,2002:"
+_ALLOWED_TAGS = {f"{_TAG}{t}" for t in ("str", "int", "float", "bool", "null", "map", "seq")}
+
+# YAML 1.2 core schema (https://yaml.org/spec/1.2.2/#1032-tag-resolution).
+_NULL = re.compile(r"^(~|null|Null|NULL|)$")
+_BOOL = re.compile(r"^(true|True|TRUE|false|False|FALSE)$")
+_INT10 = re.compile(r"^[-+]?(0|[1-9][0-9]*)$")
+_INT8 = re.compile(r"^0o[0-7]+$")
+_INT16 = re.compile(r"^0x[0-9a-fA-F]+$")
+_FLOAT = re.compile(r"^[-+]?(\.[0-9]+|[0-9]+(\.[0-9]*)?)([eE][-+]?[0-9]+)?$")
+_INF = re.compile(r"^[-+]?\.(inf|Inf|INF)$")
+_NAN = re.compile(r"^\.(nan|NaN|NAN)$")
+# What YAML 1.1 would have read differently; kept as strings, explained if
+# they land where a number or boolean belongs.
+_YAML11_BOOL = re.compile(r"^(y|Y|yes|Yes|YES|n|N|no|No|NO|on|On|ON|off|Off|OFF)$")
+_YAML11_OCTAL = re.compile(r"^[-+]?0[0-9_]+$")
+_YAML11_SEXAGESIMAL = re.compile(r"^[-+]?[0-9][0-9_]*(:[0-5]?[0-9])+(\.[0-9_]*)?$")
+
+
+@dataclass(frozen=True)
+class Limits:
+    max_file_bytes: int = DEFAULT_MAX_FILE_BYTES
+    max_depth: int = DEFAULT_MAX_DEPTH
+    max_nodes: int = DEFAULT_MAX_NODES
+
+
+@dataclass
+class Marks:
+    """Where each value (and each mapping key) of the document starts, 1-based."""
+
+    value: dict[Path_, tuple[int, int]] = field(default_factory=dict)
+    key: dict[Path_, tuple[int, int]] = field(default_factory=dict)
+    hints: dict[Path_, str] = field(default_factory=dict)
+
+    def at(self, path: Path_, *, prefer_key: bool = False) -> tuple[int, int]:
+        """The mark of ``path``, or of its nearest marked ancestor."""
+        p = tuple(path)
+        while True:
+            if prefer_key and p in self.key:
+                return self.key[p]
+            if p in self.value:
+                return self.value[p]
+            if not p:
+                return (1, 1)
+            p = p[:-1]
+
+
+@dataclass(frozen=True)
+class LoadedScene:
+    scene: Scene
+    file: str
+    sha256: str
+    marks: Marks
+    data: dict[str, Any]
+    source: str
+
+    @property
+    def name(self) -> str:
+        return self.scene.name or Path(self.file).stem
+
+
+class _Fault(Exception):
+    """A fatal problem at one place while turning nodes into data."""
+
+    def __init__(self, line: int, column: int, path: Path_, message: str):
+        super().__init__(message)
+        self.line, self.column, self.path, self.message = line, column, path, message
+
+
+def _mark(node: Node) -> tuple[int, int]:
+    return (node.start_mark.line + 1, node.start_mark.column + 1)
+
+
+class _Loader(yaml.SafeLoader):
+    """Safe composer with a depth limit and YAML 1.2 plain-scalar resolution."""
+
+    max_depth = DEFAULT_MAX_DEPTH
+
+    def __init__(self, stream: str):
+        super().__init__(stream)
+        self._depth = 0
+
+    def compose_node(self, parent: Node | None, index: Any) -> Node:  # type: ignore[override]
+        self._depth += 1
+        try:
+            if self._depth > self.max_depth:
+                mark = self.peek_event().start_mark
+                raise _Fault(
+                    mark.line + 1,
+                    mark.column + 1,
+                    (),
+                    f"nesting deeper than {self.max_depth} levels (raise it with --max-depth)",
+                )
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+    def resolve(self, kind: type, value: Any, implicit: Any) -> str:  # type: ignore[override]
+        if kind is ScalarNode:
+            if implicit[0]:  # plain (unquoted) scalar: YAML 1.2 core schema
+                return _resolve_plain(value)
+            return f"{_TAG}str"
+        return super().resolve(kind, value, implicit)
+
+
+def _resolve_plain(value: str) -> str:
+    if value == "<<":
+        return f"{_TAG}merge"
+    if _NULL.match(value):
+        return f"{_TAG}null"
+    if _BOOL.match(value):
+        return f"{_TAG}bool"
+    if _INT10.match(value) or _INT8.match(value) or _INT16.match(value):
+        return f"{_TAG}int"
+    if _FLOAT.match(value) or _INF.match(value) or _NAN.match(value):
+        if _YAML11_OCTAL.match(value):
+            return f"{_TAG}str"  # 010: octal in YAML 1.1, decimal in 1.2: refuse to guess
+        return f"{_TAG}float"
+    return f"{_TAG}str"
+
+
+def _yaml11_hint(value: str) -> str | None:
+    if _YAML11_BOOL.match(value):
+        return f"'{value}' is a string here (YAML 1.2); write true or false for a boolean"
+    if _YAML11_OCTAL.match(value):
+        return (
+            f"'{value}' is ambiguous (octal {value.lstrip('+-0') or '0'} in YAML 1.1, "
+            "decimal in 1.2); write it without leading zeros, or 0o... for octal"
+        )
+    if _YAML11_SEXAGESIMAL.match(value):
+        return f"'{value}' is not a number (YAML 1.1 read it as base 60); write the number itself"
+    return None
+
+
+class _Builder:
+    """Turns composed nodes into Python data, recording marks as it goes."""
+
+    def __init__(self, max_nodes: int):
+        self.marks = Marks()
+        self.max_nodes = max_nodes
+        self.count = 0
+
+    def build(self, node: Node, path: Path_) -> Any:
+        self.count += 1
+        if self.count > self.max_nodes:
+            line, col = _mark(node)
+            raise _Fault(
+                line,
+                col,
+                path,
+                f"the document expands to more than {self.max_nodes} nodes through "
+                "aliases (raise it with --max-nodes)",
+            )
+        self.marks.value[path] = _mark(node)
+        if node.tag not in _ALLOWED_TAGS and node.tag != f"{_TAG}merge":
+            line, col = _mark(node)
+            shown = node.tag.replace(_TAG, "!!")
+            raise _Fault(line, col, path, f"the tag {shown} is not allowed in a scene (nothing is ever executed)")
+        if isinstance(node, ScalarNode):
+            return self._scalar(node, path)
+        if isinstance(node, SequenceNode):
+            return [self.build(item, (*path, i)) for i, item in enumerate(node.value)]
+        if isinstance(node, MappingNode):
+            return self._mapping(node, path)
+        raise AssertionError(node)  # pragma: no cover - PyYAML has only these kinds
+
+    def _scalar(self, node: ScalarNode, path: Path_) -> Any:
+        v = node.value
+        tag = node.tag.removeprefix(_TAG)
+        line, col = _mark(node)
+        try:
+            if tag == "null":
+                return None
+            if tag == "bool":
+                return v.lower() == "true"
+            if tag == "int":
+                if v.startswith("0o"):
+                    return int(v[2:], 8)
+                if v.startswith("0x"):
+                    return int(v[2:], 16)
+                return int(v)
+            if tag == "float":
+                return float(v.replace(".inf", "inf").replace(".Inf", "inf").replace(".INF", "inf")
+                             .replace(".nan", "nan").replace(".NaN", "nan").replace(".NAN", "nan"))
+        except ValueError as exc:
+            raise _Fault(line, col, path, f"{v!r} is not a valid {tag}") from exc
+        if node.style is None:
+            hint = _yaml11_hint(v)
+            if hint:
+                self.marks.hints[path] = hint
+        return v
+
+    def _mapping(self, node: MappingNode, path: Path_) -> dict[Any, Any]:
+        out: dict[Any, Any] = {}
+        explicit: set[Any] = set()
+        merged: list[tuple[Node, Node]] = []
+        for key_node, value_node in node.value:
+            if key_node.tag == f"{_TAG}merge":
+                sources = value_node.value if isinstance(value_node, SequenceNode) else [value_node]
+                for src in sources:
+                    if not isinstance(src, MappingNode):
+                        line, col = _mark(src)
+                        raise _Fault(line, col, path, "a merge key (<<) takes a mapping or a list of mappings")
+                    merged.extend(src.value)
+                continue
+            if not isinstance(key_node, ScalarNode):
+                line, col = _mark(key_node)
+                raise _Fault(line, col, path, "a mapping key must be a plain value, not a collection")
+            key = self._scalar(key_node, path)
+            if not isinstance(key, str | int) or isinstance(key, bool):
+                key = key_node.value
+            if key in explicit:
+                line, col = _mark(key_node)
+                first = self.marks.key.get((*path, key), (0, 0))[0]
+                raise _Fault(line, col, (*path, key), f"duplicate key (first given on line {first})")
+            explicit.add(key)
+            self.marks.key[(*path, key)] = _mark(key_node)
+            out[key] = self.build(value_node, (*path, key))
+        # Merged keys never override explicit ones (YAML merge-key rules).
+        for key_node, value_node in merged:
+            key = self._scalar(key_node, path) if isinstance(key_node, ScalarNode) else None
+            if key is None or key in out:
+                continue
+            self.marks.key[(*path, key)] = _mark(key_node)
+            out[key] = self.build(value_node, (*path, key))
+        return out
+
+
+def read_scene_file(path: str | Path, limits: Limits = Limits()) -> bytes:
+    """Read a scene's bytes, refusing what is not a regular file of sane size."""
+    p = Path(path)
+    try:
+        st = p.stat()
+    except FileNotFoundError:
+        raise UsageError(f"{p}: no such file") from None
+    except OSError as exc:
+        raise UsageError(f"{p}: cannot read: {exc.strerror}") from None
+    if stat.S_ISDIR(st.st_mode):
+        raise UsageError(f"{p}: is a folder, not a scene file")
+    if not stat.S_ISREG(st.st_mode):
+        raise UsageError(f"{p}: not a regular file (pipes and devices are refused)")
+    if st.st_size > limits.max_file_bytes:
+        raise UsageError(
+            f"{p}: {st.st_size} bytes is more than the {limits.max_file_bytes}-byte limit "
+            "(raise it with --max-file-size)"
+        )
+    try:
+        with p.open("rb") as fh:
+            return fh.read(limits.max_file_bytes + 1)
+    except OSError as exc:
+        raise UsageError(f"{p}: cannot read: {exc.strerror}") from None
+
+
+def load_scene(path: str | Path, limits: Limits = Limits()) -> LoadedScene:
+    """Read, parse and validate a scene file; raise SceneError with every problem."""
+    data = read_scene_file(path, limits)
+    return load_scene_bytes(data, str(path), limits)
+
+
+def load_scene_text(text: str, file: str = "<scene>", limits: Limits = Limits()) -> LoadedScene:
+    return load_scene_bytes(text.encode("utf-8"), file, limits)
+
+
+def load_scene_bytes(raw: bytes, file: str, limits: Limits = Limits()) -> LoadedScene:
+    sha = hashlib.sha256(raw).hexdigest()
+    text = _decode(raw, file)
+    data, marks = parse_yaml(text, file, limits)
+    if not isinstance(data, dict):
+        kind = "empty" if data is None else f"a {type(data).__name__}"
+        raise SceneError([Diagnostic(file, 1, 1, "", f"a scene must be a mapping of keys, but this document is {kind}")])
+    # Top-level keys starting with x- are free for anchors (as in Compose files).
+    body = {k: v for k, v in data.items() if not (isinstance(k, str) and k.startswith("x-"))}
+    try:
+        scene = Scene.model_validate(body)
+    except ValidationError as exc:
+        raise SceneError(_diagnostics(exc, body, marks, file)) from None
+    from animsim.scene.validate import check_scene  # late: validate imports structures
+
+    problems = check_scene(scene)
+    if problems:
+        raise SceneError(
+            [Diagnostic(file, *marks.at(p, prefer_key=key), _dotted(p), msg) for p, msg, key in problems]
+        )
+    return LoadedScene(scene=scene, file=file, sha256=sha, marks=marks, data=body, source=text)
+
+
+def _decode(raw: bytes, file: str) -> str:
+    if raw.startswith(b"\xef\xbb\xbf"):
+        raw = raw[3:]
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        before = raw[: exc.start]
+        line = before.count(b"\n") + 1
+        col = exc.start - (before.rfind(b"\n") + 1) + 1
+        raise SceneError([Diagnostic(file, line, col, "", f"the file is not valid UTF-8 (byte 0x{raw[exc.start]:02x})")]) from None
+
+
+def parse_yaml(text: str, file: str, limits: Limits = Limits()) -> tuple[Any, Marks]:
+    """Parse one YAML document into plain data and its marks."""
+    loader = _Loader(text)
+    loader.max_depth = limits.max_depth
+    try:
+        try:
+            node = loader.get_single_node()
+        finally:
+            loader.dispose()
+        if node is None:
+            return None, Marks()
+        builder = _Builder(limits.max_nodes)
+        return builder.build(node, ()), builder.marks
+    except _Fault as f:
+        raise SceneError([Diagnostic(file, f.line, f.column, _dotted(f.path), f.message)]) from None
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        line, col = (mark.line + 1, mark.column + 1) if mark else (1, 1)
+        msg = " ".join(s for s in (exc.context, exc.problem) if s)
+        if "\t" in msg or "found character '\\t'" in msg:
+            msg += " (YAML does not allow tabs for indentation; use spaces)"
+        raise SceneError([Diagnostic(file, line, col, "", f"YAML syntax: {msg}")]) from None
+    except yaml.YAMLError as exc:
+        raise SceneError([Diagnostic(file, 1, 1, "", f"YAML: {exc}")]) from None
+    except RecursionError:
+        raise SceneError([Diagnostic(file, 1, 1, "", f"nesting too deep (the limit is {limits.max_depth})")]) from None
+
+
+# --- pydantic errors -> diagnostics ---------------------------------------------
+
+
+def _dotted(path: Path_) -> str:
+    return ".".join(str(p) for p in path)
+
+
+def _data_path(loc: tuple[Any, ...], data: Any) -> tuple[Path_, tuple[Any, ...]]:
+    """Split a pydantic loc into the path through the data, dropping union tags.
+
+    Returns (path that exists in the data, the loc segments that were skipped
+    or left over at the end).
+    """
+    path: list[Any] = []
+    cur = data
+    rest: list[Any] = []
+    for seg in loc:
+        if isinstance(cur, dict) and seg in cur:
+            path.append(seg)
+            cur = cur[seg]
+        elif isinstance(cur, list) and isinstance(seg, int) and 0 <= seg < len(cur):
+            path.append(seg)
+            cur = cur[seg]
+        else:
+            rest.append(seg)
+    return tuple(path), tuple(rest)
+
+
+def _unwrap(tp: Any) -> list[Any]:
+    """The concrete alternatives behind Annotated/Union/Optional."""
+    origin = get_origin(tp)
+    if origin is not None and str(origin).endswith("Annotated"):
+        return _unwrap(get_args(tp)[0])
+    if origin is Union or str(origin) == "<class 'types.UnionType'>":
+        out: list[Any] = []
+        for a in get_args(tp):
+            out.extend(_unwrap(a))
+        return out
+    try:
+        import types
+
+        if isinstance(tp, types.UnionType):
+            out = []
+            for a in get_args(tp):
+                out.extend(_unwrap(a))
+            return out
+    except ImportError:  # pragma: no cover
+        pass
+    return [tp]
+
+
+def _models_at(loc: tuple[Any, ...]) -> list[type[BaseModel]]:
+    """The model classes that could sit at ``loc`` (pydantic loc, tags included)."""
+    current: list[Any] = [Scene]
+    for seg in loc:
+        nxt: list[Any] = []
+        for tp in current:
+            for alt in _unwrap(tp):
+                if isinstance(alt, type) and issubclass(alt, BaseModel):
+                    if isinstance(seg, str) and seg in alt.model_fields:
+                        nxt.append(alt.model_fields[seg].annotation)
+                    elif isinstance(seg, str) and _tag_of(alt) == seg:
+                        nxt.append(alt)
+                elif get_origin(alt) is list and isinstance(seg, int):
+                    nxt.append(get_args(alt)[0])
+        current = nxt
+    return [a for tp in current for a in _unwrap(tp) if isinstance(a, type) and issubclass(a, BaseModel)]
+
+
+def _tag_of(model: type[BaseModel]) -> str | None:
+    f = model.model_fields.get("type")
+    if f is None:
+        return None
+    args = get_args(f.annotation)
+    return args[0] if args else None
+
+
+def _suggest(word: Any, choices: list[str]) -> str:
+    if not isinstance(word, str):
+        return ""
+    close = difflib.get_close_matches(word, choices, n=1, cutoff=0.6)
+    return f"; did you mean '{close[0]}'?" if close else ""
+
+
+_KIND = {
+    "float_type": "a number",
+    "float_parsing": "a number",
+    "int_type": "an integer",
+    "int_parsing": "an integer",
+    "string_type": "a string",
+    "bool_type": "true or false",
+    "list_type": "a list",
+    "dict_type": "a mapping",
+    "model_type": "a mapping",
+    "model_attributes_type": "a mapping",
+}
+
+
+def _short(value: Any) -> str:
+    r = repr(value)
+    return r if len(r) <= 40 else r[:37] + "..."
+
+
+def _diagnostics(exc: ValidationError, data: dict[str, Any], marks: Marks, file: str) -> list[Diagnostic]:
+    groups: dict[Path_, list[dict[str, Any]]] = {}
+    for err in exc.errors(include_url=False):
+        loc = err["loc"]
+        if err["type"] == "missing":
+            path, _ = _data_path(loc[:-1], data)
+            key = (*path, loc[-1])
+        else:
+            key, _ = _data_path(loc, data)
+        groups.setdefault(key, []).append(err)
+    out: list[Diagnostic] = []
+    for path, errs in groups.items():
+        msg, at_key = _message(path, errs, marks)
+        if errs[0]["type"] == "missing":
+            line, col = marks.at(path[:-1])
+        else:
+            line, col = marks.at(path, prefer_key=at_key)
+        out.append(Diagnostic(file, line, col, _dotted(path), msg))
+    return out
+
+
+def _message(path: Path_, errs: list[dict[str, Any]], marks: Marks) -> tuple[str, bool]:
+    """One message for all errors at one place (a union reports one per branch)."""
+    types = [e["type"] for e in errs]
+    first = errs[0]
+    hint = marks.hints.get(path)
+    if "extra_forbidden" in types:
+        e = errs[types.index("extra_forbidden")]
+        allowed = sorted({f for m in _models_at(e["loc"][:-1]) for f in m.model_fields})
+        return f"unknown key{_suggest(path[-1], allowed)} (allowed: {', '.join(allowed)})", True
+    if "missing" in types:
+        return "required key is missing", False
+    if "union_tag_invalid" in types:
+        e = errs[types.index("union_tag_invalid")]
+        tags = [t.strip(" '") for t in e["ctx"]["expected_tags"].split(",")]
+        return f"unknown type {e['ctx']['tag']!r}{_suggest(e['ctx']['tag'], tags)} (valid: {', '.join(tags)})", False
+    if "union_tag_not_found" in types:
+        return "needs a 'type' key", False
+    if "literal_error" in types:
+        e = errs[types.index("literal_error")]
+        choices = re.findall(r"'([^']*)'", e["ctx"]["expected"])
+        return f"{_short(e['input'])} is not one of: {', '.join(choices)}{_suggest(e['input'], choices)}", False
+    if len(errs) > 1 and all(t in _KIND for t in types):
+        kinds = " or ".join(dict.fromkeys(_KIND[t] for t in types))
+        msg = f"expected {kinds}, got {_short(first['input'])}"
+    elif first["type"] in _KIND:
+        msg = f"expected {_KIND[first['type']]}, got {_short(first['input'])}"
+        if first["type"] in ("float_type", "int_type") and isinstance(first["input"], int) and not isinstance(first["input"], bool):
+            msg = f"the number {_short(first['input'])} is too large"
+    elif first["type"] == "finite_number":
+        msg = "must be a finite number (no .nan, .inf, or overflowing values)"
+    elif first["type"] == "value_error":
+        msg = str(first["ctx"]["error"]) if "ctx" in first else first["msg"]
+    else:
+        msg = first["msg"]
+        msg = msg[0].lower() + msg[1:]
+    if hint:
+        msg = f"{msg} ({hint})"
+    return msg, False

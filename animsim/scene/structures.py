@@ -1,0 +1,195 @@
+"""Structure generators: cloth, strand (hair, rope) and soft_box (jello).
+
+Each expands to particles and families of springs whose rest length is the
+initial distance. The spring layouts follow the course notes (the "Cloth" and
+"Hair" slides of the computer-animation lectures, and Lander's "Building with
+Sticks" jello cube): structural springs between grid neighbours, shear springs
+on both diagonals of each cell, bend springs that skip one particle.
+
+Ids are ``<id>[i,j]`` (cloth), ``<id>[i]`` (strand) and ``<id>[i,j,k]``
+(soft_box), created in row-major order, so index = i*ny + j (cloth) and
+(i*ny + j)*nz + k (soft_box). The regular layout is kept (``grid_shape``) so
+later stages can use array slices instead of index lists.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from animsim.scene.models import Cloth, SoftBox, SpringFamily, Strand, Structure
+
+_PLANE_AXES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}
+
+
+@dataclass(frozen=True)
+class SpringGroup:
+    """One family of generated springs, local particle indices."""
+
+    family: str  # e.g. "cloth sheet: structural"
+    index: np.ndarray  # (m, 2) int64, local indices
+    ks: float
+    kd: float
+
+
+@dataclass(frozen=True)
+class Expanded:
+    ids: list[str]
+    position: np.ndarray  # (n, 3) m
+    velocity: np.ndarray  # (n, 3) m/s
+    mass: np.ndarray  # (n,) kg
+    pinned: np.ndarray  # (n,) bool
+    springs: list[SpringGroup]
+    grid_shape: tuple[int, ...]
+
+
+def grid_shape(s: Structure) -> tuple[int, ...]:
+    if isinstance(s, Cloth):
+        return (s.resolution[0], s.resolution[1])
+    if isinstance(s, Strand):
+        return (s.count,)
+    return (s.resolution[0], s.resolution[1], s.resolution[2])
+
+
+def particle_count(s: Structure) -> int:
+    return int(np.prod(grid_shape(s)))
+
+
+def structure_spring_count(s: Structure) -> int:
+    """Number of springs the structure generates, without generating them."""
+    shape = grid_shape(s)
+    return sum(len(pairs) for _, pairs, _ in _families(s, shape, count_only=True))
+
+
+_ID_RE = re.compile(r"^(?P<base>.*)\[(?P<idx>-?\d+(?:,-?\d+)*)\]$")
+
+
+def parse_structure_id(pid: str) -> tuple[str, tuple[int, ...]] | None:
+    """Split ``sheet[3,4]`` into ("sheet", (3, 4)); None if not of that form."""
+    m = _ID_RE.match(pid)
+    if not m:
+        return None
+    return m.group("base"), tuple(int(x) for x in m.group("idx").split(","))
+
+
+def local_index(s: Structure, pid: str) -> int | None:
+    """Local index of ``pid`` in structure ``s``, or None if ``s`` has no such particle."""
+    parsed = parse_structure_id(pid)
+    if parsed is None or parsed[0] != s.id:
+        return None
+    shape = grid_shape(s)
+    idx = parsed[1]
+    if len(idx) != len(shape) or any(not 0 <= i < n for i, n in zip(idx, shape, strict=True)):
+        return None
+    return int(np.ravel_multi_index(idx, shape))
+
+
+def format_id(base: str, shape: tuple[int, ...]) -> list[str]:
+    """All ids of a structure in creation order."""
+    grids = np.indices(shape).reshape(len(shape), -1).T
+    return [f"{base}[{','.join(map(str, row))}]" for row in grids.tolist()]
+
+
+def _pairs(shape: tuple[int, ...], a: tuple[slice, ...], b: tuple[slice, ...]) -> np.ndarray:
+    """Index pairs between two shifted sub-blocks of the grid."""
+    flat = np.arange(int(np.prod(shape)), dtype=np.int64).reshape(shape)
+    return np.stack([flat[a].ravel(), flat[b].ravel()], axis=1)
+
+
+def _lo(k: int) -> slice:
+    return slice(None, -k) if k else slice(None)
+
+
+def _hi(k: int) -> slice:
+    return slice(k, None)
+
+
+def _offset_pairs(shape: tuple[int, ...], offset: tuple[int, ...]) -> np.ndarray:
+    """Pairs (p, p + offset) for every p where both are on the grid.
+
+    Negative offset components are handled by swapping which block is shifted.
+    """
+    a: list[slice] = []
+    b: list[slice] = []
+    for n, o in zip(shape, offset, strict=True):
+        if abs(o) >= n:
+            return np.zeros((0, 2), dtype=np.int64)
+        if o >= 0:
+            a.append(_lo(o))
+            b.append(_hi(o))
+        else:
+            a.append(_hi(-o))
+            b.append(_lo(-o))
+    return _pairs(shape, tuple(a), tuple(b))
+
+
+def _families(
+    s: Structure, shape: tuple[int, ...], count_only: bool = False
+) -> list[tuple[str, np.ndarray, SpringFamily]]:
+    out: list[tuple[str, np.ndarray, SpringFamily]] = []
+
+    def add(name: str, fam: SpringFamily | None, offsets: list[tuple[int, ...]]) -> None:
+        if fam is None:
+            return
+        pairs = np.concatenate([_offset_pairs(shape, o) for o in offsets])
+        out.append((name, pairs, fam))
+
+    if isinstance(s, Cloth):
+        add("structural", s.structural, [(1, 0), (0, 1)])
+        add("shear", s.shear, [(1, 1), (1, -1)])
+        add("bend", s.bend, [(2, 0), (0, 2)])
+    elif isinstance(s, Strand):
+        add("stretch", s.stretch, [(1,)])
+        add("bend", s.bend, [(2,)])
+    else:
+        add("edge", s.edge, [(1, 0, 0), (0, 1, 0), (0, 0, 1)])
+        add(
+            "face_diagonal",
+            s.face_diagonal,
+            [(1, 1, 0), (1, -1, 0), (1, 0, 1), (1, 0, -1), (0, 1, 1), (0, 1, -1)],
+        )
+        add(
+            "body_diagonal",
+            s.body_diagonal,
+            [(1, 1, 1), (1, 1, -1), (1, -1, 1), (1, -1, -1)],
+        )
+    return out
+
+
+def expand(s: Structure) -> Expanded:
+    shape = grid_shape(s)
+    n = int(np.prod(shape))
+    if isinstance(s, Cloth):
+        u_axis, v_axis = _PLANE_AXES[s.plane]
+        i, j = np.indices(shape).reshape(2, -1).astype(np.float64)
+        pos = np.tile(np.asarray(s.origin, dtype=np.float64), (n, 1))
+        pos[:, u_axis] += s.size[0] * i / (shape[0] - 1)
+        pos[:, v_axis] += s.size[1] * j / (shape[1] - 1)
+    elif isinstance(s, Strand):
+        f = np.linspace(0.0, 1.0, n)[:, None]
+        pos = np.asarray(s.start) * (1 - f) + np.asarray(s.end) * f
+    else:
+        assert isinstance(s, SoftBox)
+        frac = [np.linspace(-0.5, 0.5, k) for k in shape]
+        grid = np.stack(np.meshgrid(*frac, indexing="ij"), axis=-1).reshape(-1, 3)
+        pos = np.asarray(s.center) + grid * np.asarray(s.size)
+    pinned = np.zeros(n, dtype=bool)
+    for pid in s.pin:
+        li = local_index(s, pid)
+        if li is not None:
+            pinned[li] = True
+    groups = [
+        SpringGroup(f"{s.type} {s.id}: {name}", pairs, fam.ks, fam.kd)
+        for name, pairs, fam in _families(s, shape)
+    ]
+    return Expanded(
+        ids=format_id(s.id, shape),
+        position=np.ascontiguousarray(pos, dtype=np.float64),
+        velocity=np.tile(np.asarray(s.velocity, dtype=np.float64), (n, 1)),
+        mass=np.full(n, s.mass),
+        pinned=pinned,
+        springs=groups,
+        grid_shape=shape,
+    )
