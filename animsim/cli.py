@@ -13,7 +13,7 @@ import os
 import signal
 import sys
 from contextlib import contextmanager
-from enum import Enum
+from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -21,6 +21,7 @@ import typer
 
 from animsim import __version__
 from animsim.errors import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_USAGE, AnimsimError, UsageError
+
 
 class _App(typer.Typer):
     """A Typer app whose call maps errors to exit statuses (see :func:`main`).
@@ -71,7 +72,7 @@ MaxSteps = Annotated[int, typer.Option("--max-steps", help="Most steps a run may
 DEFAULT_MAX_STEPS = 100_000_000
 
 
-class Format(str, Enum):
+class Format(StrEnum):
     csv = "csv"
     npz = "npz"
 
@@ -143,14 +144,20 @@ def run(
     scene: SceneArg,
     output: Annotated[
         Path | None,
-        typer.Option("-o", "--output", help="Trajectory file; default <scene stem>.csv here; '-' for stdout."),
+        typer.Option(
+            "-o", "--output", help="Trajectory file; default <scene stem>.csv here; '-' for stdout."
+        ),
     ] = None,
     integrator: Annotated[str | None, typer.Option(help="Override the scene's integrator.")] = None,
     dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
     duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
     seed: Annotated[int | None, typer.Option(help="Override the random seed.")] = None,
-    format: Annotated[Format | None, typer.Option("--format", help="Trajectory format; default from the suffix, else csv.")] = None,
-    extra_columns: Annotated[bool, typer.Option("--extra-columns", help="Add age, size, r, g, b, a columns (particle systems).")] = False,
+    format: Annotated[
+        Format | None, typer.Option("--format", help="Trajectory format; default from the suffix, else csv.")
+    ] = None,
+    extra_columns: Annotated[
+        bool, typer.Option("--extra-columns", help="Add age, size, r, g, b, a columns (particle systems).")
+    ] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
     max_file_size: MaxFileSize = 50 * 1024 * 1024,
     max_depth: MaxDepth = 100,
@@ -160,7 +167,8 @@ def run(
     """Simulate SCENE and write its trajectory (CSV or NPZ) and a .meta.json beside it."""
     from animsim.compile import compile_scene, with_overrides
     from animsim.scene.loader import load_scene
-    from animsim.simulate import STATUS_INTERRUPTED, STATUS_UNSTABLE, run as simulate
+    from animsim.simulate import STATUS_INTERRUPTED, STATUS_UNSTABLE
+    from animsim.simulate import run as simulate
 
     loaded = load_scene(scene, _limits(max_file_size, max_depth, max_nodes))
     sc = with_overrides(loaded.scene, integrator=integrator, dt=dt, duration=duration, seed=seed)
@@ -195,7 +203,9 @@ def run(
         _err(f"the frames before the failure are in {out}")
         raise typer.Exit(EXIT_FAILED)
     if result.status == STATUS_INTERRUPTED:
-        _err(f"{scene}: interrupted at step {result.steps_taken} (t = {result.final_state.time:.6g} s); frames so far in {out}")
+        _err(
+            f"{scene}: interrupted at step {result.steps_taken} (t = {result.final_state.time:.6g} s); frames so far in {out}"
+        )
         raise typer.Exit(EXIT_INTERRUPTED)
 
 

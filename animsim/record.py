@@ -74,7 +74,7 @@ def record_steps(clock: Clock, every: int | None = None, fps: float | None = Non
             idx = np.append(idx, n)
         return idx
     period = 1.0 / fps
-    count = int(math.floor(clock.duration / period * (1 + STEP_COUNT_RTOL))) + 1
+    count = math.floor(clock.duration / period * (1 + STEP_COUNT_RTOL)) + 1
     targets = np.arange(count, dtype=np.float64) * period
     if clock.divides:
         idx = np.rint(targets / clock.duration * n)

@@ -90,9 +90,7 @@ class SpringFamily(Model):
 
 class Particle(Model):
     id: Id
-    mass: NonNegative | None = Field(
-        None, description="kg, > 0; may be omitted or 0 only when pinned"
-    )
+    mass: NonNegative | None = Field(None, description="kg, > 0; may be omitted or 0 only when pinned")
     position: Vec3
     velocity: Vec3 = (0.0, 0.0, 0.0)
     pinned: StrictBool = Field(
@@ -133,9 +131,7 @@ class Wind(Model):
     type: Literal["wind"]
     velocity: Vec3 = Field(description="wind velocity, m/s")
     k: NonNegative = Field(description="coupling, f = k*(wind - v), N*s/m")
-    turbulence: NonNegative = Field(
-        0.0, description="standard deviation of the turbulent force, N"
-    )
+    turbulence: NonNegative = Field(0.0, description="standard deviation of the turbulent force, N")
     turbulence_scale: Positive = Field(1.0, description="length scale of the turbulence, m")
     turbulence_time: Positive = Field(1.0, description="time scale of the turbulence, s")
 
@@ -227,9 +223,7 @@ class DiscShape(Model):
         return v
 
 
-Shape = Annotated[
-    PointShape | SphereShape | BoxShape | DiscShape, Field(discriminator="type")
-]
+Shape = Annotated[PointShape | SphereShape | BoxShape | DiscShape, Field(discriminator="type")]
 
 
 class VelocityDistribution(Model):
@@ -272,9 +266,7 @@ class Emitter(Model):
     mass: Positive = 0.01
     size: SizeOverLife = SizeOverLife()
     color: ColorOverLife = ColorOverLife()
-    max_particles: Annotated[StrictInt, Field(ge=1, le=MAX_EMITTER_PARTICLES)] = (
-        DEFAULT_MAX_PARTICLES
-    )
+    max_particles: Annotated[StrictInt, Field(ge=1, le=MAX_EMITTER_PARTICLES)] = DEFAULT_MAX_PARTICLES
     kill_box: KillBox | None = None
 
 

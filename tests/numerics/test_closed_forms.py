@@ -49,13 +49,13 @@ def drag_exact(t):
     return x, v
 
 
-DRAG_SCENE = """
+DRAG_SCENE = f"""
 duration: 1.0
-dt: {dt}
-integrator: {method}
-particles: [{{id: p, mass: %s, position: [0, 0, 0], velocity: [10, 10, 0]}}]
-forces: [{{type: gravity, g: [0, -%s, 0]}}, {{type: drag, k: %s}}]
-""" % (M, G, K_DRAG)
+dt: {{dt}}
+integrator: {{method}}
+particles: [{{{{id: p, mass: {M}, position: [0, 0, 0], velocity: [10, 10, 0]}}}}]
+forces: [{{{{type: gravity, g: [0, -{G}, 0]}}}}, {{{{type: drag, k: {K_DRAG}}}}}]
+"""
 
 
 def drag_error(method, dt):
@@ -107,16 +107,16 @@ def oscillator_exact(t, kd):
     return OSC_REST + u
 
 
-OSC_SCENE = """
+OSC_SCENE = f"""
 duration: 2.0
-dt: {dt}
-integrator: {method}
+dt: {{dt}}
+integrator: {{method}}
 particles:
-  - {{id: anchor, pinned: true, position: [0, 0, 0]}}
-  - {{id: bob, mass: %s, position: [%s, 0, 0]}}
+  - {{{{id: anchor, pinned: true, position: [0, 0, 0]}}}}
+  - {{{{id: bob, mass: {OSC_M}, position: [{OSC_X0}, 0, 0]}}}}
 springs:
-  - {{between: [bob, anchor], ks: %s, kd: {kd}, rest: %s}}
-""" % (OSC_M, OSC_X0, OSC_K, OSC_REST)
+  - {{{{between: [bob, anchor], ks: {OSC_K}, kd: {{kd}}, rest: {OSC_REST}}}}}
+"""
 
 
 def oscillator_error(method, dt, kd):
@@ -194,7 +194,7 @@ integrator: euler
 particles: [{{id: p, mass: 1, position: [1, 0, 0], velocity: [0, 1, 0]}}]
 forces: [{{type: attractor, gm: 1.0}}]
 """
-    _, result, sink = simulate_text(scene)
+    _, _result, sink = simulate_text(scene)
     r = np.linalg.norm(sink.frames[-1].position[0])
     # Explicit Euler multiplies r^2 v^2 terms by (1 + dt^2) each step: r grows.
     assert r > 1.05
@@ -206,7 +206,9 @@ forces: [{{type: attractor, gm: 1.0}}]
 def test_explicit_euler_energy_growth_is_exact():
     # x'' = -w^2 (x - R): one Euler step maps E to E (1 + (w dt)^2) exactly.
     dt, omega = 0.05, 4.0
-    compiled, _, sink = simulate_text(OSC_SCENE.format(dt=dt, method="euler", kd=0.0).replace("duration: 2.0", "duration: 1.0"))
+    compiled, _, sink = simulate_text(
+        OSC_SCENE.format(dt=dt, method="euler", kd=0.0).replace("duration: 2.0", "duration: 1.0")
+    )
     energies = [compiled.dynamics.energy(f.position, f.velocity) for f in sink.frames]
     ratios = np.array(energies[1:]) / np.array(energies[:-1])
     np.testing.assert_allclose(ratios, 1 + (omega * dt) ** 2, rtol=1e-12)
