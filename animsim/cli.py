@@ -316,7 +316,11 @@ def check(
 def main(argv: list[str] | None = None) -> None:
     """Run the app; every AnimsimError becomes a message and an exit status, never a traceback."""
     try:
-        typer.Typer.__call__(app, args=argv, prog_name="animsim", standalone_mode=False)
+        # Without standalone mode click *returns* the code of a typer.Exit
+        # instead of raising it: it must become the process status.
+        code = typer.Typer.__call__(app, args=argv, prog_name="animsim", standalone_mode=False)
+        if isinstance(code, int) and code != 0:
+            sys.exit(code)
     except AnimsimError as exc:
         _err(str(exc))
         sys.exit(exc.exit_code)
