@@ -47,7 +47,9 @@ DEFAULT_MAX_PARTICLES = 100_000
 
 
 class Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
+    # validate_default: defaults go through the same validators as user values
+    # (a default vector becomes the same 3-tuple a written one does).
+    model_config = ConfigDict(extra="forbid", strict=True, frozen=True, validate_default=True)
 
 
 def _to_vec3(v: list[float]) -> tuple[float, float, float]:
@@ -92,7 +94,7 @@ class Particle(Model):
     id: Id
     mass: NonNegative | None = Field(None, description="kg, > 0; may be omitted or 0 only when pinned")
     position: Vec3
-    velocity: Vec3 = (0.0, 0.0, 0.0)
+    velocity: Vec3 = [0.0, 0.0, 0.0]
     pinned: StrictBool = Field(
         False, description="forces never move it; it keeps its velocity (a moving anchor)"
     )
@@ -112,7 +114,7 @@ class Spring(Model):
 
 class Gravity(Model):
     type: Literal["gravity"]
-    g: Vec3 = (0.0, -9.81, 0.0)
+    g: Vec3 = [0.0, -9.81, 0.0]
 
 
 class Drag(Model):
@@ -138,7 +140,7 @@ class Wind(Model):
 
 class Attractor(Model):
     type: Literal["attractor"]
-    position: Vec3 = (0.0, 0.0, 0.0)
+    position: Vec3 = [0.0, 0.0, 0.0]
     gm: FiniteFloat = Field(description="G*M in m^3/s^2; f = -m*gm*r/|r|^3; negative repels")
     softening: NonNegative = Field(
         0.0,
@@ -227,7 +229,7 @@ Shape = Annotated[PointShape | SphereShape | BoxShape | DiscShape, Field(discrim
 
 
 class VelocityDistribution(Model):
-    mean: Vec3 = (0.0, 0.0, 0.0)
+    mean: Vec3 = [0.0, 0.0, 0.0]
     spread: NonNegative = Field(0.0, description="standard deviation per component, m/s")
 
 
@@ -276,7 +278,7 @@ class Emitter(Model):
 class Cloth(Model):
     type: Literal["cloth"]
     id: StrictStr = Field(min_length=1)
-    origin: Vec3 = (0.0, 0.0, 0.0)
+    origin: Vec3 = [0.0, 0.0, 0.0]
     size: Vec2Positive = Field(description="extent along u and v, m")
     plane: Literal["xy", "xz", "yz"] = "xz"
     resolution: Annotated[
@@ -284,7 +286,7 @@ class Cloth(Model):
         Field(min_length=2, max_length=2),
     ]
     mass: Positive = Field(description="per particle, kg")
-    velocity: Vec3 = (0.0, 0.0, 0.0)
+    velocity: Vec3 = [0.0, 0.0, 0.0]
     structural: SpringFamily | None = None
     shear: SpringFamily | None = None
     bend: SpringFamily | None = None
@@ -298,7 +300,7 @@ class Strand(Model):
     end: Vec3
     count: Annotated[StrictInt, Field(ge=2, le=MAX_STRAND_COUNT)]
     mass: Positive = Field(description="per particle, kg")
-    velocity: Vec3 = (0.0, 0.0, 0.0)
+    velocity: Vec3 = [0.0, 0.0, 0.0]
     stretch: SpringFamily | None = None
     bend: SpringFamily | None = None
     pin: list[Id] = []
@@ -307,14 +309,14 @@ class Strand(Model):
 class SoftBox(Model):
     type: Literal["soft_box"]
     id: StrictStr = Field(min_length=1)
-    center: Vec3 = (0.0, 0.0, 0.0)
+    center: Vec3 = [0.0, 0.0, 0.0]
     size: Annotated[list[Positive], Field(min_length=3, max_length=3)]
     resolution: Annotated[
         list[Annotated[StrictInt, Field(ge=2, le=MAX_RESOLUTION)]],
         Field(min_length=3, max_length=3),
     ]
     mass: Positive = Field(description="per particle, kg")
-    velocity: Vec3 = (0.0, 0.0, 0.0)
+    velocity: Vec3 = [0.0, 0.0, 0.0]
     edge: SpringFamily | None = None
     face_diagonal: SpringFamily | None = None
     body_diagonal: SpringFamily | None = None
@@ -376,6 +378,7 @@ class Scene(Model):
         extra="forbid",
         strict=True,
         frozen=True,
+        validate_default=True,
         title="animsim scene",
         json_schema_extra={"$schema": "https://json-schema.org/draft/2020-12/schema"},
     )
