@@ -55,9 +55,13 @@ class PlaneColliders:
         v_old: np.ndarray,
         x: np.ndarray,
         v: np.ndarray,
-        dt: float,
+        dt: float | np.ndarray,
     ) -> bool:
-        """Resolve crossings of the step x_old -> x in place; True if anything changed."""
+        """Resolve crossings of the step x_old -> x in place; True if anything changed.
+
+        ``dt`` may be an (N,) array of per-particle step lengths: an emitted
+        particle moves only for the rest of its birth step.
+        """
         changed = False
         movable = self.inv_mass > 0
         for pl in self.planes:
@@ -71,7 +75,8 @@ class PlaneColliders:
             d0 = np.maximum((x_old[hit] - pl.point) @ n, 0.0)
             s = (d0 / (d0 - d1))[:, None]  # fraction of the step at impact, in [0, 1)
             xo, vo = x_old[hit], v_old[hit]
-            mean_acc = (v[hit] - vo) / dt
+            dt_hit = dt if np.ndim(dt) == 0 else np.asarray(dt)[hit][:, None]
+            mean_acc = (v[hit] - vo) / dt_hit
             xc = xo + s * (x[hit] - xo)
             vc = vo + s * (v[hit] - vo)
             # Reflect the approaching ones (Lander Eq. 3) with Coulomb friction.
@@ -82,7 +87,7 @@ class PlaneColliders:
             vt = _apply_friction(vt, np.abs(vn_new - vn), pl.friction)
             vr = vt + vn_new[:, None] * n
             # Fly on for the rest of the step.
-            r = (1.0 - s) * dt
+            r = (1.0 - s) * dt_hit
             xn = xc + r * vr + 0.5 * r * r * mean_acc
             vnew = vr + r * mean_acc
             x[hit] = xn
