@@ -397,3 +397,16 @@ def test_explain_lists_the_emitter_stages(tmp_path):
     for word in ("emitter 'smoke' births", "ageing", "deaths: at the exact age limit", "turbulence:"):
         assert word in text, text
     assert "emitters: no births" not in text
+
+
+@pytest.mark.filterwarnings("error")
+def test_dead_slots_at_an_unsoftened_attractor_are_harmless():
+    """Dead slots sit at the origin with mass 0; an attractor there must not make 0/0 noise."""
+    text = (
+        scene(rate=100, life=1.0)
+        .replace("emitters:", "forces:\n  - {type: attractor, position: [0, 0, 0], gm: 1.0}\nemitters:")
+        .replace("position: [0, 0, 0]}\n    velocity", "position: [1, 0, 0]}\n    velocity")
+    )
+    _, result, sink = simulate_text(text)
+    assert np.isfinite(result.energy_end)
+    assert len(sink.frames[-1].index) > 0
