@@ -633,6 +633,18 @@ class Emitters:
             color=color,
         )
 
+    def particle_id(self, index: int) -> str | None:
+        """The id (``<name>#<n>``) of the particle alive in global slot ``index``, if any.
+
+        For messages that name a particle (the stability guard): a pool slot's
+        index means nothing to a user, its id does.
+        """
+        for p in self.pools:
+            local = index - p.first
+            if 0 <= local < p.capacity:
+                return f"{p.name}#{int(p.slot_serial[local])}" if p.alive[local] else None
+        return None
+
     def summary(self) -> dict[str, Any]:
         return {
             "births_dropped": sum(p.dropped for p in self.pools),

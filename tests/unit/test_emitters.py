@@ -410,3 +410,51 @@ def test_dead_slots_at_an_unsoftened_attractor_are_harmless():
     _, result, sink = simulate_text(text)
     assert np.isfinite(result.energy_end)
     assert len(sink.frames[-1].index) > 0
+
+
+def test_pool_acceptance_matches_one_birth_at_a_time():
+    """The vectorised closed form keeps exactly the births a sequential pass would keep."""
+    from animsim.emitters import Births, Pool
+
+    rng = np.random.default_rng(12)
+    for trial in range(200):
+        cap = int(rng.integers(1, 12))
+        pool = Pool(emitter(max_particles=cap), 0, 0, seed=trial)
+        alive = int(rng.integers(0, cap + 1))
+        pool.alive_count = alive
+        pool.slot_death[:] = np.inf
+        pool.slot_death[:alive] = rng.uniform(0.0, 1.0, alive)
+        births = np.sort(rng.uniform(0.0, 1.0, int(rng.integers(1, 15))))
+        events = Births(births, np.zeros((len(births), 3)), np.zeros((len(births), 3)), np.ones(len(births)))
+        dying = np.flatnonzero(pool.slot_death <= 1.0)
+        got = pool._accepted(events, dying)
+        # One birth at a time, as the notes' update loop would do it.
+        deaths = np.sort(pool.slot_death[dying])
+        kept = []
+        count = alive
+        for b in births:
+            occupied = count - np.count_nonzero(deaths <= b)
+            kept.append(occupied < cap)
+            count += kept[-1]
+        assert got.tolist() == kept, (cap, alive, births, deaths)
+
+
+def test_particle_id_names_an_alive_slot():
+    compiled, _, _ = simulate_text(scene(duration=0.5, rate=100, life=1.0, cap=100))
+    em = compiled.emitters
+    pool = em.pools[0]
+    slot = int(np.flatnonzero(pool.alive)[0])
+    assert em.particle_id(pool.first + slot) == f"e#{pool.slot_serial[slot]}"
+    dead = int(np.flatnonzero(~pool.alive)[0])
+    assert em.particle_id(pool.first + dead) is None
+
+
+def test_a_slot_freed_at_a_death_time_takes_a_birth_at_that_same_time():
+    """A particle is alive for t < birth + lifetime: at that instant its slot is free."""
+    from animsim.emitters import Births, Pool
+
+    pool = Pool(emitter(max_particles=1), 0, 0, seed=0)
+    pool.alive_count = 1
+    pool.slot_death[0] = 0.5
+    events = Births(np.array([0.5]), np.zeros((1, 3)), np.zeros((1, 3)), np.ones(1))
+    assert pool._accepted(events, np.array([0])).tolist() == [True]
