@@ -47,10 +47,15 @@ The rest of the birth step
     of it, r = t1 - tau, ballistically with the acceleration at birth,
     x = x0 + r v0 + r^2/2 a0, v = v0 + r a0 (a0 = F(x0, v0)/m evaluated once
     per step with births, at the step's midpoint time), then collided with
-    the impulse planes over that same partial step. The error is O(r^3) in
-    position, once per particle, so emitted trajectories converge as dt
-    shrinks (at up to third order; a fourth-order integrator's emitted
-    particles are limited to that).
+    the impulse planes over that same partial step. Once per particle this
+    errs by O(r^3) in position and O(r^2) in velocity (the acceleration is
+    held constant, and taken at one time for the whole step), and the
+    velocity error carries into the position for the rest of the flight, so
+    emitted trajectories converge at order min(p, 2) for an integrator of
+    order p (measured: 1 for symplectic Euler, 2 for midpoint and for rk4).
+    A higher order would need one more force evaluation over every slot per
+    step, at the per-particle birth time, which the force contract (one
+    scalar t) does not offer.
 
 Deaths
     At the exact age limit: a particle is alive for birth <= t < birth +
