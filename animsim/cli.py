@@ -310,6 +310,98 @@ def check(
         raise typer.Exit(EXIT_FAILED)
 
 
+# --- render -------------------------------------------------------------------------------
+
+
+@app.command()
+def render(
+    source: Annotated[
+        Path,
+        typer.Argument(
+            help="A scene (simulated first) or a trajectory (.csv, .npz).", metavar="SCENE_OR_TRAJECTORY"
+        ),
+    ],
+    gif: Annotated[Path | None, typer.Option("--gif", help="Write an animated GIF here.")] = None,
+    mp4: Annotated[
+        Path | None, typer.Option("--mp4", help="Write an MP4 here (needs the mp4 extra: imageio-ffmpeg).")
+    ] = None,
+    fps: Annotated[
+        float, typer.Option("--fps", help="Frames per second; GIF delays come in 10 ms steps.")
+    ] = 25.0,
+    view: Annotated[
+        str, typer.Option("--view", help="xy, xz, yz (orthographic) or 3d (perspective).")
+    ] = "xy",
+    size: Annotated[str, typer.Option("--size", help="WIDTHxHEIGHT in pixels.")] = "480x480",
+    scene: Annotated[
+        Path | None,
+        typer.Option("--scene", help="The scene of a trajectory, to draw its springs and planes."),
+    ] = None,
+    azimuth: Annotated[float | None, typer.Option(help="3d camera: degrees around the up axis.")] = None,
+    elevation: Annotated[float | None, typer.Option(help="3d camera: degrees above the horizon.")] = None,
+    distance: Annotated[
+        float | None, typer.Option(help="3d camera: distance from the centre (m); default fits the bounds.")
+    ] = None,
+    integrator: Annotated[str | None, typer.Option(help="Override the scene's integrator.")] = None,
+    dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
+    duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
+) -> None:
+    """Render an animation: particles as dots (size and colour over life), springs as lines, planes as the ground."""
+    from animsim.export.trajectory import is_trajectory, read_trajectory
+    from animsim.render import RenderOptions, render_scene, render_trajectory, validate
+    from animsim.scene import models as m
+
+    opts = RenderOptions(
+        fps=fps, size=size, view=view, azimuth=azimuth, elevation=elevation, distance=distance
+    )
+    validate(gif, mp4, opts)
+    for out in (gif, mp4):
+        if out is not None:
+            check_output_path(out, source)
+    from_file = is_trajectory(source)
+    compiled = None
+    scene_path = scene if from_file else source
+    if scene_path is not None:
+        from animsim.compile import compile_scene, with_overrides
+        from animsim.scene.loader import load_scene
+
+        loaded = load_scene(scene_path)
+        sc = with_overrides(loaded.scene, integrator=integrator, dt=dt, duration=duration)
+        if not from_file:
+            # Record exactly the frames the animation shows.
+            sc = sc.model_copy(update={"record": m.Record(fps=fps)})
+        compiled = compile_scene(sc, loaded.name)
+    total = compiled.record_steps.size if (compiled is not None and not from_file) else None
+    with _frame_progress(total, quiet) as progress:
+        if from_file:
+            result = render_trajectory(
+                read_trajectory(source), gif, mp4, opts, compiled=compiled, progress=progress
+            )
+        else:
+            with _graceful_stop() as stop:
+                result = render_scene(compiled, gif, mp4, opts, progress=progress, stop=stop)
+    if not quiet:
+        outs = " and ".join(str(p) for p in result.outputs)
+        typer.echo(f"wrote {outs}: {result.frames} frames at {fps:g} fps, view {view}, {size}")
+    if result.status == "unstable":
+        _err(f"{source}: {result.failure.describe()}")
+        raise typer.Exit(EXIT_FAILED)
+    if result.status == "interrupted":
+        raise typer.Exit(EXIT_INTERRUPTED)
+
+
+@contextmanager
+def _frame_progress(total: int | None, quiet: bool):
+    if quiet or total is None or total < 50 or not sys.stderr.isatty():
+        yield None
+        return
+    from rich.progress import Progress
+
+    with Progress(transient=True, console=_stderr_console()) as bar:
+        task = bar.add_task("rendering", total=total)
+        yield lambda done: bar.update(task, completed=done)
+
+
 # --- plot -------------------------------------------------------------------------------
 
 

@@ -220,9 +220,7 @@ def compile_scene(scene: m.Scene, name: str = "scene") -> Compiled:
             if f.turbulence > 0:
                 from animsim.forces.turbulence import Turbulence
 
-                terms.append(
-                    Turbulence.from_scene(f, scene.seed, system.particle_mass, stream=force_index)
-                )
+                terms.append(Turbulence.from_scene(f, scene.seed, system.particle_mass, stream=force_index))
                 present.add("turbulence")
         elif isinstance(f, m.Attractor):
             terms.append(Attractor(np.array(f.position), f.gm, f.softening, system.particle_mass))

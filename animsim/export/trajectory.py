@@ -1,5 +1,9 @@
 """Read a trajectory file (CSV or NPZ) back into frames.
 
+A CSV has a row per alive particle per frame, so a frame in which nothing is
+alive (a particle system before its first birth) leaves no trace in it; the
+NPZ keeps every frame's time and round-trips a run exactly.
+
 ``render`` and ``plot`` draw from a scene (simulating it first) or from a
 trajectory someone already computed; this module turns the second into the
 same :class:`~animsim.record.Frame` stream the simulator produces.
@@ -31,6 +35,7 @@ class Trajectory:
     position: np.ndarray  # (R, 3)
     velocity: np.ndarray  # (R, 3)
     frame_start: np.ndarray  # (F+1,) row offsets
+    frame_time: np.ndarray | None = None  # (F,) when known (NPZ keeps empty frames)
     age: np.ndarray | None = None
     size: np.ndarray | None = None
     color: np.ndarray | None = None  # (R, 4)
@@ -41,6 +46,8 @@ class Trajectory:
 
     @property
     def times(self) -> np.ndarray:
+        if self.frame_time is not None:
+            return self.frame_time
         return self.t[self.frame_start[:-1]] if len(self.t) else np.zeros(0)
 
     def frames(self) -> Iterator[Frame]:
@@ -53,7 +60,7 @@ class Trajectory:
             seen = max(seen, top)
             yield Frame(
                 step=k,
-                time=float(self.t[a]) if b > a else float("nan"),
+                time=float(self.times[k]),
                 index=idx,
                 position=self.position[a:b],
                 velocity=self.velocity[a:b],
@@ -87,14 +94,18 @@ def read_trajectory(path: str | Path) -> Trajectory:
 
 def _read_npz(p: Path) -> Trajectory:
     with np.load(p, allow_pickle=False) as z:
-        return Trajectory(
+        traj = Trajectory(
             ids=[str(i) for i in z["ids"]],
             t=z["t"],
             particle=z["particle"].astype(np.int64),
             position=z["position"],
             velocity=z["velocity"],
             frame_start=z["frame_start"].astype(np.int64),
+            frame_time=z["frame_time"],
         )
+        if "color" in z.files:
+            traj.age, traj.size, traj.color = z["age"], z["size"], z["color"]
+        return traj
 
 
 def _read_csv(p: Path) -> Trajectory:
