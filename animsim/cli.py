@@ -341,6 +341,9 @@ def render(
     distance: Annotated[
         float | None, typer.Option(help="3d camera: distance from the centre (m); default fits the bounds.")
     ] = None,
+    dot_radius: Annotated[
+        float, typer.Option("--dot-radius", help="Radius in pixels of particles that have no size.")
+    ] = 3.0,
     integrator: Annotated[str | None, typer.Option(help="Override the scene's integrator.")] = None,
     dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
     duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
@@ -352,7 +355,13 @@ def render(
     from animsim.scene import models as m
 
     opts = RenderOptions(
-        fps=fps, size=size, view=view, azimuth=azimuth, elevation=elevation, distance=distance
+        fps=fps,
+        size=size,
+        view=view,
+        azimuth=azimuth,
+        elevation=elevation,
+        distance=distance,
+        dot_radius=dot_radius,
     )
     validate(gif, mp4, opts)
     for out in (gif, mp4):

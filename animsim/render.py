@@ -30,6 +30,7 @@ class RenderOptions:
     azimuth: float | None = None
     elevation: float | None = None
     distance: float | None = None
+    dot_radius: float = 3.0  # px, for particles without a size
 
 
 @dataclass
@@ -101,6 +102,8 @@ def validate(gif: Path | None, mp4: Path | None, opts: RenderOptions) -> tuple[i
             raise ValueError(f"MP4 needs an even width and height, got {size[0]}x{size[1]}")
     except ValueError as exc:
         raise UsageError(str(exc)) from None
+    if not (np.isfinite(opts.dot_radius) and opts.dot_radius > 0):
+        raise UsageError(f"--dot-radius {opts.dot_radius}: must be a number of pixels > 0")
     if opts.view not in VIEWS:
         raise UsageError(f"--view {opts.view!r}: choose one of {', '.join(VIEWS)}")
     if gif is not None and gif.suffix.lower() != ".gif":
@@ -123,7 +126,7 @@ def _sinks(
 ) -> list[Any]:
     from animsim.export.animation import AnimationSink
 
-    camera: dict[str, Any] = {"up": up, "distance": opts.distance}
+    camera: dict[str, Any] = {"up": up, "distance": opts.distance, "dot_radius": opts.dot_radius}
     if opts.azimuth is not None:
         camera["azimuth"] = opts.azimuth
     if opts.elevation is not None:

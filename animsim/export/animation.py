@@ -164,7 +164,11 @@ class FrameRenderer:
         background: Sequence[float] = BACKGROUND_RGB,
         time_stamp: bool = True,
         time_decimals: int = 2,
+        dot_radius: float = DEFAULT_DOT_RADIUS_PX,
     ):
+        if not (np.isfinite(dot_radius) and dot_radius > 0):
+            raise ValueError(f"dot radius must be a number of pixels > 0, got {dot_radius}")
+        self.dot_radius = float(dot_radius)
         self.camera = camera
         self.canvas = Canvas(camera.width, camera.height, background)
         paint_planes(self.canvas, camera, planes)
@@ -194,7 +198,7 @@ class FrameRenderer:
 
         ``position`` (n, 3) m; ``index`` (n,) strictly increasing indices into
         the id table (None: row i is id i); ``size`` (n,) m, the dot's
-        diameter (NaN or None: DEFAULT_DOT_RADIUS_PX); ``color`` (n, 4) RGBA
+        diameter (NaN or None: the renderer's ``dot_radius`` in pixels); ``color`` (n, 4) RGBA
         in [0, 1] (rows with NaN, or None: DEFAULT_PARTICLE_RGBA).
         """
         canvas = self.canvas
@@ -205,7 +209,7 @@ class FrameRenderer:
         if len(self.spring_index):
             self._draw_springs(proj.pixel, proj.visible, index, n)
 
-        radius = np.full(n, DEFAULT_DOT_RADIUS_PX)
+        radius = np.full(n, self.dot_radius)
         if size is not None:
             diameter = np.asarray(size, dtype=np.float64)
             has = np.isfinite(diameter) & (diameter > 0)
@@ -363,6 +367,7 @@ class AnimationSink:
         up: str = DEFAULT_UP,
         time_stamp: bool = True,
         format: str | None = None,
+        dot_radius: float = DEFAULT_DOT_RADIUS_PX,
     ):
         self.path = Path(path)
         self.format = _format_of(self.path, format)
@@ -382,7 +387,9 @@ class AnimationSink:
             up=up,
         )
         decimals = max(2, math.ceil(math.log10(self.fps))) if self.fps > 1 else 2
-        self.renderer = FrameRenderer(camera, planes, time_stamp=time_stamp, time_decimals=decimals)
+        self.renderer = FrameRenderer(
+            camera, planes, time_stamp=time_stamp, time_decimals=decimals, dot_radius=dot_radius
+        )
         self.progress = progress
         self._ffmpeg = _require_ffmpeg() if self.format == "mp4" else None
         self.frames_written = 0
