@@ -75,6 +75,12 @@ DEFAULT_MAX_STEPS = 100_000_000
 class Format(StrEnum):
     csv = "csv"
     npz = "npz"
+    ply = "ply"  # a sequence of binary PLY files, one per recorded frame
+    usda = "usda"  # one USD ASCII file of animated points
+
+
+# Output suffix -> format, for `run -o` without --format (an existing folder means PLY).
+SUFFIX_FORMATS = {".npz": Format.npz, ".ply": Format.ply, ".usda": Format.usda}
 
 
 def _limits(max_file_size: int, max_depth: int, max_nodes: int):
@@ -136,6 +142,37 @@ def check_output_path(output: Path, scene_path: Path) -> None:
         raise UsageError(f"{output}: the folder {parent} is not writable")
 
 
+def output_format(output: Path | None, requested: Format | None) -> Format:
+    """The trajectory format: as asked, else from the suffix, else PLY for an existing folder, else CSV."""
+    if requested is not None:
+        return requested
+    if output is None or str(output) == "-":
+        return Format.csv
+    if output.suffix.lower() in SUFFIX_FORMATS:
+        return SUFFIX_FORMATS[output.suffix.lower()]
+    return Format.ply if output.is_dir() else Format.csv
+
+
+def check_ply_output(output: Path, scene_path: Path) -> None:
+    """Pre-flight for a PLY sequence: a pattern ``dir/stem.ply`` or an existing folder.
+
+    As for every format, the folder must already exist (cli.md: "The output
+    folder must exist"); the sink could create it, but a typo in a folder name
+    would then silently scatter frames somewhere new.
+    """
+    from animsim.export.ply import PLY_SUFFIX
+
+    if output.is_dir():
+        if not os.access(output, os.W_OK):
+            raise UsageError(f"{output}: the folder is not writable")
+        return
+    if output.suffix.lower() != PLY_SUFFIX:
+        raise UsageError(
+            f"{output}: the folder does not exist; create it, or name the frames like {output}/frames.ply"
+        )
+    check_output_path(output, scene_path)
+
+
 # --- run ----------------------------------------------------------------------------
 
 
@@ -153,7 +190,11 @@ def run(
     duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
     seed: Annotated[int | None, typer.Option(help="Override the random seed.")] = None,
     format: Annotated[
-        Format | None, typer.Option("--format", help="Trajectory format; default from the suffix, else csv.")
+        Format | None,
+        typer.Option(
+            "--format",
+            help="Trajectory format; default from the suffix (.npz, .ply, .usda; a folder means ply), else csv.",
+        ),
     ] = None,
     extra_columns: Annotated[
         bool, typer.Option("--extra-columns", help="Add age, size, r, g, b, a columns (particle systems).")
@@ -164,7 +205,13 @@ def run(
     max_nodes: MaxNodes = 100_000,
     max_steps: MaxSteps = DEFAULT_MAX_STEPS,
 ) -> None:
-    """Simulate SCENE and write its trajectory (CSV or NPZ) and a .meta.json beside it."""
+    """Simulate SCENE and write its trajectory and a .meta.json beside it.
+
+    Formats: CSV; NPZ; PLY (one binary file per frame, for Blender, Houdini,
+    ParaView: -o out/frames.ply gives out/frames_0000.ply, ...; an existing
+    folder gives <folder>/frames_0000.ply, ...); USD ASCII (-o anim.usda).
+    The output folder must exist.
+    """
     from animsim.compile import compile_scene, with_overrides
     from animsim.scene.loader import load_scene
     from animsim.simulate import STATUS_INTERRUPTED, STATUS_UNSTABLE
@@ -173,21 +220,34 @@ def run(
     loaded = load_scene(scene, _limits(max_file_size, max_depth, max_nodes))
     sc = with_overrides(loaded.scene, integrator=integrator, dt=dt, duration=duration, seed=seed)
     to_stdout = output is not None and str(output) == "-"
-    out = output if output is not None else Path(f"{scene.stem}.csv")
-    fmt = format or (Format.npz if out.suffix.lower() == ".npz" else Format.csv)
-    if to_stdout and fmt is Format.npz:
-        raise UsageError("--format npz cannot go to stdout; give a file with -o")
-    if not to_stdout:
+    fmt = output_format(output, format)
+    out = output if output is not None else Path(f"{scene.stem}.{fmt.value}")
+    if to_stdout and fmt is not Format.csv:
+        raise UsageError(f"--format {fmt.value} cannot go to stdout; give a file with -o")
+    if fmt is Format.ply:
+        check_ply_output(out, scene)
+    elif not to_stdout:
         check_output_path(out, scene)
     compiled = compile_scene(sc, loaded.name)
     if compiled.clock.steps > max_steps:
         raise UsageError(
             f"{scene}: {compiled.clock.steps} steps is more than the limit of {max_steps} (raise it with --max-steps)"
         )
+    wrote = f"{out} and {out}.meta.json"
     if fmt is Format.npz:
         from animsim.export.npz import NpzSink
 
         sink: Any = NpzSink(out)
+    elif fmt is Format.ply:
+        from animsim.export.ply import PlySequenceSink
+
+        sink = PlySequenceSink(out, expected_frames=len(compiled.record_steps))
+    elif fmt is Format.usda:
+        from animsim.export.usda import USD_DEFAULT_TIME_CODES_PER_SECOND, UsdaSink
+
+        # Uneven frames are placed at time * rate: the scene's own frame rate when it has one.
+        fps = sc.record.fps
+        sink = UsdaSink(out, uneven_rate=fps if fps is not None else USD_DEFAULT_TIME_CODES_PER_SECOND)
     else:
         from animsim.export.csv import CsvSink
 
@@ -195,8 +255,12 @@ def run(
     extra = {"scene_sha256": loaded.sha256, "scene_file": str(scene)}
     with _graceful_stop() as stop, _progress(compiled.clock.steps, quiet) as progress:
         result = simulate(compiled, [sink], stop=stop, progress=progress, meta_extra=extra)
+    if fmt is Format.ply and sink.written:
+        first, last = sink.written[0], sink.written[-1]
+        span = f"{first}" if first == last else f"{first} .. {last.name}"
+        wrote = f"{len(sink.written)} PLY frames {span}, {sink.ids_path} and {out}.meta.json"
     if not quiet:
-        _summary(compiled, result, None if to_stdout else out)
+        _summary(compiled, result, None if to_stdout else wrote)
     if result.status == STATUS_UNSTABLE:
         assert result.failure is not None
         _err(f"{scene}: {result.failure.describe()}")
@@ -234,16 +298,17 @@ def _stderr_console():
     return Console(stderr=True)
 
 
-def _summary(compiled: Any, result: Any, out: Path | None) -> None:
-    stream_err = out is None  # trajectory went to stdout: keep stdout clean
+def _summary(compiled: Any, result: Any, wrote: str | None) -> None:
+    """Print the run summary; ``wrote`` names the files written (None: the trajectory went to stdout)."""
+    stream_err = wrote is None  # trajectory went to stdout: keep stdout clean
     lines = [
         f"{compiled.name}: {compiled.system.particle_count} particles, {compiled.system.spring_count} springs, "
         f"{result.steps_taken}/{compiled.clock.steps} steps of {compiled.clock.dt:g} s with {compiled.integrator_name}",
         f"  wall time {result.wall_time:.3f} s, {result.frames} frames, {result.force_evals} force evaluations",
         f"  energy {result.energy_start:.6g} J -> {result.energy_end:.6g} J, status {result.status}",
     ]
-    if out is not None:
-        lines.append(f"  wrote {out} and {out}.meta.json")
+    if wrote is not None:
+        lines.append(f"  wrote {wrote}")
     typer.echo("\n".join(lines), err=stream_err)
 
 
