@@ -375,6 +375,116 @@ def check(
         raise typer.Exit(EXIT_FAILED)
 
 
+# --- sweep ------------------------------------------------------------------------------
+
+
+class Reference(StrEnum):
+    auto = "auto"
+    analytic = "analytic"
+    fine = "fine"
+
+
+@app.command()
+def sweep(
+    scene: SceneArg,
+    set_: Annotated[
+        list[str],
+        typer.Option(
+            "--set",
+            help="KEY=V1,V2,...: a dotted key of the scene (springs.0.ks, structures.0.structural.ks, dt) "
+            "and its values; repeat for more axes.",
+            show_default=False,
+        ),
+    ] = [],  # noqa: B006 (typer reads the default; never mutated)
+    integrators: Annotated[
+        str | None, typer.Option("--integrators", help="Comma-separated methods: one more axis.")
+    ] = None,
+    reference: Annotated[
+        Reference | None,
+        typer.Option(help="Add an error column against this reference (fine: RK4 at dt/16)."),
+    ] = None,
+    output: Annotated[Path | None, typer.Option("-o", "--output", help="The table as CSV.")] = None,
+    plot: Annotated[Path | None, typer.Option("--plot", help="Plot --y over --x (PNG, SVG, PDF).")] = None,
+    x: Annotated[str | None, typer.Option("--x", help="Swept key on the x axis; default the first.")] = None,
+    y: Annotated[
+        str | None, typer.Option("--y", help="Column to plot; default error with --reference, else drift.")
+    ] = None,
+    jobs: Annotated[int, typer.Option("--jobs", "-j", help="Local worker processes.", min=1)] = 1,
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            "--scheduler",
+            help="Dask scheduler address, or 'local' for a LocalCluster (--jobs workers); "
+            'needs pip install "animsim[dask]".',
+        ),
+    ] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No table, only the files.")] = False,
+) -> None:
+    """Run SCENE for every combination of --set values (and --integrators) and tabulate the outcome.
+
+    Each case is re-validated by the scene rules (a refused value is an
+    'invalid' row; a key that does not exist is an error before any run) and
+    gets its own seed from the scene's seed and its case number, so serial,
+    --jobs and --scheduler runs give the same rows. Unstable and invalid
+    cases are rows, not failures: the exit status is 0 once the table is
+    made, 1 only if a case crashed (status 'error').
+    """
+    from animsim.analysis import sweep as sw
+    from animsim.scene.loader import load_scene
+
+    loaded = load_scene(scene)
+    axes = [sw.parse_set(text) for text in set_]
+    if integrators is not None:
+        axes.append(sw.integrators_axis(integrators))
+    if not axes:
+        raise UsageError("sweep: give at least one --set KEY=V1,V2,... or --integrators")
+    sw.check_axes(axes)
+    keys = [a.key for a in axes]
+    x_key = x or keys[0]
+    y_col = y or ("error" if reference is not None else "drift")
+    if plot is not None:
+        if x_key not in keys:
+            raise UsageError(f"--x {x_key}: not a swept key (swept: {', '.join(keys)})")
+        if y_col not in sw.PLOT_COLUMNS or (y_col == "error" and reference is None):
+            cols = [c for c in sw.PLOT_COLUMNS if c != "error" or reference is not None]
+            raise UsageError(f"--y {y_col}: not a plottable column (choose from {', '.join(cols)})")
+        check_output_path(plot, scene)
+    if output is not None:
+        check_output_path(output, scene)
+    table = sw.sweep(
+        loaded.data,
+        loaded.name,
+        str(scene),
+        axes,
+        reference=reference.value if reference is not None else None,
+        jobs=jobs,
+        scheduler=scheduler,
+    )
+    if not quiet:
+        sw.print_table(table, _stdout_console())
+    if output is not None:
+        sw.write_csv(table, output)
+    if plot is not None:
+        sw.plot_table(table, plot, x_key, y_col)
+    counts = table.counts()
+    where = f"Dask ({scheduler})" if scheduler else (f"{jobs} processes" if jobs > 1 else "serial")
+    summary = ", ".join(f"{n} {status}" for status, n in counts.items())
+    wrote = [str(p) for p in (output, plot) if p is not None]
+    _err(f"{len(table.rows)} cases ({where}): {summary}" + (f"; wrote {', '.join(wrote)}" if wrote else ""))
+    if counts.get(sw.STATUS_ERROR):
+        raise typer.Exit(EXIT_FAILED)
+
+
+# Width of the printed table when stdout is not a terminal (a file or a pipe).
+PIPE_TABLE_WIDTH = 200
+
+
+def _stdout_console():
+    from rich.console import Console
+
+    return Console() if sys.stdout.isatty() else Console(width=PIPE_TABLE_WIDTH)
+
+
 # --- entry point ----------------------------------------------------------------------------
 
 
