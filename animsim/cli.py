@@ -467,7 +467,10 @@ def sweep(
     if plot is not None:
         sw.plot_table(table, plot, x_key, y_col)
     counts = table.counts()
-    where = f"Dask ({scheduler})" if scheduler else (f"{jobs} processes" if jobs > 1 else "serial")
+    if scheduler is not None:
+        where = "Dask LocalCluster" if scheduler == "local" else f"Dask at {scheduler}"
+    else:
+        where = f"{jobs} processes" if jobs > 1 else "serial"
     summary = ", ".join(f"{n} {status}" for status, n in counts.items())
     wrote = [str(p) for p in (output, plot) if p is not None]
     _err(f"{len(table.rows)} cases ({where}): {summary}" + (f"; wrote {', '.join(wrote)}" if wrote else ""))

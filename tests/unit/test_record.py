@@ -10,7 +10,13 @@ from animsim.record import Clock, record_steps
 
 @pytest.mark.parametrize(
     ("duration", "dt", "steps", "last"),
-    [(0.5, 0.1, 5, 0.1), (1.0, 0.3, 4, 0.1), (1.0, 0.01, 100, 0.01), (2 * np.pi, 0.01, 629, 2 * np.pi - 6.28), (0.1, 0.1, 1, 0.1)],
+    [
+        (0.5, 0.1, 5, 0.1),
+        (1.0, 0.3, 4, 0.1),
+        (1.0, 0.01, 100, 0.01),
+        (2 * np.pi, 0.01, 629, 2 * np.pi - 6.28),
+        (0.1, 0.1, 1, 0.1),
+    ],
 )
 def test_step_count_and_last_step(duration, dt, steps, last):
     c = Clock.make(duration, dt)
