@@ -750,7 +750,8 @@ def plot_table(table: SweepTable, path: Path, x: str, y: str) -> None:
                 xp = np.array([x_labels.index(repr(r.overrides[x])) for r in rows], dtype=float)
             yp = np.array([_y_value(r, y) for r in rows])
             plotted += [v for v in yp if math.isfinite(v)]
-            (line,) = ax.plot(xp, yp, marker="o", label=label)
+            color, style = _line_look(rows[0], others, table.axes)
+            (line,) = ax.plot(xp, yp, marker="o", label=label, color=color, linestyle=style)
             bad = [i for i, r in enumerate(rows) if r.status != "ok"]
             if bad:
                 ax.plot(
@@ -781,6 +782,22 @@ def plot_table(table: SweepTable, path: Path, x: str, y: str) -> None:
 
 
 BOTTOM_MARK_Y = 0.02  # axes fraction
+LINE_STYLES = ("-", "--", ":", "-.")
+
+
+def _line_look(row: Row, others: list[str], axes: Sequence[Axis]) -> tuple[str | None, str]:
+    """Colour by integrator and line style by the other keys, when the integrator is swept,
+    so that "which method" reads at a glance; otherwise matplotlib's colour cycle."""
+    if INTEGRATOR_KEY not in others:
+        return None, LINE_STYLES[0]
+    by_key = {a.key: a for a in axes}
+    color = f"C{by_key[INTEGRATOR_KEY].values.index(row.overrides[INTEGRATOR_KEY]) % 10}"
+    rest = [k for k in others if k != INTEGRATOR_KEY]
+    combos = list(itertools.product(*(range(len(by_key[k].values)) for k in rest)))
+    mine = tuple(
+        next(i for i, v in enumerate(by_key[k].values) if repr(v) == repr(row.overrides[k])) for k in rest
+    )
+    return color, LINE_STYLES[combos.index(mine) % len(LINE_STYLES)]
 
 
 def _y_value(row: Row, column: str) -> float:
