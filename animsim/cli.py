@@ -394,6 +394,7 @@ def sweep(
             help="KEY=V1,V2,...: a dotted key of the scene (springs.0.ks, structures.0.structural.ks, dt) "
             "and its values; repeat for more axes.",
             show_default=False,
+            metavar="KEY=V1,V2,...",
         ),
     ] = [],  # noqa: B006 (typer reads the default; never mutated)
     integrators: Annotated[
@@ -415,7 +416,8 @@ def sweep(
         typer.Option(
             "--scheduler",
             help="Dask scheduler address, or 'local' for a LocalCluster (--jobs workers); "
-            'needs pip install "animsim[dask]".',
+            # \\[ keeps rich markup from eating the extra's name.
+            'needs pip install "animsim\\[dask]".',
         ),
     ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No table, only the files.")] = False,
