@@ -67,7 +67,7 @@ import io
 import itertools
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -270,8 +270,16 @@ def check_keys_exist(data: dict[str, Any], axes: Sequence[Axis], file: str) -> N
     try:
         validate_case_data(trial, file)
     except CaseInvalid as exc:
-        swept = {a.key for a in axes}
-        unknown = [f"--set {p}: {m}" for p, m in exc.problems if p in swept and m.startswith("unknown key")]
+        # An unknown name anywhere on a swept key's path (springs.0.kss, or
+        # structures.0.structual.ks, whose section set_path created) is wrong in every case.
+        keys = [a.key for a in axes]
+        unknown = [
+            f"--set {k}: {m}" if k == p else f"--set {k}: {p}: {m}"
+            for p, m in exc.problems
+            if m.startswith("unknown key")
+            for k in keys
+            if k == p or k.startswith(p + ".")
+        ]
         if unknown:
             raise KeyPathError("\n".join(unknown)) from None
 
@@ -502,7 +510,6 @@ class Row:
     at_time: float | None = None
     particle: str | None = None
     message: str = ""
-    extra: dict[str, Any] = field(default_factory=dict)
 
     def value(self, column: str) -> Any:
         if column in self.overrides:

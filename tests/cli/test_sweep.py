@@ -123,6 +123,8 @@ def test_a_key_that_exists_in_no_case_is_refused_before_any_run() -> None:
     data = load_scene_text(OSCILLATOR).data
     with pytest.raises(UsageError, match=r"did you mean 'ks'"):
         sw.sweep(data, "osc", "<t>", [sw.parse_set("springs.0.kss=1,2")])
+    with pytest.raises(UsageError, match=r"structures\.0\.structual: unknown key"):
+        sw.sweep(load_scene_text(CLOTH).data, "c", "<t>", [sw.parse_set("structures.0.structual.ks=1")])
     with pytest.raises(UsageError, match=r"springs\.3 does not exist"):
         sw.sweep(data, "osc", "<t>", [sw.parse_set("springs.3.ks=1")])
     with pytest.raises(UsageError, match="has no key"):
