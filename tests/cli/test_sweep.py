@@ -278,3 +278,43 @@ def test_plot_is_an_image_and_its_options_are_checked(cli, tmp_path: Path) -> No
     assert bad_x.returncode == 2 and "not a swept key" in bad_x.stderr
     bad_y = cli("sweep", scene, "--set", "dt=0.01,0.02", "--plot", plot, "--y", "error")
     assert bad_y.returncode == 2 and "not a plottable column" in bad_y.stderr
+
+
+def test_issue_4_closed_forms_plug_in_when_present(monkeypatch) -> None:
+    """`analytic`/`auto` use animsim.analysis.references (issue 4) when it exists; here a stand-in."""
+    import sys
+    import types
+
+    class NoClosedForm(Exception):
+        pass
+
+    def analytic_reference(compiled, times):
+        if compiled.scene.springs[0].ks != 100:
+            raise NoClosedForm("not the stand-in's oscillator")
+        x = compiled.initial.particle_position
+        trajectory = types.SimpleNamespace(times=np.asarray(times), position=[x] * len(times), ids=None)
+        return types.SimpleNamespace(trajectory=trajectory)
+
+    fake = types.ModuleType("animsim.analysis.references")
+    fake.analytic_reference = analytic_reference
+    fake.NoClosedForm = NoClosedForm
+    monkeypatch.setitem(sys.modules, "animsim.analysis.references", fake)
+    data = load_scene_text(OSCILLATOR).data
+    axes = [sw.parse_set("springs.0.ks=100,400"), sw.parse_set("integrator=rk4")]
+    analytic = sw.sweep(data, "osc", "<t>", axes, reference="analytic").rows
+    assert 0.19 < analytic[0].error < 0.2 + 1e-6  # against the stand-in's frozen positions
+    assert analytic[1].error is None and "no closed form" in analytic[1].message
+    auto = sw.sweep(data, "osc", "<t>", axes, reference="auto").rows
+    assert auto[0].error == analytic[0].error
+    assert 0 < auto[1].error < 1e-3  # no closed form: the fine RK4 reference instead
+
+
+def test_analytic_without_issue_4_is_a_usage_error(monkeypatch) -> None:
+    import sys
+
+    monkeypatch.setitem(sys.modules, "animsim.analysis.references", None)  # import fails
+    data = load_scene_text(OSCILLATOR).data
+    with pytest.raises(UsageError, match="not available in this build"):
+        sw.sweep(data, "osc", "<t>", [sw.parse_set("dt=0.01")], reference="analytic")
+    (row,) = sw.sweep(data, "osc", "<t>", [sw.parse_set("dt=0.01")], reference="auto").rows
+    assert row.error is not None and row.error > 0  # auto fell back to fine
