@@ -453,15 +453,17 @@ def sweep(
         check_output_path(plot, scene)
     if output is not None:
         check_output_path(output, scene)
-    table = sw.sweep(
-        loaded.data,
-        loaded.name,
-        str(scene),
-        axes,
-        reference=reference.value if reference is not None else None,
-        jobs=jobs,
-        scheduler=scheduler,
-    )
+    with _cases_progress(quiet) as progress:
+        table = sw.sweep(
+            loaded.data,
+            loaded.name,
+            str(scene),
+            axes,
+            reference=reference.value if reference is not None else None,
+            jobs=jobs,
+            scheduler=scheduler,
+            progress=progress,
+        )
     if not quiet:
         sw.print_table(table, _stdout_console())
     if output is not None:
@@ -478,6 +480,23 @@ def sweep(
     _err(f"{len(table.rows)} cases ({where}): {summary}" + (f"; wrote {', '.join(wrote)}" if wrote else ""))
     if counts.get(sw.STATUS_ERROR):
         raise typer.Exit(EXIT_FAILED)
+
+
+@contextmanager
+def _cases_progress(quiet: bool):
+    """A bar of finished cases on stderr, only on a terminal (cli.md)."""
+    if quiet or not sys.stderr.isatty():
+        yield None
+        return
+    from rich.progress import Progress
+
+    with Progress(transient=True, console=_stderr_console()) as bar:
+        task = bar.add_task("cases", total=None)
+
+        def update(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total)
+
+        yield update
 
 
 # Width of the printed table when stdout is not a terminal (a file or a pipe).

@@ -31,13 +31,14 @@ from __future__ import annotations
 
 import multiprocessing
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any, TypeVar
 
 from animsim.errors import UsageError
 
 C = TypeVar("C")
 R = TypeVar("R")
+Progress = Callable[[int, int], None]  # (cases done, total)
 
 LOCAL_SCHEDULER = "local"
 DASK_INSTALL_HINT = 'pip install "animsim[dask]"  (or: pip install "distributed>=2024.1")'
@@ -54,20 +55,39 @@ def map_cases(
     jobs: int = 1,
     scheduler: Any = None,
     on_error: Callable[[C, BaseException], R] | None = None,
+    progress: Progress | None = None,
 ) -> list[R]:
     """``[fn(case) for case in cases]``, run serially, on local processes or on Dask.
 
     See the module docstring for ``jobs`` and ``scheduler``. Results come back
-    in the order of ``cases``.
+    in the order of ``cases``; ``progress(done, total)`` is called as each
+    case finishes, in the order they finish.
     """
+    tick = _ticker(progress, len(cases))
     if jobs < 1:
         raise UsageError(f"--jobs: must be at least 1, not {jobs}")
     cases = list(cases)
     if scheduler is not None:
-        return _map_dask(fn, cases, scheduler, jobs, on_error)
+        return _map_dask(fn, cases, scheduler, jobs, on_error, tick)
     if jobs == 1 or len(cases) <= 1:
-        return [_call(fn, c, on_error) for c in cases]
-    return _map_processes(fn, cases, jobs, on_error)
+        results = []
+        for c in cases:
+            results.append(_call(fn, c, on_error))
+            tick()
+        return results
+    return _map_processes(fn, cases, jobs, on_error, tick)
+
+
+def _ticker(progress: Progress | None, total: int) -> Callable[[], None]:
+    done = 0
+
+    def tick() -> None:
+        nonlocal done
+        done += 1
+        if progress is not None:
+            progress(done, total)
+
+    return tick
 
 
 def _call(fn: Callable[[C], R], case: C, on_error: Callable[[C, BaseException], R] | None) -> R:
@@ -97,12 +117,18 @@ def _collect(
 
 
 def _map_processes(
-    fn: Callable[[C], R], cases: list[C], jobs: int, on_error: Callable[[C, BaseException], R] | None
+    fn: Callable[[C], R],
+    cases: list[C],
+    jobs: int,
+    on_error: Callable[[C, BaseException], R] | None,
+    tick: Callable[[], None],
 ) -> list[R]:
     context = multiprocessing.get_context("spawn")
     workers = min(jobs, len(cases))
     with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
         futures = [pool.submit(fn, c) for c in cases]
+        for _ in as_completed(futures):
+            tick()
         outcomes: list[tuple[bool, Any]] = []
         for f in futures:
             try:
@@ -128,10 +154,11 @@ def _map_dask(
     scheduler: Any,
     jobs: int,
     on_error: Callable[[C, BaseException], R] | None,
+    tick: Callable[[], None],
 ) -> list[R]:
-    if not isinstance(scheduler, str):  # a Client the caller owns (and closes)
-        return _gather(scheduler, fn, cases, on_error)
     distributed = _import_distributed()
+    if not isinstance(scheduler, str):  # a Client the caller owns (and closes)
+        return _gather(distributed, scheduler, fn, cases, on_error, tick)
     if scheduler == LOCAL_SCHEDULER:
         # dashboard_address=None: no web server, no port to collide with.
         with (
@@ -142,20 +169,27 @@ def _map_dask(
             ) as cluster,
             distributed.Client(cluster) as client,
         ):
-            return _gather(client, fn, cases, on_error)
+            return _gather(distributed, client, fn, cases, on_error, tick)
     try:
         client = distributed.Client(scheduler, timeout=CONNECT_TIMEOUT)
     except (OSError, TimeoutError, ValueError) as exc:
         raise UsageError(f"--scheduler {scheduler}: cannot reach the Dask scheduler: {exc}") from None
     with client:
-        return _gather(client, fn, cases, on_error)
+        return _gather(distributed, client, fn, cases, on_error, tick)
 
 
 def _gather(
-    client: Any, fn: Callable[[C], R], cases: list[C], on_error: Callable[[C, BaseException], R] | None
+    distributed: Any,
+    client: Any,
+    fn: Callable[[C], R],
+    cases: list[C],
+    on_error: Callable[[C, BaseException], R] | None,
+    tick: Callable[[], None],
 ) -> list[R]:
     # pure=False: two equal cases are still two runs (their wall times differ).
     futures = client.map(fn, cases, pure=False)
+    for _ in distributed.as_completed(futures):
+        tick()
     outcomes: list[tuple[bool, Any]] = []
     for f in futures:
         try:

@@ -621,6 +621,7 @@ def sweep(
     reference: str | None = None,
     jobs: int = 1,
     scheduler: Any = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> SweepTable:
     """Check the keys, build the cases and run them (serially, on processes or on Dask)."""
     from animsim.parallel import map_cases
@@ -630,7 +631,7 @@ def sweep(
     if reference is not None:
         reference_function(reference)  # an unknown or unavailable reference: exit 2 now
     cases = build_cases(data, name, file, axes, reference)
-    rows = map_cases(run_case, cases, jobs=jobs, scheduler=scheduler, on_error=error_row)
+    rows = map_cases(run_case, cases, jobs=jobs, scheduler=scheduler, on_error=error_row, progress=progress)
     return SweepTable(list(axes), rows, reference)
 
 

@@ -39,6 +39,13 @@ def test_a_failing_case_is_a_result_not_a_lost_map() -> None:
         map_cases(math.sqrt, cases, jobs=2)
 
 
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_progress_counts_every_finished_case(jobs: int) -> None:
+    calls: list[tuple[int, int]] = []
+    map_cases(math.factorial, CASES, jobs=jobs, progress=lambda done, total: calls.append((done, total)))
+    assert calls == [(k, len(CASES)) for k in range(1, len(CASES) + 1)]
+
+
 def test_jobs_must_be_positive() -> None:
     with pytest.raises(UsageError):
         map_cases(math.factorial, CASES, jobs=0)
@@ -58,7 +65,10 @@ def dask_client():
 
 
 def test_dask_keeps_case_order(dask_client) -> None:
-    assert map_cases(math.factorial, CASES, scheduler=dask_client) == EXPECTED
+    calls: list[tuple[int, int]] = []
+    got = map_cases(math.factorial, CASES, scheduler=dask_client, progress=lambda d, t: calls.append((d, t)))
+    assert got == EXPECTED
+    assert calls == [(k, len(CASES)) for k in range(1, len(CASES) + 1)]
     cases = [4.0, -1.0, 9.0]
     assert map_cases(math.sqrt, cases, scheduler=dask_client, on_error=failed) == [
         2.0,
