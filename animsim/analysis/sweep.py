@@ -109,10 +109,6 @@ class Axis:
     key: str
     values: tuple[Any, ...]
 
-    @property
-    def path(self) -> tuple[str, ...]:
-        return tuple(self.key.split("."))
-
 
 def split_values(text: str) -> list[str]:
     """Split ``V1,V2,...`` on the commas outside brackets and quotes."""
