@@ -13,7 +13,7 @@ import os
 import signal
 import sys
 from contextlib import contextmanager
-from enum import Enum
+from enum import Enum, StrEnum
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -298,6 +298,123 @@ def check(
     ok = check_scenes(scenes, quiet=quiet, echo=typer.echo, echo_err=_err)
     if not ok:
         raise typer.Exit(EXIT_FAILED)
+
+
+# --- compare ------------------------------------------------------------------------------
+
+
+class ReferenceKind(StrEnum):
+    auto = "auto"
+    analytic = "analytic"
+    fine = "fine"
+
+
+@app.command()
+def compare(
+    scene: SceneArg,
+    integrators: Annotated[
+        str | None,
+        typer.Option(
+            help="Comma-separated methods, e.g. euler,midpoint,rk4; default every fixed-step method."
+        ),
+    ] = None,
+    dt: Annotated[
+        str | None,
+        typer.Option(
+            "--dt",
+            help="Comma-separated step sizes (s); default the scene's dt halved four times: dt, dt/2, dt/4, dt/8, dt/16.",
+        ),
+    ] = None,
+    reference: Annotated[
+        ReferenceKind,
+        typer.Option(
+            help="What 'exact' is: analytic (a closed form; exit 2 if the scene has none), fine (a converged "
+            "run: DOP853 for smooth scenes, else RK4 with dt halved until it stops changing), or auto "
+            "(analytic when possible); the one used is printed."
+        ),
+    ] = ReferenceKind.auto,
+    repeat: Annotated[int, typer.Option(help="Timed runs per row; the median is reported.", min=1)] = 3,
+    output: Annotated[Path | None, typer.Option("-o", "--output", help="Write the table as CSV.")] = None,
+    plot: Annotated[
+        Path | None,
+        typer.Option(help="Work-precision and convergence diagrams; .png, .svg or .pdf."),
+    ] = None,
+    fail_on_unstable: Annotated[
+        bool, typer.Option("--fail-on-unstable", help="Exit 1 if any run was unstable.")
+    ] = False,
+) -> None:
+    """Run SCENE with each integrator at each step size; report error against run time.
+
+    Each row is one run: its largest, final and RMS position error against the
+    reference at common record times, its energy error (conservative scenes),
+    the median simulation time and force evaluations. Under the table: each
+    integrator's observed order of convergence.
+
+    An unstable run is a row with status 'unstable', not a failure of the
+    comparison: the exit status is 0 when the comparison itself completed
+    (use --fail-on-unstable to exit 1 instead), 2 for a bad scene or option.
+    """
+    from animsim.analysis.compare import compare as run_compare
+    from animsim.analysis.compare import parse_dts, parse_integrators, summary_lines, table, write_csv
+    from animsim.export.plots import plot_format, write_compare_plot
+    from animsim.scene.loader import load_scene
+
+    loaded = load_scene(scene)
+    names = parse_integrators(integrators)
+    dts = parse_dts(dt, loaded.scene)
+    for path in (output, plot):
+        if path is not None:
+            check_output_path(path, scene)
+    if plot is not None:
+        plot_format(plot)
+    console = _stdout_console()
+    with _compare_progress(len(names) * len(dts)) as progress:
+        result = run_compare(
+            loaded.scene,
+            loaded.name,
+            integrators=names,
+            dts=dts,
+            reference=reference.value,
+            repeat=repeat,
+            progress=progress,
+        )
+    console.print(table(result))
+    for line in summary_lines(result):
+        console.print(line, highlight=False, markup=False)
+    if output is not None:
+        write_csv(result, output)
+        console.print(f"wrote {output}", highlight=False, markup=False)
+    if plot is not None:
+        write_compare_plot(result, plot)
+        console.print(f"wrote {plot}", highlight=False, markup=False)
+    if fail_on_unstable and result.any_unstable:
+        raise typer.Exit(EXIT_FAILED)
+
+
+def _stdout_console():
+    from rich.console import Console
+
+    # Wide enough for the ten columns when piped, so a file holds the whole table.
+    return Console(width=None if sys.stdout.isatty() else 120)
+
+
+@contextmanager
+def _compare_progress(total: int):
+    """A transient progress bar on stderr (terminal only), advanced once per run."""
+    if not sys.stderr.isatty():
+        yield None
+        return
+    from rich.progress import Progress
+
+    with Progress(transient=True, console=_stderr_console()) as bar:
+        task = bar.add_task("comparing", total=total)
+
+        def update(label: str) -> None:
+            bar.update(task, description=label)
+            if not label.startswith("reference"):
+                bar.advance(task)
+
+        yield update
 
 
 # --- entry point ----------------------------------------------------------------------------
