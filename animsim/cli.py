@@ -13,7 +13,7 @@ import os
 import signal
 import sys
 from contextlib import contextmanager
-from enum import Enum, StrEnum
+from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -21,6 +21,7 @@ import typer
 
 from animsim import __version__
 from animsim.errors import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_USAGE, AnimsimError, UsageError
+
 
 class _App(typer.Typer):
     """A Typer app whose call maps errors to exit statuses (see :func:`main`).
@@ -71,7 +72,7 @@ MaxSteps = Annotated[int, typer.Option("--max-steps", help="Most steps a run may
 DEFAULT_MAX_STEPS = 100_000_000
 
 
-class Format(str, Enum):
+class Format(StrEnum):
     csv = "csv"
     npz = "npz"
 
@@ -143,14 +144,20 @@ def run(
     scene: SceneArg,
     output: Annotated[
         Path | None,
-        typer.Option("-o", "--output", help="Trajectory file; default <scene stem>.csv here; '-' for stdout."),
+        typer.Option(
+            "-o", "--output", help="Trajectory file; default <scene stem>.csv here; '-' for stdout."
+        ),
     ] = None,
     integrator: Annotated[str | None, typer.Option(help="Override the scene's integrator.")] = None,
     dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
     duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
     seed: Annotated[int | None, typer.Option(help="Override the random seed.")] = None,
-    format: Annotated[Format | None, typer.Option("--format", help="Trajectory format; default from the suffix, else csv.")] = None,
-    extra_columns: Annotated[bool, typer.Option("--extra-columns", help="Add age, size, r, g, b, a columns (particle systems).")] = False,
+    format: Annotated[
+        Format | None, typer.Option("--format", help="Trajectory format; default from the suffix, else csv.")
+    ] = None,
+    extra_columns: Annotated[
+        bool, typer.Option("--extra-columns", help="Add age, size, r, g, b, a columns (particle systems).")
+    ] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
     max_file_size: MaxFileSize = 50 * 1024 * 1024,
     max_depth: MaxDepth = 100,
@@ -160,7 +167,8 @@ def run(
     """Simulate SCENE and write its trajectory (CSV or NPZ) and a .meta.json beside it."""
     from animsim.compile import compile_scene, with_overrides
     from animsim.scene.loader import load_scene
-    from animsim.simulate import STATUS_INTERRUPTED, STATUS_UNSTABLE, run as simulate
+    from animsim.simulate import STATUS_INTERRUPTED, STATUS_UNSTABLE
+    from animsim.simulate import run as simulate
 
     loaded = load_scene(scene, _limits(max_file_size, max_depth, max_nodes))
     sc = with_overrides(loaded.scene, integrator=integrator, dt=dt, duration=duration, seed=seed)
@@ -195,7 +203,9 @@ def run(
         _err(f"the frames before the failure are in {out}")
         raise typer.Exit(EXIT_FAILED)
     if result.status == STATUS_INTERRUPTED:
-        _err(f"{scene}: interrupted at step {result.steps_taken} (t = {result.final_state.time:.6g} s); frames so far in {out}")
+        _err(
+            f"{scene}: interrupted at step {result.steps_taken} (t = {result.final_state.time:.6g} s); frames so far in {out}"
+        )
         raise typer.Exit(EXIT_INTERRUPTED)
 
 
@@ -417,13 +427,131 @@ def _compare_progress(total: int):
         yield update
 
 
+# --- plot -------------------------------------------------------------------------------
+
+
+class PlotKind(StrEnum):
+    trajectory = "trajectory"
+    energy = "energy"
+
+
+@app.command()
+def plot(
+    source: Annotated[
+        Path,
+        typer.Argument(
+            help="A scene (simulated first) or a trajectory (.csv, .npz).", metavar="SCENE_OR_TRAJECTORY"
+        ),
+    ],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Picture file: .png, .svg or .pdf.")],
+    kind: Annotated[
+        PlotKind, typer.Option("--kind", help="Paths of particles, or energy against time.")
+    ] = PlotKind.trajectory,
+    scene: Annotated[
+        Path | None, typer.Option("--scene", help="The scene of a trajectory (needed for --kind energy).")
+    ] = None,
+    view: Annotated[
+        str | None, typer.Option("--view", help="xy, xz or yz; default: the two widest axes.")
+    ] = None,
+    integrator: Annotated[str | None, typer.Option(help="Override the scene's integrator.")] = None,
+    dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
+    duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
+) -> None:
+    """Draw particle paths or the energy (kinetic, potential, total, and drift) of a run."""
+    from animsim.export.pictures import figure_format, plot_energy, plot_trajectory
+    from animsim.export.trajectory import TrajectoryCollector, is_trajectory, read_trajectory
+
+    figure_format(output)
+    if view is not None and view not in ("xy", "xz", "yz"):
+        raise UsageError(f"--view {view!r}: plot takes xy, xz or yz")
+    check_output_path(output, source)
+    from_file = is_trajectory(source)
+    scene_path = scene if from_file else source
+    compiled = None
+    if scene_path is not None:
+        from animsim.compile import compile_scene, with_overrides
+        from animsim.scene.loader import load_scene
+
+        loaded = load_scene(scene_path)
+        sc = with_overrides(loaded.scene, integrator=integrator, dt=dt, duration=duration)
+        compiled = compile_scene(sc, loaded.name)
+    if kind is PlotKind.energy:
+        if compiled is None:
+            raise UsageError("--kind energy needs the scene: give a scene, or --scene with the trajectory")
+        times, kinetic, potential = _energies(compiled, read_trajectory(source) if from_file else None)
+        plot_energy(
+            times,
+            kinetic,
+            potential,
+            output,
+            title=f"{compiled.name}: {compiled.integrator_name}, dt {compiled.clock.dt:g} s",
+            conservative=compiled.conservative,
+        )
+    else:
+        if from_file:
+            traj = read_trajectory(source)
+            name = source.stem
+        else:
+            from animsim.simulate import run as simulate
+
+            assert compiled is not None
+            collector = TrajectoryCollector()
+            simulate(compiled, [collector])
+            traj = collector.trajectory()
+            name = compiled.name
+        plot_trajectory(traj, output, view=view, title=name)
+    typer.echo(f"wrote {output}")
+
+
+def _energies(compiled: Any, traj: Any) -> tuple[Any, Any, Any]:
+    """Per-frame kinetic and potential energy, from a run or from a trajectory of the scene."""
+    import numpy as np
+
+    dyn = compiled.dynamics
+    times: list[float] = []
+    kinetic: list[float] = []
+    potential: list[float] = []
+    if traj is None:
+        from animsim.simulate import run as simulate
+
+        def observe(state: Any) -> None:
+            times.append(state.time)
+            kinetic.append(dyn.kinetic_energy(state.particle_velocity))
+            potential.append(dyn.potential_energy(state.particle_position))
+
+        simulate(compiled, [], observers=[observe])
+    else:
+        if compiled.emitters is not None:
+            raise UsageError("energy from a trajectory needs a scene without emitters; give the scene itself")
+        index_of = {pid: i for i, pid in enumerate(compiled.system.ids)}
+        try:
+            rows = np.array([index_of[pid] for pid in traj.ids], dtype=np.int64)
+        except KeyError as exc:
+            raise UsageError(
+                f"the trajectory has particle {exc.args[0]!r}, which the scene does not"
+            ) from None
+        x = compiled.initial.particle_position.copy()
+        v = compiled.initial.particle_velocity.copy()
+        for frame in traj.frames():
+            x[rows[frame.index]] = frame.position
+            v[rows[frame.index]] = frame.velocity
+            times.append(frame.time)
+            kinetic.append(dyn.kinetic_energy(v))
+            potential.append(dyn.potential_energy(x))
+    return np.array(times), np.array(kinetic), np.array(potential)
+
+
 # --- entry point ----------------------------------------------------------------------------
 
 
 def main(argv: list[str] | None = None) -> None:
     """Run the app; every AnimsimError becomes a message and an exit status, never a traceback."""
     try:
-        typer.Typer.__call__(app, args=argv, prog_name="animsim", standalone_mode=False)
+        # Without standalone mode click *returns* the code of a typer.Exit
+        # instead of raising it: it must become the process status.
+        code = typer.Typer.__call__(app, args=argv, prog_name="animsim", standalone_mode=False)
+        if isinstance(code, int) and code != 0:
+            sys.exit(code)
     except AnimsimError as exc:
         _err(str(exc))
         sys.exit(exc.exit_code)

@@ -22,6 +22,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+# A contact approaching slower than the normal acceleration adds in this many
+# steps is resting, not bouncing (a restitution velocity threshold, as rigid
+# body engines use, scaled by the step so it vanishes as dt -> 0).
+RESTING_STEPS = 2.0
+
 
 @dataclass(frozen=True)
 class ImpulsePlane:
@@ -61,23 +66,33 @@ class PlaneColliders:
         changed = False
         movable = self.inv_mass > 0
         for pl in self.planes:
-            d_new = (x - pl.point) @ pl.normal
-            hit = np.flatnonzero((d_new < 0) & movable)
+            n = pl.normal
+            d_new = (x - pl.point) @ n
+            # Behind the plane, or exactly on it and still moving in (a contact
+            # that would cross next step: Lander's "colliding contact").
+            hit = np.flatnonzero(((d_new < 0) | ((d_new == 0) & (v @ n < 0))) & movable)
             if hit.size == 0:
                 continue
             changed = True
-            n = pl.normal
             d1 = d_new[hit]
             d0 = np.maximum((x_old[hit] - pl.point) @ n, 0.0)
-            s = (d0 / (d0 - d1))[:, None]  # fraction of the step at impact, in [0, 1)
+            gap = d0 - d1
+            # fraction of the step at impact; a particle ending exactly on the plane touched it at the end
+            s = np.divide(d0, gap, out=np.ones_like(d0), where=gap > 0)[:, None]
             xo, vo = x_old[hit], v_old[hit]
             mean_acc = (v[hit] - vo) / dt
             xc = xo + s * (x[hit] - xo)
             vc = vo + s * (v[hit] - vo)
             # Reflect the approaching ones (Lander Eq. 3) with Coulomb friction.
+            # An approach slower than what the pressing acceleration adds in
+            # RESTING_STEPS steps is a resting contact: it stops instead of
+            # bouncing, so a particle at rest does not jitter.
             vn = vc @ n
             approaching = vn < 0
-            vn_new = np.where(approaching, -pl.restitution * vn, vn)
+            pressing = np.maximum(-(mean_acc @ n), 0.0)
+            resting = approaching & (-vn <= RESTING_STEPS * pressing * dt)
+            e = np.where(resting, 0.0, pl.restitution)
+            vn_new = np.where(approaching, -e * vn, vn)
             vt = vc - vn[:, None] * n
             vt = _apply_friction(vt, np.abs(vn_new - vn), pl.friction)
             vr = vt + vn_new[:, None] * n

@@ -133,16 +133,16 @@ def compile_scene(scene: m.Scene, name: str = "scene") -> Compiled:
         expanded.append((s, e, base))
 
     if scene.springs:
-        pairs = np.array([[index_of[a], index_of[b]] for a, b in (sp.between for sp in scene.springs)], dtype=np.int64)
+        pairs = np.array(
+            [[index_of[a], index_of[b]] for a, b in (sp.between for sp in scene.springs)], dtype=np.int64
+        )
         spring_pairs.append(pairs)
         spring_ks.append(np.array([sp.ks for sp in scene.springs]))
         spring_kd.append(np.array([sp.kd for sp in scene.springs]))
-        spring_rest.append(
-            np.array([np.nan if sp.rest == "auto" else sp.rest for sp in scene.springs])
-        )
+        spring_rest.append(np.array([np.nan if sp.rest == "auto" else sp.rest for sp in scene.springs]))
         families.append(("listed springs", 0, len(scene.springs)))
         spring_total += len(scene.springs)
-    for s, e, base in expanded:
+    for _, e, base in expanded:
         for group in e.springs:
             k = len(group.index)
             spring_pairs.append(group.index + base)
@@ -177,7 +177,9 @@ def compile_scene(scene: m.Scene, name: str = "scene") -> Compiled:
     n = len(particle_mass)
     particle_mass = np.where(particle_pinned, 0.0, particle_mass)
     with np.errstate(divide="ignore"):
-        particle_inv_mass = np.where(particle_mass > 0, 1.0 / np.where(particle_mass > 0, particle_mass, 1.0), 0.0)
+        particle_inv_mass = np.where(
+            particle_mass > 0, 1.0 / np.where(particle_mass > 0, particle_mass, 1.0), 0.0
+        )
 
     if spring_pairs:
         spring_index = np.concatenate(spring_pairs)
@@ -268,7 +270,14 @@ def compile_scene(scene: m.Scene, name: str = "scene") -> Compiled:
     rec = record_steps(clock, every=scene.record.every, fps=scene.record.fps)
 
     moving_anchor = bool(np.any(particle_pinned & np.any(particle_velocity != 0, axis=1)))
-    conservative = dynamics.conservative and not moving_anchor and not scene.emitters and not penalty
+    lossy_planes = any(p.restitution < 1 or p.friction > 0 for p in scene.planes if p.response == "impulse")
+    conservative = (
+        dynamics.conservative
+        and not moving_anchor
+        and not scene.emitters
+        and not penalty
+        and not lossy_planes
+    )
 
     stages[:0] = [t.label for t in terms]
     stages.append(f"integrator: {integrator.name} ({integrator.description})")
@@ -285,7 +294,11 @@ def compile_scene(scene: m.Scene, name: str = "scene") -> Compiled:
         ids=list(ids),
         spring_index=spring_index,
         has_emitters=emitters is not None,
-        extra={"planes": [(np.array(p.point), np.array(p.normal) / np.linalg.norm(p.normal)) for p in scene.planes]},
+        extra={
+            "planes": [
+                (np.array(p.point), np.array(p.normal) / np.linalg.norm(p.normal)) for p in scene.planes
+            ]
+        },
     )
     initial = State(
         particle_position=particle_position,

@@ -21,7 +21,7 @@ from typing import IO, Any
 import numpy as np
 
 from animsim.atomic import AtomicFile
-from animsim.export.meta import meta_file
+from animsim.export.meta import commit_with_meta
 from animsim.record import Frame, TrajectoryHeader
 
 _COLUMNS = {
@@ -76,17 +76,10 @@ class NpzSink:
             out.abort()
             self._cleanup()
             raise
-        m = meta_file(self.path, meta) if self.write_meta else None
         try:
-            out.commit()
-        except BaseException:
-            if m is not None:
-                m.abort()
+            commit_with_meta(out, self.path, meta if self.write_meta else None)
+        finally:
             self._cleanup()
-            raise
-        if m is not None:
-            m.commit()
-        self._cleanup()
 
     def abort(self) -> None:
         for fh in self._raw.values():

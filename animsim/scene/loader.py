@@ -193,7 +193,9 @@ class _Builder:
         if node.tag not in _ALLOWED_TAGS and node.tag != f"{_TAG}merge":
             line, col = _mark(node)
             shown = node.tag.replace(_TAG, "!!")
-            raise _Fault(line, col, path, f"the tag {shown} is not allowed in a scene (nothing is ever executed)")
+            raise _Fault(
+                line, col, path, f"the tag {shown} is not allowed in a scene (nothing is ever executed)"
+            )
         if isinstance(node, ScalarNode):
             return self._scalar(node, path)
         if isinstance(node, SequenceNode):
@@ -218,8 +220,14 @@ class _Builder:
                     return int(v[2:], 16)
                 return int(v)
             if tag == "float":
-                return float(v.replace(".inf", "inf").replace(".Inf", "inf").replace(".INF", "inf")
-                             .replace(".nan", "nan").replace(".NaN", "nan").replace(".NAN", "nan"))
+                return float(
+                    v.replace(".inf", "inf")
+                    .replace(".Inf", "inf")
+                    .replace(".INF", "inf")
+                    .replace(".nan", "nan")
+                    .replace(".NaN", "nan")
+                    .replace(".NAN", "nan")
+                )
         except ValueError as exc:
             raise _Fault(line, col, path, f"{v!r} is not a valid {tag}") from exc
         if node.style is None:
@@ -238,7 +246,9 @@ class _Builder:
                 for src in sources:
                     if not isinstance(src, MappingNode):
                         line, col = _mark(src)
-                        raise _Fault(line, col, path, "a merge key (<<) takes a mapping or a list of mappings")
+                        raise _Fault(
+                            line, col, path, "a merge key (<<) takes a mapping or a list of mappings"
+                        )
                     merged.extend(src.value)
                 continue
             if not isinstance(key_node, ScalarNode):
@@ -305,7 +315,9 @@ def load_scene_bytes(raw: bytes, file: str, limits: Limits = Limits()) -> Loaded
     data, marks = parse_yaml(text, file, limits)
     if not isinstance(data, dict):
         kind = "empty" if data is None else f"a {type(data).__name__}"
-        raise SceneError([Diagnostic(file, 1, 1, "", f"a scene must be a mapping of keys, but this document is {kind}")])
+        raise SceneError(
+            [Diagnostic(file, 1, 1, "", f"a scene must be a mapping of keys, but this document is {kind}")]
+        )
     # Top-level keys starting with x- are free for anchors (as in Compose files).
     body = {k: v for k, v in data.items() if not (isinstance(k, str) and k.startswith("x-"))}
     try:
@@ -331,7 +343,9 @@ def _decode(raw: bytes, file: str) -> str:
         before = raw[: exc.start]
         line = before.count(b"\n") + 1
         col = exc.start - (before.rfind(b"\n") + 1) + 1
-        raise SceneError([Diagnostic(file, line, col, "", f"the file is not valid UTF-8 (byte 0x{raw[exc.start]:02x})")]) from None
+        raise SceneError(
+            [Diagnostic(file, line, col, "", f"the file is not valid UTF-8 (byte 0x{raw[exc.start]:02x})")]
+        ) from None
 
 
 def parse_yaml(text: str, file: str, limits: Limits = Limits()) -> tuple[Any, Marks]:
@@ -352,14 +366,24 @@ def parse_yaml(text: str, file: str, limits: Limits = Limits()) -> tuple[Any, Ma
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         line, col = (mark.line + 1, mark.column + 1) if mark else (1, 1)
-        msg = " ".join(s for s in (exc.context, exc.problem) if s)
+        msg = exc.problem or "invalid YAML"
+        if exc.context:
+            cm = exc.context_mark
+            opened = (
+                f" (started at line {cm.line + 1}, column {cm.column + 1})"
+                if cm and mark and cm.line != mark.line
+                else ""
+            )
+            msg = f"{exc.context}{opened}: {msg}"
         if "\t" in msg or "found character '\\t'" in msg:
             msg += " (YAML does not allow tabs for indentation; use spaces)"
         raise SceneError([Diagnostic(file, line, col, "", f"YAML syntax: {msg}")]) from None
     except yaml.YAMLError as exc:
         raise SceneError([Diagnostic(file, 1, 1, "", f"YAML: {exc}")]) from None
     except RecursionError:
-        raise SceneError([Diagnostic(file, 1, 1, "", f"nesting too deep (the limit is {limits.max_depth})")]) from None
+        raise SceneError(
+            [Diagnostic(file, 1, 1, "", f"nesting too deep (the limit is {limits.max_depth})")]
+        ) from None
 
 
 # --- pydantic errors -> diagnostics ---------------------------------------------
@@ -379,10 +403,9 @@ def _data_path(loc: tuple[Any, ...], data: Any) -> tuple[Path_, tuple[Any, ...]]
     cur = data
     rest: list[Any] = []
     for seg in loc:
-        if isinstance(cur, dict) and seg in cur:
-            path.append(seg)
-            cur = cur[seg]
-        elif isinstance(cur, list) and isinstance(seg, int) and 0 <= seg < len(cur):
+        if (isinstance(cur, dict) and seg in cur) or (
+            isinstance(cur, list) and isinstance(seg, int) and 0 <= seg < len(cur)
+        ):
             path.append(seg)
             cur = cur[seg]
         else:
@@ -475,8 +498,19 @@ def _diagnostics(exc: ValidationError, data: dict[str, Any], marks: Marks, file:
         else:
             key, _ = _data_path(loc, data)
         groups.setdefault(key, []).append(err)
+    # One typo, one message: a missing key that an unknown sibling key's
+    # did-you-mean already names is not reported again.
+    suggested = set()
+    for path, errs in groups.items():
+        if any(e["type"] == "extra_forbidden" for e in errs):
+            allowed = sorted({f for m in _models_at(errs[0]["loc"][:-1]) for f in m.model_fields})
+            close = difflib.get_close_matches(str(path[-1]), allowed, n=1, cutoff=0.6)
+            if close:
+                suggested.add((*path[:-1], close[0]))
     out: list[Diagnostic] = []
     for path, errs in groups.items():
+        if errs[0]["type"] == "missing" and path in suggested:
+            continue
         msg, at_key = _message(path, errs, marks)
         if errs[0]["type"] == "missing":
             line, col = marks.at(path[:-1])
@@ -500,19 +534,29 @@ def _message(path: Path_, errs: list[dict[str, Any]], marks: Marks) -> tuple[str
     if "union_tag_invalid" in types:
         e = errs[types.index("union_tag_invalid")]
         tags = [t.strip(" '") for t in e["ctx"]["expected_tags"].split(",")]
-        return f"unknown type {e['ctx']['tag']!r}{_suggest(e['ctx']['tag'], tags)} (valid: {', '.join(tags)})", False
+        return (
+            f"unknown type {e['ctx']['tag']!r}{_suggest(e['ctx']['tag'], tags)} (valid: {', '.join(tags)})",
+            False,
+        )
     if "union_tag_not_found" in types:
         return "needs a 'type' key", False
     if "literal_error" in types:
         e = errs[types.index("literal_error")]
         choices = re.findall(r"'([^']*)'", e["ctx"]["expected"])
-        return f"{_short(e['input'])} is not one of: {', '.join(choices)}{_suggest(e['input'], choices)}", False
+        return (
+            f"{_short(e['input'])} is not one of: {', '.join(choices)}{_suggest(e['input'], choices)}",
+            False,
+        )
     if len(errs) > 1 and all(t in _KIND for t in types):
         kinds = " or ".join(dict.fromkeys(_KIND[t] for t in types))
         msg = f"expected {kinds}, got {_short(first['input'])}"
     elif first["type"] in _KIND:
         msg = f"expected {_KIND[first['type']]}, got {_short(first['input'])}"
-        if first["type"] in ("float_type", "int_type") and isinstance(first["input"], int) and not isinstance(first["input"], bool):
+        if (
+            first["type"] in ("float_type", "int_type")
+            and isinstance(first["input"], int)
+            and not isinstance(first["input"], bool)
+        ):
             msg = f"the number {_short(first['input'])} is too large"
     elif first["type"] == "finite_number":
         msg = "must be a finite number (no .nan, .inf, or overflowing values)"

@@ -7,6 +7,7 @@ file's line and column on it; all problems are collected, none stops the rest.
 from __future__ import annotations
 
 import difflib
+import itertools
 
 from animsim.scene.models import Scene
 from animsim.scene.structures import local_index, parse_structure_id
@@ -53,7 +54,11 @@ def check_scene(scene: Scene) -> list[Problem]:
             out.append((("particles", i, "id"), "an id must not be empty", False))
         if p.id in first_seen:
             out.append(
-                (("particles", i, "id"), f"duplicate id {p.id!r} (also particles.{first_seen[p.id]}.id)", False)
+                (
+                    ("particles", i, "id"),
+                    f"duplicate id {p.id!r} (also particles.{first_seen[p.id]}.id)",
+                    False,
+                )
             )
         else:
             first_seen[p.id] = i
@@ -62,7 +67,11 @@ def check_scene(scene: Scene) -> list[Problem]:
         if not p.pinned and (p.mass is None or p.mass == 0):
             what = "has no mass" if p.mass is None else "has mass 0"
             out.append(
-                (("particles", i, "mass"), f"a free particle {what}; give mass > 0 or pinned: true", p.mass is not None)
+                (
+                    ("particles", i, "mass"),
+                    f"a free particle {what}; give mass > 0 or pinned: true",
+                    p.mass is not None,
+                )
             )
 
     known = list(first_seen)
@@ -71,10 +80,20 @@ def check_scene(scene: Scene) -> list[Problem]:
         for k, pid in enumerate((a, b)):
             if pid not in first_seen and structure_of(pid) is None:
                 out.append(
-                    (("springs", i, "between", k), f"no particle with id {pid!r}{_suggest(pid, known)}", False)
+                    (
+                        ("springs", i, "between", k),
+                        f"no particle with id {pid!r}{_suggest(pid, known)}",
+                        False,
+                    )
                 )
         if a == b:
-            out.append((("springs", i, "between"), f"a spring must join two different particles, not {a!r} to itself", False))
+            out.append(
+                (
+                    ("springs", i, "between"),
+                    f"a spring must join two different particles, not {a!r} to itself",
+                    False,
+                )
+            )
 
     names: dict[str, int] = {}
     for i, e in enumerate(scene.emitters):
@@ -83,7 +102,7 @@ def check_scene(scene: Scene) -> list[Problem]:
         names.setdefault(e.name, i)
         if isinstance(e.rate, list):
             times = [kf[0] for kf in e.rate]
-            if any(t1 < t0 for t0, t1 in zip(times, times[1:], strict=False)):
+            if any(t1 < t0 for t0, t1 in itertools.pairwise(times)):
                 out.append((("emitters", i, "rate"), "keyframe times must not decrease", False))
         if e.kill_box is not None and any(
             lo > hi for lo, hi in zip(e.kill_box.min, e.kill_box.max, strict=True)
