@@ -30,7 +30,9 @@ emitters, rows are matched by particle id:
 
 Observed order: the least-squares slope of log(error) against log(dt) over an
 integrator's stable points whose error is above round-off (``ROUNDOFF_SAFETY``
-eps |x| sqrt(steps)) and above the reference's own accuracy. Hairer, Norsett
+eps |x| sqrt(steps)), above the reference's own accuracy, and below half the
+distance the particles move (``ASYMPTOTIC_LIMIT``: a run that is off by more
+than that is not in the regime where error ~ C dt^p). Hairer, Norsett
 and Wanner, "Solving ODEs I", II.1 (global error = C dt^p); the work-precision
 idea is SciML DiffEqDevTools' ``WorkPrecisionSet``.
 """
@@ -85,6 +87,10 @@ DEFAULT_REPEAT = 3
 ROUNDOFF_SAFETY = 10.0
 #: an error below this multiple of the reference's own accuracy measures the reference
 REFERENCE_MARGIN = 3.0
+#: a point whose error exceeds this fraction of how far the particles move is
+#: outside the asymptotic regime (error ~ C dt^p holds only for small errors),
+#: so it is left out of the order fit
+ASYMPTOTIC_LIMIT = 0.5
 #: below this (J) an energy scale means nothing
 ENERGY_FLOOR = 1e-12
 STATUS_OK = "ok"
@@ -146,7 +152,7 @@ class OrderFit:
 
     def describe(self) -> str:
         if self.order is None:
-            why = "fewer than 2 stable points above round-off"
+            why = "fewer than 2 usable points"
             return f"n/a ({why}; {self.points} of {self.total})"
         return f"{self.order:.2f}  (expected {self.expected}; fit over {self.points} of {self.total} points)"
 
@@ -263,6 +269,21 @@ def _position_scale(ref: Trajectory) -> float:
     return max((float(np.max(np.abs(x))) for x in ref.position if x.size), default=1.0) or 1.0
 
 
+def motion_scale(ref: Trajectory, moving: np.ndarray | None) -> float:
+    """How far the moving particles get from where they started, m (largest over frames)."""
+    if ref.ids is not None:  # populations change: use the spread of positions instead
+        return max((float(np.ptp(x, axis=0).max()) for x in ref.position if len(x)), default=0.0)
+    start = ref.position[0]
+    far = 0.0
+    for x in ref.position:
+        d = np.linalg.norm(x - start, axis=1)
+        if moving is not None:
+            d = d[moving]
+        if d.size:
+            far = max(far, float(d.max()))
+    return far
+
+
 def roundoff_floor(ref: Trajectory, steps: int) -> float:
     """Errors below this are rounding, not truncation (see ``ROUNDOFF_SAFETY``)."""
     return ROUNDOFF_SAFETY * np.finfo(float).eps * _position_scale(ref) * math.sqrt(max(steps, 1))
@@ -343,7 +364,7 @@ def compare(
                     f"  closed forms cover: {'; '.join(CLOSED_FORM_FAMILIES)}.\n"
                     "  use --reference fine (a converged run) or auto"
                 ) from None
-            notes.append(f"no closed form ({exc}), so the reference is a converged run")
+            notes.append(f"no closed form: {exc}; the reference is a converged run")
     if ref is None and smooth(base):
         ref = dop853_reference(base, times)
 
@@ -372,9 +393,11 @@ def compare(
         ref = rk4_reference(scene, name, times, dts[-1], smallest, distance)
     notes.extend(ref.notes)
 
-    rows = [_row(r, ref, moving, base.conservative) for r in runs]
-    orders = _fit_orders(rows, integrators, ref)
-    return Comparison(name, ref, rows, orders, times, repeat, base.conservative, notes)
+    conservative = base.conservative
+    rows = [_row(r, ref, moving, conservative) for r in runs]
+    ceiling = ASYMPTOTIC_LIMIT * motion_scale(ref.trajectory, moving)
+    orders = _fit_orders(rows, integrators, ref, ceiling)
+    return Comparison(name, ref, rows, orders, times, repeat, conservative, notes)
 
 
 def _measure(scene: m.Scene, name: str, integ: str, dt: float, times: np.ndarray, repeat: int) -> _Run:
@@ -428,7 +451,10 @@ def _row(r: _Run, ref: Reference, moving: np.ndarray | None, conservative: bool)
     )
 
 
-def _fit_orders(rows: list[Row], integrators: Sequence[str], ref: Reference) -> list[OrderFit]:
+def _fit_orders(
+    rows: list[Row], integrators: Sequence[str], ref: Reference, ceiling: float
+) -> list[OrderFit]:
+    """Fit each integrator over its stable points above round-off and below ``ceiling``."""
     fits = []
     for integ in integrators:
         mine = [r for r in rows if r.integrator == integ]
@@ -438,6 +464,7 @@ def _fit_orders(rows: list[Row], integrators: Sequence[str], ref: Reference) -> 
             for r in stable
             if r.error is not None
             and r.error > max(roundoff_floor(ref.trajectory, r.steps), REFERENCE_MARGIN * ref.accuracy)
+            and (ceiling <= 0 or r.error < ceiling)
         ]
         for r in usable:
             r.in_fit = True
@@ -471,7 +498,7 @@ def table(comparison: Comparison) -> Any:
 
     ref = comparison.reference
     title = f"{comparison.scene_name}: error against cost"
-    caption = f"reference: {ref.kind} ({ref.description})"
+    caption = f"reference: {ref.kind}: {ref.description}"
     t = Table(title=title, caption=caption, caption_justify="left", header_style="bold")
     for col in COLUMNS:
         numeric = col not in ("integrator", "status")
@@ -503,7 +530,8 @@ def summary_lines(comparison: Comparison) -> list[str]:
     lines = [
         f"errors at {len(times)} record times from {times[0]:g} to {times[-1]:g} s; "
         f"seconds: median of {comparison.repeat} timed runs of the simulation loop only",
-        "observed order (least-squares slope of log error against log dt, stable points above round-off):",
+        "observed order: least-squares slope of log error against log dt",
+        "  (over stable points above round-off whose error is below half the distance moved)",
     ]
     width = max(len(o.integrator) for o in comparison.orders)
     for o in comparison.orders:

@@ -70,9 +70,11 @@ FINE_START_DIVISOR = 4
 #: ... and is halved until the last change is below this fraction of the
 #: smallest error measured ("far below": a thousandth)
 FINE_TARGET_RATIO = 1e-3
-#: never more steps than this for one reference run (a scene with collisions
+#: never more steps than this for one reference run, nor more than
+#: FINE_MAX_FACTOR times the finest compared run's (a scene with collisions
 #: may never converge at fourth order; compare says so instead of running forever)
 FINE_MAX_STEPS = 2_000_000
+FINE_MAX_FACTOR = 64
 #: Richardson's estimate of RK4's error at h/2 from the change between h and h/2
 RK4_RICHARDSON = 2**4 - 1
 
@@ -626,10 +628,13 @@ def rk4_reference(
     last two solutions is RK4's error estimate (Richardson: the finer one is
     off by about change/15). Stops when the change is below a thousandth of
     ``smallest_error(reference)`` (re-measured against each new reference), or
-    at :data:`FINE_MAX_STEPS`, saying so.
+    at :data:`FINE_MAX_STEPS` or :data:`FINE_MAX_FACTOR` times the finest
+    compared run's steps, saying so.
     """
     dt = finest_dt / FINE_START_DIVISOR
-    prev, status = run_trajectory(record_at(scene, name, "rk4", dt, times))
+    first = record_at(scene, name, "rk4", dt, times)
+    finest_steps = first.clock.steps * FINE_START_DIVISOR
+    prev, status = run_trajectory(first)
     if status != "ok":
         raise RuntimeError(f"the RK4 reference at dt = {dt:g} s was {status}")
     notes: list[str] = []
@@ -644,9 +649,10 @@ def rk4_reference(
         prev = cur
         if change <= target or change == 0.0:
             break
-        if compiled.clock.steps * 2 > FINE_MAX_STEPS:
+        limit = min(FINE_MAX_STEPS, FINE_MAX_FACTOR * finest_steps)
+        if compiled.clock.steps * 2 > limit:
             notes.append(
-                f"the RK4 reference did not converge within {FINE_MAX_STEPS} steps "
+                f"the RK4 reference did not converge within {limit} steps "
                 f"(last change {change:.1e} m); errors near it are not trusted"
             )
             break

@@ -79,7 +79,8 @@ def compare_figure(comparison: Any) -> Any:
         (line,) = conv.plot([r.dt for r in rows], err, marker=marker, color=colour, lw=1.6, ms=6)
         handles.append(line)
         labels.append(f"{name}: observed order {order} (expected {fit.expected})")
-        # Points left out of the order fit (round-off, reference accuracy) are hollow.
+        # Points left out of the order fit (round-off, reference accuracy, not yet
+        # asymptotic) are drawn hollow, so the fit's basis is visible.
         out = [r for r in rows if not r.in_fit]
         if out:
             conv.plot(
@@ -106,13 +107,18 @@ def compare_figure(comparison: Any) -> Any:
     conv.set_xlabel("step size dt, s")
     conv.set_ylabel("largest position error, m")
     conv.set_title(r"convergence: error $\propto$ dt$^{\,order}$")
+    if any(not r.in_fit for _, rows, _ in _series(comparison) for r in rows):
+        from matplotlib.lines import Line2D
+
+        handles.append(Line2D([], [], ls="none", marker="o", ms=8, mfc="white", mec="0.3"))
+        labels.append("hollow: left out of the order fit")
     # One legend for both panels (the colours match), below them, so it never hides a line.
     fig.legend(
         handles, labels, loc="outside lower center", ncols=min(3, max(len(handles), 1)), fontsize="small"
     )
     ref = comparison.reference
     fig.suptitle(
-        f"{comparison.scene_name}: error against cost and step size\nreference: {ref.kind} ({ref.description})",
+        f"{comparison.scene_name}: error against cost and step size\nreference: {ref.kind}: {ref.description}",
         fontsize="medium",
     )
     unstable = [r for r in comparison.rows if r.status != "ok"]
