@@ -149,12 +149,27 @@ class OrderFit:
     points: int  # used in the fit
     stable: int  # stable points
     total: int
+    below: int = 0  # stable points at round-off or reference accuracy
+    above: int = 0  # stable points not yet in the asymptotic regime
 
     def describe(self) -> str:
-        if self.order is None:
-            why = "fewer than 2 usable points"
-            return f"n/a ({why}; {self.points} of {self.total})"
-        return f"{self.order:.2f}  (expected {self.expected}; fit over {self.points} of {self.total} points)"
+        if self.order is not None:
+            return (
+                f"{self.order:.2f}  (expected {self.expected}; fit over {self.points} of {self.total} points)"
+            )
+        if self.stable == 0:
+            why = "unstable at every dt"
+        elif self.below == self.stable:
+            why = "every error is at round-off or reference accuracy: exact for this scene"
+        else:
+            left_out = [
+                (self.total - self.stable, "unstable"),
+                (self.below, "at round-off"),
+                (self.above, "error above half the motion"),
+            ]
+            detail = ", ".join(f"{n} {what}" for n, what in left_out if n)
+            why = f"{self.points} usable of {self.total} points ({detail}); need 2"
+        return f"n/a  (expected {self.expected}; {why})"
 
 
 @dataclass
@@ -459,21 +474,23 @@ def _fit_orders(
     for integ in integrators:
         mine = [r for r in rows if r.integrator == integ]
         stable = [r for r in mine if r.status == STATUS_OK and r.error is not None]
-        usable = [
+        low = [
             r
             for r in stable
             if r.error is not None
-            and r.error > max(roundoff_floor(ref.trajectory, r.steps), REFERENCE_MARGIN * ref.accuracy)
-            and (ceiling <= 0 or r.error < ceiling)
+            and r.error <= max(roundoff_floor(ref.trajectory, r.steps), REFERENCE_MARGIN * ref.accuracy)
         ]
+        high = [r for r in stable if ceiling > 0 and r.error is not None and r.error >= ceiling]
+        usable = [r for r in stable if r not in low and r not in high]
         for r in usable:
             r.in_fit = True
-        order = (
-            observed_order([r.dt for r in usable], [r.error for r in usable]) if len(usable) >= 2 else None
-        )  # type: ignore[misc]
-        fits.append(
-            OrderFit(integ, integrator_class(integ).order, order, len(usable), len(stable), len(mine))
-        )
+        order = None
+        if len(usable) >= 2:
+            order = observed_order([r.dt for r in usable], [r.error for r in usable])  # type: ignore[misc]
+        fit = OrderFit(integ, integrator_class(integ).order, order, len(usable), len(stable), len(mine))
+        fit.below = len(low)
+        fit.above = len(high)
+        fits.append(fit)
     return fits
 
 
