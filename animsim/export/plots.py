@@ -36,6 +36,8 @@ DPI = 120
 MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
 #: a fixed salt makes SVG element ids reproducible
 SVG_SALT = "animsim"
+#: an axis spanning fewer decades than this gets ticks at 1, 2 and 5 per decade
+SHORT_AXIS_DECADES = 2.5
 #: guides sit this factor below the line they follow, parallel to it
 GUIDE_OFFSET = 0.3
 
@@ -99,6 +101,8 @@ def compare_figure(comparison: Any) -> Any:
     for ax in (work, conv):
         ax.set_xscale("log")
         ax.set_yscale("log")
+        _log_ticks(ax.xaxis, *ax.get_xlim())
+        _log_ticks(ax.yaxis, *ax.get_ylim())
         ax.grid(True, which="major", alpha=0.35)
         ax.grid(True, which="minor", alpha=0.12)
     work.set_xlabel(f"run time per simulation, s (median of {comparison.repeat}; simulation loop only)")
@@ -138,6 +142,26 @@ def compare_figure(comparison: Any) -> Any:
             wrap=True,
         )
     return fig
+
+
+def _log_ticks(axis: Any, lo: float, hi: float) -> None:
+    """Readable log ticks: 1, 2, 5 per decade on a short axis, decades on a long one.
+
+    matplotlib labels minor ticks when an axis spans less than about a decade,
+    and those labels overlap; here only major ticks carry labels.
+    """
+    import math
+
+    from matplotlib.ticker import LogFormatterSciNotation, LogLocator, NullFormatter
+
+    decades = math.log10(hi / lo) if lo > 0 and hi > lo else 0.0
+    subs = (1.0, 2.0, 5.0) if decades < SHORT_AXIS_DECADES else (1.0,)
+    axis.set_major_locator(LogLocator(base=10, subs=subs))
+    # minor_thresholds: label every major tick whatever the span (the locator chose them).
+    axis.set_major_formatter(
+        LogFormatterSciNotation(labelOnlyBase=False, minor_thresholds=(math.inf, math.inf))
+    )
+    axis.set_minor_formatter(NullFormatter())
 
 
 def _guides(ax: Any, series: list[tuple[str, list[Any], Any]], dt_lo: float, dt_hi: float) -> None:
