@@ -219,3 +219,45 @@ def test_step_sizes_that_do_not_halve_compare_only_at_shared_times(tmp_path):
     # 0.01 s and 0.003 s grids meet at 0, 0.03, 0.06, ... and at the end, 0.3 s.
     np.testing.assert_allclose(result.times, np.linspace(0.0, 0.3, 11), atol=1e-12)
     assert any("not on every run's step grid" in n for n in result.notes)
+
+
+BOUNCE = """\
+name: bounce
+duration: 0.6
+dt: 0.01
+particles:
+  - {id: ball, mass: 1.0, position: [0, 0.5, 0], velocity: [1, 0, 0]}
+planes:
+  - {point: [0, 0, 0], normal: [0, 1, 0], restitution: 0.8}
+forces:
+  - {type: gravity}
+"""
+
+
+def test_a_scene_with_planes_gets_an_rk4_reference_that_converged(tmp_path):
+    from animsim.analysis.compare import compare
+    from animsim.scene.loader import load_scene_text
+
+    loaded = load_scene_text(BOUNCE)
+    result = compare(loaded.scene, loaded.name, integrators=["euler", "verlet"], dts=[0.01, 0.005], repeat=1)
+    ref = result.reference
+    assert ref.kind == "fine" and ref.description.startswith("RK4 at dt")
+    assert not ref.notes  # converged within its budget
+    smallest = min(r.error for r in result.rows if r.error is not None)
+    assert ref.accuracy < 1e-3 * smallest
+    assert not result.conservative  # restitution 0.8: no energy column
+    assert all(r.energy_error is None for r in result.rows)
+
+
+def test_fine_reference_agrees_with_the_closed_form():
+    from animsim.analysis.compare import compare
+    from animsim.scene.loader import load_scene
+
+    loaded = load_scene(SCENES / "damped_oscillator.yaml")
+    scene = loaded.scene.model_copy(update={"duration": 0.5})
+    kwargs = {"integrators": ["euler", "rk4"], "dts": [0.01, 0.005], "repeat": 1}
+    exact = compare(scene, loaded.name, reference="analytic", **kwargs)
+    fine = compare(scene, loaded.name, reference="fine", **kwargs)
+    assert fine.reference.description.startswith("DOP853")
+    for a, b in zip(exact.rows, fine.rows, strict=True):
+        assert b.error == pytest.approx(a.error, rel=1e-6, abs=1e-11)
