@@ -352,6 +352,7 @@ def compare(
     fail_on_unstable: Annotated[
         bool, typer.Option("--fail-on-unstable", help="Exit 1 if any run was unstable.")
     ] = False,
+    max_steps: MaxSteps = DEFAULT_MAX_STEPS,
 ) -> None:
     """Run SCENE with each integrator at each step size; report error against run time.
 
@@ -387,6 +388,7 @@ def compare(
             reference=reference.value,
             repeat=repeat,
             progress=progress,
+            max_steps=max_steps,
         )
     console.print(table(result))
     for line in summary_lines(result):

@@ -61,9 +61,10 @@ from animsim.analysis.references import (
     run_trajectory,
     smooth,
 )
-from animsim.compile import Compiled, compile_scene
+from animsim.compile import Compiled
 from animsim.errors import UsageError
 from animsim.integrators import FIXED_STEP, REGISTRY, integrator_class
+from animsim.record import Clock, record_steps
 from animsim.scene import models as m
 
 COLUMNS = (
@@ -82,6 +83,8 @@ REFERENCE_KINDS = ("auto", "analytic", "fine")
 #: the default step sizes are the scene's dt and this many halvings of it
 DEFAULT_HALVINGS = 4
 DEFAULT_REPEAT = 3
+#: the most steps one run may take (the spec's limit; --max-steps raises it)
+DEFAULT_MAX_STEPS = 100_000_000
 #: an error below this many machine epsilons of |x| sqrt(steps) is round-off
 #: (rounding errors of n steps add up like a random walk), not truncation
 ROUNDOFF_SAFETY = 10.0
@@ -326,13 +329,24 @@ class _Run:
     failure: str | None
 
 
-def common_times(scene: m.Scene, name: str, dts: Sequence[float]) -> tuple[np.ndarray, list[str]]:
-    """Record times of the coarsest run that every run lands on, and notes on any dropped."""
-    coarse = compile_scene(scene.model_copy(update={"dt": max(dts)}), name)
-    candidates = [coarse.clock.time(int(s)) for s in coarse.record_steps]
+def common_times(
+    scene: m.Scene, dts: Sequence[float], max_steps: int = DEFAULT_MAX_STEPS
+) -> tuple[np.ndarray, list[str]]:
+    """Record times of the coarsest run that every run lands on, and notes on any dropped.
+
+    Refuses (UsageError) a step size whose run would take more than ``max_steps``.
+    """
+    clocks = [Clock.make(scene.duration, dt) for dt in dts]
+    for dt, clock in zip(dts, clocks, strict=True):  # before anything is allocated per step
+        if clock.steps > max_steps:
+            raise UsageError(
+                f"--dt {dt:g}: {clock.steps} steps is more than the limit of {max_steps} (raise it with --max-steps)"
+            )
+    coarse = Clock.make(scene.duration, max(dts))
+    recorded = record_steps(coarse, every=scene.record.every, fps=scene.record.fps)
+    candidates = [coarse.time(int(s)) for s in recorded]
     keep = np.ones(len(candidates), dtype=bool)
-    for dt in dts:
-        clock = compile_scene(scene.model_copy(update={"dt": dt}), name).clock
+    for clock in clocks:
         keep &= np.array([s is not None for s in landing_steps(clock, candidates)])
     notes = []
     if not keep.all():
@@ -353,6 +367,7 @@ def compare(
     reference: str = "auto",
     repeat: int = DEFAULT_REPEAT,
     progress: Callable[[str], None] | None = None,
+    max_steps: int = DEFAULT_MAX_STEPS,
 ) -> Comparison:
     """Run every (integrator, dt), measure errors against a reference and time the runs."""
     if reference not in REFERENCE_KINDS:
@@ -364,7 +379,7 @@ def compare(
         notes.append("the scene's adaptive stepping is ignored: compare runs each method at fixed steps")
     scene = scene.model_copy(update={"integrator": scene.integrator_name})
     dts = sorted(set(dts), reverse=True)
-    times, time_notes = common_times(scene, name, dts)
+    times, time_notes = common_times(scene, dts, max_steps)
     notes.extend(time_notes)
     base = record_at(scene, name, integrators[0], dts[-1], times)
 

@@ -199,6 +199,8 @@ def test_plot_bytes_are_deterministic_for_the_same_comparison(tmp_path):
         (("--dt", "5"), "longer than the duration"),
         (("--plot", "out.gif"), "unknown image type"),
         (("--repeat", "0"), "repeat"),
+        (("--max-steps", "1000"), "more than the limit"),  # dt/16 takes 3200 steps
+        (("--dt", "1e-9"), "more than the limit"),  # refused before any per-step allocation
     ],
 )
 def test_bad_options_exit_2_before_running(tmp_path, args, message):
