@@ -361,6 +361,10 @@ def compare(
     the median simulation time and force evaluations. Under the table: each
     integrator's observed order of convergence.
 
+    Cost: each row is run 1 + --repeat times (an accuracy run that is also the
+    warm-up, then the timed runs), so the finest dt dominates; pass fewer or
+    larger step sizes with --dt for big scenes.
+
     An unstable run is a row with status 'unstable', not a failure of the
     comparison: the exit status is 0 when the comparison itself completed
     (use --fail-on-unstable to exit 1 instead), 2 for a bad scene or option.

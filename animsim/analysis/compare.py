@@ -52,6 +52,7 @@ import numpy as np
 from animsim.analysis.references import (
     NoClosedForm,
     Reference,
+    ReferenceFailed,
     Trajectory,
     analytic_reference,
     dop853_reference,
@@ -396,7 +397,11 @@ def compare(
                 ) from None
             notes.append(f"no closed form: {exc}; the reference is a converged run")
     if ref is None and smooth(base):
-        ref = dop853_reference(base, times)
+        try:
+            with np.errstate(all="ignore"):
+                ref = dop853_reference(base, times)
+        except ReferenceFailed as exc:
+            notes.append(f"{exc}; falling back to RK4 with dt halved")
 
     runs: list[_Run] = []
     for integ in integrators:

@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from animsim.compile import Compiled, compile_scene, with_overrides
+from animsim.errors import SimulationError
 from animsim.record import Clock, MemorySink
 from animsim.scene import models as m
 
@@ -80,6 +81,10 @@ RK4_RICHARDSON = 2**4 - 1
 
 
 PINNED_LABEL = "pinned particles moving uniformly"
+
+
+class ReferenceFailed(Exception):
+    """A converged reference could not be computed this way (compare tries another)."""
 
 
 class NoClosedForm(Exception):
@@ -564,7 +569,7 @@ def dop853_reference(compiled: Compiled, times: np.ndarray) -> Reference:
             atol=atol,
         )
         if not sol.success:
-            raise RuntimeError(f"DOP853 failed: {sol.message}")
+            raise ReferenceFailed(f"DOP853 failed: {sol.message}")
         return sol.y.T
 
     y = solve(DOP853_RTOL)
@@ -618,6 +623,13 @@ def run_trajectory(compiled: Compiled) -> tuple[Trajectory, str]:
     return Trajectory.from_sink(sink, compiled.emitters is None), result.status
 
 
+def _unstable_reference(dt: float, status: str) -> SimulationError:
+    return SimulationError(
+        f"the RK4 reference run at dt = {dt:.3g} s was {status}, so there is nothing to compare against; "
+        "the scene may be unstable whatever the step (see animsim check)"
+    )
+
+
 def rk4_reference(
     scene: m.Scene,
     name: str,
@@ -640,14 +652,14 @@ def rk4_reference(
     finest_steps = first.clock.steps * FINE_START_DIVISOR
     prev, status = run_trajectory(first)
     if status != "ok":
-        raise RuntimeError(f"the RK4 reference at dt = {dt:g} s was {status}")
+        raise _unstable_reference(dt, status)
     notes: list[str] = []
     while True:
         dt /= 2
         compiled = record_at(scene, name, "rk4", dt, times)
         cur, status = run_trajectory(compiled)
         if status != "ok":
-            raise RuntimeError(f"the RK4 reference at dt = {dt:g} s was {status}")
+            raise _unstable_reference(dt, status)
         change = distance(cur, prev)
         target = FINE_TARGET_RATIO * smallest_error(cur)
         prev = cur
