@@ -36,6 +36,8 @@ DPI = 120
 MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
 #: a fixed salt makes SVG element ids reproducible
 SVG_SALT = "animsim"
+#: characters per line of the "unstable, not drawn" note inside the convergence panel
+UNSTABLE_TEXT_WIDTH = 60
 #: an axis spanning fewer decades than this gets ticks at 1, 2 and 5 per decade
 SHORT_AXIS_DECADES = 2.5
 #: guides sit this factor below the line they follow, parallel to it
@@ -70,7 +72,6 @@ def compare_figure(comparison: Any) -> Any:
     colours = matplotlib.colormaps["tab10"].colors
     handles: list[Any] = []
     labels: list[str] = []
-    largest_dt = max(r.dt for r in comparison.rows)
     for k, (name, rows, fit) in enumerate(_series(comparison)):
         colour, marker = colours[k % len(colours)], MARKERS[k % len(MARKERS)]
         if not rows:
@@ -96,8 +97,9 @@ def compare_figure(comparison: Any) -> Any:
                 zorder=3,
             )
     drawn = [item for item in _series(comparison) if item[1]]
-    if drawn:
-        _guides(conv, drawn, min(r.dt for r in comparison.rows), largest_dt)
+    if drawn:  # the guides span the drawn points only
+        drawn_dts = [r.dt for _, rows, _ in drawn for r in rows]
+        _guides(conv, drawn, min(drawn_dts), max(drawn_dts))
     for ax in (work, conv):
         ax.set_xscale("log")
         ax.set_yscale("log")
@@ -127,21 +129,31 @@ def compare_figure(comparison: Any) -> Any:
     )
     unstable = [r for r in comparison.rows if r.status != "ok"]
     if unstable:
-        text = "unstable, not drawn: " + ", ".join(f"{r.integrator} dt={r.dt:g}" for r in unstable[:8])
-        if len(unstable) > 8:
-            text += f", and {len(unstable) - 8} more"
         conv.text(
             0.02,
             0.98,
-            text,
+            _unstable_text(comparison.rows, unstable),
             transform=conv.transAxes,
             ha="left",
             va="top",
             fontsize="small",
             color="firebrick",
-            wrap=True,
         )
     return fig
+
+
+def _unstable_text(rows: list[Any], unstable: list[Any]) -> str:
+    """'unstable, not drawn: euler (every dt); rk4 dt 0.01', wrapped to fit inside a panel."""
+    import textwrap
+
+    parts = []
+    for name in dict.fromkeys(r.integrator for r in unstable):
+        bad = [r for r in unstable if r.integrator == name]
+        if len(bad) == sum(1 for r in rows if r.integrator == name):
+            parts.append(f"{name} (every dt)")
+        else:
+            parts.append(f"{name} dt " + ", ".join(f"{r.dt:g}" for r in bad))
+    return textwrap.fill("unstable, not drawn: " + "; ".join(parts), width=UNSTABLE_TEXT_WIDTH)
 
 
 def _log_ticks(axis: Any, lo: float, hi: float) -> None:
