@@ -25,7 +25,8 @@ into independent pieces that each have one. The pieces recognised:
   orbit: Kepler's equation in the eccentric anomaly difference and Lagrange's
   f and g functions (Vallado, "Fundamentals of Astrodynamics", 2.3 and 2.4).
 
-Everything else uses a converged run (:func:`fine_reference`): SciPy's DOP853
+Everything else uses a converged run (:func:`dop853_reference`,
+:func:`rk4_reference`): SciPy's DOP853
 at tight tolerances for smooth scenes (no planes, no emitters), or RK4 with
 the step halved until the change is far below the smallest error measured.
 """
@@ -335,7 +336,12 @@ def closed_form(compiled: Compiled) -> ClosedForm:
     return ClosedForm(n, pieces)
 
 
-def _flight_piece(index: np.ndarray, x0: np.ndarray, v0: np.ndarray, c, gamma):
+Fill = Callable[[np.ndarray, np.ndarray, np.ndarray], None]
+
+
+def _flight_piece(
+    index: np.ndarray, x0: np.ndarray, v0: np.ndarray, c: np.ndarray | float, gamma: np.ndarray | float
+) -> Fill:
     """x'' = c - gamma x' for each particle of ``index`` (c: (k, 3) or scalar, gamma: (k,) or scalar)."""
     gamma_col = np.reshape(np.broadcast_to(np.asarray(gamma, dtype=float), (len(index),)), (1, -1, 1))
     c_arr = np.broadcast_to(np.asarray(c, dtype=float), (len(index), 3))
@@ -348,7 +354,21 @@ def _flight_piece(index: np.ndarray, x0: np.ndarray, v0: np.ndarray, c, gamma):
     return fill
 
 
-def _anchored(a, b, ks, kd, rest, x0, v0, mass, pinned, g, drag, push, duration):
+def _anchored(
+    a: int,
+    b: int,
+    ks: float,
+    kd: float,
+    rest: float,
+    x0: np.ndarray,
+    v0: np.ndarray,
+    mass: np.ndarray,
+    pinned: np.ndarray,
+    g: np.ndarray,
+    drag: float,
+    push: np.ndarray,
+    duration: float,
+) -> tuple[str, Fill]:
     """One free particle on one spring to a pinned (possibly uniformly moving) anchor."""
     anchor, bob = (a, b) if pinned[a] else (b, a)
     u = v0[anchor]
@@ -382,7 +402,18 @@ def _anchored(a, b, ks, kd, rest, x0, v0, mass, pinned, g, drag, push, duration)
     return label, fill
 
 
-def _two_body(a, b, ks, kd, rest, x0, v0, mass, g, duration):
+def _two_body(
+    a: int,
+    b: int,
+    ks: float,
+    kd: float,
+    rest: float,
+    x0: np.ndarray,
+    v0: np.ndarray,
+    mass: np.ndarray,
+    g: np.ndarray,
+    duration: float,
+) -> tuple[str, Fill]:
     """Two free particles on one spring: centre of mass in flight, stretch as an oscillator."""
     ma, mb = float(mass[a]), float(mass[b])
     total = ma + mb
