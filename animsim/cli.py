@@ -479,7 +479,9 @@ def _frame_progress(total: int | None, quiet: bool):
 # --- sweep ------------------------------------------------------------------------------
 
 
-class Reference(StrEnum):
+class ReferenceKind(StrEnum):
+    """What "exact" is for compare and sweep: a closed form, a converged run, or whichever fits."""
+
     auto = "auto"
     analytic = "analytic"
     fine = "fine"
@@ -502,7 +504,7 @@ def sweep(
         str | None, typer.Option("--integrators", help="Comma-separated methods: one more axis.")
     ] = None,
     reference: Annotated[
-        Reference | None,
+        ReferenceKind | None,
         typer.Option(help="Add an error column against this reference (fine: RK4 at dt/16)."),
     ] = None,
     output: Annotated[Path | None, typer.Option("-o", "--output", help="The table as CSV.")] = None,
@@ -608,6 +610,116 @@ def _stdout_console():
     from rich.console import Console
 
     return Console() if sys.stdout.isatty() else Console(width=PIPE_TABLE_WIDTH)
+
+
+# --- compare ------------------------------------------------------------------------------
+
+
+@app.command()
+def compare(
+    scene: SceneArg,
+    integrators: Annotated[
+        str | None,
+        typer.Option(
+            help="Comma-separated methods, e.g. euler,midpoint,rk4; default every fixed-step method."
+        ),
+    ] = None,
+    dt: Annotated[
+        str | None,
+        typer.Option(
+            "--dt",
+            help="Comma-separated step sizes (s); default the scene's dt halved four times: dt, dt/2, dt/4, dt/8, dt/16.",
+        ),
+    ] = None,
+    reference: Annotated[
+        ReferenceKind,
+        typer.Option(
+            help="What 'exact' is: analytic (a closed form; exit 2 if the scene has none), fine (a converged "
+            "run: DOP853 for smooth scenes, else RK4 with dt halved until it stops changing), or auto "
+            "(analytic when possible); the one used is printed."
+        ),
+    ] = ReferenceKind.auto,
+    repeat: Annotated[int, typer.Option(help="Timed runs per row; the median is reported.", min=1)] = 3,
+    output: Annotated[Path | None, typer.Option("-o", "--output", help="Write the table as CSV.")] = None,
+    plot: Annotated[
+        Path | None,
+        typer.Option(help="Work-precision and convergence diagrams; .png, .svg or .pdf."),
+    ] = None,
+    fail_on_unstable: Annotated[
+        bool, typer.Option("--fail-on-unstable", help="Exit 1 if any run was unstable.")
+    ] = False,
+    max_steps: MaxSteps = DEFAULT_MAX_STEPS,
+) -> None:
+    """Run SCENE with each integrator at each step size; report error against run time.
+
+    Each row is one run: its largest, final and RMS position error against the
+    reference at common record times, its energy error (conservative scenes),
+    the median simulation time and force evaluations. Under the table: each
+    integrator's observed order of convergence.
+
+    Cost: each row is run 1 + --repeat times (an accuracy run that is also the
+    warm-up, then the timed runs), so the finest dt dominates; pass fewer or
+    larger step sizes with --dt for big scenes.
+
+    An unstable run is a row with status 'unstable', not a failure of the
+    comparison: the exit status is 0 when the comparison itself completed
+    (use --fail-on-unstable to exit 1 instead), 2 for a bad scene or option.
+    """
+    from animsim.analysis.compare import compare as run_compare
+    from animsim.analysis.compare import parse_dts, parse_integrators, summary_lines, table, write_csv
+    from animsim.export.plots import plot_format, write_compare_plot
+    from animsim.scene.loader import load_scene
+
+    loaded = load_scene(scene)
+    names = parse_integrators(integrators)
+    dts = parse_dts(dt, loaded.scene)
+    for path in (output, plot):
+        if path is not None:
+            check_output_path(path, scene)
+    if plot is not None:
+        plot_format(plot)
+    console = _stdout_console()
+    with _compare_progress(len(names) * len(dts)) as progress:
+        result = run_compare(
+            loaded.scene,
+            loaded.name,
+            integrators=names,
+            dts=dts,
+            reference=reference.value,
+            repeat=repeat,
+            progress=progress,
+            max_steps=max_steps,
+        )
+    console.print(table(result))
+    for line in summary_lines(result):
+        console.print(line, highlight=False, markup=False)
+    if output is not None:
+        write_csv(result, output)
+        console.print(f"wrote {output}", highlight=False, markup=False)
+    if plot is not None:
+        write_compare_plot(result, plot)
+        console.print(f"wrote {plot}", highlight=False, markup=False)
+    if fail_on_unstable and result.any_unstable:
+        raise typer.Exit(EXIT_FAILED)
+
+
+@contextmanager
+def _compare_progress(total: int):
+    """A transient progress bar on stderr (terminal only), advanced once per run."""
+    if not sys.stderr.isatty():
+        yield None
+        return
+    from rich.progress import Progress
+
+    with Progress(transient=True, console=_stderr_console()) as bar:
+        task = bar.add_task("comparing", total=total)
+
+        def update(label: str) -> None:
+            bar.update(task, description=label)
+            if not label.startswith("reference"):
+                bar.advance(task)
+
+        yield update
 
 
 # --- plot -------------------------------------------------------------------------------

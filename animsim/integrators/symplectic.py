@@ -19,6 +19,9 @@ from animsim.dynamics import Dynamics
 from animsim.integrators.base import Integrator
 from animsim.system import State
 
+#: relative tolerance when deciding that Verlet's cached acceleration is for this time
+CACHE_TIME_RTOL = 1e-9
+
 
 class SymplecticEuler(Integrator):
     name = "symplectic_euler"
@@ -78,7 +81,15 @@ class Verlet(Integrator):
 
     def step(self, state: State, dt: float) -> None:
         x, v = state.particle_position, state.particle_velocity
-        if self._cache != (state.revision, state.time):
+        # The loop sets state.time from the clock (duration * i / steps), which can
+        # differ from the cached time + dt in the last bit; compare with a tolerance
+        # so the cached acceleration is reused and Verlet costs one evaluation per step.
+        cached = self._cache
+        if (
+            cached is None
+            or cached[0] != state.revision
+            or abs(cached[1] - state.time) > CACHE_TIME_RTOL * max(abs(state.time), dt)
+        ):
             self.dynamics.acceleration(x, v, state.time, self._a0)
         a0 = self._a0
         np.multiply(a0, dt, out=self._vp)
