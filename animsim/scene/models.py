@@ -265,7 +265,7 @@ class Emitter(Model):
     )
     rate_spread: NonNegative = Field(0.0, description="standard deviation of births per second")
     shape: Shape
-    velocity: VelocityDistribution = VelocityDistribution()
+    velocity: VelocityDistribution = {"mean": [0.0, 0.0, 0.0], "spread": 0.0}  # type: ignore[assignment]
     lifetime: LifetimeDistribution
     mass: Positive = 0.01
     size: SizeOverLife = SizeOverLife()
