@@ -316,7 +316,10 @@ def check(
 def main(argv: list[str] | None = None) -> None:
     """Run the app; every AnimsimError becomes a message and an exit status, never a traceback."""
     try:
-        typer.Typer.__call__(app, args=argv, prog_name="animsim", standalone_mode=False)
+        # Without standalone mode click returns a command's typer.Exit code instead of raising it.
+        code = typer.Typer.__call__(app, args=argv, prog_name="animsim", standalone_mode=False)
+        if isinstance(code, int) and code:
+            sys.exit(code)
     except AnimsimError as exc:
         _err(str(exc))
         sys.exit(exc.exit_code)
