@@ -104,7 +104,9 @@ class Guard:
             bad = ~(np.isfinite(x).all(axis=1) & np.isfinite(v).all(axis=1))
             if bad.any():  # else the sum overflowed on huge but finite values
                 i = int(np.flatnonzero(bad)[0])
-                return self._failure(state, i, self._stiffest_spring_at(i), None, "a position or velocity is not finite")
+                return self._failure(
+                    state, i, self._stiffest_spring_at(i), None, "a position or velocity is not finite"
+                )
         if self.watch.disabled is not None:
             return None
         with np.errstate(over="ignore", invalid="ignore"):
@@ -112,9 +114,7 @@ class Guard:
         if growth <= BLOWUP_FACTOR:  # False for NaN too: an overflowed energy is a blow-up
             return None
         particle, spring = self.watch.blame(state)
-        reason = (
-            f"the mechanical energy {h:.3g} J is {growth:.3g} times what the forces put in ({b:.3g} J)"
-        )
+        reason = f"the mechanical energy {h:.3g} J is {growth:.3g} times what the forces put in ({b:.3g} J)"
         return self._failure(state, particle, spring, growth, reason)
 
     def _stiffest_spring_at(self, i: int) -> int | None:
@@ -129,7 +129,9 @@ class Guard:
         w2 = sysm.spring_ks[touching] * (inv[idx[touching, 0]] + inv[idx[touching, 1]])
         return int(touching[np.argmax(w2)])
 
-    def _failure(self, state: State, i: int, spring: int | None, growth: float | None, reason: str) -> Failure:
+    def _failure(
+        self, state: State, i: int, spring: int | None, growth: float | None, reason: str
+    ) -> Failure:
         from animsim.analysis import stability
 
         ids = self.compiled.system.ids
@@ -170,7 +172,9 @@ def run(
     clock = compiled.clock
     adaptive_spec = compiled.scene.adaptive
     # The watchdog's one-step energy slack uses the largest step the run can take.
-    guard = guard or Guard(compiled, dt=None if adaptive_spec is None else max(adaptive_spec.dt_max, clock.dt))
+    guard = guard or Guard(
+        compiled, dt=None if adaptive_spec is None else max(adaptive_spec.dt_max, clock.dt)
+    )
     record = compiled.record_steps
     next_rec = 0
     dyn.evaluations = 0
@@ -231,7 +235,9 @@ def run(
                         failure = guard.check(state)
                         if failure is not None:
                             if last_good is not None and state.step - checked > 1:
-                                failure = _first_failure(state, last_good, failure, advance, guard, integ, dyn)
+                                failure = _first_failure(
+                                    state, last_good, failure, advance, guard, integ, dyn
+                                )
                             status = STATUS_UNSTABLE
                             break
                         checked = state.step

@@ -109,7 +109,9 @@ def one_step_matrix(method: str, h: np.ndarray, omega: np.ndarray, zeta: np.ndar
             # v1 = v + h/2 (a0 + a1), a1 = -k x1 - c vp (velocity Verlet, damping at the prediction)
             a0 = np.stack([-k, -c], axis=-1)
             a1 = -k[..., None] * x1 - c[..., None] * vp
-            out[..., 1, :] = np.stack([np.zeros_like(h), np.ones_like(h)], axis=-1) + 0.5 * h[..., None] * (a0 + a1)
+            out[..., 1, :] = np.stack([np.zeros_like(h), np.ones_like(h)], axis=-1) + 0.5 * h[..., None] * (
+                a0 + a1
+            )
         return out
     if method == "implicit_euler":
         # (I - hA) y1 = y0

@@ -144,7 +144,13 @@ class EnergyWatch:
             else:
                 released += float(np.sum(u - self._per_particle_potential(t, x)))
         movable = float(np.count_nonzero(self.mass))
-        return self.h0 + max(released, 0.0) + self.wind_power * movable * state.time + self.born_energy + self.floor
+        return (
+            self.h0
+            + max(released, 0.0)
+            + self.wind_power * movable * state.time
+            + self.born_energy
+            + self.floor
+        )
 
     def growth(self, state: Any) -> tuple[float, float, float]:
         """(H, B, H/B) at ``state``."""
