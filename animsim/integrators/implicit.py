@@ -75,7 +75,7 @@ class ImplicitEuler(Integrator):
         mass = system.particle_mass
         free = np.repeat(system.particle_inv_mass > 0, 3)  # unknown degrees of freedom
         kx, kv = self.jacobians(x, v)
-        if kx is None and kv is None or not free.any():
+        if (kx is None and kv is None) or not free.any():
             v += dt * a  # nothing implicit: A = M, dv = dt M^-1 f
             x += dt * v
             return
