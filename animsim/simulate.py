@@ -190,8 +190,9 @@ def run(
             _emit(compiled, state, sinks)
             frames += 1
             next_rec = 1
-        energy_start = dyn.energy(state.particle_position, state.particle_velocity)
-        guard.start(state)
+        with np.errstate(over="ignore", invalid="ignore"):
+            energy_start = dyn.energy(state.particle_position, state.particle_velocity)
+            guard.start(state)
         failure: Failure | None = None
         status = STATUS_OK
         t_start = _time.perf_counter()

@@ -90,8 +90,9 @@ class EnergyWatch:
         if not self.releasing:
             return 0.0
         f = np.zeros_like(x)
-        for t in self.releasing:
-            t.accumulate(x, v, 0.0, f)
+        with np.errstate(all="ignore"):  # a singular start is the first check's to report
+            for t in self.releasing:
+                t.accumulate(x, v, 0.0, f)
         inv = self.system.particle_inv_mass
         return ENERGY_FLOOR_STEPS * self.dt**2 * float(np.dot(inv, np.einsum("ij,ij->i", f, f)))
 
@@ -108,7 +109,7 @@ class EnergyWatch:
         if isinstance(term, Attractor):
             r = x - term.center
             d = np.sqrt(np.einsum("ij,ij->i", r, r) + term.eps2)
-            with np.errstate(divide="ignore", invalid="ignore"):
+            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
                 return np.where(d > 0, -term.gm * term.mass / d, 0.0)
         return np.zeros(len(x))  # gravity is released from x - x_ref directly
 
