@@ -27,8 +27,11 @@ import numpy as np
 from animsim.record import FrameSink
 from animsim.system import State
 
-#: length unit of the error: positions in m; velocities count as v * h (m)
+#: a doubled step has about DOUBLING_BASE^(p+1) times the local error of the two halves
 DOUBLING_BASE = 2.0
+#: a step this close (relative) to the distance left lands on the record time, so
+#: rounding in the accumulated time never leaves a sliver of a step behind
+LANDING_SLACK = 1e-6
 
 
 def _copy_into(dst: State, src: State) -> None:
@@ -112,7 +115,7 @@ class StepDoubling:
         nominal = clock.steps
         for target in targets:
             while state.time < target:
-                landing = target - state.time <= h
+                landing = target - state.time <= h * (1.0 + LANDING_SLACK)
                 h_try = target - state.time if landing else h
                 self.integ.reset()  # Verlet's cached force belongs to one trajectory
                 _copy_into(big, state)

@@ -41,7 +41,7 @@ def test_registered():
 def test_stable_at_omega_dt_20_and_energy_decays_as_backward_euler():
     k, m, dt = 400.0, 1.0, 1.0  # omega = 20 rad/s, omega dt = 20
     text = OSCILLATOR.format(duration=30.0, dt=dt, m=m, k=k)
-    c, r, sink = simulate_text(text)
+    _c, r, sink = simulate_text(text)
     assert r.status == STATUS_OK
     x = sink.positions()[:, 1, 0] - 1.0
     v = sink.velocities()[:, 1, 0]
