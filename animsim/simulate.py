@@ -67,9 +67,9 @@ class RunResult:
     meta: dict[str, Any] = field(default_factory=dict)
 
 
-#: steps between two full watchdog checks on the fixed-step path; record frames
-#: and the last step are always checked, and a failure found at a check is
-#: traced back to its first step by replaying from the last good check
+#: steps between two full watchdog checks on the fixed-step path (and at the
+#: last step); frames recorded in between are held until a check passes, and a
+#: failure found at a check is traced back to its first step by a replay
 CHECK_STRIDE = 16
 
 
@@ -225,32 +225,50 @@ def run(
                     state.step = i + 1
                     state.time = t_end
 
+                # The watchdog runs every `stride` steps and at the end. Frames recorded in
+                # between wait (copied, at most `stride` of them) until a check has passed,
+                # so no unverified frame reaches a sink; a failure is traced back to its
+                # first step by replaying from the last good check.
                 stride = guard.stride
                 last_good = state.copy() if stride > 1 else None
+                pending: list[tuple[int, Frame | None]] = []
                 checked = 0
+
+                def verify() -> Failure | None:
+                    nonlocal frames, checked
+                    found = guard.check(state)
+                    if found is not None and last_good is not None and state.step - checked > 1:
+                        found = _first_failure(state, last_good, found, advance, guard, integ, dyn)
+                    for step, frame in pending:
+                        if found is None or step < found.step:
+                            if frame is not None:
+                                for sink in sinks:
+                                    sink.write(frame)
+                            frames += 1
+                    pending.clear()
+                    checked = state.step
+                    if found is None and last_good is not None:
+                        _copy_state(last_good, state)
+                    return found
+
                 for i in range(steps):
                     advance(i)
-                    recording = next_rec < len(record) and record[next_rec] == state.step
-                    # Full checks every `stride` steps, before any frame leaves, and at the end.
-                    if state.step - checked >= stride or (recording and sinks) or state.step == steps:
-                        failure = guard.check(state)
+                    if next_rec < len(record) and record[next_rec] == state.step:
+                        next_rec += 1
+                        if last_good is None:
+                            _emit(compiled, state, sinks)
+                            frames += 1
+                        else:
+                            pending.append((state.step, _frame_copy(compiled, state) if sinks else None))
+                    interrupted = stop is not None and stop()
+                    if state.step - checked >= stride or state.step == steps or interrupted:
+                        failure = verify()
                         if failure is not None:
-                            if last_good is not None and state.step - checked > 1:
-                                failure = _first_failure(
-                                    state, last_good, failure, advance, guard, integ, dyn
-                                )
                             status = STATUS_UNSTABLE
                             break
-                        checked = state.step
-                        if last_good is not None:
-                            _copy_state(last_good, state)
-                    if recording:
-                        _emit(compiled, state, sinks)
-                        frames += 1
-                        next_rec += 1
                     if progress is not None:
                         progress(state.step, steps)
-                    if stop is not None and stop():
+                    if interrupted:
                         status = STATUS_INTERRUPTED
                         break
         wall = _time.perf_counter() - t_start
@@ -316,6 +334,17 @@ def _first_failure(
             break
     dyn.evaluations = evaluations
     return first
+
+
+def _frame_copy(compiled: Compiled, state: State) -> Frame:
+    """A frame that owns its arrays (fixed population: no emitters)."""
+    return Frame(
+        step=state.step,
+        time=state.time,
+        index=_all_index(compiled),
+        position=state.particle_position.copy(),
+        velocity=state.particle_velocity.copy(),
+    )
 
 
 def _emit(compiled: Compiled, state: State, sinks: Sequence[FrameSink]) -> None:

@@ -66,10 +66,14 @@ def test_first_failing_step_is_exact_when_checks_are_strided():
     text = STIFF.replace("ks: 1.0e7", "ks: 1.0e2").replace("integrator: euler", "integrator: midpoint")
     # midpoint at omega dt = 0.1 is weakly unstable: slow growth, fails deep inside a stride
     text = text.replace("duration: 2.0", "duration: 40000.0").replace("dt: 0.01", "dt: 0.01")
-    with_sinks = run(compiled_from(text, dt=0.3, duration=3000.0), [MemorySink()])
+    sink = MemorySink()
+    with_sinks = run(compiled_from(text, dt=0.3, duration=3000.0), [sink])
     without = run(compiled_from(text, dt=0.3, duration=3000.0), [])
     assert with_sinks.status == without.status == STATUS_UNSTABLE
     assert with_sinks.failure.step == without.failure.step
+    # frames wait for a passing check: exactly those before the first failing step are written
+    assert [f.step for f in sink.frames] == list(range(with_sinks.failure.step))
+    assert with_sinks.frames == with_sinks.failure.step
     assert without.failure.step % CHECK_STRIDE != 0  # it really was found by the replay
     assert without.steps_taken == without.failure.step
 
@@ -175,3 +179,14 @@ def test_unstable_run_exits_1_with_the_report(cli, tmp_path):
     assert "unstable at step 1" in res.stderr and "spring 'anchor'-'bob'" in res.stderr
     assert "fix:" in res.stderr
     assert out.read_text().count("\n") == 3  # header + the two particles at t = 0
+
+
+def test_an_interrupt_writes_the_checked_frames_so_far():
+    text = STIFF.replace("integrator: euler", "integrator: symplectic_euler").replace(
+        "dt: 0.01", "dt: 0.0001"
+    )
+    calls = iter(range(10**6))
+    sink = MemorySink()
+    r = run(compiled_from(text), [sink], stop=lambda: next(calls) == 4)
+    assert r.status == "interrupted"
+    assert [f.step for f in sink.frames] == [0, 1, 2, 3, 4, 5]
