@@ -121,8 +121,16 @@ class EnergyWatch:
         x = state.particle_position
         h = self.kinetic(state.particle_velocity)
         for t in self.elastic:
-            h += t.potential(x)
+            h += self._spring_energy(t, x) if t is self.springs else t.potential(x)
         return h
+
+    @staticmethod
+    def _spring_energy(springs: Springs, x: np.ndarray) -> float:
+        """sum 1/2 ks (|L| - R)^2, as Springs.potential but without its zero-length guard
+        (|L| alone needs none), since this runs on every check."""
+        d = x[springs.a] - x[springs.b]
+        stretch = np.sqrt(np.einsum("ij,ij->i", d, d)) - springs.rest
+        return 0.5 * float(np.dot(springs.ks, stretch * stretch))
 
     def budget(self, state: Any) -> float:
         """B: the most energy H may hold at ``state`` without the integrator making any."""
