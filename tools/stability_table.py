@@ -117,8 +117,9 @@ k = 1 N/m, m = 1 kg oscillator released from 0.1 m stretch is bisected
 ({bisection} steps, omega*dt searched in [{lo:g}, {hi:g}]) between a run that
 ends `ok` and one the watchdog stops as `unstable` (a value not finite, or
 the energy above {factor:g} times what the forces put in), over a fixed
-number of steps. A true limit gives the same number at both horizons. The
-weakly unstable methods give a number that shrinks as the horizon grows: they
+number of steps. A true limit gives the same number at both horizons (just
+above it growth is slow, so the short horizon can overshoot a little, as RK4
+does). The weakly unstable methods give a number that shrinks as the horizon grows: they
 are "stable" only in the sense that their energy has not yet grown
 {factor:g}-fold, and over an unbounded horizon no step is stable.
 
