@@ -337,6 +337,14 @@ def analyse(compiled: Any) -> StabilityReport:
             limits[name] = float(largest_stable_dt(name, uniq[:, 0], uniq[:, 1]).min())
     else:
         limits = {name: math.inf for name in METHOD_ORDER}
+    if system.spring_count and np.any(system.spring_kd > 0):
+        # Lander's damping term acts along the spring: swinging and bending across
+        # springs keep only the drag's damping, and the weakly unstable methods
+        # amplify undamped motion at every dt (the cloth example, euler at c/k, does).
+        notes.append(
+            "spring damping acts along springs only: euler, euler_average, midpoint and heun can "
+            "still grow slowly on motion across them (swinging, bending) unless drag damps it"
+        )
     if any(getattr(t, "label", "").startswith("quadratic drag") for t in compiled.dynamics.terms):
         notes.append("quadratic drag damps in proportion to speed and is not counted")
     adaptive = scene.adaptive is not None
