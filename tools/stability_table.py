@@ -129,7 +129,37 @@ Damping changes these limits: with damping ratio zeta, symplectic Euler's is
 2 (sqrt(zeta^2 + 1) - zeta) (for one spring (sqrt(c^2 + 4km) - c)/k),
 explicit Euler becomes stable for omega*dt <= 2 zeta (dt <= c/k), and midpoint,
 Heun and euler_average get a small stable range. `animsim check SCENE` prints
-the limits of every method for the scene's own stiffest mode.
+the limits of every method for the scene's own stiffest mode (a Gershgorin
+upper bound of omega_max over spring and penalty stiffness scaled by the
+inverse masses, so the printed limits err on the safe side), and `animsim run`
+warns before the first step when the scene's dt is beyond its method's limit.
+Spring damping acts along springs only, so motion across them (swinging,
+bending) keeps only the drag's damping.
+
+## How a run is judged
+
+Every run is watched (`animsim.analysis.watchdog`). The energy watched is
+H = kinetic + spring + penalty energy, which is shift-invariant (a particle
+sitting still at x = 1e17 m holds none); its budget is H at the start plus
+the energy gravity and attractors have released (per particle, from its own
+start), a bound of the wind's work, the kinetic energy of births, and one
+step's worth of the initial external force. A run is stopped as `unstable` at
+the first step where a value is not finite or H exceeds {factor:g} times its
+budget. Checks run every 16 steps and at the end; recorded frames wait until
+a check passes, and a failure is replayed from the last good check to find
+its first step. The report names the step, time, the particle and the spring
+holding the most energy, the growth factor and a fix: a stable dt for the
+method, or, when the method is unstable at every dt, a stable method and its
+dt. Explicit Euler on k = 1e7 N/m, m = 1 kg, dt = 0.01 s is stopped at step
+1, where the energy is already 1000 times the start (without the energy test
+it would reach 1e149 m before any value stopped being finite).
+
+Adaptive stepping (`integrator: {{method: NAME, adaptive: {{...}}}}`) is step
+doubling (one step of h against two of h/2): rejected and halved while the
+difference exceeds the tolerance, doubled when it is below tolerance / 2^(p+1),
+within [dt_min, dt_max], landing exactly on the record times; the metadata
+counts accepted and rejected steps, and a step that would fall below dt_min
+stops the run as `unstable`.
 """
 
 
