@@ -102,8 +102,10 @@ class StepDoubling:
         frames: int,
         stop: Callable[[], bool] | None,
         progress: Callable[[int, int], None] | None,
+        observers: Sequence[Callable[[State], None]] = (),
     ) -> tuple[str, Any, int]:
         """Advance ``state`` to the end of the clock; returns (status, failure, frames)."""
+        from animsim.analysis.stability import particle_name
         from animsim.simulate import STATUS_INTERRUPTED, STATUS_OK, STATUS_UNSTABLE, Failure, _emit
 
         compiled = self.compiled
@@ -127,13 +129,12 @@ class StepDoubling:
                 err, worst = self._error(big, small, h_try)
                 if not err <= self.tolerance:  # NaN or inf count as too large
                     if 0.5 * h_try < self.dt_min:
-                        ids = compiled.system.ids
                         return (
                             STATUS_UNSTABLE,
                             Failure(
                                 step=state.step,
                                 time=state.time,
-                                particle=ids[worst] if worst < len(ids) else f"#{worst}",
+                                particle=particle_name(compiled, worst),
                                 reason=(
                                     f"adaptive step: the step-doubling error {err:.3g} m exceeds the "
                                     f"tolerance {self.tolerance:g} m even at dt_min = {self.dt_min:g} s"
@@ -166,6 +167,6 @@ class StepDoubling:
                     progress(int(nominal * state.time / clock.duration), nominal)
                 if stop is not None and stop():
                     return STATUS_INTERRUPTED, None, frames
-            _emit(compiled, state, sinks)
+            _emit(compiled, state, sinks, observers)
             frames += 1
         return STATUS_OK, None, frames

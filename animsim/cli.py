@@ -315,15 +315,231 @@ def check(
         raise typer.Exit(EXIT_FAILED)
 
 
+# --- render -------------------------------------------------------------------------------
+
+
+@app.command()
+def render(
+    source: Annotated[
+        Path,
+        typer.Argument(
+            help="A scene (simulated first) or a trajectory (.csv, .npz).", metavar="SCENE_OR_TRAJECTORY"
+        ),
+    ],
+    gif: Annotated[Path | None, typer.Option("--gif", help="Write an animated GIF here.")] = None,
+    mp4: Annotated[
+        Path | None, typer.Option("--mp4", help="Write an MP4 here (needs the mp4 extra: imageio-ffmpeg).")
+    ] = None,
+    fps: Annotated[
+        float, typer.Option("--fps", help="Frames per second; GIF delays come in 10 ms steps.")
+    ] = 25.0,
+    view: Annotated[
+        str, typer.Option("--view", help="xy, xz, yz (orthographic) or 3d (perspective).")
+    ] = "xy",
+    size: Annotated[str, typer.Option("--size", help="WIDTHxHEIGHT in pixels.")] = "480x480",
+    scene: Annotated[
+        Path | None,
+        typer.Option("--scene", help="The scene of a trajectory, to draw its springs and planes."),
+    ] = None,
+    azimuth: Annotated[float | None, typer.Option(help="3d camera: degrees around the up axis.")] = None,
+    elevation: Annotated[float | None, typer.Option(help="3d camera: degrees above the horizon.")] = None,
+    distance: Annotated[
+        float | None, typer.Option(help="3d camera: distance from the centre (m); default fits the bounds.")
+    ] = None,
+    dot_radius: Annotated[
+        float, typer.Option("--dot-radius", help="Radius in pixels of particles that have no size.")
+    ] = 3.0,
+    integrator: Annotated[str | None, typer.Option(help="Override the scene's integrator.")] = None,
+    dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
+    duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
+) -> None:
+    """Render an animation: particles as dots (size and colour over life), springs as lines, planes as the ground."""
+    from animsim.export.trajectory import is_trajectory, read_trajectory
+    from animsim.render import RenderOptions, render_scene, render_trajectory, validate
+    from animsim.scene import models as m
+
+    opts = RenderOptions(
+        fps=fps,
+        size=size,
+        view=view,
+        azimuth=azimuth,
+        elevation=elevation,
+        distance=distance,
+        dot_radius=dot_radius,
+    )
+    validate(gif, mp4, opts)
+    for out in (gif, mp4):
+        if out is not None:
+            check_output_path(out, source)
+    from_file = is_trajectory(source)
+    compiled = None
+    scene_path = scene if from_file else source
+    if scene_path is not None:
+        from animsim.compile import compile_scene, with_overrides
+        from animsim.scene.loader import load_scene
+
+        loaded = load_scene(scene_path)
+        sc = with_overrides(loaded.scene, integrator=integrator, dt=dt, duration=duration)
+        if not from_file:
+            # Record exactly the frames the animation shows.
+            sc = sc.model_copy(update={"record": m.Record(fps=fps)})
+        compiled = compile_scene(sc, loaded.name)
+    total = compiled.record_steps.size if (compiled is not None and not from_file) else None
+    with _frame_progress(total, quiet) as progress:
+        if from_file:
+            result = render_trajectory(
+                read_trajectory(source), gif, mp4, opts, compiled=compiled, progress=progress
+            )
+        else:
+            with _graceful_stop() as stop:
+                result = render_scene(compiled, gif, mp4, opts, progress=progress, stop=stop)
+    if not quiet:
+        outs = " and ".join(str(p) for p in result.outputs)
+        typer.echo(f"wrote {outs}: {result.frames} frames at {fps:g} fps, view {view}, {size}")
+    if result.status == "unstable":
+        _err(f"{source}: {result.failure.describe()}")
+        raise typer.Exit(EXIT_FAILED)
+    if result.status == "interrupted":
+        raise typer.Exit(EXIT_INTERRUPTED)
+
+
+@contextmanager
+def _frame_progress(total: int | None, quiet: bool):
+    if quiet or total is None or total < 50 or not sys.stderr.isatty():
+        yield None
+        return
+    from rich.progress import Progress
+
+    with Progress(transient=True, console=_stderr_console()) as bar:
+        task = bar.add_task("rendering", total=total)
+        yield lambda done: bar.update(task, completed=done)
+
+
+# --- plot -------------------------------------------------------------------------------
+
+
+class PlotKind(StrEnum):
+    trajectory = "trajectory"
+    energy = "energy"
+
+
+@app.command()
+def plot(
+    source: Annotated[
+        Path,
+        typer.Argument(
+            help="A scene (simulated first) or a trajectory (.csv, .npz).", metavar="SCENE_OR_TRAJECTORY"
+        ),
+    ],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Picture file: .png, .svg or .pdf.")],
+    kind: Annotated[
+        PlotKind, typer.Option("--kind", help="Paths of particles, or energy against time.")
+    ] = PlotKind.trajectory,
+    scene: Annotated[
+        Path | None, typer.Option("--scene", help="The scene of a trajectory (needed for --kind energy).")
+    ] = None,
+    view: Annotated[
+        str | None, typer.Option("--view", help="xy, xz or yz; default: the two widest axes.")
+    ] = None,
+    integrator: Annotated[str | None, typer.Option(help="Override the scene's integrator.")] = None,
+    dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
+    duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
+) -> None:
+    """Draw particle paths or the energy (kinetic, potential, total, and drift) of a run."""
+    from animsim.export.pictures import figure_format, plot_energy, plot_trajectory
+    from animsim.export.trajectory import TrajectoryCollector, is_trajectory, read_trajectory
+
+    figure_format(output)
+    if view is not None and view not in ("xy", "xz", "yz"):
+        raise UsageError(f"--view {view!r}: plot takes xy, xz or yz")
+    check_output_path(output, source)
+    from_file = is_trajectory(source)
+    scene_path = scene if from_file else source
+    compiled = None
+    if scene_path is not None:
+        from animsim.compile import compile_scene, with_overrides
+        from animsim.scene.loader import load_scene
+
+        loaded = load_scene(scene_path)
+        sc = with_overrides(loaded.scene, integrator=integrator, dt=dt, duration=duration)
+        compiled = compile_scene(sc, loaded.name)
+    if kind is PlotKind.energy:
+        if compiled is None:
+            raise UsageError("--kind energy needs the scene: give a scene, or --scene with the trajectory")
+        times, kinetic, potential = _energies(compiled, read_trajectory(source) if from_file else None)
+        plot_energy(
+            times,
+            kinetic,
+            potential,
+            output,
+            title=f"{compiled.name}: {compiled.integrator_name}, dt {compiled.clock.dt:g} s",
+            conservative=compiled.conservative,
+        )
+    else:
+        if from_file:
+            traj = read_trajectory(source)
+            name = source.stem
+        else:
+            from animsim.simulate import run as simulate
+
+            assert compiled is not None
+            collector = TrajectoryCollector()
+            simulate(compiled, [collector])
+            traj = collector.trajectory()
+            name = compiled.name
+        plot_trajectory(traj, output, view=view, title=name)
+    typer.echo(f"wrote {output}")
+
+
+def _energies(compiled: Any, traj: Any) -> tuple[Any, Any, Any]:
+    """Per-frame kinetic and potential energy, from a run or from a trajectory of the scene."""
+    import numpy as np
+
+    dyn = compiled.dynamics
+    times: list[float] = []
+    kinetic: list[float] = []
+    potential: list[float] = []
+    if traj is None:
+        from animsim.simulate import run as simulate
+
+        def observe(state: Any) -> None:
+            times.append(state.time)
+            kinetic.append(dyn.kinetic_energy(state.particle_velocity))
+            potential.append(dyn.potential_energy(state.particle_position))
+
+        simulate(compiled, [], observers=[observe])
+    else:
+        if compiled.emitters is not None:
+            raise UsageError("energy from a trajectory needs a scene without emitters; give the scene itself")
+        index_of = {pid: i for i, pid in enumerate(compiled.system.ids)}
+        try:
+            rows = np.array([index_of[pid] for pid in traj.ids], dtype=np.int64)
+        except KeyError as exc:
+            raise UsageError(
+                f"the trajectory has particle {exc.args[0]!r}, which the scene does not"
+            ) from None
+        x = compiled.initial.particle_position.copy()
+        v = compiled.initial.particle_velocity.copy()
+        for frame in traj.frames():
+            x[rows[frame.index]] = frame.position
+            v[rows[frame.index]] = frame.velocity
+            times.append(frame.time)
+            kinetic.append(dyn.kinetic_energy(v))
+            potential.append(dyn.potential_energy(x))
+    return np.array(times), np.array(kinetic), np.array(potential)
+
+
 # --- entry point ----------------------------------------------------------------------------
 
 
 def main(argv: list[str] | None = None) -> None:
     """Run the app; every AnimsimError becomes a message and an exit status, never a traceback."""
     try:
-        # Without standalone mode click returns a command's typer.Exit code instead of raising it.
+        # Without standalone mode click *returns* the code of a typer.Exit
+        # instead of raising it: it must become the process status.
         code = typer.Typer.__call__(app, args=argv, prog_name="animsim", standalone_mode=False)
-        if isinstance(code, int) and code:
+        if isinstance(code, int) and code != 0:
             sys.exit(code)
     except AnimsimError as exc:
         _err(str(exc))

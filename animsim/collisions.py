@@ -60,9 +60,13 @@ class PlaneColliders:
         v_old: np.ndarray,
         x: np.ndarray,
         v: np.ndarray,
-        dt: float,
+        dt: float | np.ndarray,
     ) -> bool:
-        """Resolve crossings of the step x_old -> x in place; True if anything changed."""
+        """Resolve crossings of the step x_old -> x in place; True if anything changed.
+
+        ``dt`` may be an (N,) array of per-particle step lengths: an emitted
+        particle moves only for the rest of its birth step.
+        """
         changed = False
         movable = self.inv_mass > 0
         for pl in self.planes:
@@ -80,7 +84,8 @@ class PlaneColliders:
             # fraction of the step at impact; a particle ending exactly on the plane touched it at the end
             s = np.divide(d0, gap, out=np.ones_like(d0), where=gap > 0)[:, None]
             xo, vo = x_old[hit], v_old[hit]
-            mean_acc = (v[hit] - vo) / dt
+            dt_hit = dt if np.ndim(dt) == 0 else np.asarray(dt)[hit][:, None]
+            mean_acc = (v[hit] - vo) / dt_hit
             xc = xo + s * (x[hit] - xo)
             vc = vo + s * (v[hit] - vo)
             # Reflect the approaching ones (Lander Eq. 3) with Coulomb friction.
@@ -97,7 +102,7 @@ class PlaneColliders:
             vt = _apply_friction(vt, np.abs(vn_new - vn), pl.friction)
             vr = vt + vn_new[:, None] * n
             # Fly on for the rest of the step.
-            r = (1.0 - s) * dt
+            r = (1.0 - s) * dt_hit
             xn = xc + r * vr + 0.5 * r * r * mean_acc
             vnew = vr + r * mean_acc
             x[hit] = xn

@@ -170,7 +170,6 @@ def compile_scene(scene: m.Scene, name: str = "scene") -> Compiled:
         particle_mass = np.concatenate([particle_mass, np.zeros(extra)])
         particle_pinned = np.concatenate([particle_pinned, np.zeros(extra, dtype=bool)])
         particle_alive = np.concatenate([np.ones(fixed_count, dtype=bool), np.zeros(extra, dtype=bool)])
-        stages.extend(emitters.labels)
     else:
         left_out.append("emitters: no births, deaths, ageing or over-life attributes")
 
@@ -208,7 +207,7 @@ def compile_scene(scene: m.Scene, name: str = "scene") -> Compiled:
     # --- force terms: only those the scene uses -----------------------------------
     terms: list[ForceTerm] = []
     present = set()
-    for f in scene.forces:
+    for force_index, f in enumerate(scene.forces):
         present.add(f.type)
         if isinstance(f, m.Gravity):
             terms.append(Gravity(np.array(f.g), system.particle_mass))
@@ -221,7 +220,7 @@ def compile_scene(scene: m.Scene, name: str = "scene") -> Compiled:
             if f.turbulence > 0:
                 from animsim.forces.turbulence import Turbulence
 
-                terms.append(Turbulence.from_scene(f, scene.seed, system.particle_mass))
+                terms.append(Turbulence.from_scene(f, scene.seed, system.particle_mass, stream=force_index))
                 present.add("turbulence")
         elif isinstance(f, m.Attractor):
             terms.append(Attractor(np.array(f.position), f.gm, f.softening, system.particle_mass))
@@ -283,6 +282,8 @@ def compile_scene(scene: m.Scene, name: str = "scene") -> Compiled:
     stages.append(f"integrator: {integrator.name} ({integrator.description})")
     if colliders:
         stages.append(colliders.label)
+    if emitters is not None:
+        stages.extend(emitters.labels)  # they run after the step and its collisions
     stages.append(
         f"record: {len(rec)} frames of {clock.steps} steps"
         + (f" (every {scene.record.every})" if scene.record.every else "")

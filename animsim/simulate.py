@@ -134,12 +134,11 @@ class Guard:
     ) -> Failure:
         from animsim.analysis import stability
 
-        ids = self.compiled.system.ids
         report = stability.analyse(self.compiled)
         return Failure(
             step=state.step,
             time=state.time,
-            particle=ids[i] if i < len(ids) else f"#{i}",
+            particle=stability.particle_name(self.compiled, i),
             reason=reason,
             spring=None if spring is None else stability.spring_label(self.compiled.system, spring),
             growth=None if growth is None else float(growth),
@@ -155,8 +154,12 @@ def run(
     progress: Callable[[int, int], None] | None = None,
     guard: Guard | None = None,
     meta_extra: dict[str, Any] | None = None,
+    observers: Sequence[Callable[[State], None]] = (),
 ) -> RunResult:
     """Simulate ``compiled`` from its initial state, streaming frames to ``sinks``.
+
+    ``observers`` are called with the live state at every recorded frame
+    (energy plots read whole states, which frames of alive rows are not).
 
     ``stop`` is polled at each step boundary (Ctrl-C handling sets it); the
     frames so far are kept and the status is ``interrupted``.
@@ -187,7 +190,7 @@ def run(
     try:
         frames = 0
         if record[0] == 0:
-            _emit(compiled, state, sinks)
+            _emit(compiled, state, sinks, observers)
             frames += 1
             next_rec = 1
         with np.errstate(over="ignore", invalid="ignore"):
@@ -204,7 +207,7 @@ def run(
                 from animsim.adaptive import StepDoubling
 
                 stepper = StepDoubling(compiled, adaptive, guard)
-                status, failure, frames = stepper.run(state, sinks, frames, stop, progress)
+                status, failure, frames = stepper.run(state, sinks, frames, stop, progress, observers)
                 extra_meta = stepper.summary()
             else:
                 extra_meta = {}
@@ -231,7 +234,7 @@ def run(
                 # first step by replaying from the last good check.
                 stride = guard.stride
                 last_good = state.copy() if stride > 1 else None
-                pending: list[tuple[int, Frame | None]] = []
+                pending: list[tuple[int, Frame | None, State | None]] = []
                 checked = 0
 
                 def verify() -> Failure | None:
@@ -239,8 +242,11 @@ def run(
                     found = guard.check(state)
                     if found is not None and last_good is not None and state.step - checked > 1:
                         found = _first_failure(state, last_good, found, advance, guard, integ, dyn)
-                    for step, frame in pending:
+                    for step, frame, seen in pending:
                         if found is None or step < found.step:
+                            if seen is not None:
+                                for observe in observers:
+                                    observe(seen)
                             if frame is not None:
                                 for sink in sinks:
                                     sink.write(frame)
@@ -256,10 +262,16 @@ def run(
                     if next_rec < len(record) and record[next_rec] == state.step:
                         next_rec += 1
                         if last_good is None:
-                            _emit(compiled, state, sinks)
+                            _emit(compiled, state, sinks, observers)
                             frames += 1
                         else:
-                            pending.append((state.step, _frame_copy(compiled, state) if sinks else None))
+                            pending.append(
+                                (
+                                    state.step,
+                                    _frame_copy(compiled, state) if sinks else None,
+                                    state.copy() if observers else None,
+                                )
+                            )
                     interrupted = stop is not None and stop()
                     if state.step - checked >= stride or state.step == steps or interrupted:
                         failure = verify()
@@ -347,7 +359,14 @@ def _frame_copy(compiled: Compiled, state: State) -> Frame:
     )
 
 
-def _emit(compiled: Compiled, state: State, sinks: Sequence[FrameSink]) -> None:
+def _emit(
+    compiled: Compiled,
+    state: State,
+    sinks: Sequence[FrameSink],
+    observers: Sequence[Callable[[State], None]] = (),
+) -> None:
+    for observe in observers:
+        observe(state)
     if not sinks:
         return
     if compiled.emitters is None:

@@ -315,7 +315,11 @@ def analyse(compiled: Any) -> StabilityReport:
     stiff = np.flatnonzero(omega_rows > 0)
     if stiff.size:
         top = int(stiff[np.argmax(omega_rows[stiff])])
-        omega_max, zeta, particle = float(omega_rows[top]), float(zeta_rows[top]), system.ids[top]
+        omega_max, zeta, particle = (
+            float(omega_rows[top]),
+            float(zeta_rows[top]),
+            particle_name(compiled, top),
+        )
     else:
         omega_max, zeta, particle = 0.0, 0.0, None
 
@@ -361,6 +365,15 @@ def analyse(compiled: Any) -> StabilityReport:
         limits=limits,
         notes=notes,
     )
+
+
+def particle_name(compiled: Any, i: int) -> str:
+    """The id of particle ``i``: listed and structure particles by their id, emitted ones as ``name#n``."""
+    ids = compiled.system.ids
+    if i < len(ids):
+        return ids[i]
+    emitted = compiled.emitters.particle_id(i) if compiled.emitters is not None else None
+    return emitted if emitted is not None else f"#{i}"
 
 
 def spring_label(system: Any, s: int) -> str:

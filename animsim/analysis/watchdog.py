@@ -105,12 +105,14 @@ class EnergyWatch:
         self.born_energy = 0.0
         self.h0 = self.watched(state)
 
-    def _per_particle_potential(self, term: Any, x: np.ndarray) -> np.ndarray:
+    def _per_particle_potential(self, term: Any, x: np.ndarray, idx: np.ndarray | None = None) -> np.ndarray:
+        """U of ``term`` per particle at ``x`` (the rows ``idx`` of the system, or all)."""
         if isinstance(term, Attractor):
+            mass = term.mass if idx is None else term.mass[idx]
             r = x - term.center
             d = np.sqrt(np.einsum("ij,ij->i", r, r) + term.eps2)
             with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-                return np.where(d > 0, -term.gm * term.mass / d, 0.0)
+                return np.where(d > 0, -term.gm * mass / d, 0.0)
         return np.zeros(len(x))  # gravity is released from x - x_ref directly
 
     def kinetic(self, v: np.ndarray) -> float:
@@ -143,7 +145,7 @@ class EnergyWatch:
                 self.born_energy += float(0.5 * np.dot(self.mass[idx], np.einsum("ij,ij->i", vb, vb)))
                 self.x_ref[idx] = x[idx]
                 for t, u in zip(self.releasing, self.u_ref, strict=True):
-                    u[idx] = self._per_particle_potential(t, x[idx])
+                    u[idx] = self._per_particle_potential(t, x[idx], idx)
             np.copyto(self.alive_prev, state.particle_alive)
         released = 0.0
         for t, u in zip(self.releasing, self.u_ref, strict=True):

@@ -15,7 +15,7 @@ from typing import IO, Any
 import numpy as np
 
 from animsim.atomic import AtomicFile
-from animsim.export.meta import meta_file
+from animsim.export.meta import commit_with_meta
 from animsim.record import Frame, TrajectoryHeader
 
 HEADER = ("t", "id", "x", "y", "z", "vx", "vy", "vz")
@@ -94,16 +94,7 @@ class CsvSink:
             if self._out is not None:
                 self._out.flush()
             return
-        data = self._file
-        m = meta_file(self.path, meta) if self.write_meta else None
-        try:
-            data.commit()
-        except BaseException:
-            if m is not None:
-                m.abort()
-            raise
-        if m is not None:
-            m.commit()
+        commit_with_meta(self._file, self.path, meta if self.write_meta else None)
 
     def abort(self) -> None:
         if self._file is not None:

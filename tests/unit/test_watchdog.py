@@ -190,3 +190,36 @@ def test_an_interrupt_writes_the_checked_frames_so_far():
     r = run(compiled_from(text), [sink], stop=lambda: next(calls) == 4)
     assert r.status == "interrupted"
     assert [f.step for f in sink.frames] == [0, 1, 2, 3, 4, 5]
+
+
+EMITTER = """
+duration: 1.0
+dt: 0.01
+record: {fps: 10}
+forces:
+  - {type: attractor, gm: 3.0, softening: 0.1}
+  - {type: gravity}
+emitters:
+  - name: stars
+    rate: 200
+    shape: {type: sphere, center: [2, 0, 0], radius: 0.15}
+    velocity: {mean: [0, 0, 1.22], spread: 0.12}
+    lifetime: {mean: 5.0}
+    mass: 0.001
+    max_particles: 500
+"""
+
+
+def test_births_feed_the_budget_of_an_emitter_scene():
+    """Each birth brings its own kinetic energy and its own start for released potential."""
+    assert simulate_text(EMITTER)[1].status == STATUS_OK
+
+
+def test_a_blow_up_among_emitted_particles_is_caught():
+    text = (
+        EMITTER
+        + "planes:\n  - {point: [0, -0.05, 0], normal: [0, 1, 0], response: penalty, stiffness: 1.0e9}\n"
+    )
+    _, r, _ = simulate_text(text)
+    assert r.status == STATUS_UNSTABLE
+    assert r.failure.particle.startswith("stars#")
