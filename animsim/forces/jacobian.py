@@ -1,7 +1,8 @@
 """Sparse Jacobians of force terms, for implicit integration.
 
 A force term may offer ``jacobians(x, v) -> (Kx, Kv)``: the (3N, 3N) sparse
-matrices dF/dx and dF/dv at (x, v), either of them None when it is zero.
+matrices dF/dx and dF/dv at (x, v), either of them None when it is zero;
+they are new on every call and the caller may scale them in place.
 Degree of freedom 3*i + axis is particle i's coordinate ``axis``. Terms
 without the method (gravity, attractors, turbulence) are treated explicitly
 by the implicit integrator (Baraff and Witkin, "Large Steps in Cloth

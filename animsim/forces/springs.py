@@ -40,16 +40,8 @@ class Springs:
         self.has_damping = bool(np.any(kd > 0))
         s = len(self.a)
         self._weights = np.empty(2 * s)
-        # Sparsity pattern of the Jacobians: blocks (a,a), (a,b), (b,a), (b,b) per spring.
-        rows, cols = zip(
-            *(
-                block_pattern(p, q)
-                for p, q in ((self.a, self.a), (self.a, self.b), (self.b, self.a), (self.b, self.b))
-            ),
-            strict=True,
-        )
-        self._jac_rows = np.concatenate([r.ravel() for r in rows])
-        self._jac_cols = np.concatenate([c.ravel() for c in cols])
+        # CSR structure of the Jacobians, built on first use (explicit methods never need it).
+        self._jac: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.label = label or f"springs: {s} (Hooke + damping, Lander Eq. 2)"
 
     def _geometry(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -105,14 +97,27 @@ class Springs:
         )
         eye = np.eye(3)[None]
         jx = -self.ks[:, None, None] * (ratio[:, None, None] * eye + (1.0 - ratio)[:, None, None] * uu)
-        shape = (3 * self.n, 3 * self.n)
-        kx = sp.csr_matrix(
-            (np.concatenate([jx, -jx, -jx, jx]).ravel(), (self._jac_rows, self._jac_cols)), shape=shape
-        )
+        kx = self._assemble(jx)
         if not self.has_damping:
             return kx, None
-        jv = -self.kd[:, None, None] * uu
-        kv = sp.csr_matrix(
-            (np.concatenate([jv, -jv, -jv, jv]).ravel(), (self._jac_rows, self._jac_cols)), shape=shape
-        )
-        return kx, kv
+        return kx, self._assemble(-self.kd[:, None, None] * uu)
+
+    def _assemble(self, block: np.ndarray) -> sp.csr_matrix:
+        """The (3N, 3N) matrix with +block at (a,a) and (b,b) and -block at (a,b) and (b,a).
+
+        The CSR structure is computed once; each call only sums the entries
+        into it with one bincount (duplicates, such as two springs on one
+        pair, add up as the derivative of a sum should).
+        """
+        size = 3 * self.n
+        if self._jac is None:
+            blocks = ((self.a, self.a), (self.a, self.b), (self.b, self.a), (self.b, self.b))
+            rows = np.concatenate([block_pattern(p, q)[0].ravel() for p, q in blocks])
+            cols = np.concatenate([block_pattern(p, q)[1].ravel() for p, q in blocks])
+            keys, slot = np.unique(rows * size + cols, return_inverse=True)
+            indptr = np.searchsorted(keys // size, np.arange(size + 1)).astype(np.int64)
+            self._jac = (slot, (keys % size).astype(np.int64), indptr)
+        slot, indices, indptr = self._jac
+        values = np.concatenate([block, -block, -block, block]).ravel()
+        data = np.bincount(slot, weights=values, minlength=len(indices))
+        return sp.csr_matrix((data, indices, indptr), shape=(size, size))

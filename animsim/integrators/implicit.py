@@ -14,7 +14,8 @@ Ordinary Differential Equations II", IV.3).
 Forces that offer ``jacobians(x, v)`` (springs, penalty planes, drag, wind;
 :mod:`animsim.forces.jacobian`) are implicit; the others (gravity, attractors,
 turbulence) enter only through f, explicitly. Pinned particles and dead pool
-slots are not unknowns: their rows and columns are removed, and their
+slots are not unknowns: their rows and columns are removed (replaced by
+identity rows with a zero right-hand side, so their dv is 0), and their
 prescribed velocities still reach the right-hand side through K v. The system
 is symmetric positive definite (the spring Jacobians are clamped to stay
 negative semidefinite), so it is solved with conjugate gradients and a Jacobi
@@ -72,29 +73,35 @@ class ImplicitEuler(Integrator):
         x, v = state.particle_position, state.particle_velocity
         system = self.dynamics.system
         a = self.dynamics.acceleration(x, v, state.time, self._a)
-        mass = system.particle_mass
         free = np.repeat(system.particle_inv_mass > 0, 3)  # unknown degrees of freedom
         kx, kv = self.jacobians(x, v)
         if (kx is None and kv is None) or not free.any():
             v += dt * a  # nothing implicit: A = M, dv = dt M^-1 f
             x += dt * v
             return
-        m_dof = np.repeat(mass, 3)
+        m_dof = np.repeat(system.particle_mass, 3)
         f = self._f
         np.multiply(a.ravel(), m_dof, out=f)  # f = M a on the free DOFs (a is 0 elsewhere)
         rhs = f.copy()
-        a_mat = sp.diags(m_dof, format="csr")
         if kx is not None:
-            rhs += dt * (kx @ v.ravel())
-            a_mat = a_mat - (dt * dt) * kx
-        if kv is not None:
-            a_mat = a_mat - dt * kv
+            rhs += dt * (kx @ v.ravel())  # the anchors' prescribed velocities enter here too
         rhs *= dt
-        idx = np.flatnonzero(free)
-        a_ff = a_mat[idx][:, idx].tocsr()
-        b = rhs[idx]
-        diag = a_ff.diagonal()
-        precond = sp.diags(1.0 / diag)
+        # -dt^2 Kx - dt Kv, scaled in place (the terms built these matrices for this step)
+        parts = []
+        for mat, scale in ((kx, -dt * dt), (kv, -dt)):
+            if mat is not None:
+                mat.data *= scale
+                parts.append(mat)
+        stiff = parts[0] if len(parts) == 1 else parts[0] + parts[1]
+        pinned = ~free
+        if pinned.any():
+            # Pinned particles and dead slots are not unknowns: their rows and columns
+            # drop out (identity rows with a zero right-hand side), so dv = 0 there.
+            rows = np.repeat(np.arange(stiff.shape[0]), np.diff(stiff.indptr))
+            stiff.data *= free[rows] & free[stiff.indices]
+            rhs[pinned] = 0.0
+        a_mat = (stiff + _diagonal(np.where(free, m_dof, 1.0))).tocsr()
+        precond = _diagonal(1.0 / a_mat.diagonal())
         iterations = 0
 
         def count(_xk: np.ndarray) -> None:
@@ -102,12 +109,12 @@ class ImplicitEuler(Integrator):
             iterations += 1
 
         dv, info = spla.cg(
-            a_ff,
-            b,
-            x0=self._dv[idx],
+            a_mat,
+            rhs,
+            x0=self._dv,
             rtol=CG_RTOL,
             atol=0.0,
-            maxiter=CG_MAXITER_FACTOR * idx.size,
+            maxiter=CG_MAXITER_FACTOR * int(free.sum()),
             M=precond,
             callback=count,
         )
@@ -115,9 +122,16 @@ class ImplicitEuler(Integrator):
         if info != 0:
             # Not converged (or broke down): the same system, solved directly, rather
             # than a half-solved step passed off as backward Euler.
-            dv = spla.spsolve(a_ff.tocsc(), b)
+            dv = spla.spsolve(a_mat.tocsc(), rhs)
             self.direct_solves += 1
-        self._dv.fill(0.0)
-        self._dv[idx] = dv
+        dv[pinned] = 0.0
+        self._dv[:] = dv
         v += self._dv.reshape(-1, 3)
         x += dt * v
+
+
+def _diagonal(values: np.ndarray) -> sp.csr_matrix:
+    """A diagonal CSR matrix, built directly (scipy.sparse.diags is slow for a per-step call)."""
+    n = len(values)
+    index = np.arange(n + 1)
+    return sp.csr_matrix((values, index[:-1], index), shape=(n, n))
