@@ -259,12 +259,10 @@ def run(
 
                 for i in range(steps):
                     advance(i)
-                    if next_rec < len(record) and record[next_rec] == state.step:
+                    recording = next_rec < len(record) and record[next_rec] == state.step
+                    if recording:
                         next_rec += 1
-                        if last_good is None:
-                            _emit(compiled, state, sinks, observers)
-                            frames += 1
-                        else:
+                        if last_good is not None:
                             pending.append(
                                 (
                                     state.step,
@@ -278,6 +276,9 @@ def run(
                         if failure is not None:
                             status = STATUS_UNSTABLE
                             break
+                    if recording and last_good is None:  # stride 1: checked above, emit now
+                        _emit(compiled, state, sinks, observers)
+                        frames += 1
                     if progress is not None:
                         progress(state.step, steps)
                     if interrupted:

@@ -223,3 +223,14 @@ def test_a_blow_up_among_emitted_particles_is_caught():
     _, r, _ = simulate_text(text)
     assert r.status == STATUS_UNSTABLE
     assert r.failure.particle.startswith("stars#")
+
+
+def test_an_emitter_scene_never_writes_the_failing_frame():
+    """Emitter runs are checked every step, before the frame is written."""
+    text = EMITTER.replace("record: {fps: 10}", "") + (
+        "planes:\n  - {point: [0, -0.05, 0], normal: [0, 1, 0], response: penalty, stiffness: 1.0e9}\n"
+    )
+    sink = MemorySink()
+    r = run(compiled_from(text), [sink])
+    assert r.status == STATUS_UNSTABLE
+    assert sink.frames[-1].step == r.failure.step - 1
