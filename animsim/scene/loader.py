@@ -18,9 +18,10 @@ import difflib
 import hashlib
 import re
 import stat
+import types
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Union, get_args, get_origin
+from typing import Annotated, Any, Union, get_args, get_origin
 
 import yaml
 from pydantic import BaseModel, ValidationError
@@ -416,23 +417,10 @@ def _data_path(loc: tuple[Any, ...], data: Any) -> tuple[Path_, tuple[Any, ...]]
 def _unwrap(tp: Any) -> list[Any]:
     """The concrete alternatives behind Annotated/Union/Optional."""
     origin = get_origin(tp)
-    if origin is not None and str(origin).endswith("Annotated"):
+    if origin is Annotated:
         return _unwrap(get_args(tp)[0])
-    if origin is Union or str(origin) == "<class 'types.UnionType'>":
-        out: list[Any] = []
-        for a in get_args(tp):
-            out.extend(_unwrap(a))
-        return out
-    try:
-        import types
-
-        if isinstance(tp, types.UnionType):
-            out = []
-            for a in get_args(tp):
-                out.extend(_unwrap(a))
-            return out
-    except ImportError:  # pragma: no cover
-        pass
+    if origin is Union or origin is types.UnionType:
+        return [alt for a in get_args(tp) for alt in _unwrap(a)]
     return [tp]
 
 

@@ -12,7 +12,7 @@ so that each error can name the exact key it is about.
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, get_args
 
 from pydantic import (
     AfterValidator,
@@ -26,7 +26,7 @@ from pydantic import (
     model_validator,
 )
 
-INTEGRATOR_NAMES = (
+IntegratorName = Literal[
     "euler",
     "symplectic_euler",
     "euler_average",
@@ -35,7 +35,9 @@ INTEGRATOR_NAMES = (
     "rk4",
     "verlet",
     "implicit_euler",
-)
+]
+#: the names, in the order of the spec's table
+INTEGRATOR_NAMES: tuple[str, ...] = get_args(IntegratorName)
 DEFAULT_INTEGRATOR = "symplectic_euler"
 DEFAULT_DT = 0.01
 # Bounds that keep a typo from asking for an absurd lattice; issue 7's
@@ -327,17 +329,6 @@ STRUCTURE_TYPES = ("cloth", "strand", "soft_box")
 
 
 # --- integrator, record, scene ----------------------------------------------
-
-IntegratorName = Literal[
-    "euler",
-    "symplectic_euler",
-    "euler_average",
-    "midpoint",
-    "heun",
-    "rk4",
-    "verlet",
-    "implicit_euler",
-]
 
 
 class Adaptive(Model):

@@ -91,7 +91,8 @@ def test_bad_scene_exit_2_nothing_written(tmp_path):
 def test_output_preflight(tmp_path):
     r = run_cli("run", PROJECTILE, "-o", tmp_path / "missing" / "x.csv")
     assert r.returncode == 2 and "does not exist" in r.stderr
-    r = run_cli("run", PROJECTILE, "-o", tmp_path)
+    # A folder is a CSV or NPZ target only by mistake (issue 9: without --format it means PLY).
+    r = run_cli("run", PROJECTILE, "-o", tmp_path, "--format", "csv")
     assert r.returncode == 2 and "folder" in r.stderr
     scene = tmp_path / "s.yaml"
     scene.write_bytes(PROJECTILE.read_bytes())

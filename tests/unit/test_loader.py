@@ -25,6 +25,18 @@ def errors(text: str) -> list[tuple[int, int, str, str]]:
 # (scene text, expected line, expected key path, message fragment)
 BAD = [
     (
+        "duration: 1\nstructures:\n  - {type: cloth, id: s, size: [1, 1], resolution: [2, 2], mass: 1, structual: {ks: 1}}\n",
+        3,
+        "structures.0.structual",
+        "did you mean 'structural'",
+    ),
+    (
+        "duration: 1\nforces:\n  - {type: drag, kk: 1}\nparticles: [{id: a, mass: 1, position: [0, 0]}]\n",
+        3,
+        "forces.0.kk",
+        "(allowed: k, type)",
+    ),
+    (
         "duration: 1\nparticles:\n  - {id: a, mas: 1, position: [0, 0]}\n",
         3,
         "particles.0.mas",
