@@ -233,6 +233,11 @@ def run(
         raise UsageError(
             f"{scene}: {compiled.clock.steps} steps is more than the limit of {max_steps} (raise it with --max-steps)"
         )
+    from animsim.analysis import stability
+
+    report = stability.analyse(compiled)
+    if report.dt_exceeds_limit:  # warn before the first step; the watchdog judges the run
+        _err(f"{scene}: warning: {report.verdict()}")
     wrote = f"{out} and {out}.meta.json"
     if fmt is Format.npz:
         from animsim.export.npz import NpzSink

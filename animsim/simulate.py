@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from animsim import __version__
+from animsim.analysis.watchdog import BLOWUP_FACTOR
 from animsim.compile import Compiled
 from animsim.record import Frame, FrameSink
 from animsim.system import State
@@ -66,31 +67,82 @@ class RunResult:
     meta: dict[str, Any] = field(default_factory=dict)
 
 
-class Guard:
-    """Stops a run at the first step whose state is not finite.
+#: steps between two full watchdog checks on the fixed-step path (and at the
+#: last step); frames recorded in between are held until a check passes, and a
+#: failure found at a check is traced back to its first step by a replay
+CHECK_STRIDE = 16
 
-    Issue 5's watchdog (energy growth, stable-dt advice) plugs in through
-    ``check``: it returns a Failure or None.
+
+class Guard:
+    """The watchdog: stops a run at the first step whose state is not finite or
+    whose mechanical energy has grown far beyond what the forces put in
+    (:mod:`animsim.analysis.watchdog`).
+
+    ``check`` returns a Failure (with the particle and spring most to blame and
+    a fix from :mod:`animsim.analysis.stability`) or None. ``stride`` says how
+    often the loop must call it; 1 when the run cannot be replayed (emitters).
     """
 
-    def __init__(self, compiled: Compiled):
+    def __init__(self, compiled: Compiled, dt: float | None = None):
+        from animsim.analysis.watchdog import EnergyWatch
+
         self.compiled = compiled
+        self.watch = EnergyWatch(compiled, dt if dt is not None else compiled.clock.dt)
+        # Emitters draw random numbers and age particles: a replay would not be
+        # the same run, so they are checked every step.
+        self.stride = 1 if compiled.emitters is not None else CHECK_STRIDE
+
+    def start(self, state: State) -> None:
+        """Open the energy books at the run's initial state."""
+        self.watch.reset(state)
 
     def check(self, state: State) -> Failure | None:
         x, v = state.particle_position, state.particle_velocity
         # One reduction each instead of an (N, 3) boolean array: a NaN or inf
         # anywhere makes the sum non-finite.
-        if np.isfinite(x.sum()) and np.isfinite(v.sum()):
+        if not (np.isfinite(x.sum()) and np.isfinite(v.sum())):
+            bad = ~(np.isfinite(x).all(axis=1) & np.isfinite(v).all(axis=1))
+            if bad.any():  # else the sum overflowed on huge but finite values
+                i = int(np.flatnonzero(bad)[0])
+                return self._failure(
+                    state, i, self._stiffest_spring_at(i), None, "a position or velocity is not finite"
+                )
+        if self.watch.disabled is not None:
             return None
-        bad = ~(np.isfinite(x).all(axis=1) & np.isfinite(v).all(axis=1))
-        if not bad.any():  # the sum overflowed on huge but finite values
+        with np.errstate(over="ignore", invalid="ignore"):
+            h, b, growth = self.watch.growth(state)
+        if growth <= BLOWUP_FACTOR:  # False for NaN too: an overflowed energy is a blow-up
             return None
-        i = int(np.flatnonzero(bad)[0])
+        particle, spring = self.watch.blame(state)
+        reason = f"the mechanical energy {h:.3g} J is {growth:.3g} times what the forces put in ({b:.3g} J)"
+        return self._failure(state, particle, spring, growth, reason)
+
+    def _stiffest_spring_at(self, i: int) -> int | None:
+        sysm = self.compiled.system
+        if not sysm.spring_count:
+            return None
+        idx = sysm.spring_index
+        touching = np.flatnonzero((idx[:, 0] == i) | (idx[:, 1] == i))
+        if touching.size == 0:
+            return None
+        inv = sysm.particle_inv_mass
+        w2 = sysm.spring_ks[touching] * (inv[idx[touching, 0]] + inv[idx[touching, 1]])
+        return int(touching[np.argmax(w2)])
+
+    def _failure(
+        self, state: State, i: int, spring: int | None, growth: float | None, reason: str
+    ) -> Failure:
+        from animsim.analysis import stability
+
+        report = stability.analyse(self.compiled)
         return Failure(
             step=state.step,
             time=state.time,
-            particle=self.compiled.system.ids[i] if i < len(self.compiled.system.ids) else f"#{i}",
-            reason="a position or velocity is not finite",
+            particle=stability.particle_name(self.compiled, i),
+            reason=reason,
+            spring=None if spring is None else stability.spring_label(self.compiled.system, spring),
+            growth=None if growth is None else float(growth),
+            suggestion=report.suggestion(),
         )
 
 
@@ -121,7 +173,11 @@ def run(
     colliders = compiled.colliders
     emitters = compiled.emitters
     clock = compiled.clock
-    guard = guard or Guard(compiled)
+    adaptive_spec = compiled.scene.adaptive
+    # The watchdog's one-step energy slack uses the largest step the run can take.
+    guard = guard or Guard(
+        compiled, dt=None if adaptive_spec is None else max(adaptive_spec.dt_max, clock.dt)
+    )
     record = compiled.record_steps
     next_rec = 0
     dyn.evaluations = 0
@@ -137,42 +193,102 @@ def run(
             _emit(compiled, state, sinks, observers)
             frames += 1
             next_rec = 1
-        energy_start = dyn.energy(state.particle_position, state.particle_velocity)
+        with np.errstate(over="ignore", invalid="ignore"):
+            energy_start = dyn.energy(state.particle_position, state.particle_velocity)
+            guard.start(state)
         failure: Failure | None = None
         status = STATUS_OK
         t_start = _time.perf_counter()
         steps = clock.steps
-        for i in range(steps):
-            dt = clock.step_size(i)
-            if colliders is not None:
-                np.copyto(x_old, state.particle_position)
-                np.copyto(v_old, state.particle_velocity)
-            integ.step(state, dt)
-            if colliders is not None and colliders.apply(
-                x_old, v_old, state.particle_position, state.particle_velocity, dt
-            ):
-                state.revision += 1
-            t_end = clock.time(i + 1)
-            if emitters is not None:
-                emitters.advance(compiled, state, state.time, t_end)
-            state.step = i + 1
-            state.time = t_end
-            failure = guard.check(state)
-            if failure is not None:
-                status = STATUS_UNSTABLE
-                break
-            if next_rec < len(record) and record[next_rec] == state.step:
-                _emit(compiled, state, sinks, observers)
-                frames += 1
-                next_rec += 1
-            if progress is not None:
-                progress(state.step, steps)
-            if stop is not None and stop():
-                status = STATUS_INTERRUPTED
-                break
+        adaptive = adaptive_spec
+        # Overflow on the way to a blow-up is the watchdog's to report, not numpy's.
+        with np.errstate(over="ignore", invalid="ignore"):
+            if adaptive is not None:
+                from animsim.adaptive import StepDoubling
+
+                stepper = StepDoubling(compiled, adaptive, guard)
+                status, failure, frames = stepper.run(state, sinks, frames, stop, progress, observers)
+                extra_meta = stepper.summary()
+            else:
+                extra_meta = {}
+
+                def advance(i: int) -> None:
+                    dt = clock.step_size(i)
+                    if colliders is not None:
+                        np.copyto(x_old, state.particle_position)
+                        np.copyto(v_old, state.particle_velocity)
+                    integ.step(state, dt)
+                    if colliders is not None and colliders.apply(
+                        x_old, v_old, state.particle_position, state.particle_velocity, dt
+                    ):
+                        state.revision += 1
+                    t_end = clock.time(i + 1)
+                    if emitters is not None:
+                        emitters.advance(compiled, state, state.time, t_end)
+                    state.step = i + 1
+                    state.time = t_end
+
+                # The watchdog runs every `stride` steps and at the end. Frames recorded in
+                # between wait (copied, at most `stride` of them) until a check has passed,
+                # so no unverified frame reaches a sink; a failure is traced back to its
+                # first step by replaying from the last good check.
+                stride = guard.stride
+                last_good = state.copy() if stride > 1 else None
+                pending: list[tuple[int, Frame | None, State | None]] = []
+                checked = 0
+
+                def verify() -> Failure | None:
+                    nonlocal frames, checked
+                    found = guard.check(state)
+                    if found is not None and last_good is not None and state.step - checked > 1:
+                        found = _first_failure(state, last_good, found, advance, guard, integ, dyn)
+                    for step, frame, seen in pending:
+                        if found is None or step < found.step:
+                            if seen is not None:
+                                for observe in observers:
+                                    observe(seen)
+                            if frame is not None:
+                                for sink in sinks:
+                                    sink.write(frame)
+                            frames += 1
+                    pending.clear()
+                    checked = state.step
+                    if found is None and last_good is not None:
+                        _copy_state(last_good, state)
+                    return found
+
+                for i in range(steps):
+                    advance(i)
+                    recording = next_rec < len(record) and record[next_rec] == state.step
+                    if recording:
+                        next_rec += 1
+                        if last_good is not None:
+                            pending.append(
+                                (
+                                    state.step,
+                                    _frame_copy(compiled, state) if sinks else None,
+                                    state.copy() if observers else None,
+                                )
+                            )
+                    interrupted = stop is not None and stop()
+                    if state.step - checked >= stride or state.step == steps or interrupted:
+                        failure = verify()
+                        if failure is not None:
+                            status = STATUS_UNSTABLE
+                            break
+                    if recording and last_good is None:  # stride 1: checked above, emit now
+                        _emit(compiled, state, sinks, observers)
+                        frames += 1
+                    if progress is not None:
+                        progress(state.step, steps)
+                    if interrupted:
+                        status = STATUS_INTERRUPTED
+                        break
         wall = _time.perf_counter() - t_start
-        energy_end = dyn.energy(state.particle_position, state.particle_velocity)
+        with np.errstate(over="ignore", invalid="ignore"):
+            energy_end = dyn.energy(state.particle_position, state.particle_velocity)
         meta = _meta(compiled, status, state, wall, energy_start, energy_end, frames, failure)
+        meta.update(extra_meta)
         meta.update(meta_extra or {})
         if emitters is not None:
             meta["emitters"] = emitters.summary()
@@ -193,6 +309,54 @@ def run(
         final_state=state,
         failure=failure,
         meta=meta,
+    )
+
+
+def _copy_state(dst: State, src: State) -> None:
+    np.copyto(dst.particle_position, src.particle_position)
+    np.copyto(dst.particle_velocity, src.particle_velocity)
+    dst.time, dst.step, dst.revision = src.time, src.step, src.revision
+
+
+def _first_failure(
+    state: State,
+    last_good: State,
+    failure: Failure,
+    advance: Callable[[int], None],
+    guard: Guard,
+    integ: Any,
+    dyn: Any,
+) -> Failure:
+    """Replay from the last state that passed a check, checking every step, so
+    the report names the first failing step; ``state`` ends there.
+
+    The replay is the same computation (no randomness: runs with emitters are
+    checked every step), except that Verlet re-evaluates its first force.
+    Its force evaluations are not counted.
+    """
+    failed_at = state.step
+    evaluations = dyn.evaluations
+    _copy_state(state, last_good)
+    integ.reset()
+    first = failure
+    for i in range(last_good.step, failed_at):
+        advance(i)
+        found = guard.check(state)
+        if found is not None:
+            first = found
+            break
+    dyn.evaluations = evaluations
+    return first
+
+
+def _frame_copy(compiled: Compiled, state: State) -> Frame:
+    """A frame that owns its arrays (fixed population: no emitters)."""
+    return Frame(
+        step=state.step,
+        time=state.time,
+        index=_all_index(compiled),
+        position=state.particle_position.copy(),
+        velocity=state.particle_velocity.copy(),
     )
 
 

@@ -1,13 +1,381 @@
-"""Stiffness and stability analysis (issue 5 fills this in).
+"""Stiffness and stability analysis: how large may dt be, and for which method?
 
-``analyse`` returns None until the stiffness analysis exists, so ``check``
-reports only what it can measure.
+A mass-spring scene linearised about its state is M x'' = -K x - C x' + ...;
+its fastest mode has angular frequency omega_max = sqrt(lambda_max(M^-1 K)).
+Every explicit method has a bounded stability region, so dt * omega_max must
+stay below a constant of the method (Hairer and Wanner, "Solving Ordinary
+Differential Equations II", IV.2; the "Bring Me Stability or Bring My Program
+Death" section of Lander's Game Developer column is the symptom).
+
+omega_max is bounded from above with Gershgorin's theorem applied to the
+symmetrically scaled stiffness M^-1/2 K M^-1/2 (same eigenvalues as M^-1 K):
+row i gives ``ks_ij / m_i + ks_ij / sqrt(m_i m_j)`` summed over its springs,
+plus ``k / m_i`` for every penalty plane. Pinned particles are not degrees of
+freedom (their rows and columns drop out), so one spring to an anchor gives
+exactly k/m and two free equal masses exactly 2k/m. Because it is an upper
+bound, the dt limits below are on the safe side.
+
+Damping is bounded the same way (spring kd, viscous drag and wind coupling),
+giving each row a (omega_i, zeta_i) pair, a "mode" with
+x'' + 2 zeta omega x' + omega^2 x = 0. For each method the largest stable dt
+of that test equation is the largest h with spectral radius of the method's
+one-step matrix <= 1: closed forms where they are short (explicit Euler
+h <= 2 zeta / omega, i.e. c/k for one spring; symplectic Euler
+h <= 2 (sqrt(zeta^2 + 1) - zeta) / omega, i.e. (sqrt(c^2 + 4km) - c)/k),
+otherwise a scan and bisection of the exact one-step matrix (RK4:
+2 sqrt(2) / omega undamped). Explicit Euler, euler_average, midpoint and
+Heun amplify an undamped oscillation at every dt > 0 (|R(i y)| > 1 for all
+y != 0), so with zeta = 0 they have no stable dt. Backward Euler is A-stable.
 """
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
 
-def analyse(compiled: Any) -> Any:
-    return None
+#: explicit methods that amplify an undamped oscillation at every step size
+#: (|R(iy)| > 1 for every real y != 0; euler_average has det = 1 + (h omega)^2 / 2)
+WEAKLY_UNSTABLE = ("euler", "euler_average", "midpoint", "heun")
+#: methods without a step-size limit on linear damped springs
+UNCONDITIONAL = ("implicit_euler",)
+#: order in which the analysis lists methods
+METHOD_ORDER = (
+    "euler",
+    "symplectic_euler",
+    "euler_average",
+    "midpoint",
+    "heun",
+    "rk4",
+    "verlet",
+    "implicit_euler",
+)
+#: stability polynomials R(z) of the explicit Runge-Kutta methods (coefficients of z^0, z^1, ...)
+RK_POLYNOMIALS: dict[str, tuple[float, ...]] = {
+    "euler": (1.0, 1.0),
+    "midpoint": (1.0, 1.0, 0.5),
+    "heun": (1.0, 1.0, 0.5),
+    "rk4": (1.0, 1.0, 0.5, 1.0 / 6.0, 1.0 / 24.0),
+}
+#: the suggested dt is this fraction of the limit, then rounded down to two significant digits
+SAFETY_FACTOR = 0.9
+#: a one-step matrix counts as stable while its spectral radius is at most 1 + this
+RADIUS_TOLERANCE = 1e-12
+#: omega*dt grid on which the stable interval is bracketed before bisection
+SCAN_GRID = np.geomspace(1e-4, 1e3, 400)
+BISECTION_STEPS = 60
+#: relative rounding used to group rows with the same (omega, zeta)
+GROUPING_DIGITS = 12
+
+
+def one_step_matrix(method: str, h: np.ndarray, omega: np.ndarray, zeta: np.ndarray) -> np.ndarray:
+    """The (..., 2, 2) matrix mapping (x, v) to the next step's (x, v) for
+    x'' = -omega^2 x - 2 zeta omega x', exactly as the method in
+    :mod:`animsim.integrators` computes it."""
+    h, omega, zeta = np.broadcast_arrays(
+        np.asarray(h, float), np.asarray(omega, float), np.asarray(zeta, float)
+    )
+    k = omega**2  # stiffness per unit mass
+    c = 2.0 * zeta * omega  # damping per unit mass
+    out = np.empty((*h.shape, 2, 2))
+    if method in RK_POLYNOMIALS:
+        # R(hA) for A = [[0, 1], [-k, -c]], by Horner's rule on 2x2 matrices
+        a = np.zeros((*h.shape, 2, 2))
+        a[..., 0, 1] = h
+        a[..., 1, 0] = -h * k
+        a[..., 1, 1] = -h * c
+        coeffs = RK_POLYNOMIALS[method]
+        out[...] = coeffs[-1] * np.eye(2)
+        for coef in reversed(coeffs[:-1]):
+            out = out @ a + coef * np.eye(2)
+        return out
+    if method == "symplectic_euler":
+        # v1 = v + h(-k x - c v); x1 = x + h v1
+        out[..., 1, 0] = -h * k
+        out[..., 1, 1] = 1.0 - h * c
+        out[..., 0, 0] = 1.0 + h * out[..., 1, 0]
+        out[..., 0, 1] = h * out[..., 1, 1]
+        return out
+    if method in ("euler_average", "verlet"):
+        # both: x1 = x + h v + h^2/2 a0, predicted vp = v + h a0
+        x1 = np.stack([1.0 - 0.5 * h * h * k, h - 0.5 * h * h * c], axis=-1)
+        vp = np.stack([-h * k, 1.0 - h * c], axis=-1)
+        out[..., 0, :] = x1
+        if method == "euler_average":
+            out[..., 1, :] = vp
+        else:
+            # v1 = v + h/2 (a0 + a1), a1 = -k x1 - c vp (velocity Verlet, damping at the prediction)
+            a0 = np.stack([-k, -c], axis=-1)
+            a1 = -k[..., None] * x1 - c[..., None] * vp
+            out[..., 1, :] = np.stack([np.zeros_like(h), np.ones_like(h)], axis=-1) + 0.5 * h[..., None] * (
+                a0 + a1
+            )
+        return out
+    if method == "implicit_euler":
+        # (I - hA) y1 = y0
+        a = np.zeros((*h.shape, 2, 2))
+        a[..., 0, 1] = h
+        a[..., 1, 0] = -h * k
+        a[..., 1, 1] = -h * c
+        return np.linalg.inv(np.eye(2) - a)
+    raise KeyError(method)
+
+
+def spectral_radius(m: np.ndarray) -> np.ndarray:
+    """Largest |eigenvalue| of each 2x2 matrix in (..., 2, 2), from trace and determinant."""
+    tr = m[..., 0, 0] + m[..., 1, 1]
+    det = m[..., 0, 0] * m[..., 1, 1] - m[..., 0, 1] * m[..., 1, 0]
+    disc = np.sqrt((0.25 * tr * tr - det).astype(complex))
+    return np.maximum(np.abs(0.5 * tr + disc), np.abs(0.5 * tr - disc))
+
+
+def largest_stable_dt(method: str, omega: np.ndarray, zeta: np.ndarray) -> np.ndarray:
+    """Largest stable step (s) of ``method`` on x'' + 2 zeta omega x' + omega^2 x = 0.
+
+    Element-wise over arrays of omega (rad/s) and zeta; inf where there is no
+    limit (omega = 0, or an A-stable method), 0 where no step is stable.
+    """
+    omega = np.atleast_1d(np.asarray(omega, float))
+    zeta = np.broadcast_to(np.asarray(zeta, float), omega.shape)
+    out = np.full(omega.shape, np.inf)
+    stiff = omega > 0
+    if method in UNCONDITIONAL or not stiff.any():
+        return out
+    w, z = omega[stiff], zeta[stiff]
+    if method == "symplectic_euler":
+        res = 2.0 * (np.sqrt(z * z + 1.0) - z) / w
+    elif method == "euler":
+        # complex pair: |1 + h lambda| <= 1  <=>  h <= 2 zeta / omega; overdamped: h |lambda_fast| <= 2
+        fast = w * (z + np.sqrt(np.maximum(z * z - 1.0, 0.0)))
+        with np.errstate(divide="ignore"):
+            res = np.where(z < 1.0, 2.0 * z / w, 2.0 / fast)
+    else:
+        res = _bisect_limit(method, w, z)
+    if method in WEAKLY_UNSTABLE:
+        res = np.where(z == 0.0, 0.0, res)
+    out[stiff] = res
+    return out
+
+
+def _bisect_limit(method: str, omega: np.ndarray, zeta: np.ndarray) -> np.ndarray:
+    """Largest h with spectral radius <= 1 on the first stable interval from 0."""
+    theta = SCAN_GRID[None, :]  # omega * h
+    rho = spectral_radius(one_step_matrix(method, theta / omega[:, None], omega[:, None], zeta[:, None]))
+    unstable = rho > 1.0 + RADIUS_TOLERANCE
+    first_bad = np.where(unstable.any(axis=1), unstable.argmax(axis=1), len(SCAN_GRID))
+    lo = np.where(first_bad > 0, SCAN_GRID[np.maximum(first_bad - 1, 0)], 0.0)
+    hi = np.where(first_bad < len(SCAN_GRID), SCAN_GRID[np.minimum(first_bad, len(SCAN_GRID) - 1)], np.inf)
+    done = ~np.isfinite(hi) | (lo == 0.0)
+    for _ in range(BISECTION_STEPS):
+        mid = np.where(done, lo, 0.5 * (lo + np.where(np.isfinite(hi), hi, lo)))
+        r = spectral_radius(one_step_matrix(method, mid / omega, omega, zeta))
+        bad = r > 1.0 + RADIUS_TOLERANCE
+        hi = np.where(~done & bad, mid, hi)
+        lo = np.where(~done & ~bad, mid, lo)
+    return lo / omega
+
+
+def nice_dt(limit: float) -> float:
+    """A round step below SAFETY_FACTOR * limit (two significant digits, rounded down)."""
+    target = SAFETY_FACTOR * limit
+    if not math.isfinite(target) or target <= 0:
+        return target
+    scale = 10.0 ** (math.floor(math.log10(target)) - 1)
+    return math.floor(target / scale) * scale
+
+
+@dataclass
+class StabilityReport:
+    """The static analysis of one compiled scene (see the module docstring)."""
+
+    integrator: str
+    dt: float
+    adaptive: bool
+    omega_max: float  # rad/s, upper bound of the stiffest mode; 0 when nothing is stiff
+    zeta: float  # damping ratio of the row that sets omega_max
+    particle: str | None  # the particle whose row sets omega_max
+    spring: str | None  # the stiffest single spring, "'a'-'b'"
+    spring_omega: float  # sqrt(ks (1/m_a + 1/m_b)) of that spring
+    penalty_stiffness: float  # N/m, largest penalty plane (0 without penalty planes)
+    limits: dict[str, float] = field(default_factory=dict)  # method -> largest stable dt (s)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def limit(self) -> float:
+        return self.limits[self.integrator]
+
+    @property
+    def dt_exceeds_limit(self) -> bool:
+        """True when the scene's own (fixed) dt is beyond its integrator's limit."""
+        return not self.adaptive and self.dt > self.limit
+
+    def stable_alternative(self) -> tuple[str, float]:
+        """A method that is stable on this scene and a dt for it (symplectic Euler if it can)."""
+        for name in ("symplectic_euler", "verlet", "rk4"):
+            lim = self.limits.get(name, 0.0)
+            if lim > 0:
+                return name, nice_dt(lim)
+        return "implicit_euler", self.dt
+
+    def suggestion(self, integrator: str | None = None) -> str:
+        """What to do instead: a stable dt for this method, or a stable method and its dt."""
+        name = integrator or self.integrator
+        lim = self.limits.get(name, math.inf)
+        if lim > 0 and math.isfinite(lim):
+            return f"use dt <= {nice_dt(lim):.3g} s with {name} (its limit here is {lim:.3g} s)"
+        if lim > 0:
+            return f"{name} has no step-size limit on this scene; the failure is not a stiffness limit"
+        alt, alt_dt = self.stable_alternative()
+        why = "the stiffest mode is undamped" if self.zeta == 0 else "the damping is too weak"
+        return (
+            f"{name} is unstable at every dt here ({why}); use {alt} with dt <= {alt_dt:.3g} s, "
+            f"or implicit_euler at any dt"
+        )
+
+    def lines(self) -> list[str]:
+        if self.omega_max == 0:
+            return ["stiffness: no springs or penalty contact, so no stiffness limit on dt"]
+        out = [
+            f"stiffness: omega_max <= {self.omega_max:.4g} rad/s (Gershgorin bound, row of particle "
+            f"{self.particle!r}), damping ratio {self.zeta:.3g}",
+        ]
+        if self.spring is not None:
+            out.append(f"  stiffest spring {self.spring}: omega {self.spring_omega:.4g} rad/s")
+        if self.penalty_stiffness > 0:
+            out.append(f"  penalty contact counted: stiffness {self.penalty_stiffness:.4g} N/m")
+        out.extend(f"  {n}" for n in self.notes)
+        out.append("  largest stable dt per integrator (omega_max*dt):")
+        for name in METHOD_ORDER:
+            lim = self.limits[name]
+            if lim == 0:
+                text = "none: unstable at every dt"
+            elif math.isinf(lim):
+                text = "unbounded"
+            else:
+                text = f"{lim:.4g} s ({lim * self.omega_max:.3g})"
+            mark = " <- scene" if name == self.integrator else ""
+            out.append(f"    {name:<17} {text}{mark}")
+        out.append("  verdict: " + self.verdict())
+        return out
+
+    def verdict(self) -> str:
+        if self.adaptive:
+            return (
+                f"adaptive {self.integrator}: step doubling picks dt; its stiffness limit is "
+                f"{self.limit:.4g} s" + ("" if self.limit > 0 else " (none)")
+            )
+        if not self.dt_exceeds_limit:
+            return f"dt {self.dt:.4g} s is within the limit of {self.integrator}"
+        return f"dt {self.dt:.4g} s exceeds the limit of {self.integrator}: {self.suggestion()}"
+
+
+def _row_bounds(compiled: Any) -> tuple[np.ndarray, np.ndarray, float, list[str]]:
+    """Gershgorin row sums (per particle) of M^-1/2 K M^-1/2 and M^-1/2 C M^-1/2 (1/s^2, 1/s)."""
+    system = compiled.system
+    inv = system.particle_inv_mass
+    n = system.particle_count
+    k_rows = np.zeros(n)
+    c_rows = np.zeros(n)
+    notes: list[str] = []
+    if system.spring_count:
+        a, b = system.spring_index[:, 0], system.spring_index[:, 1]
+        ia, ib = inv[a], inv[b]
+        cross = np.sqrt(ia * ib)
+        for coef, rows in ((system.spring_ks, k_rows), (system.spring_kd, c_rows)):
+            rows += np.bincount(a, weights=coef * (ia + cross), minlength=n)
+            rows += np.bincount(b, weights=coef * (ib + cross), minlength=n)
+    penalty_k = 0.0
+    from animsim.forces.drag import Drag
+    from animsim.forces.penalty import PenaltyPlane
+    from animsim.forces.wind import Wind
+
+    for term in compiled.dynamics.terms:
+        if isinstance(term, PenaltyPlane):
+            # Any particle may touch the plane: its stiffness and damping count on every row.
+            k_rows += term.k * inv
+            c_rows += term.c * inv
+            penalty_k = max(penalty_k, term.k)
+        elif isinstance(term, Drag | Wind):
+            c_rows += term.k * inv
+    if compiled.emitters is not None and penalty_k > 0:
+        notes.append("emitted particles touching penalty planes are not counted")
+    return k_rows, c_rows, penalty_k, notes
+
+
+def analyse(compiled: Any) -> StabilityReport:
+    """The stability report of a compiled scene (cheap: O(particles + springs))."""
+    system = compiled.system
+    scene = compiled.scene
+    k_rows, c_rows, penalty_k, notes = _row_bounds(compiled)
+    omega_rows = np.sqrt(k_rows)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        zeta_rows = np.where(omega_rows > 0, c_rows / (2.0 * omega_rows), 0.0)
+    stiff = np.flatnonzero(omega_rows > 0)
+    if stiff.size:
+        top = int(stiff[np.argmax(omega_rows[stiff])])
+        omega_max, zeta, particle = (
+            float(omega_rows[top]),
+            float(zeta_rows[top]),
+            particle_name(compiled, top),
+        )
+    else:
+        omega_max, zeta, particle = 0.0, 0.0, None
+
+    spring, spring_omega = None, 0.0
+    if system.spring_count:
+        inv = system.particle_inv_mass
+        idx = system.spring_index
+        w2 = system.spring_ks * (inv[idx[:, 0]] + inv[idx[:, 1]])
+        s = int(np.argmax(w2))
+        if w2[s] > 0:
+            spring, spring_omega = spring_label(system, s), float(np.sqrt(w2[s]))
+
+    limits: dict[str, float] = {}
+    if stiff.size:
+        # Rows with the same (omega, zeta) give the same limit: a cloth has a handful.
+        key = np.round(np.stack([omega_rows[stiff], zeta_rows[stiff]], axis=1), GROUPING_DIGITS)
+        uniq = np.unique(key, axis=0)
+        for name in METHOD_ORDER:
+            limits[name] = float(largest_stable_dt(name, uniq[:, 0], uniq[:, 1]).min())
+    else:
+        limits = {name: math.inf for name in METHOD_ORDER}
+    if system.spring_count and np.any(system.spring_kd > 0):
+        # Lander's damping term acts along the spring: swinging and bending across
+        # springs keep only the drag's damping, and the weakly unstable methods
+        # amplify undamped motion at every dt (the cloth example, euler at c/k, does).
+        notes.append(
+            "spring damping acts along springs only: euler, euler_average, midpoint and heun can "
+            "still grow slowly on motion across them (swinging, bending) unless drag damps it"
+        )
+    if any(getattr(t, "label", "").startswith("quadratic drag") for t in compiled.dynamics.terms):
+        notes.append("quadratic drag damps in proportion to speed and is not counted")
+    adaptive = scene.adaptive is not None
+    return StabilityReport(
+        integrator=compiled.integrator_name,
+        dt=compiled.clock.dt,
+        adaptive=adaptive,
+        omega_max=omega_max,
+        zeta=zeta,
+        particle=particle,
+        spring=spring,
+        spring_omega=spring_omega,
+        penalty_stiffness=penalty_k,
+        limits=limits,
+        notes=notes,
+    )
+
+
+def particle_name(compiled: Any, i: int) -> str:
+    """The id of particle ``i``: listed and structure particles by their id, emitted ones as ``name#n``."""
+    ids = compiled.system.ids
+    if i < len(ids):
+        return ids[i]
+    emitted = compiled.emitters.particle_id(i) if compiled.emitters is not None else None
+    return emitted if emitted is not None else f"#{i}"
+
+
+def spring_label(system: Any, s: int) -> str:
+    a, b = system.spring_index[s]
+    return f"{system.ids[a]!r}-{system.ids[b]!r}"

@@ -7,6 +7,9 @@ law is the aerodynamic drag of the CSE 3541 notes ("Opposing forces").
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
+
+from animsim.forces.jacobian import diagonal_blocks, scaled_identity
 
 
 class Drag:
@@ -20,6 +23,10 @@ class Drag:
     def potential(self, x: np.ndarray) -> None:
         return None
 
+    def jacobians(self, x: np.ndarray, v: np.ndarray) -> tuple[None, sp.csr_matrix]:
+        """dF/dv = -k I (Baraff and Witkin put drag in the implicit part too)."""
+        return None, scaled_identity(-self.k, len(v))
+
 
 class QuadraticDrag:
     def __init__(self, rho: float, cd: float, area: float):
@@ -32,3 +39,11 @@ class QuadraticDrag:
 
     def potential(self, x: np.ndarray) -> None:
         return None
+
+    def jacobians(self, x: np.ndarray, v: np.ndarray) -> tuple[None, sp.csr_matrix]:
+        """dF_i/dv_i = -c (|v| I + v v^T / |v|), 0 at rest."""
+        speed = np.sqrt(np.einsum("ij,ij->i", v, v))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            vv = np.where(speed[:, None, None] > 0, v[:, :, None] * v[:, None, :] / speed[:, None, None], 0.0)
+        blocks = -self.c * (speed[:, None, None] * np.eye(3)[None] + vv)
+        return None, diagonal_blocks(np.arange(len(v)), blocks, len(v))

@@ -12,6 +12,9 @@ stiffness counts in the stability analysis like any spring's.
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
+
+from animsim.forces.jacobian import diagonal_blocks
 
 
 class PenaltyPlane:
@@ -33,3 +36,19 @@ class PenaltyPlane:
     def potential(self, x: np.ndarray) -> float:
         d = (x - self.p) @ self.n
         return float(0.5 * self.k * np.sum(np.minimum(d, 0.0) ** 2))
+
+    def jacobians(self, x: np.ndarray, v: np.ndarray) -> tuple[sp.csr_matrix | None, sp.csr_matrix | None]:
+        """-k n n^T for particles behind the plane; -c n n^T for those also approaching it."""
+        n = len(x)
+        d = (x - self.p) @ self.n
+        behind = np.flatnonzero(d < 0)
+        if behind.size == 0:
+            return None, None
+        nn = np.outer(self.n, self.n)
+        kx = diagonal_blocks(behind, np.broadcast_to(-self.k * nn, (behind.size, 3, 3)), n)
+        kv = None
+        if self.c > 0:
+            closing = behind[(v[behind] @ self.n) < 0]
+            if closing.size:
+                kv = diagonal_blocks(closing, np.broadcast_to(-self.c * nn, (closing.size, 3, 3)), n)
+        return kx, kv

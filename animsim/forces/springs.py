@@ -15,6 +15,9 @@ end indices; ``out[idx] += f`` would apply a repeated index only once.
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
+
+from animsim.forces.jacobian import block_pattern
 
 
 class Springs:
@@ -37,6 +40,8 @@ class Springs:
         self.has_damping = bool(np.any(kd > 0))
         s = len(self.a)
         self._weights = np.empty(2 * s)
+        # CSR structure of the Jacobians, built on first use (explicit methods never need it).
+        self._jac: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.label = label or f"springs: {s} (Hooke + damping, Lander Eq. 2)"
 
     def _geometry(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -69,3 +74,50 @@ class Springs:
     def per_spring_energy(self, x: np.ndarray) -> np.ndarray:
         _, length, _ = self._geometry(x)
         return 0.5 * self.ks * (length - self.rest) ** 2
+
+    def jacobians(self, x: np.ndarray, v: np.ndarray) -> tuple[sp.csr_matrix, sp.csr_matrix | None]:
+        """dF/dx and dF/dv (3N x 3N), Baraff and Witkin 1998, section 4.2 (spring conditions).
+
+        With u the unit vector from b to a, the block of dF_a/dx_a is
+
+            -ks [u u^T + max(1 - R/|L|, 0) (I - u u^T)]
+
+        (the transverse "geometric" term is clamped at 0 for compressed springs,
+        so the matrix stays negative semidefinite and the implicit system SPD), and
+        of dF_a/dv_a is -kd u u^T; dF_b/dx_b equals dF_a/dx_a and the mixed
+        blocks are their negatives. The damping force's dependence on x is left
+        out, as Baraff and Witkin do. A zero-rest spring between coincident
+        particles is the linear force -ks L, so its block is -ks I.
+        """
+        d, length, inv = self._geometry(x)
+        u = d * inv[:, None]
+        uu = u[:, :, None] * u[:, None, :]
+        ratio = np.where(
+            length > 0, np.maximum(1.0 - self.rest * inv, 0.0), np.where(self.rest == 0, 1.0, 0.0)
+        )
+        eye = np.eye(3)[None]
+        jx = -self.ks[:, None, None] * (ratio[:, None, None] * eye + (1.0 - ratio)[:, None, None] * uu)
+        kx = self._assemble(jx)
+        if not self.has_damping:
+            return kx, None
+        return kx, self._assemble(-self.kd[:, None, None] * uu)
+
+    def _assemble(self, block: np.ndarray) -> sp.csr_matrix:
+        """The (3N, 3N) matrix with +block at (a,a) and (b,b) and -block at (a,b) and (b,a).
+
+        The CSR structure is computed once; each call only sums the entries
+        into it with one bincount (duplicates, such as two springs on one
+        pair, add up as the derivative of a sum should).
+        """
+        size = 3 * self.n
+        if self._jac is None:
+            blocks = ((self.a, self.a), (self.a, self.b), (self.b, self.a), (self.b, self.b))
+            rows = np.concatenate([block_pattern(p, q)[0].ravel() for p, q in blocks])
+            cols = np.concatenate([block_pattern(p, q)[1].ravel() for p, q in blocks])
+            keys, slot = np.unique(rows * size + cols, return_inverse=True)
+            indptr = np.searchsorted(keys // size, np.arange(size + 1)).astype(np.int64)
+            self._jac = (slot, (keys % size).astype(np.int64), indptr)
+        slot, indices, indptr = self._jac
+        values = np.concatenate([block, -block, -block, block]).ravel()
+        data = np.bincount(slot, weights=values, minlength=len(indices))
+        return sp.csr_matrix((data, indices, indptr), shape=(size, size))

@@ -9,6 +9,9 @@ scene asks for it.
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
+
+from animsim.forces.jacobian import scaled_identity
 
 
 class Wind:
@@ -22,3 +25,7 @@ class Wind:
 
     def potential(self, x: np.ndarray) -> None:
         return None
+
+    def jacobians(self, x: np.ndarray, v: np.ndarray) -> tuple[None, sp.csr_matrix]:
+        """The steady part k (w - v) has dF/dv = -k I."""
+        return None, scaled_identity(-self.k, len(v))

@@ -26,3 +26,9 @@ def register(cls: type[Integrator]) -> type[Integrator]:
 
 def integrator_class(name: str) -> type[Integrator]:
     return REGISTRY[name]
+
+
+# Registered last: implicit.py imports the package's base module.
+from animsim.integrators.implicit import ImplicitEuler  # noqa: E402
+
+register(ImplicitEuler)

@@ -154,7 +154,10 @@ def test_a_blow_up_is_a_row_and_the_rest_finish(cli, oscillator: Path, tmp_path:
     for r in rows[2:]:
         assert 0 < int(r["at_step"]) < 200 and int(r["steps"]) == int(r["at_step"])
         assert float(r["at_time"]) == pytest.approx(int(r["at_step"]) * 0.01)
-        assert r["particle"] in ("anchor", "bob") and "not finite" in r["message"]
+        # issue 5's watchdog stops the blow-up by its energy growth, before anything is non-finite
+        assert r["particle"] in ("anchor", "bob") and (
+            "not finite" in r["message"] or "times what the forces put in" in r["message"]
+        )
     for r in rows[:2]:
         assert int(r["steps"]) == 200 and r["at_step"] == ""
     assert "unstable" in done.stdout  # the printed table

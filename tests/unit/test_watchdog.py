@@ -1,0 +1,236 @@
+"""The watchdog: energy growth and non-finite values, first failing step, blame and fix."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from animsim.compile import compile_scene, with_overrides
+from animsim.record import MemorySink
+from animsim.scene.loader import load_scene_text
+from animsim.simulate import CHECK_STRIDE, STATUS_OK, STATUS_UNSTABLE, Guard, run
+from tests.conftest import simulate_text
+
+STIFF = """
+duration: 2.0
+dt: 0.01
+integrator: euler
+particles:
+  - {id: anchor, pinned: true, position: [0, 0, 0]}
+  - {id: bob, mass: 1.0, position: [1.1, 0, 0]}
+springs:
+  - {between: [anchor, bob], ks: 1.0e7, rest: 1.0}
+"""
+
+
+def compiled_from(text: str, **overrides):
+    loaded = load_scene_text(text)
+    return compile_scene(with_overrides(loaded.scene, **overrides), loaded.name)
+
+
+def test_explicit_euler_on_a_stiff_spring_is_caught_at_once_not_at_1e149():
+    _c, r, sink = simulate_text(STIFF)
+    assert r.status == STATUS_UNSTABLE
+    f = r.failure
+    assert f.step == 1 and f.time == pytest.approx(0.01)
+    assert f.particle == "bob"
+    assert f.spring == "'anchor'-'bob'"
+    assert f.growth > 100
+    assert "unstable at every dt" in f.suggestion and "symplectic_euler" in f.suggestion
+    # nothing non-finite was needed to see it
+    assert np.isfinite(r.final_state.particle_position).all()
+    # the frames before the failure are kept, and only those
+    assert [fr.step for fr in sink.frames] == [0]
+    assert sink.meta["status"] == "unstable" and sink.meta["failure"]["step"] == 1
+
+
+def test_without_the_watchdog_the_same_run_reaches_1e149_without_a_nan():
+    """Why isfinite alone is not enough (the issue's numbers)."""
+
+    class FiniteOnly(Guard):
+        def check(self, state):
+            return None if np.isfinite(state.particle_position).all() else super().check(state)
+
+    c = compiled_from(STIFF)
+    with np.errstate(over="ignore"):
+        r = run(c, [], guard=FiniteOnly(c))
+    x = r.final_state.particle_position
+    assert r.status == STATUS_OK or r.failure.step > 100
+    assert np.abs(x).max() > 1e149 or not np.isfinite(x).all()
+
+
+def test_first_failing_step_is_exact_when_checks_are_strided():
+    """Without sinks the energy is checked every CHECK_STRIDE steps; a replay finds the first step."""
+    text = STIFF.replace("ks: 1.0e7", "ks: 1.0e2").replace("integrator: euler", "integrator: midpoint")
+    # midpoint at omega dt = 0.1 is weakly unstable: slow growth, fails deep inside a stride
+    text = text.replace("duration: 2.0", "duration: 40000.0").replace("dt: 0.01", "dt: 0.01")
+    sink = MemorySink()
+    with_sinks = run(compiled_from(text, dt=0.3, duration=3000.0), [sink])
+    without = run(compiled_from(text, dt=0.3, duration=3000.0), [])
+    assert with_sinks.status == without.status == STATUS_UNSTABLE
+    assert with_sinks.failure.step == without.failure.step
+    # frames wait for a passing check: exactly those before the first failing step are written
+    assert [f.step for f in sink.frames] == list(range(with_sinks.failure.step))
+    assert with_sinks.frames == with_sinks.failure.step
+    assert without.failure.step % CHECK_STRIDE != 0  # it really was found by the replay
+    assert without.steps_taken == without.failure.step
+
+
+def test_a_particle_sitting_still_far_away_is_not_unstable():
+    text = """
+duration: 1.0
+dt: 0.01
+integrator: euler
+particles:
+  - {id: far, mass: 1.0, position: [1.0e17, 0, 0]}
+  - {id: falling, mass: 1.0, position: [1.0e17, 5.0e16, 0]}
+forces:
+  - {type: gravity}
+"""
+    _c, r, _ = simulate_text(text)
+    assert r.status == STATUS_OK, r.failure
+    assert r.final_state.particle_position[0, 0] == 1e17
+
+
+@pytest.mark.parametrize(
+    "integrator", ["euler", "symplectic_euler", "euler_average", "midpoint", "rk4", "verlet"]
+)
+def test_free_fall_from_rest_is_not_unstable(integrator):
+    """Explicit Euler's first step from rest makes kinetic energy before any position moves."""
+    text = """
+duration: 20.0
+dt: 0.1
+particles:
+  - {id: ball, mass: 3.0, position: [0, 0, 0]}
+forces:
+  - {type: gravity}
+"""
+    assert simulate_text(text, integrator=integrator)[1].status == STATUS_OK
+
+
+def test_non_finite_values_are_reported_with_the_particle():
+    text = """
+duration: 1.0
+dt: 0.01
+particles:
+  - {id: near, mass: 1.0, position: [1.0e-160, 0, 0]}
+forces:
+  - {type: attractor, gm: 1.0e300}
+"""
+    _c, r, _ = simulate_text(text)
+    assert r.status == STATUS_UNSTABLE
+    assert r.failure.particle == "near"
+    assert r.failure.step == 1
+    assert "not finite" in r.failure.reason
+
+
+def test_the_suggested_dt_runs_stable():
+    text = STIFF.replace("integrator: euler", "integrator: symplectic_euler").replace("dt: 0.01", "dt: 0.001")
+    _c, r, _ = simulate_text(text)
+    assert r.status == STATUS_UNSTABLE
+    suggestion = r.failure.suggestion
+    dt = float(suggestion.split("dt <= ")[1].split(" s")[0])
+    assert dt < 2 / math.sqrt(1e7)
+    assert simulate_text(text, dt=dt, duration=0.2)[1].status == STATUS_OK
+    # for explicit Euler the fix is another method and its dt, which also runs
+    _c, r, _ = simulate_text(STIFF)
+    alt = r.failure.suggestion.split("use ")[1]
+    method, dt = alt.split(" with dt <= ")[0], float(alt.split(" with dt <= ")[1].split(" s")[0])
+    assert simulate_text(STIFF, integrator=method, dt=dt, duration=0.2)[1].status == STATUS_OK
+
+
+def test_weak_instability_is_judged_by_energy_growth():
+    """Midpoint on an undamped spring gains energy every step; the watchdog stops it once the
+    energy is BLOWUP_FACTOR times the start, and names the spring."""
+    text = STIFF.replace("ks: 1.0e7", "ks: 100.0").replace("integrator: euler", "integrator: midpoint")
+    _c, r, _ = simulate_text(text, dt=0.05, duration=5000.0)
+    assert r.status == STATUS_UNSTABLE and r.failure.spring == "'anchor'-'bob'"
+    # |R(i theta)|^2 = 1 + theta^4 / 4 per step at theta = 0.5: energy x100 after ln(100)/ln(1 + 1/64) steps
+    expected = math.log(100) / math.log(1 + 0.5**4 / 4)
+    assert r.failure.step == pytest.approx(expected, rel=0.05)
+
+
+def test_damped_and_dissipative_scenes_stay_ok():
+    text = """
+duration: 10.0
+dt: 0.01
+integrator: euler
+particles:
+  - {id: anchor, pinned: true, position: [0, 0, 0]}
+  - {id: bob, mass: 1.0, position: [1.5, 0, 0]}
+springs:
+  - {between: [anchor, bob], ks: 100.0, kd: 2.0, rest: 1.0}
+forces:
+  - {type: gravity}
+  - {type: drag, k: 0.1}
+  - {type: wind, velocity: [3, 0, 0], k: 0.2}
+"""
+    assert simulate_text(text)[1].status == STATUS_OK
+
+
+def test_unstable_run_exits_1_with_the_report(cli, tmp_path):
+    scene = tmp_path / "stiff.yaml"
+    scene.write_text(STIFF)
+    out = tmp_path / "out.csv"
+    res = cli("run", scene, "-o", out, "--quiet")
+    assert res.returncode == 1
+    assert "unstable at step 1" in res.stderr and "spring 'anchor'-'bob'" in res.stderr
+    assert "fix:" in res.stderr
+    assert out.read_text().count("\n") == 3  # header + the two particles at t = 0
+
+
+def test_an_interrupt_writes_the_checked_frames_so_far():
+    text = STIFF.replace("integrator: euler", "integrator: symplectic_euler").replace(
+        "dt: 0.01", "dt: 0.0001"
+    )
+    calls = iter(range(10**6))
+    sink = MemorySink()
+    r = run(compiled_from(text), [sink], stop=lambda: next(calls) == 4)
+    assert r.status == "interrupted"
+    assert [f.step for f in sink.frames] == [0, 1, 2, 3, 4, 5]
+
+
+EMITTER = """
+duration: 1.0
+dt: 0.01
+record: {fps: 10}
+forces:
+  - {type: attractor, gm: 3.0, softening: 0.1}
+  - {type: gravity}
+emitters:
+  - name: stars
+    rate: 200
+    shape: {type: sphere, center: [2, 0, 0], radius: 0.15}
+    velocity: {mean: [0, 0, 1.22], spread: 0.12}
+    lifetime: {mean: 5.0}
+    mass: 0.001
+    max_particles: 500
+"""
+
+
+def test_births_feed_the_budget_of_an_emitter_scene():
+    """Each birth brings its own kinetic energy and its own start for released potential."""
+    assert simulate_text(EMITTER)[1].status == STATUS_OK
+
+
+def test_a_blow_up_among_emitted_particles_is_caught():
+    text = (
+        EMITTER
+        + "planes:\n  - {point: [0, -0.05, 0], normal: [0, 1, 0], response: penalty, stiffness: 1.0e9}\n"
+    )
+    _, r, _ = simulate_text(text)
+    assert r.status == STATUS_UNSTABLE
+    assert r.failure.particle.startswith("stars#")
+
+
+def test_an_emitter_scene_never_writes_the_failing_frame():
+    """Emitter runs are checked every step, before the frame is written."""
+    text = EMITTER.replace("record: {fps: 10}", "") + (
+        "planes:\n  - {point: [0, -0.05, 0], normal: [0, 1, 0], response: penalty, stiffness: 1.0e9}\n"
+    )
+    sink = MemorySink()
+    r = run(compiled_from(text), [sink])
+    assert r.status == STATUS_UNSTABLE
+    assert sink.frames[-1].step == r.failure.step - 1
