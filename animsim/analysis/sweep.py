@@ -416,21 +416,18 @@ def fine_reference(compiled: Any, times: np.ndarray) -> Trajectory:
     return trajectory
 
 
-def _issue4(kind: str) -> Callable[[Any, np.ndarray], Trajectory] | None:
-    """Issue 4's closed forms, when that module is present (``analytic_reference``)."""
-    try:
-        from animsim.analysis import references  # type: ignore[attr-defined]
-    except ImportError:
-        return None
-    analytic = getattr(references, "analytic_reference", None)
-    no_form = getattr(references, "NoClosedForm", None)
-    if analytic is None or no_form is None:
-        return None
+def _closed_form(kind: str) -> Callable[[Any, np.ndarray], Trajectory]:
+    """The closed forms of :mod:`animsim.analysis.references` (shared with compare).
+
+    ``auto`` falls back to the fine RK4 reference when the scene has none;
+    ``analytic`` makes that case's row say why.
+    """
+    from animsim.analysis.references import NoClosedForm, analytic_reference
 
     def reference(compiled: Any, times: np.ndarray) -> Trajectory:
         try:
-            ref = analytic(compiled, times)
-        except no_form as exc:
+            ref = analytic_reference(compiled, times)
+        except NoClosedForm as exc:
             if kind == "auto":
                 return fine_reference(compiled, times)
             raise ReferenceFailed(f"no closed form: {exc}") from None
@@ -449,14 +446,7 @@ def reference_function(name: str) -> Callable[[Any, np.ndarray], Trajectory]:
     if name in REFERENCES:
         return REFERENCES[name]
     if name in ("analytic", "auto"):
-        fn = _issue4(name)
-        if fn is not None:
-            return fn
-        if name == "auto":
-            return fine_reference  # no closed forms in this build: auto means fine
-        raise UsageError(
-            "--reference analytic: closed forms are not available in this build (use fine or auto)"
-        )
+        return _closed_form(name)
     raise UsageError(f"--reference: unknown {name!r} (valid: {', '.join(REFERENCE_CHOICES)})")
 
 

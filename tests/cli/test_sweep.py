@@ -283,41 +283,22 @@ def test_plot_is_an_image_and_its_options_are_checked(cli, tmp_path: Path) -> No
     assert bad_y.returncode == 2 and "not a plottable column" in bad_y.stderr
 
 
-def test_issue_4_closed_forms_plug_in_when_present(monkeypatch) -> None:
-    """`analytic`/`auto` use animsim.analysis.references (issue 4) when it exists; here a stand-in."""
-    import sys
-    import types
-
-    class NoClosedForm(Exception):
-        pass
-
-    def analytic_reference(compiled, times):
-        if compiled.scene.springs[0].ks != 100:
-            raise NoClosedForm("not the stand-in's oscillator")
-        x = compiled.initial.particle_position
-        trajectory = types.SimpleNamespace(times=np.asarray(times), position=[x] * len(times), ids=None)
-        return types.SimpleNamespace(trajectory=trajectory)
-
-    fake = types.ModuleType("animsim.analysis.references")
-    fake.analytic_reference = analytic_reference
-    fake.NoClosedForm = NoClosedForm
-    monkeypatch.setitem(sys.modules, "animsim.analysis.references", fake)
+def test_closed_forms_are_used_for_analytic_and_auto() -> None:
+    """`analytic`/`auto` measure against compare's closed forms (an oscillator has one)."""
     data = load_scene_text(OSCILLATOR).data
-    axes = [sw.parse_set("springs.0.ks=100,400"), sw.parse_set("integrator=rk4")]
+    axes = [sw.parse_set("integrator=euler,rk4")]
     analytic = sw.sweep(data, "osc", "<t>", axes, reference="analytic").rows
-    assert 0.19 < analytic[0].error < 0.2 + 1e-6  # against the stand-in's frozen positions
-    assert analytic[1].error is None and "no closed form" in analytic[1].message
+    fine = sw.sweep(data, "osc", "<t>", axes, reference="fine").rows
     auto = sw.sweep(data, "osc", "<t>", axes, reference="auto").rows
-    assert auto[0].error == analytic[0].error
-    assert 0 < auto[1].error < 1e-3  # no closed form: the fine RK4 reference instead
+    assert analytic[0].error > 100 * analytic[1].error > 0  # euler far worse than rk4
+    assert [r.error for r in auto] == [r.error for r in analytic]
+    # the fine RK4 run and the closed form agree on the errors they measure
+    assert analytic[0].error == pytest.approx(fine[0].error, rel=1e-3)
 
 
-def test_analytic_without_issue_4_is_a_usage_error(monkeypatch) -> None:
-    import sys
-
-    monkeypatch.setitem(sys.modules, "animsim.analysis.references", None)  # import fails
-    data = load_scene_text(OSCILLATOR).data
-    with pytest.raises(UsageError, match="not available in this build"):
-        sw.sweep(data, "osc", "<t>", [sw.parse_set("dt=0.01")], reference="analytic")
+def test_analytic_on_a_scene_without_closed_form_is_a_row_message() -> None:
+    data = load_scene_text(OSCILLATOR + "forces: [{type: quadratic_drag, area: 0.1}]\n").data
+    (row,) = sw.sweep(data, "osc", "<t>", [sw.parse_set("dt=0.01")], reference="analytic").rows
+    assert row.error is None and "no closed form" in row.message
     (row,) = sw.sweep(data, "osc", "<t>", [sw.parse_set("dt=0.01")], reference="auto").rows
     assert row.error is not None and row.error > 0  # auto fell back to fine
