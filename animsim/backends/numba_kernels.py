@@ -131,20 +131,19 @@ def _friction(t0, t1, t2, dvn, mu):
     return t0 * keep, t1 * keep, t2 * keep
 
 
-@njit(cache=True)
-def _collide(i, xo0, xo1, xo2, vo0, vo1, vo2, x, v, dt, p):
-    """Impulse planes on particle i for the step (xo, vo) -> (x[i], v[i]); True if it changed.
+@njit(cache=True, inline="always")
+def _collide(xo0, xo1, xo2, vo0, vo1, vo2, x0, x1, x2, v0, v1, v2, dt, pl_p, pl_n, pl_e, pl_mu):
+    """Impulse planes on one movable particle for the step (xo, vo) -> (x, v).
 
-    PlaneColliders.apply then _project, for one particle (both act per particle).
+    PlaneColliders.apply then _project, for one particle (both act per
+    particle). Returns (changed, x0, x1, x2, v0, v1, v2). Scalars and plain
+    arrays only: a tuple of arrays passed to a call that is not inlined costs
+    a reference-count round trip per array per particle.
     """
-    if p.inv_mass[i] <= 0.0:
-        return False
-    x0, x1, x2 = x[i, 0], x[i, 1], x[i, 2]
-    v0, v1, v2 = v[i, 0], v[i, 1], v[i, 2]
     changed = False
-    for q in range(p.pl_e.shape[0]):
-        n0, n1, n2 = p.pl_n[q, 0], p.pl_n[q, 1], p.pl_n[q, 2]
-        P0, P1, P2 = p.pl_p[q, 0], p.pl_p[q, 1], p.pl_p[q, 2]
+    for q in range(pl_e.shape[0]):
+        n0, n1, n2 = pl_n[q, 0], pl_n[q, 1], pl_n[q, 2]
+        P0, P1, P2 = pl_p[q, 0], pl_p[q, 1], pl_p[q, 2]
         d1 = (x0 - P0) * n0 + (x1 - P1) * n1 + (x2 - P2) * n2
         if not d1 < 0.0:
             continue
@@ -161,8 +160,8 @@ def _collide(i, xo0, xo1, xo2, vo0, vo1, vo2, x, v, dt, p):
         vc1 = vo1 + s * (v1 - vo1)
         vc2 = vo2 + s * (v2 - vo2)
         vn = vc0 * n0 + vc1 * n1 + vc2 * n2
-        vn_new = -p.pl_e[q] * vn if vn < 0.0 else vn
-        t0, t1, t2 = _friction(vc0 - vn * n0, vc1 - vn * n1, vc2 - vn * n2, abs(vn_new - vn), p.pl_mu[q])
+        vn_new = -pl_e[q] * vn if vn < 0.0 else vn
+        t0, t1, t2 = _friction(vc0 - vn * n0, vc1 - vn * n1, vc2 - vn * n2, abs(vn_new - vn), pl_mu[q])
         vr0 = t0 + vn_new * n0
         vr1 = t1 + vn_new * n1
         vr2 = t2 + vn_new * n2
@@ -175,9 +174,9 @@ def _collide(i, xo0, xo1, xo2, vo0, vo1, vo2, x, v, dt, p):
         v1 = vr1 + r * ma1
         v2 = vr2 + r * ma2
     if changed:
-        for q in range(p.pl_e.shape[0]):
-            n0, n1, n2 = p.pl_n[q, 0], p.pl_n[q, 1], p.pl_n[q, 2]
-            P0, P1, P2 = p.pl_p[q, 0], p.pl_p[q, 1], p.pl_p[q, 2]
+        for q in range(pl_e.shape[0]):
+            n0, n1, n2 = pl_n[q, 0], pl_n[q, 1], pl_n[q, 2]
+            P0, P1, P2 = pl_p[q, 0], pl_p[q, 1], pl_p[q, 2]
             d = (x0 - P0) * n0 + (x1 - P1) * n1 + (x2 - P2) * n2
             if not d < 0.0:
                 continue
@@ -193,13 +192,41 @@ def _collide(i, xo0, xo1, xo2, vo0, vo1, vo2, x, v, dt, p):
                 x2 -= 2.0 * db * n2 + np.spacing(abs(x2)) * np.sign(n2)
             vn = v0 * n0 + v1 * n1 + v2 * n2
             inward = min(vn, 0.0)
-            t0, t1, t2 = _friction(v0 - vn * n0, v1 - vn * n1, v2 - vn * n2, -inward, p.pl_mu[q])
+            t0, t1, t2 = _friction(v0 - vn * n0, v1 - vn * n1, v2 - vn * n2, -inward, pl_mu[q])
             v0 = t0 + (vn - inward) * n0
             v1 = t1 + (vn - inward) * n1
             v2 = t2 + (vn - inward) * n2
-    x[i, 0], x[i, 1], x[i, 2] = x0, x1, x2
-    v[i, 0], v[i, 1], v[i, 2] = v0, v1, v2
-    return changed
+    return changed, x0, x1, x2, v0, v1, v2
+
+
+@njit(cache=True, inline="always")
+def _collide_row(i, xo0, xo1, xo2, vo0, vo1, vo2, x, v, dt, movable, pl_p, pl_n, pl_e, pl_mu):
+    """_collide on row i of x and v, in place; True if it changed."""
+    if not movable:
+        return False
+    hit, x0, x1, x2, v0, v1, v2 = _collide(
+        xo0,
+        xo1,
+        xo2,
+        vo0,
+        vo1,
+        vo2,
+        x[i, 0],
+        x[i, 1],
+        x[i, 2],
+        v[i, 0],
+        v[i, 1],
+        v[i, 2],
+        dt,
+        pl_p,
+        pl_n,
+        pl_e,
+        pl_mu,
+    )
+    if hit:
+        x[i, 0], x[i, 1], x[i, 2] = x0, x1, x2
+        v[i, 0], v[i, 1], v[i, 2] = v0, v1, v2
+    return hit
 
 
 @njit(cache=True, inline="always")
@@ -224,6 +251,55 @@ def _acc(i, x0, x1, x2, v0, v1, v2, p):
     return f0 * w, f1 * w, f2 * w
 
 
+@njit(cache=True, inline="always")
+def _particle_step(i, x0, x1, x2, v0, v1, v2, c0, c1, c2, dt, method, p):
+    """One step of one particle; (c0, c1, c2) is Verlet's cached acceleration.
+
+    Returns the new (x, v, c). Operation order as in the NumPy integrators.
+    """
+    if method == SYMPLECTIC_EULER:
+        a_0, a_1, a_2 = _acc(i, x0, x1, x2, v0, v1, v2, p)
+        v0 += dt * a_0
+        v1 += dt * a_1
+        v2 += dt * a_2
+        x0 += dt * v0
+        x1 += dt * v1
+        x2 += dt * v2
+    elif method == RUNGE_KUTTA:  # one stage: explicit Euler
+        a_0, a_1, a_2 = _acc(i, x0, x1, x2, v0, v1, v2, p)
+        x0 += dt * v0
+        x1 += dt * v1
+        x2 += dt * v2
+        v0 += dt * a_0
+        v1 += dt * a_1
+        v2 += dt * a_2
+    elif method == EULER_AVERAGE:
+        a_0, a_1, a_2 = _acc(i, x0, x1, x2, v0, v1, v2, p)
+        e0 = a_0 * dt + v0
+        e1 = a_1 * dt + v1
+        e2 = a_2 * dt + v2
+        half_dt = 0.5 * dt
+        x0 += half_dt * (v0 + e0)
+        x1 += half_dt * (v1 + e1)
+        x2 += half_dt * (v2 + e2)
+        v0, v1, v2 = e0, e1, e2
+    else:  # VERLET
+        half_dt = 0.5 * dt
+        half_dt2 = 0.5 * dt * dt
+        p0 = c0 * dt + v0
+        p1 = c1 * dt + v1
+        p2 = c2 * dt + v2
+        x0 += dt * v0 + half_dt2 * c0
+        x1 += dt * v1 + half_dt2 * c1
+        x2 += dt * v2 + half_dt2 * c2
+        b0, b1, b2 = _acc(i, x0, x1, x2, p0, p1, p2, p)
+        v0 += half_dt * (c0 + b0)
+        v1 += half_dt * (c1 + b1)
+        v2 += half_dt * (c2 + b2)
+        c0, c1, c2 = b0, b1, b2
+    return x0, x1, x2, v0, v1, v2, c0, c1, c2
+
+
 @njit(cache=True, parallel=True)
 def particle_chunk(x, v, steps, dt, method, a0, a0_valid, p):
     """Advance every particle ``steps`` steps of ``dt``; returns (non-finite count, changed count).
@@ -232,74 +308,42 @@ def particle_chunk(x, v, steps, dt, method, a0, a0_valid, p):
     tableau (explicit Euler) or VERLET (only without impulse planes: a
     collision anywhere invalidates every particle's cached acceleration).
     ``a0`` holds Verlet's cached accelerations between chunks.
+
+    Particle-major: each particle runs all the chunk's steps in registers.
+    (Stepping blocks of 128 particles step by step, to overlap independent
+    particles, measured 8 % slower: a particle's plane test branches the same
+    way step after step, which the branch predictor likes.)
     """
     n = x.shape[0]
     planes = p.pl_e.shape[0] > 0
+    pl_p, pl_n, pl_e, pl_mu, inv_mass = p.pl_p, p.pl_n, p.pl_e, p.pl_mu, p.inv_mass
+    verlet = method == VERLET
     bad = 0
     changed = 0
-    half_dt = 0.5 * dt
-    half_dt2 = 0.5 * dt * dt
     for i in prange(n):
         x0, x1, x2 = x[i, 0], x[i, 1], x[i, 2]
         v0, v1, v2 = v[i, 0], v[i, 1], v[i, 2]
+        movable = inv_mass[i] > 0.0
         hit = False
-        xo0 = xo1 = xo2 = vo0 = vo1 = vo2 = 0.0
         c0 = c1 = c2 = 0.0
-        if method == VERLET:
+        if verlet:
             if a0_valid:
                 c0, c1, c2 = a0[i, 0], a0[i, 1], a0[i, 2]
             else:
                 c0, c1, c2 = _acc(i, x0, x1, x2, v0, v1, v2, p)
         for _ in range(steps):
-            if planes:
-                xo0, xo1, xo2, vo0, vo1, vo2 = x0, x1, x2, v0, v1, v2
-            if method == SYMPLECTIC_EULER:
-                a_0, a_1, a_2 = _acc(i, x0, x1, x2, v0, v1, v2, p)
-                v0 += dt * a_0
-                v1 += dt * a_1
-                v2 += dt * a_2
-                x0 += dt * v0
-                x1 += dt * v1
-                x2 += dt * v2
-            elif method == RUNGE_KUTTA:  # one stage: explicit Euler
-                a_0, a_1, a_2 = _acc(i, x0, x1, x2, v0, v1, v2, p)
-                x0 += dt * v0
-                x1 += dt * v1
-                x2 += dt * v2
-                v0 += dt * a_0
-                v1 += dt * a_1
-                v2 += dt * a_2
-            elif method == EULER_AVERAGE:
-                a_0, a_1, a_2 = _acc(i, x0, x1, x2, v0, v1, v2, p)
-                e0 = a_0 * dt + v0
-                e1 = a_1 * dt + v1
-                e2 = a_2 * dt + v2
-                x0 += half_dt * (v0 + e0)
-                x1 += half_dt * (v1 + e1)
-                x2 += half_dt * (v2 + e2)
-                v0, v1, v2 = e0, e1, e2
-            else:  # VERLET
-                p0 = c0 * dt + v0
-                p1 = c1 * dt + v1
-                p2 = c2 * dt + v2
-                x0 += dt * v0 + half_dt2 * c0
-                x1 += dt * v1 + half_dt2 * c1
-                x2 += dt * v2 + half_dt2 * c2
-                b0, b1, b2 = _acc(i, x0, x1, x2, p0, p1, p2, p)
-                v0 += half_dt * (c0 + b0)
-                v1 += half_dt * (c1 + b1)
-                v2 += half_dt * (c2 + b2)
-                c0, c1, c2 = b0, b1, b2
-            if planes:
-                x[i, 0], x[i, 1], x[i, 2] = x0, x1, x2
-                v[i, 0], v[i, 1], v[i, 2] = v0, v1, v2
-                if _collide(i, xo0, xo1, xo2, vo0, vo1, vo2, x, v, dt, p):
-                    hit = True
-                    x0, x1, x2 = x[i, 0], x[i, 1], x[i, 2]
-                    v0, v1, v2 = v[i, 0], v[i, 1], v[i, 2]
+            xo0, xo1, xo2, vo0, vo1, vo2 = x0, x1, x2, v0, v1, v2
+            x0, x1, x2, v0, v1, v2, c0, c1, c2 = _particle_step(
+                i, x0, x1, x2, v0, v1, v2, c0, c1, c2, dt, method, p
+            )
+            if planes and movable:
+                h, x0, x1, x2, v0, v1, v2 = _collide(
+                    xo0, xo1, xo2, vo0, vo1, vo2, x0, x1, x2, v0, v1, v2, dt, pl_p, pl_n, pl_e, pl_mu
+                )
+                hit = hit or h
         x[i, 0], x[i, 1], x[i, 2] = x0, x1, x2
         v[i, 0], v[i, 1], v[i, 2] = v0, v1, v2
-        if method == VERLET:
+        if verlet:
             a0[i, 0], a0[i, 1], a0[i, 2] = c0, c1, c2
         if not _finite(i, x, v):
             bad += 1
@@ -311,34 +355,136 @@ def particle_chunk(x, v, steps, dt, method, a0, a0_valid, p):
 # --- scenes with springs: step-major --------------------------------------------------
 
 
+@njit(cache=True, inline="always")
+def _spring(s, x, v, sa, sb, rest, ks, kd, damped):
+    """Force on end a of spring s (Lander Eq. 2, as springs.Springs)."""
+    a = sa[s]
+    b = sb[s]
+    d0 = x[a, 0] - x[b, 0]
+    d1 = x[a, 1] - x[b, 1]
+    d2 = x[a, 2] - x[b, 2]
+    length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    inv = 1.0 / length if length > 0.0 else 0.0
+    mag = ks[s] * (length - rest[s])
+    if damped:
+        dot = (v[a, 0] - v[b, 0]) * d0 + (v[a, 1] - v[b, 1]) * d1 + (v[a, 2] - v[b, 2]) * d2
+        mag += kd[s] * dot * inv
+    scale = -mag * inv
+    return scale * d0, scale * d1, scale * d2
+
+
+@njit(cache=True, parallel=True)
+def _spring_forces(x, v, p):
+    """Every spring's force on its end a, into p.spr_force (parallel, no shared writes)."""
+    # Arrays come out of the tuple once: read through it in the loop, numba
+    # cannot prove they do not alias the output and reloads them every time.
+    fs, sa, sb, rest, ks, kd, damped = (
+        p.spr_force,
+        p.spr_a,
+        p.spr_b,
+        p.spr_rest,
+        p.spr_ks,
+        p.spr_kd,
+        p.spr_damped,
+    )
+    for s in prange(sa.shape[0]):
+        fs[s, 0], fs[s, 1], fs[s, 2] = _spring(s, x, v, sa, sb, rest, ks, kd, damped)
+
+
+@njit(cache=True)
+def _spring_scatter(x, v, out, p):
+    """out = spring forces, scattered serially: one thread needs no per-spring buffer or gather."""
+    sa, sb, rest, ks, kd, damped = p.spr_a, p.spr_b, p.spr_rest, p.spr_ks, p.spr_kd, p.spr_damped
+    out[:] = 0.0
+    for s in range(sa.shape[0]):
+        f0, f1, f2 = _spring(s, x, v, sa, sb, rest, ks, kd, damped)
+        a = sa[s]
+        b = sb[s]
+        out[a, 0] += f0
+        out[a, 1] += f1
+        out[a, 2] += f2
+        out[b, 0] -= f0
+        out[b, 1] -= f1
+        out[b, 2] -= f2
+
+
+@njit(cache=True, inline="always")
+def _gather(i, fs, ptr, inc, sign):
+    """Sum of the spring forces on particle i from the per-spring forces fs (CSR incidence)."""
+    f0 = f1 = f2 = 0.0
+    for k in range(ptr[i], ptr[i + 1]):
+        s = inc[k]
+        g = sign[k]
+        f0 += g * fs[s, 0]
+        f1 += g * fs[s, 1]
+        f2 += g * fs[s, 2]
+    return f0, f1, f2
+
+
+@njit(cache=True, parallel=True)
+def _symplectic_update(x, v, spring_f, gather, dt, p):
+    """Symplectic Euler for every particle given this step's spring forces, then collisions
+    and the finiteness test, in one pass; returns (non-finite, changed)."""
+    planes = p.pl_e.shape[0] > 0
+    fs, ptr, inc, sign = p.spr_force, p.inc_ptr, p.inc_spring, p.inc_sign
+    pl_p, pl_n, pl_e, pl_mu, inv_mass = p.pl_p, p.pl_n, p.pl_e, p.pl_mu, p.inv_mass
+    bad = 0
+    changed = 0
+    for i in prange(x.shape[0]):
+        xo0, xo1, xo2 = x[i, 0], x[i, 1], x[i, 2]
+        vo0, vo1, vo2 = v[i, 0], v[i, 1], v[i, 2]
+        f0, f1, f2 = _local_force(i, xo0, xo1, xo2, vo0, vo1, vo2, p)
+        if gather:
+            g0, g1, g2 = _gather(i, fs, ptr, inc, sign)
+        else:
+            g0, g1, g2 = spring_f[i, 0], spring_f[i, 1], spring_f[i, 2]
+        w = p.inv_mass[i]
+        v0 = vo0 + dt * ((f0 + g0) * w)
+        v1 = vo1 + dt * ((f1 + g1) * w)
+        v2 = vo2 + dt * ((f2 + g2) * w)
+        x[i, 0] = xo0 + dt * v0
+        x[i, 1] = xo1 + dt * v1
+        x[i, 2] = xo2 + dt * v2
+        v[i, 0], v[i, 1], v[i, 2] = v0, v1, v2
+        if planes and _collide_row(
+            i, xo0, xo1, xo2, vo0, vo1, vo2, x, v, dt, inv_mass[i] > 0.0, pl_p, pl_n, pl_e, pl_mu
+        ):
+            changed += 1
+        if not _finite(i, x, v):
+            bad += 1
+    return bad, changed
+
+
+@njit(cache=True)
+def symplectic_chunk(x, v, steps, dt, spring_f, gather, p):
+    """Symplectic Euler, the default method, fused: per step one pass over the springs
+    (parallel into a buffer with ``gather``, else a serial scatter into ``spring_f``)
+    and one over the particles. Returns (steps taken, steps a collision changed, failed)."""
+    changed_steps = 0
+    for step in range(steps):
+        if gather:
+            _spring_forces(x, v, p)
+        else:
+            _spring_scatter(x, v, spring_f, p)
+        bad, changed = _symplectic_update(x, v, spring_f, gather, dt, p)
+        if changed:
+            changed_steps += 1
+        if bad:
+            return step + 1, changed_steps, True
+    return steps, changed_steps, False
+
+
 @njit(cache=True, parallel=True)
 def accel(x, v, out, p):
     """out = F(x, v) / m for every particle (Dynamics.acceleration)."""
-    fs = p.spr_force
-    for s in prange(p.spr_a.shape[0]):
-        a = p.spr_a[s]
-        b = p.spr_b[s]
-        d0 = x[a, 0] - x[b, 0]
-        d1 = x[a, 1] - x[b, 1]
-        d2 = x[a, 2] - x[b, 2]
-        length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        inv = 1.0 / length if length > 0.0 else 0.0
-        mag = p.spr_ks[s] * (length - p.spr_rest[s])
-        if p.spr_damped:
-            dot = (v[a, 0] - v[b, 0]) * d0 + (v[a, 1] - v[b, 1]) * d1 + (v[a, 2] - v[b, 2]) * d2
-            mag += p.spr_kd[s] * dot * inv
-        scale = -mag * inv
-        fs[s, 0] = scale * d0
-        fs[s, 1] = scale * d1
-        fs[s, 2] = scale * d2
+    _spring_forces(x, v, p)
+    fs, ptr, inc, sign = p.spr_force, p.inc_ptr, p.inc_spring, p.inc_sign
     for i in prange(x.shape[0]):
         f0, f1, f2 = _local_force(i, x[i, 0], x[i, 1], x[i, 2], v[i, 0], v[i, 1], v[i, 2], p)
-        for k in range(p.inc_ptr[i], p.inc_ptr[i + 1]):
-            s = p.inc_spring[k]
-            g = p.inc_sign[k]
-            f0 += g * fs[s, 0]
-            f1 += g * fs[s, 1]
-            f2 += g * fs[s, 2]
+        g0, g1, g2 = _gather(i, fs, ptr, inc, sign)
+        f0 += g0
+        f1 += g1
+        f2 += g2
         w = p.inv_mass[i]
         out[i, 0] = f0 * w
         out[i, 1] = f1 * w
@@ -357,10 +503,27 @@ def _axpy(y, c, z):
 def _finish(x, v, xo, vo, dt, p):
     """Collisions (if any planes) and the finiteness test; returns (non-finite, changed)."""
     planes = p.pl_e.shape[0] > 0
+    pl_p, pl_n, pl_e, pl_mu, inv_mass = p.pl_p, p.pl_n, p.pl_e, p.pl_mu, p.inv_mass
     bad = 0
     changed = 0
     for i in prange(x.shape[0]):
-        if planes and _collide(i, xo[i, 0], xo[i, 1], xo[i, 2], vo[i, 0], vo[i, 1], vo[i, 2], x, v, dt, p):
+        if planes and _collide_row(
+            i,
+            xo[i, 0],
+            xo[i, 1],
+            xo[i, 2],
+            vo[i, 0],
+            vo[i, 1],
+            vo[i, 2],
+            x,
+            v,
+            dt,
+            inv_mass[i] > 0.0,
+            pl_p,
+            pl_n,
+            pl_e,
+            pl_mu,
+        ):
             changed += 1
         if not _finite(i, x, v):
             bad += 1
