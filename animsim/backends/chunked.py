@@ -64,7 +64,7 @@ def run_chunked(
             else:
                 count, dt = 1, clock.step_size(i)
             count = min(count, stepper.max_steps_per_call)
-            taken, evals, failed = stepper.advance(state, count, dt)
+            taken, evals, failed = stepper.advance(state, count, dt, clock)
             dyn.evaluations += evals
             state.step = i + taken
             state.time = clock.time(state.step)

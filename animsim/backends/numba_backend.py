@@ -189,8 +189,35 @@ class NumbaStepper:
         """Forget Verlet's cached acceleration (a new run starts)."""
         self._a0_valid = False
 
-    def advance(self, state: State, steps: int, dt: float) -> tuple[int, int, bool]:
-        """Advance ``state`` up to ``steps`` steps of ``dt`` in place.
+    def verlet_refresh(self, clock: Any, first: int, steps: int) -> np.ndarray:
+        """(steps,) bool: before which steps of this call Verlet recomputes its acceleration.
+
+        The NumPy Verlet keys its cache on (revision, time) and stores
+        ``time + dt``; the loop sets the time from the clock (``duration * i /
+        steps``), which can differ from ``time + dt`` in the last bit. Then it
+        recomputes a(x, v) instead of reusing a(x, v_predicted): a different
+        trajectory, which this backend must reproduce.
+        """
+        refresh = np.zeros(steps, dtype=bool)
+        if self.method != K.VERLET:
+            return refresh
+        if clock is not None:
+            idx = np.arange(first - 1, first + steps, dtype=np.int64)
+            if clock.divides:
+                t = clock.duration * idx / clock.steps
+                dts = np.full(idx.shape, clock.dt)
+            else:
+                t = idx * clock.dt
+                last = clock.duration - (clock.steps - 1) * clock.dt
+                dts = np.where(idx < clock.steps - 1, clock.dt, last)
+            t = np.where(idx >= clock.steps, clock.duration, t)
+            refresh = t[:-1] + dts[:-1] != t[1:]
+        if first == 0 or not self._a0_valid:
+            refresh[0] = True
+        return refresh
+
+    def advance(self, state: State, steps: int, dt: float, clock: Any = None) -> tuple[int, int, bool]:
+        """Advance ``state`` up to ``steps`` steps of ``dt`` in place (``clock``: the run's).
 
         Returns (steps taken, force evaluations, failed): on a non-finite
         state it stops after the first step that made one, exactly as the
@@ -200,12 +227,11 @@ class NumbaStepper:
         x, v = state.particle_position, state.particle_velocity
         numba.set_num_threads(self.threads)
         buf = self._buffer()
+        refresh = self.verlet_refresh(clock, state.step, steps)
         if self.particle_major:
-            saved = (x.copy(), v.copy(), buf["a0"].copy(), self._a0_valid)
-            bad, changed = K.particle_chunk(
-                x, v, steps, dt, self.method, buf["a0"], self._a0_valid, self.params
-            )
-            evals = steps + (1 if self.method == K.VERLET and not self._a0_valid else 0)
+            saved = (x.copy(), v.copy(), buf["a0"].copy())
+            bad, changed = K.particle_chunk(x, v, steps, dt, self.method, buf["a0"], refresh, self.params)
+            evals = steps + int(refresh.sum())
             taken = steps
             if bad:
                 # Replay from the chunk's start one step at a time (the same
@@ -213,14 +239,11 @@ class NumbaStepper:
                 np.copyto(x, saved[0])
                 np.copyto(v, saved[1])
                 np.copyto(buf["a0"], saved[2])
-                self._a0_valid = saved[3]
                 evals = changed = 0
-                for taken in range(1, steps + 1):  # noqa: B007 (taken is the result)
-                    evals += 1 + (1 if self.method == K.VERLET and not self._a0_valid else 0)
-                    bad, c = K.particle_chunk(
-                        x, v, 1, dt, self.method, buf["a0"], self._a0_valid, self.params
-                    )
-                    self._a0_valid = self.method == K.VERLET
+                for taken in range(1, steps + 1):
+                    one = refresh[taken - 1 : taken]
+                    evals += 1 + int(one.sum())
+                    bad, c = K.particle_chunk(x, v, 1, dt, self.method, buf["a0"], one, self.params)
                     changed += c
                     if bad:
                         break
@@ -254,6 +277,7 @@ class NumbaStepper:
             buf["xo"],
             buf["vo"],
             self._a0_valid,
+            refresh,
             self.params,
         )
         self._a0_valid = bool(valid)

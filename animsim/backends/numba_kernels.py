@@ -301,13 +301,15 @@ def _particle_step(i, x0, x1, x2, v0, v1, v2, c0, c1, c2, dt, method, p):
 
 
 @njit(cache=True, parallel=True)
-def particle_chunk(x, v, steps, dt, method, a0, a0_valid, p):
+def particle_chunk(x, v, steps, dt, method, a0, refresh, p):
     """Advance every particle ``steps`` steps of ``dt``; returns (non-finite count, changed count).
 
     ``method``: SYMPLECTIC_EULER, EULER_AVERAGE, RUNGE_KUTTA with the one-stage
     tableau (explicit Euler) or VERLET (only without impulse planes: a
     collision anywhere invalidates every particle's cached acceleration).
-    ``a0`` holds Verlet's cached accelerations between chunks.
+    ``a0`` holds Verlet's cached accelerations between chunks; ``refresh[k]``
+    says the NumPy Verlet would recompute it before step k (see
+    NumbaStepper.verlet_refresh).
 
     Particle-major: each particle runs all the chunk's steps in registers.
     (Stepping blocks of 128 particles step by step, to overlap independent
@@ -327,11 +329,10 @@ def particle_chunk(x, v, steps, dt, method, a0, a0_valid, p):
         hit = False
         c0 = c1 = c2 = 0.0
         if verlet:
-            if a0_valid:
-                c0, c1, c2 = a0[i, 0], a0[i, 1], a0[i, 2]
-            else:
+            c0, c1, c2 = a0[i, 0], a0[i, 1], a0[i, 2]
+        for k in range(steps):
+            if verlet and refresh[k]:
                 c0, c1, c2 = _acc(i, x0, x1, x2, v0, v1, v2, p)
-        for _ in range(steps):
             xo0, xo1, xo2, vo0, vo1, vo2 = x0, x1, x2, v0, v1, v2
             x0, x1, x2, v0, v1, v2, c0, c1, c2 = _particle_step(
                 i, x0, x1, x2, v0, v1, v2, c0, c1, c2, dt, method, p
@@ -531,7 +532,9 @@ def _finish(x, v, xo, vo, dt, p):
 
 
 @njit(cache=True)
-def coupled_chunk(x, v, steps, dt, method, tab_a, tab_b, kx, kv, xs, vs, a0, a1, xo, vo, a0_valid, p):
+def coupled_chunk(
+    x, v, steps, dt, method, tab_a, tab_b, kx, kv, xs, vs, a0, a1, xo, vo, a0_valid, refresh, p
+):
     """Advance up to ``steps`` steps; stops after the first step that is not finite.
 
     Returns (steps taken, force evaluations, steps a collision changed,
@@ -560,7 +563,7 @@ def coupled_chunk(x, v, steps, dt, method, tab_a, tab_b, kx, kv, xs, vs, a0, a1,
                     x[i, k] += half_dt * (v[i, k] + e)
                     v[i, k] = e
         elif method == VERLET:
-            if not a0_valid:
+            if not a0_valid or refresh[step]:
                 accel(x, v, a0, p)
                 evals += 1
             for i in range(x.shape[0]):
