@@ -11,6 +11,7 @@ stores the machine code under ``__pycache__``; later runs load it.
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import numba
@@ -27,9 +28,14 @@ from animsim.forces.wind import Wind
 from animsim.integrators.runge_kutta import RungeKutta
 from animsim.system import State
 
-#: particle count from which the kernels' parallel loops use every core;
-#: below it thread start-up costs more than it saves (measured, benchmarks/RESULTS.md)
+#: particles + springs from which more than one thread is even tried; below
+#: it a parallel region's start-up costs more than it saves
 PARALLEL_MIN_WORK = 20_000
+#: timed calls per thread count before the stepper settles on the faster one.
+#: Measured, not assumed: on a machine whose cores other processes keep busy,
+#: every parallel region waits for a descheduled thread, and 2 threads ran
+#: cloth 128 at 25 steps/s against 425 on one (benchmarks/RESULTS.md).
+THREAD_TRIALS = 2
 #: largest (particles + springs) x steps one call may do, so Ctrl-C and the
 #: progress bar are served about every few tenths of a second
 MAX_WORK_PER_CALL = 20_000_000
@@ -156,7 +162,15 @@ class NumbaStepper:
             or (self.method == K.VERLET and not planes)
         )
         work = n + (len(a) if springs is not None else 0)
-        self.threads = threads or (numba.config.NUMBA_NUM_THREADS if work >= PARALLEL_MIN_WORK else 1)
+        cores = numba.config.NUMBA_NUM_THREADS
+        if threads is not None:
+            self._candidates = [max(1, min(threads, cores))]
+        elif work >= PARALLEL_MIN_WORK and cores > 1:
+            self._candidates = [cores, 1]
+        else:
+            self._candidates = [1]
+        self._trials: dict[int, list[float]] = {c: [] for c in self._candidates}
+        self.threads = self._candidates[0]
         self.max_steps_per_call = max(1, MAX_WORK_PER_CALL // max(work, 1))
         self._n = n
         self._stages = stages
@@ -165,7 +179,11 @@ class NumbaStepper:
         mode = (
             "particle-major fused steps" if self.particle_major else "step-major, parallel springs and gather"
         )
-        self.description = f"{mode}, {self.threads} thread{'s' if self.threads != 1 else ''}"
+        if len(self._candidates) > 1:
+            how = f"threads: {' or '.join(map(str, self._candidates))}, whichever runs faster on the first calls"
+        else:
+            how = f"{self.threads} thread{'s' if self.threads != 1 else ''}"
+        self.description = f"{mode}, {how}"
 
     def _buffer(self) -> dict[str, np.ndarray]:
         if self._buffers is None:
@@ -224,8 +242,20 @@ class NumbaStepper:
         NumPy loop's Guard would, so the Guard can report it.
         ``state.revision`` is bumped when a collision changed the state.
         """
-        x, v = state.particle_position, state.particle_velocity
+        trying = [c for c in self._candidates if len(self._trials[c]) < THREAD_TRIALS]
+        if trying:
+            self.threads = trying[0]
         numba.set_num_threads(self.threads)
+        started = time.perf_counter()
+        result = self._advance(state, steps, dt, clock)
+        if trying and result[0]:
+            self._trials[self.threads].append((time.perf_counter() - started) / result[0])
+            if len(trying) == 1 and len(self._trials[self.threads]) == THREAD_TRIALS:
+                self.threads = min(self._candidates, key=lambda c: min(self._trials[c]))
+        return result
+
+    def _advance(self, state: State, steps: int, dt: float, clock: Any) -> tuple[int, int, bool]:
+        x, v = state.particle_position, state.particle_velocity
         buf = self._buffer()
         refresh = self.verlet_refresh(clock, state.step, steps)
         if self.particle_major:

@@ -16,6 +16,7 @@ from animsim.integrators import FIXED_STEP
 from animsim.record import MemorySink
 from animsim.scene.loader import load_scene_text
 from animsim.simulate import run
+from tests.conftest import ROOT
 
 pytest.importorskip("numba")
 
@@ -203,7 +204,8 @@ def test_cli_backend_numba_on_unsupported_integrator_exits_2(tmp_path, cli):
 
 
 def test_cli_backend_numba_on_turbulence_exits_2(tmp_path, cli):
-    pytest.importorskip("animsim.forces.turbulence")
+    if not (ROOT / "animsim" / "forces" / "turbulence.py").exists():  # not importorskip: an
+        pytest.skip("turbulence is not in this tree")  # editable install elsewhere may supply it
     scene = tmp_path / "s.yaml"
     scene.write_text(
         PARTICLES.replace(
