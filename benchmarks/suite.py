@@ -51,8 +51,8 @@ WORKLOADS = ("cloth", "particles", "tiny", "io", "render")
 
 @dataclass
 class Settings:
-    samples: int = 7
-    seconds: float = 0.25  # per sample
+    samples: int = 5
+    seconds: float = 0.2  # per sample
     cloth_sizes: tuple[int, ...] = CLOTH_SIZES
     particle_counts: tuple[int, ...] = PARTICLE_COUNTS
 
@@ -266,6 +266,26 @@ def peer_contenders(workload: str, n: int, notes: list[str]) -> list[Contender]:
     return out
 
 
+def thread_counts(notes: list[str]) -> tuple[int, ...]:
+    """Thread counts to measure the numba backend with.
+
+    All cores only when the machine has them to spare: with the load average
+    above the core count every parallel region waits for a descheduled
+    thread (cloth 128: 25 steps/s on 2 threads against 425 on 1 while
+    building this suite), which measures the neighbours, not animsim, and
+    takes minutes per workload.
+    """
+    cores = os.cpu_count() or 1
+    load = os.getloadavg()[0]
+    if cores > 1 and load > cores:
+        notes.append(
+            f"animsim numba on {cores} threads skipped: load average {load:.1f} > {cores} cores "
+            "(oversubscribed cores make parallel regions wait for descheduled threads)"
+        )
+        return (1,)
+    return (1, cores) if cores > 1 else (1,)
+
+
 def numba_ok(notes: list[str]) -> bool:
     if importlib.util.find_spec("numba") is None:
         notes.append('animsim numba backend skipped: numba is not installed (pip install -e ".[fast]")')
@@ -295,7 +315,7 @@ def bench_cloth(settings: Settings) -> Table:
                 numpy_contender(_compile(cloth_scene(n, "implicit_euler")), "animsim numpy, implicit Euler")
             )
         if use_numba:
-            for threads in (1, os.cpu_count() or 1):
+            for threads in thread_counts(table.notes):
                 contenders.append(numba_contender(default, threads, f"animsim numba, {threads} thread(s)"))
         sample(contenders, settings)
         add_rows(
@@ -330,7 +350,7 @@ def bench_particles(settings: Settings) -> Table:
         compiled.initial.particle_velocity[:] = prob.v0
         contenders.append(numpy_contender(compiled, "animsim numpy (default)"))
         if use_numba:
-            for threads in (1, os.cpu_count() or 1):
+            for threads in thread_counts(table.notes):
                 contenders.append(numba_contender(compiled, threads, f"animsim numba, {threads} thread(s)"))
         sample(contenders, settings)
         for c in contenders:
