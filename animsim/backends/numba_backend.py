@@ -198,7 +198,6 @@ class NumbaStepper:
                 "kx": np.zeros((s, *shape)) if self.method == K.RUNGE_KUTTA and big else np.zeros((1, 0, 3)),
                 "kv": np.zeros((s, *shape)) if self.method == K.RUNGE_KUTTA and big else np.zeros((1, 0, 3)),
                 "xo": np.zeros(shape),
-                "spring_f": np.zeros(shape),
                 "vo": np.zeros(shape),
             }
         return self._buffers
@@ -282,12 +281,7 @@ class NumbaStepper:
                 state.revision += 1
             return taken, evals, bool(bad)
         if self.method == K.SYMPLECTIC_EULER:
-            # The parallel spring pass + gather beats a serial scatter even on one
-            # thread (0.54 + 0.14 ms against 1.47 ms at cloth 128, CPU time).
-            gather = True
-            taken, changed_steps, failed = K.symplectic_chunk(
-                x, v, steps, dt, buf["spring_f"], gather, self.params
-            )
+            taken, changed_steps, failed = K.symplectic_chunk(x, v, steps, dt, self.params)
             state.revision += int(changed_steps)
             return int(taken), int(taken), bool(failed)
         taken, evals, changed_steps, valid, failed = K.coupled_chunk(
