@@ -202,3 +202,21 @@ record: {every: 10}
     assert np.abs(x1[-1] - x1[0]).max() > 1e-3  # the cloth moved
     _assert_close(x1, x2)
     _assert_close(v1, v2)
+
+
+def test_cli_explain_names_the_backend_and_the_slice_path(tmp_path, cli):
+    scene = tmp_path / "c.yaml"
+    scene.write_text(cloth_text(6, 5, ALL_CLOTH))
+    out = cli("explain", scene)
+    assert out.returncode == 0, out.stderr
+    assert "backend: numpy" in out.stdout
+    assert "as 6 grid slice blocks" in out.stdout
+
+
+def test_cli_unknown_backend_is_a_usage_error(tmp_path, cli):
+    scene = tmp_path / "c.yaml"
+    scene.write_text(cloth_text(3, 3, ALL_CLOTH))
+    out = cli("run", scene, "--backend", "reference", "-o", tmp_path / "o.csv")
+    assert out.returncode == 2
+    assert "valid: numpy, numba, auto" in out.stderr
+    assert not (tmp_path / "o.csv").exists()
