@@ -68,6 +68,13 @@ MaxFileSize = Annotated[int, typer.Option("--max-file-size", help="Largest scene
 MaxDepth = Annotated[int, typer.Option("--max-depth", help="Deepest YAML nesting.", min=1)]
 MaxNodes = Annotated[int, typer.Option("--max-nodes", help="Most YAML nodes after alias expansion.", min=1)]
 MaxSteps = Annotated[int, typer.Option("--max-steps", help="Most steps a run may take.", min=1)]
+BackendOpt = Annotated[
+    str,
+    typer.Option(
+        "--backend",
+        help="numpy (default), numba (compiled; pip install -e '.[fast]') or auto (numba when installed and able).",
+    ),
+]
 
 DEFAULT_MAX_STEPS = 100_000_000
 
@@ -81,6 +88,15 @@ class Format(StrEnum):
 
 # Output suffix -> format, for `run -o` without --format (an existing folder means PLY).
 SUFFIX_FORMATS = {".npz": Format.npz, ".ply": Format.ply, ".usda": Format.usda}
+
+
+def _backend(name: str) -> str:
+    """Check a --backend value (the library also accepts the internal 'reference')."""
+    from animsim.backends import BACKENDS
+
+    if name not in BACKENDS:
+        raise UsageError(f"--backend: unknown backend {name!r} (valid: {', '.join(BACKENDS)})")
+    return name
 
 
 def _limits(max_file_size: int, max_depth: int, max_nodes: int):
@@ -204,6 +220,7 @@ def run(
     max_depth: MaxDepth = 100,
     max_nodes: MaxNodes = 100_000,
     max_steps: MaxSteps = DEFAULT_MAX_STEPS,
+    backend: BackendOpt = "numpy",
 ) -> None:
     """Simulate SCENE and write its trajectory and a .meta.json beside it.
 
@@ -228,7 +245,7 @@ def run(
         check_ply_output(out, scene)
     elif not to_stdout:
         check_output_path(out, scene)
-    compiled = compile_scene(sc, loaded.name)
+    compiled = compile_scene(sc, loaded.name, backend=_backend(backend))
     if compiled.clock.steps > max_steps:
         raise UsageError(
             f"{scene}: {compiled.clock.steps} steps is more than the limit of {max_steps} (raise it with --max-steps)"
@@ -324,6 +341,7 @@ def _summary(compiled: Any, result: Any, wrote: str | None) -> None:
 def explain(
     scene: SceneArg,
     integrator: Annotated[str | None, typer.Option(help="Explain with this integrator instead.")] = None,
+    backend: BackendOpt = "numpy",
 ) -> None:
     """Show what SCENE compiles to: counts, the stages run each step, and what was left out."""
     from animsim.compile import compile_scene, with_overrides
@@ -331,7 +349,7 @@ def explain(
 
     loaded = load_scene(scene)
     sc = with_overrides(loaded.scene, integrator=integrator)
-    c = compile_scene(sc, loaded.name)
+    c = compile_scene(sc, loaded.name, backend=_backend(backend))
     s = c.system
     typer.echo(f"scene {c.name!r} ({scene})")
     typer.echo(

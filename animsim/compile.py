@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from animsim.backends import BACKEND_REFERENCE, attach_backend
 from animsim.collisions import ImpulsePlane, PlaneColliders
 from animsim.dynamics import Dynamics
 from animsim.errors import UsageError
@@ -20,8 +21,8 @@ from animsim.forces import ForceTerm
 from animsim.forces.attractor import Attractor
 from animsim.forces.drag import Drag, QuadraticDrag
 from animsim.forces.gravity import Gravity
+from animsim.forces.grid_springs import build_spring_term
 from animsim.forces.penalty import PenaltyPlane
-from animsim.forces.springs import Springs
 from animsim.forces.wind import Wind
 from animsim.integrators import integrator_class
 from animsim.integrators.base import Integrator
@@ -52,6 +53,8 @@ class Compiled:
     stages: list[str] = field(default_factory=list)
     left_out: list[str] = field(default_factory=list)
     conservative: bool = False
+    backend: str = "numpy"  # the backend that steps it (animsim.backends)
+    stepper: Any | None = None  # the numba backend's stepper; None: the NumPy loop
 
     @property
     def integrator_name(self) -> str:
@@ -101,7 +104,10 @@ def with_overrides(
     return new
 
 
-def compile_scene(scene: m.Scene, name: str = "scene") -> Compiled:
+def compile_scene(
+    scene: m.Scene, name: str = "scene", backend: str = "numpy", threads: int | None = None
+) -> Compiled:
+    """Compile ``scene`` for ``backend`` (see :mod:`animsim.backends`; ``threads``: numba's)."""
     stages: list[str] = []
     left_out: list[str] = []
 
@@ -116,6 +122,7 @@ def compile_scene(scene: m.Scene, name: str = "scene") -> Compiled:
     spring_kd: list[np.ndarray] = []
     spring_rest: list[np.ndarray | None] = []  # None: auto
     families: list[tuple[str, int, int]] = []
+    grids: list[tuple[int, tuple[int, ...], int, int]] = []
     spring_total = 0
 
     index_of = {pid: i for i, pid in enumerate(ids)}
@@ -143,6 +150,7 @@ def compile_scene(scene: m.Scene, name: str = "scene") -> Compiled:
         families.append(("listed springs", 0, len(scene.springs)))
         spring_total += len(scene.springs)
     for _, e, base in expanded:
+        grids.append((base, e.grid_shape, len(families), len(families) + len(e.springs)))
         for group in e.springs:
             k = len(group.index)
             spring_pairs.append(group.index + base)
@@ -173,7 +181,6 @@ def compile_scene(scene: m.Scene, name: str = "scene") -> Compiled:
     else:
         left_out.append("emitters: no births, deaths, ageing or over-life attributes")
 
-    n = len(particle_mass)
     particle_mass = np.where(particle_pinned, 0.0, particle_mass)
     with np.errstate(divide="ignore"):
         particle_inv_mass = np.where(
@@ -202,6 +209,7 @@ def compile_scene(scene: m.Scene, name: str = "scene") -> Compiled:
         spring_ks=ks,
         spring_kd=kd,
         spring_families=families,
+        structure_grids=grids,
     )
 
     # --- force terms: only those the scene uses -----------------------------------
@@ -231,8 +239,8 @@ def compile_scene(scene: m.Scene, name: str = "scene") -> Compiled:
         left_out.append("turbulence: the wind has none")
 
     if system.spring_count:
-        label = f"springs: {system.spring_count} in {len(families)} famil{'y' if len(families) == 1 else 'ies'} ({', '.join(f'{name} {b - a}' for name, a, b in families)}), bincount scatter"
-        terms.append(Springs(spring_index, rest, ks, kd, n, label))
+        label = f"springs: {system.spring_count} in {len(families)} famil{'y' if len(families) == 1 else 'ies'} ({', '.join(f'{name} {b - a}' for name, a, b in families)})"
+        terms.append(build_spring_term(system, label, grid=backend != BACKEND_REFERENCE))
     else:
         left_out.append("springs: none, so no spring forces or scatter")
 
@@ -308,7 +316,7 @@ def compile_scene(scene: m.Scene, name: str = "scene") -> Compiled:
         step=0,
         particle_alive=particle_alive,
     )
-    return Compiled(
+    compiled = Compiled(
         name=name,
         scene=scene,
         system=system,
@@ -325,3 +333,5 @@ def compile_scene(scene: m.Scene, name: str = "scene") -> Compiled:
         left_out=left_out,
         conservative=conservative,
     )
+    attach_backend(compiled, backend, threads=threads)
+    return compiled

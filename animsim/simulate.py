@@ -164,6 +164,13 @@ def run(
     ``stop`` is polled at each step boundary (Ctrl-C handling sets it); the
     frames so far are kept and the status is ``interrupted``.
     """
+    if compiled.stepper is not None:  # a compiled backend fuses the steps (issue 8)
+        from animsim.backends.chunked import run_chunked
+
+        chunk_guard = guard or Guard(compiled)
+        return run_chunked(
+            compiled, sinks, stop=stop, progress=progress, guard=chunk_guard, meta_extra=meta_extra
+        )
     state = compiled.fresh_state()
     dyn = compiled.dynamics
     integ = compiled.integrator

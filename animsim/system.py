@@ -34,6 +34,9 @@ class System:
     spring_kd: np.ndarray
     # (family label, first spring, end spring): contiguous runs of generated springs.
     spring_families: list[tuple[str, int, int]] = field(default_factory=list)
+    # (first particle, grid shape, first family, end family) of each generated
+    # structure, so spring kernels can work on the grid by slices (issue 8).
+    structure_grids: list[tuple[int, tuple[int, ...], int, int]] = field(default_factory=list)
 
     @property
     def particle_count(self) -> int:

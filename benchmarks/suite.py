@@ -1,0 +1,559 @@
+"""animsim's benchmark suite: ``python -m benchmarks [--quick] [--only ...]``.
+
+Every workload is measured side by side, in the same run, for animsim's
+backends and for the peers of :mod:`benchmarks.peers` (plain NumPy with a
+bincount scatter, Warp CPU). Contenders of one workload are sampled round
+robin (A B C A B C ...), so a load spike from another process on this shared
+machine hits them all alike instead of one contender's whole measurement.
+The results go to ``benchmarks/RESULTS.md`` (machine, versions, medians and
+the p10/p90 spread), followed by ``benchmarks/optimisation_log.md``.
+
+Speed is measured here and never asserted in a test.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.metadata
+import importlib.util
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.peers import PeerUnavailable, load_peers
+from benchmarks.peers import particles as P
+from benchmarks.peers.cloth import BEND, GRAVITY, PARTICLE_MASS, SHEAR, STRUCTURAL
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+DEFAULT_OUTPUT = HERE / "RESULTS.md"
+LOG = HERE / "optimisation_log.md"
+
+#: steps between recorded frames for the compiled backend's calls (a 50 fps
+#: animation at dt = 1 ms); the NumPy contenders and the peers step one at a time
+STEPS_PER_FRAME = 20
+CLOTH_SIZES = (32, 128, 256)
+PARTICLE_COUNTS = (100_000, 1_000_000)
+TINY_STEPS = 20_000
+TINY_RECORD_EVERY = 100
+IO_GRID = 64  # 64 x 64 = 4096 rows per frame
+IO_FRAMES = 25
+WORKLOADS = ("cloth", "particles", "tiny", "io", "render")
+
+
+@dataclass
+class Settings:
+    samples: int = 5
+    seconds: float = 0.2  # per sample
+    cloth_sizes: tuple[int, ...] = CLOTH_SIZES
+    particle_counts: tuple[int, ...] = PARTICLE_COUNTS
+
+
+QUICK = Settings(samples=3, seconds=0.1, cloth_sizes=(32, 128), particle_counts=(100_000,))
+
+
+@dataclass
+class Contender:
+    """One way to run a workload: ``call()`` advances ``steps_per_call`` steps."""
+
+    label: str
+    call: Callable[[], None]
+    steps_per_call: int = 1
+    note: str = ""
+    rates: list[float] = field(default_factory=list)  # steps/s per sample
+
+
+@dataclass
+class Table:
+    title: str
+    unit: str  # how a rate is shown
+    scale: float  # rate (steps/s) -> shown unit
+    rows: list[tuple[str, str, str, str, str]] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+
+def in_tree(module: str) -> bool:
+    """True if ``module`` exists in this checkout's animsim.
+
+    ``importlib.util.find_spec`` alone is not enough: an editable install of
+    another checkout can supply submodules this tree lacks.
+    """
+    import animsim
+
+    spec = importlib.util.find_spec(module)
+    if spec is None or spec.origin is None:
+        return False
+    return Path(spec.origin).resolve().is_relative_to(Path(animsim.__file__).resolve().parent)
+
+
+def _version(dist: str) -> str:
+    try:
+        return importlib.metadata.version(dist)
+    except importlib.metadata.PackageNotFoundError:
+        return "not installed"
+
+
+def machine() -> list[str]:
+    model = "unknown"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    mem = "unknown"
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemTotal"):
+                mem = f"{int(line.split()[1]) / 1024**2:.1f} GiB"
+    except OSError:
+        pass
+    try:
+        commit = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True, check=False
+        ).stdout.strip()
+    except OSError:
+        commit = "?"
+    import animsim
+
+    return [
+        f"- CPU: {model}, {os.cpu_count()} cores; memory {mem}",
+        f"- load average at start: {' '.join(f'{x:.2f}' for x in os.getloadavg())} (a shared machine: other jobs ran beside this one)",
+        f"- Python {platform.python_version()}, NumPy {np.__version__}, numba {_version('numba')}, "
+        f"warp-lang {_version('warp-lang')}, animsim {animsim.__version__} (commit {commit})",
+    ]
+
+
+def sample(contenders: list[Contender], settings: Settings) -> None:
+    """Warm up, calibrate and sample every contender, round robin."""
+    counts = []
+    for c in contenders:
+        c.call()  # warm-up (compiles, fills caches)
+        t0 = time.perf_counter()
+        c.call()
+        once = max(time.perf_counter() - t0, 1e-9)
+        counts.append(max(1, round(settings.seconds / once)))
+    for _ in range(settings.samples):
+        for c, k in zip(contenders, counts, strict=True):
+            t0 = time.perf_counter()
+            for _ in range(k):
+                c.call()
+            c.rates.append(k * c.steps_per_call / (time.perf_counter() - t0))
+
+
+def add_rows(table: Table, workload: str, contenders: list[Contender], baseline: str | None) -> None:
+    base = next((c for c in contenders if c.label == baseline), None)
+    base_median = float(np.median(base.rates)) if base and base.rates else None
+    for c in contenders:
+        r = np.asarray(c.rates) * table.scale
+        med, p10, p90 = np.median(r), np.percentile(r, 10), np.percentile(r, 90)
+        if table.unit == "us/step":  # lower is better: show the time, spread reversed
+            med, p10, p90 = 1e6 / med, 1e6 / p90, 1e6 / p10
+        ratio = f"{np.median(c.rates) / base_median:.2f}x" if base_median else ""
+        label = c.label + (f" ({c.note})" if c.note else "")
+        table.rows.append((workload, label, _fmt(med), f"{_fmt(p10)} - {_fmt(p90)}", ratio))
+
+
+def _fmt(x: float) -> str:
+    return f"{x:,.0f}" if x >= 100 else f"{x:.3g}"
+
+
+# --- animsim contenders --------------------------------------------------------------
+
+
+def _compile(text: str, backend: str = "numpy", threads: int | None = None):
+    from animsim.compile import compile_scene
+    from animsim.scene.loader import load_scene_text
+
+    return compile_scene(load_scene_text(text).scene, "bench", backend=backend, threads=threads)
+
+
+def cloth_scene(n: int, integrator: str = "symplectic_euler") -> str:
+    """The peers' cloth (benchmarks/peers/cloth.py) as an animsim scene."""
+    fam = {"structural": STRUCTURAL, "shear": SHEAR, "bend": BEND}
+    lines = "".join(f"    {k}: {{ks: {ks}, kd: {kd}}}\n" for k, (ks, kd) in fam.items())
+    return f"""
+duration: 1000.0
+dt: 0.001
+integrator: {integrator}
+record: {{every: {STEPS_PER_FRAME}}}
+forces: [{{type: gravity, g: {list(GRAVITY)}}}]
+structures:
+  - type: cloth
+    id: c
+    plane: xz
+    size: [1, 1]
+    resolution: [{n}, {n}]
+    mass: {PARTICLE_MASS}
+{lines}    pin: ["c[0,0]", "c[{n - 1},0]"]
+"""
+
+
+def particles_scene(n: int) -> str:
+    """The peers' particle forces and ground (benchmarks/peers/particles.py), fixed particles.
+
+    Without ``animsim.emitters`` a strand with no springs is the cheapest way
+    to get n particles; its state is then replaced by the peers' initial state.
+    """
+    return f"""
+duration: 1000.0
+dt: {P.DT}
+record: {{every: {STEPS_PER_FRAME}}}
+forces:
+  - {{type: gravity, g: {list(P.GRAVITY)}}}
+  - {{type: drag, k: {P.K_DRAG}}}
+  - {{type: wind, velocity: {list(P.WIND)}, k: {P.K_WIND}}}
+planes: [{{point: [0, 0, 0], normal: [0, 1, 0], restitution: {P.RESTITUTION}}}]
+structures:
+  - {{type: strand, id: s, start: [0, 0, 0], end: [1, 0, 0], count: {n}, mass: {P.PARTICLE_MASS}}}
+"""
+
+
+def numpy_contender(compiled, label: str, note: str = "") -> Contender:
+    """One step of the NumPy loop's work: integrate, collide, guard."""
+    from animsim.simulate import Guard
+
+    state = compiled.fresh_state()
+    integ, colliders, guard, dt = compiled.integrator, compiled.colliders, Guard(compiled), compiled.clock.dt
+    integ.reset()
+    x_old = np.empty_like(state.particle_position)
+    v_old = np.empty_like(state.particle_velocity)
+
+    def call() -> None:
+        if colliders is not None:
+            np.copyto(x_old, state.particle_position)
+            np.copyto(v_old, state.particle_velocity)
+        integ.step(state, dt)
+        if colliders is not None:
+            colliders.apply(x_old, v_old, state.particle_position, state.particle_velocity, dt)
+        guard.check(state)
+
+    return Contender(label, call, 1, note)
+
+
+def numba_contender(compiled, threads: int, label: str) -> Contender:
+    from animsim.backends.numba_backend import NumbaStepper
+
+    stepper = NumbaStepper(compiled, threads=threads)
+    state = compiled.fresh_state()
+    clock = compiled.clock
+
+    def call() -> None:
+        stepper.advance(state, STEPS_PER_FRAME, clock.dt, clock)
+        state.step += STEPS_PER_FRAME
+
+    return Contender(label, call, STEPS_PER_FRAME, f"{STEPS_PER_FRAME} steps per call")
+
+
+def peer_contenders(workload: str, n: int, notes: list[str]) -> list[Contender]:
+    out = []
+    for peer in load_peers():
+        try:
+            st = peer.cloth_stepper(n) if workload == "cloth" else peer.particles_stepper(n)
+        except PeerUnavailable as exc:
+            notes.append(f"{peer.LABEL} skipped: {exc}")
+            continue
+        out.append(Contender(f"peer: {peer.LABEL}", st.step, 1))
+    return out
+
+
+def thread_counts(notes: list[str]) -> tuple[int, ...]:
+    """Thread counts to measure the numba backend with.
+
+    All cores only when the machine has them to spare: with the load average
+    above the core count every parallel region waits for a descheduled
+    thread (cloth 128: 25 steps/s on 2 threads against 425 on 1 while
+    building this suite), which measures the neighbours, not animsim, and
+    takes minutes per workload.
+    """
+    cores = os.cpu_count() or 1
+    load = os.getloadavg()[0]
+    if cores > 1 and load > cores:
+        if not any(n.startswith("animsim numba on") for n in notes):
+            notes.append(
+                f"animsim numba on {cores} threads skipped: load average {load:.1f} > {cores} cores "
+                "(oversubscribed cores make parallel regions wait for descheduled threads)"
+            )
+        return (1,)
+    return (1, cores) if cores > 1 else (1,)
+
+
+def numba_ok(notes: list[str]) -> bool:
+    if importlib.util.find_spec("numba") is None:
+        notes.append('animsim numba backend skipped: numba is not installed (pip install -e ".[fast]")')
+        return False
+    return True
+
+
+def bench_cloth(settings: Settings) -> Table:
+    from animsim.integrators import REGISTRY
+
+    table = Table("Cloth n x n (structural + shear + bend, symplectic Euler, dt = 1 ms)", "steps/s", 1.0)
+    implicit = "implicit_euler" in REGISTRY
+    if not implicit:
+        table.notes.append(
+            "implicit Euler skipped: `implicit_euler` is not registered in this build (issue 5)"
+        )
+    use_numba = numba_ok(table.notes)
+    for n in settings.cloth_sizes:
+        springs = 2 * n * (n - 1) + 2 * (n - 1) ** 2 + 2 * n * (n - 2)
+        contenders = peer_contenders("cloth", n, table.notes)
+        ref = _compile(cloth_scene(n), "reference")
+        contenders.append(numpy_contender(ref, "animsim numpy, generic bincount (before)"))
+        default = _compile(cloth_scene(n))
+        contenders.append(numpy_contender(default, "animsim numpy, grid slices (default)"))
+        if implicit:
+            contenders.append(
+                numpy_contender(_compile(cloth_scene(n, "implicit_euler")), "animsim numpy, implicit Euler")
+            )
+        if use_numba:
+            for threads in thread_counts(table.notes):
+                contenders.append(numba_contender(default, threads, f"animsim numba, {threads} thread(s)"))
+        sample(contenders, settings)
+        add_rows(
+            table, f"cloth {n} ({springs:,} springs)", contenders, "peer: plain NumPy (bincount scatter)"
+        )
+        print(f"  cloth {n} done", flush=True)
+    return table
+
+
+def bench_particles(settings: Settings) -> Table:
+    table = Table(
+        "Particles with gravity, drag, wind and a ground plane (symplectic Euler, dt = 1 ms)",
+        "M particle-steps/s",
+        1.0,
+    )
+    emitters = in_tree("animsim.emitters")
+    table.notes.append(
+        "animsim runs fixed particles (a strand without springs) started from the peers' initial state, "
+        "with its impulse plane (time of impact, restitution); the peers also respawn particles by age"
+        + (
+            " (animsim.emitters exists, but an emitter scene is not wired into this suite yet)"
+            if emitters
+            else " (animsim.emitters is absent in this build)"
+        )
+    )
+    use_numba = numba_ok(table.notes)
+    for n in settings.particle_counts:
+        prob = P.make_particles(n, 0)
+        contenders = peer_contenders("particles", n, table.notes)
+        compiled = _compile(particles_scene(n))
+        compiled.initial.particle_position[:] = prob.x0
+        compiled.initial.particle_velocity[:] = prob.v0
+        contenders.append(numpy_contender(compiled, "animsim numpy (default)"))
+        if use_numba:
+            for threads in thread_counts(table.notes):
+                contenders.append(numba_contender(compiled, threads, f"animsim numba, {threads} thread(s)"))
+        sample(contenders, settings)
+        for c in contenders:
+            c.rates = [r * n / 1e6 for r in c.rates]
+        add_rows(table, f"{n:.0e} particles", contenders, "peer: plain NumPy (bincount scatter)")
+        print(f"  particles {n} done", flush=True)
+    return table
+
+
+class NullSink:
+    """Takes frames and drops them: the loop's recording cost without I/O."""
+
+    def begin(self, header) -> None: ...
+
+    def write(self, frame) -> None: ...
+
+    def close(self, meta) -> None: ...
+
+    def abort(self) -> None: ...
+
+
+TINY = f"""
+duration: {TINY_STEPS * 1e-4}
+dt: 0.0001
+record: {{every: {TINY_RECORD_EVERY}}}
+particles: [{{id: p, mass: 1, position: [0, 0, 0]}}]
+forces: [{{type: gravity}}]
+"""
+
+
+def bench_tiny(settings: Settings) -> Table:
+    from animsim.simulate import run
+
+    table = Table(
+        f"Tiny scene: 1 particle, gravity, symplectic Euler; whole `run()` of {TINY_STEPS:,} steps, "
+        f"a frame every {TINY_RECORD_EVERY} to a sink that drops it",
+        "us/step",
+        1.0,
+    )
+    contenders = []
+    # No "before" row: without springs the reference backend runs the same
+    # code; the loop's before/after is in the optimisation log (CPU time).
+    backends = [("numpy", "animsim numpy (default)")]
+    if numba_ok(table.notes):
+        backends.append(("numba", "animsim numba"))
+    for backend, label in backends:
+        compiled = _compile(TINY, backend)
+
+        def call(compiled=compiled) -> None:
+            run(compiled, [NullSink()])
+
+        contenders.append(Contender(label, call, TINY_STEPS))
+    sample(contenders, Settings(samples=settings.samples, seconds=settings.seconds))
+    add_rows(table, "tiny", contenders, None)
+    table.notes.append("per step = wall time of run() / steps, including energy at start and end")
+    return table
+
+
+def bench_io(settings: Settings) -> Table:
+    from animsim.export.csv import CsvSink
+    from animsim.export.npz import NpzSink
+    from animsim.record import Frame
+
+    table = Table(f"Trajectory writing: {IO_FRAMES} frames of {IO_GRID * IO_GRID:,} particles", "rows/s", 1.0)
+    compiled = _compile(cloth_scene(IO_GRID))
+    rng = np.random.default_rng(0)
+    n = compiled.system.particle_count
+    x = compiled.initial.particle_position + rng.normal(scale=0.01, size=(n, 3))
+    v = rng.normal(size=(n, 3))
+    index = np.arange(n, dtype=np.int64)
+    tmp = Path(tempfile.mkdtemp(prefix="animsim-bench-"))
+    contenders = []
+    for label, make in (
+        ("CsvSink", lambda p: CsvSink(p / "t.csv", write_meta=False)),
+        ("NpzSink", lambda p: NpzSink(p / "t.npz")),
+    ):
+
+        def call(make=make) -> None:
+            sink = make(tmp)
+            sink.begin(compiled.header)
+            for k in range(IO_FRAMES):
+                sink.write(Frame(step=k, time=k * 1e-3, index=index, position=x, velocity=v))
+            sink.close({"status": "ok"})
+
+        contenders.append(Contender(label, call, IO_FRAMES * n))
+    sample(contenders, Settings(samples=max(3, settings.samples // 2), seconds=settings.seconds))
+    add_rows(table, f"{IO_FRAMES} x {n:,} rows", contenders, None)
+    return table
+
+
+def bench_render(settings: Settings) -> Table:
+    table = Table("Rendering", "frames/s", 1.0)
+    if not in_tree("animsim.export.animation"):
+        table.notes.append(
+            "skipped: `animsim.export.animation` is absent in this build (a colleague's issue)"
+        )
+    else:
+        table.notes.append(
+            "skipped: `animsim.export.animation` exists but its API is not wired into this suite yet"
+        )
+    return table
+
+
+def startup() -> list[str]:
+    """Seconds for a fresh process to import, compile a scene and run it, per backend."""
+    lines = []
+    tiny = Path(tempfile.mkdtemp(prefix="animsim-bench-")) / "tiny.yaml"
+    tiny.write_text(TINY)
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    backends = ["numpy"] + (["numba"] if importlib.util.find_spec("numba") else [])
+    for backend in backends:
+        t0 = time.perf_counter()
+        out = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "animsim",
+                "run",
+                str(tiny),
+                "-o",
+                str(tiny.with_suffix(".csv")),
+                "-q",
+                "--backend",
+                backend,
+            ],
+            capture_output=True,
+            text=True,
+            env=env,
+            check=False,
+        )
+        wall = time.perf_counter() - t0
+        status = "ok" if out.returncode == 0 else f"exit {out.returncode}: {out.stderr.strip()[:200]}"
+        lines.append(f"| `animsim run tiny.yaml --backend {backend}` | {wall:.2f} s | {status} |")
+    return lines
+
+
+def render_markdown(tables: list[Table], header: list[str], start_lines: list[str], elapsed: float) -> str:
+    out = [
+        "# animsim benchmarks",
+        "",
+        "Written by `python -m benchmarks` (see `benchmarks/suite.py`); do not edit by hand.",
+        "Medians over samples taken round robin across the contenders of a workload, with the",
+        "10th-90th percentile spread; `vs plain` is the median over the plain-NumPy peer's in the same run.",
+        "",
+        "## Machine",
+        "",
+        *header,
+        f"- load average at end: {' '.join(f'{x:.2f}' for x in os.getloadavg())}; suite took {elapsed:.0f} s",
+        "",
+    ]
+    for t in tables:
+        out += [f"## {t.title}", ""]
+        if t.rows:
+            out += [
+                f"| workload | contender | median {t.unit} | p10 - p90 | vs plain |",
+                "| --- | --- | ---: | ---: | ---: |",
+            ]
+            out += [f"| {' | '.join(r)} |" for r in t.rows]
+            out.append("")
+        out += [f"- {note}" for note in dict.fromkeys(t.notes)]
+        out.append("")
+    if start_lines:
+        out += ["## Start-up (fresh process, numba kernels from the on-disk cache)", ""]
+        out += ["| command | wall time | status |", "| --- | ---: | --- |", *start_lines, ""]
+    if LOG.exists():
+        out += [LOG.read_text().rstrip(), ""]
+    return "\n".join(out)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m benchmarks", description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="fewer, shorter samples and only the smaller sizes")
+    ap.add_argument(
+        "--only",
+        default=",".join(WORKLOADS),
+        help=f"comma-separated workloads (default all: {','.join(WORKLOADS)})",
+    )
+    ap.add_argument("--output", type=Path, default=DEFAULT_OUTPUT, help="where to write the Markdown results")
+    args = ap.parse_args(argv)
+    only = [w.strip() for w in args.only.split(",") if w.strip()]
+    unknown = sorted(set(only) - set(WORKLOADS))
+    if unknown:
+        ap.error(f"unknown workload(s) {', '.join(unknown)} (valid: {', '.join(WORKLOADS)})")
+    settings = QUICK if args.quick else Settings()
+    t0 = time.perf_counter()
+    header = machine()
+    print("\n".join(header), flush=True)
+    runners = {
+        "cloth": bench_cloth,
+        "particles": bench_particles,
+        "tiny": bench_tiny,
+        "io": bench_io,
+        "render": bench_render,
+    }
+    tables = []
+    for name in WORKLOADS:
+        if name in only:
+            print(f"{name} ...", flush=True)
+            tables.append(runners[name](settings))
+    start_lines = startup() if "tiny" in only else []
+    text = render_markdown(tables, header, start_lines, time.perf_counter() - t0)
+    args.output.write_text(text)
+    print(text)
+    print(f"wrote {args.output}")
+    return 0
