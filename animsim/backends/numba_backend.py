@@ -26,6 +26,7 @@ from animsim.forces.penalty import PenaltyPlane
 from animsim.forces.springs import Springs
 from animsim.forces.wind import Wind
 from animsim.integrators.runge_kutta import RungeKutta
+from animsim.integrators.symplectic import CACHE_TIME_RTOL
 from animsim.system import State
 
 #: particles + springs from which more than one thread is even tried; below
@@ -211,9 +212,9 @@ class NumbaStepper:
 
         The NumPy Verlet keys its cache on (revision, time) and stores
         ``time + dt``; the loop sets the time from the clock (``duration * i /
-        steps``), which can differ from ``time + dt`` in the last bit. Then it
-        recomputes a(x, v) instead of reusing a(x, v_predicted): a different
-        trajectory, which this backend must reproduce.
+        steps``), which can differ from ``time + dt`` in the last bit, so the
+        NumPy side compares with a relative tolerance (CACHE_TIME_RTOL) and
+        only a real jump in time refreshes the cache. This mirrors that rule.
         """
         refresh = np.zeros(steps, dtype=bool)
         if self.method != K.VERLET:
@@ -228,7 +229,9 @@ class NumbaStepper:
                 last = clock.duration - (clock.steps - 1) * clock.dt
                 dts = np.where(idx < clock.steps - 1, clock.dt, last)
             t = np.where(idx >= clock.steps, clock.duration, t)
-            refresh = t[:-1] + dts[:-1] != t[1:]
+            refresh = np.abs(t[:-1] + dts[:-1] - t[1:]) > CACHE_TIME_RTOL * np.maximum(
+                np.abs(t[1:]), dts[:-1]
+            )
         if first == 0 or not self._a0_valid:
             refresh[0] = True
         return refresh
