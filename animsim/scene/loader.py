@@ -24,6 +24,7 @@ from typing import Any, Union, get_args, get_origin
 
 import yaml
 from pydantic import BaseModel, ValidationError
+from yaml.events import AliasEvent
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
 from animsim.errors import Diagnostic, SceneError, UsageError
@@ -36,8 +37,16 @@ DEFAULT_MAX_FILE_BYTES = 50 * 1024 * 1024
 DEFAULT_MAX_DEPTH = 100
 DEFAULT_MAX_NODES = 100_000
 
+_UTF8_BOM = b"\xef\xbb\xbf"
+
 _TAG = "tag:yaml.org,2002:"
 _ALLOWED_TAGS = {f"{_TAG}{t}" for t in ("str", "int", "float", "bool", "null", "map", "seq")}
+# Which node kind each allowed tag may sit on (``!!map [1, 2]`` is refused).
+_TAG_KIND: dict[str, type[Node]] = {
+    **{f"{_TAG}{t}": ScalarNode for t in ("str", "int", "float", "bool", "null")},
+    f"{_TAG}map": MappingNode,
+    f"{_TAG}seq": SequenceNode,
+}
 
 # YAML 1.2 core schema (https://yaml.org/spec/1.2.2/#1032-tag-resolution).
 _NULL = re.compile(r"^(~|null|Null|NULL|)$")
@@ -117,8 +126,15 @@ class _Loader(yaml.SafeLoader):
     def __init__(self, stream: str):
         super().__init__(stream)
         self._depth = 0
+        #: nodes as written (an alias counts once), for the alias-expansion limit
+        self.written = 0
+        #: every alias in document order: (line, column, anchor, the node it names)
+        self.aliases: list[tuple[int, int, str, Node]] = []
 
     def compose_node(self, parent: Node | None, index: Any) -> Node:  # type: ignore[override]
+        # The check comes before PyYAML's own recursion, so 3000 nested "[" or
+        # "- " never reach Python's recursion limit (PyYAML's scanner and
+        # parser are iterative; only this composer recurses).
         self._depth += 1
         try:
             if self._depth > self.max_depth:
@@ -129,6 +145,13 @@ class _Loader(yaml.SafeLoader):
                     (),
                     f"nesting deeper than {self.max_depth} levels (raise it with --max-depth)",
                 )
+            self.written += 1
+            if self.check_event(AliasEvent):
+                event = self.peek_event()
+                node = super().compose_node(parent, index)
+                mark = event.start_mark
+                self.aliases.append((mark.line + 1, mark.column + 1, str(event.anchor), node))
+                return node
             return super().compose_node(parent, index)
         finally:
             self._depth -= 1
@@ -170,10 +193,96 @@ def _yaml11_hint(value: str) -> str | None:
     return None
 
 
+def _expansion(root: Node) -> tuple[dict[int, int], dict[int, int]]:
+    """Size and depth of every node's subtree with aliases expanded, per ``id(node)``.
+
+    Computed on the composed graph, where an alias is the anchored node itself,
+    so each node is visited once: a "billion laughs" file costs as many steps
+    as it has distinct nodes, not as many as it would expand to. Iterative,
+    because a chain of aliases can be far deeper than the written nesting.
+    Raises ``_Fault`` for an alias that refers to a node containing itself.
+    """
+    size: dict[int, int] = {}
+    depth: dict[int, int] = {}
+    on_stack: set[int] = set()
+    stack: list[tuple[Node, bool]] = [(root, False)]
+    while stack:
+        node, children_done = stack.pop()
+        key = id(node)
+        if children_done:
+            kids = _children(node)
+            size[key] = 1 + sum(size[id(k)] for k in kids)
+            depth[key] = 1 + max((depth[id(k)] for k in kids), default=0)
+            on_stack.discard(key)
+            continue
+        if key in size:
+            continue
+        if key in on_stack:
+            line, col = _mark(node)
+            raise _Fault(
+                line, col, (), "an alias refers to the collection that contains it (a recursive structure)"
+            )
+        on_stack.add(key)
+        stack.append((node, True))
+        for kid in _children(node):
+            kid_key = id(kid)
+            if kid_key in on_stack:
+                line, col = _mark(node)
+                raise _Fault(
+                    line,
+                    col,
+                    (),
+                    "an alias refers to the collection that contains it (a recursive structure)",
+                )
+            if kid_key not in size:
+                stack.append((kid, False))
+    return size, depth
+
+
+def _children(node: Node) -> list[Node]:
+    if isinstance(node, SequenceNode):
+        return list(node.value)
+    if isinstance(node, MappingNode):
+        return [n for pair in node.value for n in pair]
+    return []
+
+
+def _check_expansion(root: Node, loader: _Loader, limits: Limits) -> None:
+    """Refuse, before building any data, a document that aliases blow up.
+
+    The limit counts the nodes aliases *add* (the expanded size minus the
+    nodes as written), so a long scene written out in full is never mistaken
+    for an alias bomb. Merge keys are counted in full (an upper bound).
+    """
+    if not loader.aliases:
+        return
+    size, depth = _expansion(root)
+    added = size[id(root)] - loader.written
+    if added > limits.max_nodes:
+        line, col, anchor, _ = max(loader.aliases, key=lambda a: (size[id(a[3])], -a[0], -a[1]))
+        raise _Fault(
+            line,
+            col,
+            (),
+            f"aliases would expand the document by {added} nodes, more than the limit of "
+            f"{limits.max_nodes} (the largest is *{anchor}; raise it with --max-nodes)",
+        )
+    if depth[id(root)] > limits.max_depth:
+        line, col, anchor, _ = max(loader.aliases, key=lambda a: (depth[id(a[3])], -a[0], -a[1]))
+        raise _Fault(
+            line,
+            col,
+            (),
+            f"aliases nest the document {depth[id(root)]} levels deep, more than the limit of "
+            f"{limits.max_depth} (the deepest is *{anchor}; raise it with --max-depth)",
+        )
+
+
 class _Builder:
     """Turns composed nodes into Python data, recording marks as it goes."""
 
     def __init__(self, max_nodes: int):
+        """``max_nodes`` bounds the whole build: a safety net behind ``_check_expansion``."""
         self.marks = Marks()
         self.max_nodes = max_nodes
         self.count = 0
@@ -193,7 +302,14 @@ class _Builder:
         if node.tag not in _ALLOWED_TAGS and node.tag != f"{_TAG}merge":
             line, col = _mark(node)
             shown = node.tag.replace(_TAG, "!!")
-            raise _Fault(line, col, path, f"the tag {shown} is not allowed in a scene (nothing is ever executed)")
+            raise _Fault(
+                line, col, path, f"the tag {shown} is not allowed in a scene (nothing is ever executed)"
+            )
+        kind = _TAG_KIND.get(node.tag)
+        if kind is not None and not isinstance(node, kind):
+            line, col = _mark(node)
+            shown = node.tag.replace(_TAG, "!!")
+            raise _Fault(line, col, path, f"the tag {shown} does not fit this kind of value")
         if isinstance(node, ScalarNode):
             return self._scalar(node, path)
         if isinstance(node, SequenceNode):
@@ -210,6 +326,8 @@ class _Builder:
             if tag == "null":
                 return None
             if tag == "bool":
+                if not _BOOL.match(v):  # an explicit !!bool "yes" is not YAML 1.2
+                    raise ValueError(v)
                 return v.lower() == "true"
             if tag == "int":
                 if v.startswith("0o"):
@@ -218,8 +336,14 @@ class _Builder:
                     return int(v[2:], 16)
                 return int(v)
             if tag == "float":
-                return float(v.replace(".inf", "inf").replace(".Inf", "inf").replace(".INF", "inf")
-                             .replace(".nan", "nan").replace(".NaN", "nan").replace(".NAN", "nan"))
+                return float(
+                    v.replace(".inf", "inf")
+                    .replace(".Inf", "inf")
+                    .replace(".INF", "inf")
+                    .replace(".nan", "nan")
+                    .replace(".NaN", "nan")
+                    .replace(".NAN", "nan")
+                )
         except ValueError as exc:
             raise _Fault(line, col, path, f"{v!r} is not a valid {tag}") from exc
         if node.style is None:
@@ -238,7 +362,9 @@ class _Builder:
                 for src in sources:
                     if not isinstance(src, MappingNode):
                         line, col = _mark(src)
-                        raise _Fault(line, col, path, "a merge key (<<) takes a mapping or a list of mappings")
+                        raise _Fault(
+                            line, col, path, "a merge key (<<) takes a mapping or a list of mappings"
+                        )
                     merged.extend(src.value)
                 continue
             if not isinstance(key_node, ScalarNode):
@@ -305,15 +431,25 @@ def load_scene_bytes(raw: bytes, file: str, limits: Limits = Limits()) -> Loaded
     data, marks = parse_yaml(text, file, limits)
     if not isinstance(data, dict):
         kind = "empty" if data is None else f"a {type(data).__name__}"
-        raise SceneError([Diagnostic(file, 1, 1, "", f"a scene must be a mapping of keys, but this document is {kind}")])
+        raise SceneError(
+            [Diagnostic(file, 1, 1, "", f"a scene must be a mapping of keys, but this document is {kind}")]
+        )
     # Top-level keys starting with x- are free for anchors (as in Compose files).
     body = {k: v for k, v in data.items() if not (isinstance(k, str) and k.startswith("x-"))}
+    from animsim.scene.validate import check_scene, partial_scene  # late: validate imports structures
+
     try:
         scene = Scene.model_validate(body)
     except ValidationError as exc:
-        raise SceneError(_diagnostics(exc, body, marks, file)) from None
-    from animsim.scene.validate import check_scene  # late: validate imports structures
-
+        # Report the cross-field problems of the parts that did validate too,
+        # so one round of fixes is enough (never twice for one key).
+        found = _diagnostics(exc, body, marks, file)
+        partial, ids_complete = partial_scene(body)
+        seen = {d.path for d in found}
+        for p, msg, key in check_scene(partial, ids_complete=ids_complete):
+            if _dotted(p) not in seen:
+                found.append(Diagnostic(file, *marks.at(p, prefer_key=key), _dotted(p), msg))
+        raise SceneError(found) from None
     problems = check_scene(scene)
     if problems:
         raise SceneError(
@@ -323,43 +459,80 @@ def load_scene_bytes(raw: bytes, file: str, limits: Limits = Limits()) -> Loaded
 
 
 def _decode(raw: bytes, file: str) -> str:
-    if raw.startswith(b"\xef\xbb\xbf"):
-        raw = raw[3:]
+    """UTF-8 text (a leading BOM is allowed and dropped); a bad byte is reported by line and column."""
+    if raw.startswith(_UTF8_BOM):
+        raw = raw[len(_UTF8_BOM) :]
     try:
         return raw.decode("utf-8")
     except UnicodeDecodeError as exc:
-        before = raw[: exc.start]
-        line = before.count(b"\n") + 1
-        col = exc.start - (before.rfind(b"\n") + 1) + 1
-        raise SceneError([Diagnostic(file, line, col, "", f"the file is not valid UTF-8 (byte 0x{raw[exc.start]:02x})")]) from None
+        line_start = raw.rfind(b"\n", 0, exc.start) + 1
+        line = raw.count(b"\n", 0, exc.start) + 1
+        # Columns count characters, as editors do, not bytes.
+        col = len(raw[line_start : exc.start].decode("utf-8", errors="replace")) + 1
+        hint = ""
+        if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
+            hint = "; it looks like UTF-16: save it as UTF-8"
+        msg = f"the file is not valid UTF-8 (byte 0x{raw[exc.start]:02x}){hint}"
+        raise SceneError([Diagnostic(file, line, col, "", msg)]) from None
 
 
 def parse_yaml(text: str, file: str, limits: Limits = Limits()) -> tuple[Any, Marks]:
     """Parse one YAML document into plain data and its marks."""
-    loader = _Loader(text)
-    loader.max_depth = limits.max_depth
     try:
+        loader = _Loader(text)  # PyYAML's reader checks for unprintable characters here
+        loader.max_depth = limits.max_depth
         try:
             node = loader.get_single_node()
         finally:
             loader.dispose()
         if node is None:
             return None, Marks()
-        builder = _Builder(limits.max_nodes)
+        _check_expansion(node, loader, limits)
+        builder = _Builder(loader.written + limits.max_nodes)
         return builder.build(node, ()), builder.marks
     except _Fault as f:
         raise SceneError([Diagnostic(file, f.line, f.column, _dotted(f.path), f.message)]) from None
     except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark or exc.context_mark
-        line, col = (mark.line + 1, mark.column + 1) if mark else (1, 1)
-        msg = " ".join(s for s in (exc.context, exc.problem) if s)
-        if "\t" in msg or "found character '\\t'" in msg:
-            msg += " (YAML does not allow tabs for indentation; use spaces)"
-        raise SceneError([Diagnostic(file, line, col, "", f"YAML syntax: {msg}")]) from None
+        raise SceneError([_syntax_diagnostic(exc, file)]) from None
+    except yaml.reader.ReaderError as exc:
+        # PyYAML gives a character offset; turn it into a line and column.
+        before = text[: exc.position]
+        line = before.count("\n") + 1
+        col = exc.position - (before.rfind("\n") + 1) + 1
+        char = exc.character if isinstance(exc.character, str) else chr(exc.character)
+        msg = f"the character U+{ord(char):04X} is not allowed in YAML (control characters must be escaped)"
+        raise SceneError([Diagnostic(file, line, col, "", msg)]) from None
     except yaml.YAMLError as exc:
         raise SceneError([Diagnostic(file, 1, 1, "", f"YAML: {exc}")]) from None
-    except RecursionError:
-        raise SceneError([Diagnostic(file, 1, 1, "", f"nesting too deep (the limit is {limits.max_depth})")]) from None
+    except RecursionError:  # pragma: no cover - the depth checks come first; kept as a last guard
+        raise SceneError(
+            [Diagnostic(file, 1, 1, "", f"nesting too deep (the limit is {limits.max_depth})")]
+        ) from None
+
+
+# PyYAML contexts that name where a bracket or quote was opened.
+_OPENED = {
+    "while parsing a flow sequence": "the [ opened here is not closed",
+    "while parsing a flow mapping": "the { opened here is not closed",
+    "while scanning a quoted scalar": "the quote opened here is not closed",
+}
+
+
+def _syntax_diagnostic(exc: yaml.MarkedYAMLError, file: str) -> Diagnostic:
+    """A YAML syntax error at the place a person would look first."""
+    mark = exc.problem_mark or exc.context_mark
+    line, col = (mark.line + 1, mark.column + 1) if mark else (1, 1)
+    problem = exc.problem or ""
+    opened = _OPENED.get(exc.context or "")
+    if opened and exc.context_mark is not None:
+        # An unclosed bracket is noticed far from where it was opened; point at the opening.
+        where = f"line {line}, column {col}"
+        line, col = exc.context_mark.line + 1, exc.context_mark.column + 1
+        return Diagnostic(file, line, col, "", f"YAML syntax: {opened} ({problem} at {where})")
+    msg = " ".join(s for s in (exc.context, problem) if s)
+    if "'\\t'" in msg or "\t" in msg:
+        msg += " (YAML does not allow tabs for indentation; use spaces)"
+    return Diagnostic(file, line, col, "", f"YAML syntax: {msg}")
 
 
 # --- pydantic errors -> diagnostics ---------------------------------------------
@@ -379,10 +552,7 @@ def _data_path(loc: tuple[Any, ...], data: Any) -> tuple[Path_, tuple[Any, ...]]
     cur = data
     rest: list[Any] = []
     for seg in loc:
-        if isinstance(cur, dict) and seg in cur:
-            path.append(seg)
-            cur = cur[seg]
-        elif isinstance(cur, list) and isinstance(seg, int) and 0 <= seg < len(cur):
+        if (isinstance(cur, dict) and seg in cur) or (isinstance(cur, list) and isinstance(seg, int) and 0 <= seg < len(cur)):
             path.append(seg)
             cur = cur[seg]
         else:
@@ -460,6 +630,16 @@ _KIND = {
 }
 
 
+# pydantic bound errors: (how to say it, the ctx key holding the bound)
+_BOUND = {
+    "greater_than": (">", "gt"),
+    "greater_than_equal": (">=", "ge"),
+    "less_than": ("<", "lt"),
+    "less_than_equal": ("<=", "le"),
+}
+_VECTOR_KEYS = {"position", "velocity", "g", "point", "normal", "center", "origin", "start", "end", "min", "max", "mean"}
+
+
 def _short(value: Any) -> str:
     r = repr(value)
     return r if len(r) <= 40 else r[:37] + "..."
@@ -500,20 +680,39 @@ def _message(path: Path_, errs: list[dict[str, Any]], marks: Marks) -> tuple[str
     if "union_tag_invalid" in types:
         e = errs[types.index("union_tag_invalid")]
         tags = [t.strip(" '") for t in e["ctx"]["expected_tags"].split(",")]
-        return f"unknown type {e['ctx']['tag']!r}{_suggest(e['ctx']['tag'], tags)} (valid: {', '.join(tags)})", False
+        return (
+            f"unknown type {e['ctx']['tag']!r}{_suggest(e['ctx']['tag'], tags)} (valid: {', '.join(tags)})",
+            False,
+        )
     if "union_tag_not_found" in types:
         return "needs a 'type' key", False
     if "literal_error" in types:
         e = errs[types.index("literal_error")]
         choices = re.findall(r"'([^']*)'", e["ctx"]["expected"])
-        return f"{_short(e['input'])} is not one of: {', '.join(choices)}{_suggest(e['input'], choices)}", False
+        return (
+            f"{_short(e['input'])} is not one of: {', '.join(choices)}{_suggest(e['input'], choices)}",
+            False,
+        )
     if len(errs) > 1 and all(t in _KIND for t in types):
         kinds = " or ".join(dict.fromkeys(_KIND[t] for t in types))
         msg = f"expected {kinds}, got {_short(first['input'])}"
     elif first["type"] in _KIND:
         msg = f"expected {_KIND[first['type']]}, got {_short(first['input'])}"
-        if first["type"] in ("float_type", "int_type") and isinstance(first["input"], int) and not isinstance(first["input"], bool):
-            msg = f"the number {_short(first['input'])} is too large"
+        value = first["input"]
+        if first["type"] in ("float_type", "int_type") and isinstance(value, int) and not isinstance(value, bool):
+            msg = f"the number {_short(value)} is too large"
+        elif first["type"] == "int_type" and isinstance(value, float) and value.is_integer():
+            msg += f" (write it without a decimal point or exponent: {int(value)})"
+    elif first["type"] in _BOUND and "ctx" in first:
+        op, key = _BOUND[first["type"]]
+        msg = f"must be {op} {first['ctx'][key]!r}, got {_short(first['input'])}"
+    elif first["type"] in ("too_short", "too_long") and "ctx" in first:
+        ctx = first["ctx"]
+        lo, hi = ctx.get("min_length"), ctx.get("max_length")
+        want = f"at least {lo}" if first["type"] == "too_short" else f"at most {hi}"
+        msg = f"expected {want} items, got {ctx.get('actual_length')}"
+        if path and path[-1] in _VECTOR_KEYS:
+            msg += " (a vector is [x, y, z], or [x, y] meaning z = 0)"
     elif first["type"] == "finite_number":
         msg = "must be a finite number (no .nan, .inf, or overflowing values)"
     elif first["type"] == "value_error":

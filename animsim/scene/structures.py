@@ -14,6 +14,7 @@ later stages can use array slices instead of index lists.
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 
@@ -54,13 +55,19 @@ def grid_shape(s: Structure) -> tuple[int, ...]:
 
 
 def particle_count(s: Structure) -> int:
-    return int(np.prod(grid_shape(s)))
+    return math.prod(grid_shape(s))  # exact Python int: no overflow for absurd resolutions
 
 
 def structure_spring_count(s: Structure) -> int:
-    """Number of springs the structure generates, without generating them."""
+    """Number of springs the structure generates, counted without generating them
+    (the memory pre-flight calls this on lattices far too large to build)."""
     shape = grid_shape(s)
-    return sum(len(pairs) for _, pairs, _ in _families(s, shape, count_only=True))
+    total = 0
+    for _name, _fam, offsets in _family_offsets(s):
+        for offset in offsets:
+            if all(abs(o) < n for n, o in zip(shape, offset, strict=True)):
+                total += math.prod(n - abs(o) for n, o in zip(shape, offset, strict=True))
+    return total
 
 
 _ID_RE = re.compile(r"^(?P<base>.*)\[(?P<idx>-?\d+(?:,-?\d+)*)\]$")
@@ -125,37 +132,34 @@ def _offset_pairs(shape: tuple[int, ...], offset: tuple[int, ...]) -> np.ndarray
     return _pairs(shape, tuple(a), tuple(b))
 
 
-def _families(
-    s: Structure, shape: tuple[int, ...], count_only: bool = False
-) -> list[tuple[str, np.ndarray, SpringFamily]]:
-    out: list[tuple[str, np.ndarray, SpringFamily]] = []
-
-    def add(name: str, fam: SpringFamily | None, offsets: list[tuple[int, ...]]) -> None:
-        if fam is None:
-            return
-        pairs = np.concatenate([_offset_pairs(shape, o) for o in offsets])
-        out.append((name, pairs, fam))
-
+def _family_offsets(s: Structure) -> list[tuple[str, SpringFamily, list[tuple[int, ...]]]]:
+    """The spring families a structure asks for, each with its grid offsets."""
     if isinstance(s, Cloth):
-        add("structural", s.structural, [(1, 0), (0, 1)])
-        add("shear", s.shear, [(1, 1), (1, -1)])
-        add("bend", s.bend, [(2, 0), (0, 2)])
+        spec = [
+            ("structural", s.structural, [(1, 0), (0, 1)]),
+            ("shear", s.shear, [(1, 1), (1, -1)]),
+            ("bend", s.bend, [(2, 0), (0, 2)]),
+        ]
     elif isinstance(s, Strand):
-        add("stretch", s.stretch, [(1,)])
-        add("bend", s.bend, [(2,)])
+        spec = [("stretch", s.stretch, [(1,)]), ("bend", s.bend, [(2,)])]
     else:
-        add("edge", s.edge, [(1, 0, 0), (0, 1, 0), (0, 0, 1)])
-        add(
-            "face_diagonal",
-            s.face_diagonal,
-            [(1, 1, 0), (1, -1, 0), (1, 0, 1), (1, 0, -1), (0, 1, 1), (0, 1, -1)],
-        )
-        add(
-            "body_diagonal",
-            s.body_diagonal,
-            [(1, 1, 1), (1, 1, -1), (1, -1, 1), (1, -1, -1)],
-        )
-    return out
+        spec = [
+            ("edge", s.edge, [(1, 0, 0), (0, 1, 0), (0, 0, 1)]),
+            (
+                "face_diagonal",
+                s.face_diagonal,
+                [(1, 1, 0), (1, -1, 0), (1, 0, 1), (1, 0, -1), (0, 1, 1), (0, 1, -1)],
+            ),
+            ("body_diagonal", s.body_diagonal, [(1, 1, 1), (1, 1, -1), (1, -1, 1), (1, -1, -1)]),
+        ]
+    return [(name, fam, offsets) for name, fam, offsets in spec if fam is not None]
+
+
+def _families(s: Structure, shape: tuple[int, ...]) -> list[tuple[str, np.ndarray, SpringFamily]]:
+    return [
+        (name, np.concatenate([_offset_pairs(shape, o) for o in offsets]), fam)
+        for name, fam, offsets in _family_offsets(s)
+    ]
 
 
 def expand(s: Structure) -> Expanded:
