@@ -8,10 +8,12 @@ problem, 2 the input or the usage is wrong, 130 interrupted.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
 import sys
+import threading
 from contextlib import contextmanager
 from enum import Enum
 from pathlib import Path
@@ -21,6 +23,7 @@ import typer
 
 from animsim import __version__
 from animsim.errors import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_USAGE, AnimsimError, UsageError
+
 
 class _App(typer.Typer):
     """A Typer app whose call maps errors to exit statuses (see :func:`main`).
@@ -63,10 +66,121 @@ def _root(
 # --- shared options ---------------------------------------------------------------
 
 SceneArg = Annotated[Path, typer.Argument(help="The scene file (YAML).", show_default=False, metavar="SCENE")]
-MaxFileSize = Annotated[int, typer.Option("--max-file-size", help="Largest scene file in bytes.", min=1)]
-MaxDepth = Annotated[int, typer.Option("--max-depth", help="Deepest YAML nesting.", min=1)]
-MaxNodes = Annotated[int, typer.Option("--max-nodes", help="Most YAML nodes after alias expansion.", min=1)]
-MaxSteps = Annotated[int, typer.Option("--max-steps", help="Most steps a run may take.", min=1)]
+
+_LIMITS_PANEL = "Limits (spec: Errors and limits)"
+
+# The limit options, shared by every command that loads a scene (see
+# limit_options). Sizes take suffixes (50MiB, 4GiB); counts take 1e9.
+_LIMIT_PARAMS: dict[str, tuple[Any, Any]] = {
+    "max_file_size": (
+        Annotated[
+            str,
+            typer.Option(
+                "--max-file-size", help="Largest scene file, e.g. 50MiB.", rich_help_panel=_LIMITS_PANEL
+            ),
+        ],
+        "50MiB",
+    ),
+    "max_depth": (
+        Annotated[
+            int,
+            typer.Option("--max-depth", help="Deepest YAML nesting.", min=1, rich_help_panel=_LIMITS_PANEL),
+        ],
+        100,
+    ),
+    "max_nodes": (
+        Annotated[
+            int,
+            typer.Option(
+                "--max-nodes", help="Most YAML nodes aliases may add.", min=1, rich_help_panel=_LIMITS_PANEL
+            ),
+        ],
+        100_000,
+    ),
+    "max_steps": (
+        Annotated[
+            str,
+            typer.Option(
+                "--max-steps", help="Most steps a run may take (1e8).", rich_help_panel=_LIMITS_PANEL
+            ),
+        ],
+        "100000000",
+    ),
+    "max_memory": (
+        Annotated[
+            str,
+            typer.Option(
+                "--max-memory",
+                help="Memory budget for the live state, e.g. 4GiB.",
+                rich_help_panel=_LIMITS_PANEL,
+            ),
+        ],
+        "4GiB",
+    ),
+    "disk_check": (
+        Annotated[
+            bool,
+            typer.Option(
+                "--disk-check/--no-disk-check",
+                help="Refuse a run whose estimated output exceeds the free disk space.",
+                rich_help_panel=_LIMITS_PANEL,
+            ),
+        ],
+        True,
+    ),
+}
+
+
+def limit_options(func: Any) -> Any:
+    """Give a command the limit options; it receives them as ``limits: RunLimits``.
+
+    One decorator instead of six parameters copied into every command, so
+    run, check, explain and any later command (compare, render, ...) take the
+    same options with the same defaults and the same parsing.
+    """
+    import functools
+    import inspect
+
+    sig = inspect.signature(func, eval_str=True)
+    if "limits" not in sig.parameters:
+        raise TypeError(f"{func.__name__} must take a 'limits' parameter")
+    params = [p for p in sig.parameters.values() if p.name != "limits"]
+    params += [
+        inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=default, annotation=annotation)
+        for name, (annotation, default) in _LIMIT_PARAMS.items()
+    ]
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        values = {name: kwargs.pop(name, default) for name, (_, default) in _LIMIT_PARAMS.items()}
+        kwargs["limits"] = make_limits(**values)
+        return func(*args, **kwargs)
+
+    wrapper.__signature__ = sig.replace(parameters=params)  # type: ignore[attr-defined]
+    wrapper.__annotations__ = {p.name: p.annotation for p in params}
+    return wrapper
+
+
+def make_limits(
+    max_file_size: str | int = "50MiB",
+    max_depth: int = 100,
+    max_nodes: int = 100_000,
+    max_steps: str | int = "100000000",
+    max_memory: str | int = "4GiB",
+    disk_check: bool = True,
+):
+    """RunLimits from the options' values (sizes and counts parsed here, once)."""
+    from animsim.preflight import RunLimits, parse_count, parse_size
+
+    return RunLimits(
+        max_file_bytes=parse_size(str(max_file_size), "--max-file-size"),
+        max_depth=max_depth,
+        max_nodes=max_nodes,
+        max_steps=parse_count(str(max_steps), "--max-steps"),
+        max_memory=parse_size(str(max_memory), "--max-memory"),
+        disk_check=disk_check,
+    )
+
 
 DEFAULT_MAX_STEPS = 100_000_000
 
@@ -74,12 +188,6 @@ DEFAULT_MAX_STEPS = 100_000_000
 class Format(str, Enum):
     csv = "csv"
     npz = "npz"
-
-
-def _limits(max_file_size: int, max_depth: int, max_nodes: int):
-    from animsim.scene.loader import Limits
-
-    return Limits(max_file_bytes=max_file_size, max_depth=max_depth, max_nodes=max_nodes)
 
 
 def _err(text: str) -> None:
@@ -116,66 +224,57 @@ def _graceful_stop():
 
 
 def check_output_path(output: Path, scene_path: Path) -> None:
-    """Refuse, before any step, an output that cannot be written."""
-    parent = output.parent if str(output.parent) else Path(".")
-    if not parent.exists():
-        raise UsageError(f"{output}: the folder {parent} does not exist")
-    if not parent.is_dir():
-        raise UsageError(f"{output}: {parent} is not a folder")
-    if output.is_dir():
-        raise UsageError(f"{output}: is a folder; give a file name")
-    try:
-        if output.exists() and output.resolve() == scene_path.resolve():
-            raise UsageError(f"{output}: is the scene file itself; choose another output")
-    except OSError:
-        pass
-    if output.resolve() == scene_path.resolve():
-        raise UsageError(f"{output}: is the scene file itself; choose another output")
-    if not os.access(parent, os.W_OK):
-        raise UsageError(f"{output}: the folder {parent} is not writable")
+    """Refuse, before any step, an output that cannot be written (see animsim.preflight)."""
+    from animsim.preflight import check_output_path as check
+
+    check(output, scene_path)
 
 
 # --- run ----------------------------------------------------------------------------
 
 
 @app.command()
+@limit_options
 def run(
     scene: SceneArg,
     output: Annotated[
         Path | None,
-        typer.Option("-o", "--output", help="Trajectory file; default <scene stem>.csv here; '-' for stdout."),
+        typer.Option(
+            "-o", "--output", help="Trajectory file; default <scene stem>.csv here; '-' for stdout."
+        ),
     ] = None,
     integrator: Annotated[str | None, typer.Option(help="Override the scene's integrator.")] = None,
     dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
     duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
     seed: Annotated[int | None, typer.Option(help="Override the random seed.")] = None,
-    format: Annotated[Format | None, typer.Option("--format", help="Trajectory format; default from the suffix, else csv.")] = None,
-    extra_columns: Annotated[bool, typer.Option("--extra-columns", help="Add age, size, r, g, b, a columns (particle systems).")] = False,
+    format: Annotated[
+        Format | None, typer.Option("--format", help="Trajectory format; default from the suffix, else csv.")
+    ] = None,
+    extra_columns: Annotated[
+        bool, typer.Option("--extra-columns", help="Add age, size, r, g, b, a columns (particle systems).")
+    ] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
-    max_file_size: MaxFileSize = 50 * 1024 * 1024,
-    max_depth: MaxDepth = 100,
-    max_nodes: MaxNodes = 100_000,
-    max_steps: MaxSteps = DEFAULT_MAX_STEPS,
+    *,
+    limits: Any = None,
 ) -> None:
     """Simulate SCENE and write its trajectory (CSV or NPZ) and a .meta.json beside it."""
-    from animsim.compile import compile_scene, with_overrides
-    from animsim.scene.loader import load_scene
-    from animsim.simulate import STATUS_INTERRUPTED, STATUS_UNSTABLE, run as simulate
+    from animsim.compile import compile_scene
+    from animsim.preflight import check_disk
+    from animsim.simulate import STATUS_INTERRUPTED, STATUS_UNSTABLE
+    from animsim.simulate import run as simulate
 
-    loaded = load_scene(scene, _limits(max_file_size, max_depth, max_nodes))
-    sc = with_overrides(loaded.scene, integrator=integrator, dt=dt, duration=duration, seed=seed)
     to_stdout = output is not None and str(output) == "-"
     out = output if output is not None else Path(f"{scene.stem}.csv")
     fmt = format or (Format.npz if out.suffix.lower() == ".npz" else Format.csv)
     if to_stdout and fmt is Format.npz:
         raise UsageError("--format npz cannot go to stdout; give a file with -o")
+    loaded, sc, est = prepare_scene(
+        scene, limits, fmt=fmt.value, integrator=integrator, dt=dt, duration=duration, seed=seed
+    )
     if not to_stdout:
         check_output_path(out, scene)
+        check_disk(out, est, fmt.value, sc, limits)
     compiled = compile_scene(sc, loaded.name)
-    if compiled.clock.steps > max_steps:
-        raise UsageError(
-            f"{scene}: {compiled.clock.steps} steps is more than the limit of {max_steps} (raise it with --max-steps)"
-        )
     if fmt is Format.npz:
         from animsim.export.npz import NpzSink
 
@@ -195,8 +294,37 @@ def run(
         _err(f"the frames before the failure are in {out}")
         raise typer.Exit(EXIT_FAILED)
     if result.status == STATUS_INTERRUPTED:
-        _err(f"{scene}: interrupted at step {result.steps_taken} (t = {result.final_state.time:.6g} s); frames so far in {out}")
+        _err(
+            f"{scene}: interrupted at step {result.steps_taken} (t = {result.final_state.time:.6g} s); frames so far in {out}"
+        )
         raise typer.Exit(EXIT_INTERRUPTED)
+
+
+def prepare_scene(
+    scene: Path,
+    limits: Any,
+    *,
+    fmt: str = "csv",
+    integrator: str | None = None,
+    dt: float | None = None,
+    duration: float | None = None,
+    seed: int | None = None,
+) -> tuple[Any, Any, Any]:
+    """Load SCENE, apply overrides and check the step and memory limits.
+
+    Every command that compiles a scene goes through here, so none of them
+    allocates before the pre-flight has said the scene fits. Returns
+    (LoadedScene, Scene with overrides, preflight.Estimate).
+    """
+    from animsim.compile import with_overrides
+    from animsim.preflight import RunLimits, check_limits
+    from animsim.scene.loader import load_scene
+
+    limits = limits or RunLimits()
+    loaded = load_scene(scene, limits.loader)
+    sc = with_overrides(loaded.scene, integrator=integrator, dt=dt, duration=duration, seed=seed)
+    est = check_limits(loaded, sc, limits, fmt=fmt, overridden=dt is not None or duration is not None)
+    return loaded, sc, est
 
 
 @contextmanager
@@ -241,16 +369,17 @@ def _summary(compiled: Any, result: Any, out: Path | None) -> None:
 
 
 @app.command()
+@limit_options
 def explain(
     scene: SceneArg,
     integrator: Annotated[str | None, typer.Option(help="Explain with this integrator instead.")] = None,
+    *,
+    limits: Any = None,
 ) -> None:
     """Show what SCENE compiles to: counts, the stages run each step, and what was left out."""
-    from animsim.compile import compile_scene, with_overrides
-    from animsim.scene.loader import load_scene
+    from animsim.compile import compile_scene
 
-    loaded = load_scene(scene)
-    sc = with_overrides(loaded.scene, integrator=integrator)
+    loaded, sc, _ = prepare_scene(scene, limits, integrator=integrator)
     c = compile_scene(sc, loaded.name)
     s = c.system
     typer.echo(f"scene {c.name!r} ({scene})")
@@ -288,14 +417,17 @@ def schema() -> None:
 
 
 @app.command()
+@limit_options
 def check(
     scenes: Annotated[list[Path], typer.Argument(help="Scene files.", show_default=False)],
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Only problems.")] = False,
+    *,
+    limits: Any = None,
 ) -> None:
     """Validate, analyse and run each scene; exit 0 only if every one is valid and stable."""
     from animsim.analysis.check import check_scenes
 
-    ok = check_scenes(scenes, quiet=quiet, echo=typer.echo, echo_err=_err)
+    ok = check_scenes(scenes, quiet=quiet, echo=typer.echo, echo_err=_err, limits=limits)
     if not ok:
         raise typer.Exit(EXIT_FAILED)
 
@@ -303,8 +435,29 @@ def check(
 # --- entry point ----------------------------------------------------------------------------
 
 
+def _sigterm_as_interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt
+
+
 def main(argv: list[str] | None = None) -> None:
     """Run the app; every AnimsimError becomes a message and an exit status, never a traceback."""
+    # Outside a run's step loop (loading, compiling, assembling an NPZ), SIGTERM
+    # unwinds like Ctrl-C, so temporary files are removed and the status is 130
+    # instead of the process vanishing mid-write.
+    old_term = None
+    if (
+        threading.current_thread() is threading.main_thread()
+        and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL
+    ):
+        old_term = signal.signal(signal.SIGTERM, _sigterm_as_interrupt)
+    try:
+        _main(argv)
+    finally:
+        if old_term is not None:
+            signal.signal(signal.SIGTERM, old_term)
+
+
+def _main(argv: list[str] | None) -> None:
     try:
         typer.Typer.__call__(app, args=argv, prog_name="animsim", standalone_mode=False)
     except AnimsimError as exc:
@@ -315,6 +468,18 @@ def main(argv: list[str] | None = None) -> None:
     except (typer.Abort, KeyboardInterrupt):
         _err("animsim: interrupted")
         sys.exit(EXIT_INTERRUPTED)
+    except BrokenPipeError:
+        # The reader of stdout went away (`animsim run -o - | head`): not an error to report.
+        with contextlib.suppress(OSError):
+            sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - silences the flush at exit
+        sys.exit(EXIT_FAILED)
+    except MemoryError:
+        _err("animsim: out of memory; lower the scene's size or --max-memory so the pre-flight refuses it")
+        sys.exit(EXIT_FAILED)
+    except OSError as exc:  # a write that failed outside the atomic sinks (e.g. stdout on a full disk)
+        where = f"{exc.filename}: " if exc.filename else ""
+        _err(f"animsim: {where}{exc.strerror or exc}")
+        sys.exit(EXIT_FAILED)
     except Exception as exc:  # click usage errors and anything unexpected
         # Typer vendors its own copy of click, so match click's exceptions by
         # their base class name rather than importing click.
