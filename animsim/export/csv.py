@@ -14,7 +14,7 @@ from typing import IO, Any
 
 import numpy as np
 
-from animsim.atomic import AtomicFile
+from animsim.atomic import AtomicFile, commit_together, writing
 from animsim.export.meta import meta_file
 from animsim.record import Frame, TrajectoryHeader
 
@@ -51,7 +51,8 @@ class CsvSink:
             self._out = self._file.handle
         self._ids = [quote_id(i) for i in header.ids]
         cols = HEADER + (EXTRA_HEADER if self.extra else ())
-        self._out.write(",".join(cols) + "\n")
+        with writing(self.path):
+            self._out.write(",".join(cols) + "\n")
 
     def write(self, frame: Frame) -> None:
         assert self._out is not None
@@ -71,7 +72,9 @@ class CsvSink:
                 f"{t},{ids[k]},{a!r},{b!r},{c!r},{d!r},{e!r},{f!r},{x}\n"
                 for k, (a, b, c, d, e, f), x in zip(index, rows, extra, strict=True)
             ]
-        self._out.write("".join(lines))
+        # A full disk shows here (or only at close): a clear error, never a traceback.
+        with writing(self.path):
+            self._out.write("".join(lines))
 
     @staticmethod
     def _extra_cells(frame: Frame) -> list[str]:
@@ -92,18 +95,15 @@ class CsvSink:
     def close(self, meta: dict[str, Any]) -> None:
         if self._file is None:
             if self._out is not None:
-                self._out.flush()
+                with writing(self.path):
+                    self._out.flush()
             return
-        data = self._file
-        m = meta_file(self.path, meta) if self.write_meta else None
         try:
-            data.commit()
+            m = meta_file(self.path, meta) if self.write_meta else None
         except BaseException:
-            if m is not None:
-                m.abort()
+            self._file.abort()
             raise
-        if m is not None:
-            m.commit()
+        commit_together(self._file, m)
 
     def abort(self) -> None:
         if self._file is not None:

@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from animsim.atomic import AtomicFile
+from animsim.atomic import AtomicFile, writing
 
 
 def meta_path(output: str | Path) -> Path:
@@ -16,5 +16,10 @@ def meta_path(output: str | Path) -> Path:
 def meta_file(output: str | Path, meta: dict[str, Any]) -> AtomicFile:
     """Write the metadata to a temporary file; the caller commits it."""
     f = AtomicFile(meta_path(output), "w")
-    f.handle.write(json.dumps(meta, indent=2, sort_keys=True, allow_nan=True) + "\n")
+    try:
+        with writing(f.path):
+            f.handle.write(json.dumps(meta, indent=2, sort_keys=True, allow_nan=True) + "\n")
+    except BaseException:
+        f.abort()
+        raise
     return f

@@ -12,6 +12,7 @@ the end, so memory stays bounded by one frame.
 
 from __future__ import annotations
 
+import contextlib
 import shutil
 import tempfile
 import zipfile
@@ -20,7 +21,7 @@ from typing import IO, Any
 
 import numpy as np
 
-from animsim.atomic import AtomicFile
+from animsim.atomic import AtomicFile, commit_together, writing
 from animsim.export.meta import meta_file
 from animsim.record import Frame, TrajectoryHeader
 
@@ -44,58 +45,59 @@ class NpzSink:
         self._ids: list[str] = []
 
     def begin(self, header: TrajectoryHeader) -> None:
-        self._tmpdir = tempfile.TemporaryDirectory(prefix=".animsim-npz-", dir=self.path.parent)
-        for name in _COLUMNS:
-            self._raw[name] = open(Path(self._tmpdir.name) / name, "wb")  # noqa: SIM115
+        with writing(self.path):
+            self._tmpdir = tempfile.TemporaryDirectory(prefix=".animsim-npz-", dir=self.path.parent)
+            for name in _COLUMNS:
+                self._raw[name] = open(Path(self._tmpdir.name) / name, "wb")  # noqa: SIM115
         self._ids = list(header.ids)
 
     def write(self, frame: Frame) -> None:
         self._ids.extend(frame.new_ids)
         n = len(frame.index)
-        self._raw["t"].write(np.full(n, frame.time, dtype=np.float64).tobytes())
-        self._raw["particle"].write(np.asarray(frame.index, dtype=np.int64).tobytes())
-        self._raw["position"].write(np.ascontiguousarray(frame.position, dtype=np.float64).tobytes())
-        self._raw["velocity"].write(np.ascontiguousarray(frame.velocity, dtype=np.float64).tobytes())
+        with writing(self.path):
+            self._raw["t"].write(np.full(n, frame.time, dtype=np.float64).tobytes())
+            self._raw["particle"].write(np.asarray(frame.index, dtype=np.int64).tobytes())
+            self._raw["position"].write(np.ascontiguousarray(frame.position, dtype=np.float64).tobytes())
+            self._raw["velocity"].write(np.ascontiguousarray(frame.velocity, dtype=np.float64).tobytes())
         self._rows += n
         self._frame_time.append(frame.time)
         self._frame_start.append(self._rows)
 
     def close(self, meta: dict[str, Any]) -> None:
         assert self._tmpdir is not None
-        for fh in self._raw.values():
-            fh.close()
-        out = AtomicFile(self.path, "wb")
+        out: AtomicFile | None = None
         try:
-            with zipfile.ZipFile(out.handle, "w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
-                for name, (shape, dtype) in _COLUMNS.items():
-                    _write_npy(zf, name, Path(self._tmpdir.name) / name, (self._rows, *shape), dtype)
-                _write_array(zf, "ids", np.array(self._ids, dtype=str))
-                _write_array(zf, "frame_time", np.array(self._frame_time, dtype=np.float64))
-                _write_array(zf, "frame_start", np.array(self._frame_start, dtype=np.int64))
+            with writing(self.path):
+                for fh in self._raw.values():
+                    fh.close()
+                out = AtomicFile(self.path, "wb")
+                with zipfile.ZipFile(out.handle, "w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
+                    for name, (shape, dtype) in _COLUMNS.items():
+                        _write_npy(zf, name, Path(self._tmpdir.name) / name, (self._rows, *shape), dtype)
+                    _write_array(zf, "ids", np.array(self._ids, dtype=str))
+                    _write_array(zf, "frame_time", np.array(self._frame_time, dtype=np.float64))
+                    _write_array(zf, "frame_start", np.array(self._frame_start, dtype=np.int64))
+            m = meta_file(self.path, meta) if self.write_meta else None
         except BaseException:
-            out.abort()
+            if out is not None:
+                out.abort()
             self._cleanup()
             raise
-        m = meta_file(self.path, meta) if self.write_meta else None
         try:
-            out.commit()
-        except BaseException:
-            if m is not None:
-                m.abort()
+            commit_together(out, m)
+        finally:
             self._cleanup()
-            raise
-        if m is not None:
-            m.commit()
-        self._cleanup()
 
     def abort(self) -> None:
         for fh in self._raw.values():
-            fh.close()
+            with contextlib.suppress(OSError):
+                fh.close()
         self._cleanup()
 
     def _cleanup(self) -> None:
         if self._tmpdir is not None:
-            self._tmpdir.cleanup()
+            with contextlib.suppress(OSError):
+                self._tmpdir.cleanup()
             self._tmpdir = None
 
 
