@@ -258,10 +258,7 @@ def run(
     limits: Any = None,
 ) -> None:
     """Simulate SCENE and write its trajectory (CSV or NPZ) and a .meta.json beside it."""
-    from animsim.compile import compile_scene
     from animsim.preflight import check_disk
-    from animsim.simulate import STATUS_INTERRUPTED, STATUS_UNSTABLE
-    from animsim.simulate import run as simulate
 
     to_stdout = output is not None and str(output) == "-"
     out = output if output is not None else Path(f"{scene.stem}.csv")
@@ -274,6 +271,11 @@ def run(
     if not to_stdout:
         check_output_path(out, scene)
         check_disk(out, est, fmt.value, sc, limits)
+    # Imported only now: a refused scene never pays for NumPy and the stepper.
+    from animsim.compile import compile_scene
+    from animsim.simulate import STATUS_INTERRUPTED, STATUS_UNSTABLE
+    from animsim.simulate import run as simulate
+
     compiled = compile_scene(sc, loaded.name)
     if fmt is Format.npz:
         from animsim.export.npz import NpzSink
@@ -316,13 +318,16 @@ def prepare_scene(
     allocates before the pre-flight has said the scene fits. Returns
     (LoadedScene, Scene with overrides, preflight.Estimate).
     """
-    from animsim.compile import with_overrides
     from animsim.preflight import RunLimits, check_limits
     from animsim.scene.loader import load_scene
 
     limits = limits or RunLimits()
     loaded = load_scene(scene, limits.loader)
-    sc = with_overrides(loaded.scene, integrator=integrator, dt=dt, duration=duration, seed=seed)
+    sc = loaded.scene
+    if any(v is not None for v in (integrator, dt, duration, seed)):
+        from animsim.compile import with_overrides  # imports every force and integrator: only when needed
+
+        sc = with_overrides(sc, integrator=integrator, dt=dt, duration=duration, seed=seed)
     est = check_limits(loaded, sc, limits, fmt=fmt, overridden=dt is not None or duration is not None)
     return loaded, sc, est
 

@@ -18,9 +18,10 @@ import difflib
 import hashlib
 import re
 import stat
+import types
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Union, get_args, get_origin
+from typing import Annotated, Any, Union, get_args, get_origin
 
 import yaml
 from pydantic import BaseModel, ValidationError
@@ -38,6 +39,7 @@ DEFAULT_MAX_DEPTH = 100
 DEFAULT_MAX_NODES = 100_000
 
 _UTF8_BOM = b"\xef\xbb\xbf"
+_READ_CHUNK = 1024 * 1024
 
 _TAG = "tag:yaml.org,2002:"
 _ALLOWED_TAGS = {f"{_TAG}{t}" for t in ("str", "int", "float", "bool", "null", "map", "seq")}
@@ -408,11 +410,22 @@ def read_scene_file(path: str | Path, limits: Limits = Limits()) -> bytes:
             f"{p}: {st.st_size} bytes is more than the {limits.max_file_bytes}-byte limit "
             "(raise it with --max-file-size)"
         )
+    # Read in chunks: read(limit + 1) would allocate the whole 50 MB limit up
+    # front for every scene, and the size may change after the stat.
+    chunks: list[bytes] = []
+    total = 0
     try:
         with p.open("rb") as fh:
-            return fh.read(limits.max_file_bytes + 1)
+            while chunk := fh.read(_READ_CHUNK):
+                total += len(chunk)
+                if total > limits.max_file_bytes:
+                    raise UsageError(
+                        f"{p}: more than the {limits.max_file_bytes}-byte limit (raise it with --max-file-size)"
+                    )
+                chunks.append(chunk)
     except OSError as exc:
         raise UsageError(f"{p}: cannot read: {exc.strerror}") from None
+    return b"".join(chunks)
 
 
 def load_scene(path: str | Path, limits: Limits = Limits()) -> LoadedScene:
@@ -446,7 +459,7 @@ def load_scene_bytes(raw: bytes, file: str, limits: Limits = Limits()) -> Loaded
         found = _diagnostics(exc, body, marks, file)
         partial, ids_complete = partial_scene(body)
         seen = {d.path for d in found}
-        for p, msg, key in check_scene(partial, ids_complete=ids_complete):
+        for p, msg, key in check_scene(partial, ids_complete=ids_complete, partial=True):
             if _dotted(p) not in seen:
                 found.append(Diagnostic(file, *marks.at(p, prefer_key=key), _dotted(p), msg))
         raise SceneError(found) from None
@@ -552,7 +565,9 @@ def _data_path(loc: tuple[Any, ...], data: Any) -> tuple[Path_, tuple[Any, ...]]
     cur = data
     rest: list[Any] = []
     for seg in loc:
-        if (isinstance(cur, dict) and seg in cur) or (isinstance(cur, list) and isinstance(seg, int) and 0 <= seg < len(cur)):
+        if (isinstance(cur, dict) and seg in cur) or (
+            isinstance(cur, list) and isinstance(seg, int) and 0 <= seg < len(cur)
+        ):
             path.append(seg)
             cur = cur[seg]
         else:
@@ -563,23 +578,13 @@ def _data_path(loc: tuple[Any, ...], data: Any) -> tuple[Path_, tuple[Any, ...]]
 def _unwrap(tp: Any) -> list[Any]:
     """The concrete alternatives behind Annotated/Union/Optional."""
     origin = get_origin(tp)
-    if origin is not None and str(origin).endswith("Annotated"):
+    if origin is Annotated:
         return _unwrap(get_args(tp)[0])
-    if origin is Union or str(origin) == "<class 'types.UnionType'>":
+    if origin is Union or origin is types.UnionType:
         out: list[Any] = []
         for a in get_args(tp):
             out.extend(_unwrap(a))
         return out
-    try:
-        import types
-
-        if isinstance(tp, types.UnionType):
-            out = []
-            for a in get_args(tp):
-                out.extend(_unwrap(a))
-            return out
-    except ImportError:  # pragma: no cover
-        pass
     return [tp]
 
 
@@ -593,7 +598,7 @@ def _models_at(loc: tuple[Any, ...]) -> list[type[BaseModel]]:
                 if isinstance(alt, type) and issubclass(alt, BaseModel):
                     if isinstance(seg, str) and seg in alt.model_fields:
                         nxt.append(alt.model_fields[seg].annotation)
-                    elif isinstance(seg, str) and _tag_of(alt) == seg:
+                    elif isinstance(seg, str) and seg in (_tag_of(alt), alt.__name__):
                         nxt.append(alt)
                 elif get_origin(alt) is list and isinstance(seg, int):
                     nxt.append(get_args(alt)[0])
@@ -637,7 +642,20 @@ _BOUND = {
     "less_than": ("<", "lt"),
     "less_than_equal": ("<=", "le"),
 }
-_VECTOR_KEYS = {"position", "velocity", "g", "point", "normal", "center", "origin", "start", "end", "min", "max", "mean"}
+_VECTOR_KEYS = {
+    "position",
+    "velocity",
+    "g",
+    "point",
+    "normal",
+    "center",
+    "origin",
+    "start",
+    "end",
+    "min",
+    "max",
+    "mean",
+}
 
 
 def _short(value: Any) -> str:
@@ -655,6 +673,13 @@ def _diagnostics(exc: ValidationError, data: dict[str, Any], marks: Marks, file:
         else:
             key, _ = _data_path(loc, data)
         groups.setdefault(key, []).append(err)
+    # A union reports each branch: when the value matched one branch's shape
+    # (a mapping for IntegratorSpec) and failed deeper, the other branches'
+    # "is not one of the names" errors are noise about the same value.
+    for path in list(groups):
+        deeper = any(len(other) > len(path) and other[: len(path)] == path for other in groups)
+        if deeper and all(e["type"] in _KIND or e["type"] == "literal_error" for e in groups[path]):
+            del groups[path]
     out: list[Diagnostic] = []
     for path, errs in groups.items():
         msg, at_key = _message(path, errs, marks)
@@ -699,7 +724,11 @@ def _message(path: Path_, errs: list[dict[str, Any]], marks: Marks) -> tuple[str
     elif first["type"] in _KIND:
         msg = f"expected {_KIND[first['type']]}, got {_short(first['input'])}"
         value = first["input"]
-        if first["type"] in ("float_type", "int_type") and isinstance(value, int) and not isinstance(value, bool):
+        if (
+            first["type"] in ("float_type", "int_type")
+            and isinstance(value, int)
+            and not isinstance(value, bool)
+        ):
             msg = f"the number {_short(value)} is too large"
         elif first["type"] == "int_type" and isinstance(value, float) and value.is_integer():
             msg += f" (write it without a decimal point or exponent: {int(value)})"

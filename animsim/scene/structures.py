@@ -18,7 +18,10 @@ import math
 import re
 from dataclasses import dataclass
 
-import numpy as np
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # numpy is imported where arrays are built, so validating a scene
+    import numpy as np  # (and refusing a bad one) does not pay for importing it
 
 from animsim.scene.models import Cloth, SoftBox, SpringFamily, Strand, Structure
 
@@ -90,17 +93,24 @@ def local_index(s: Structure, pid: str) -> int | None:
     idx = parsed[1]
     if len(idx) != len(shape) or any(not 0 <= i < n for i, n in zip(idx, shape, strict=True)):
         return None
-    return int(np.ravel_multi_index(idx, shape))
+    flat = 0
+    for i, n in zip(idx, shape, strict=True):  # row-major, as np.ravel_multi_index
+        flat = flat * n + i
+    return flat
 
 
 def format_id(base: str, shape: tuple[int, ...]) -> list[str]:
     """All ids of a structure in creation order."""
+    import numpy as np
+
     grids = np.indices(shape).reshape(len(shape), -1).T
     return [f"{base}[{','.join(map(str, row))}]" for row in grids.tolist()]
 
 
 def _pairs(shape: tuple[int, ...], a: tuple[slice, ...], b: tuple[slice, ...]) -> np.ndarray:
     """Index pairs between two shifted sub-blocks of the grid."""
+    import numpy as np
+
     flat = np.arange(int(np.prod(shape)), dtype=np.int64).reshape(shape)
     return np.stack([flat[a].ravel(), flat[b].ravel()], axis=1)
 
@@ -118,6 +128,8 @@ def _offset_pairs(shape: tuple[int, ...], offset: tuple[int, ...]) -> np.ndarray
 
     Negative offset components are handled by swapping which block is shifted.
     """
+    import numpy as np
+
     a: list[slice] = []
     b: list[slice] = []
     for n, o in zip(shape, offset, strict=True):
@@ -156,6 +168,8 @@ def _family_offsets(s: Structure) -> list[tuple[str, SpringFamily, list[tuple[in
 
 
 def _families(s: Structure, shape: tuple[int, ...]) -> list[tuple[str, np.ndarray, SpringFamily]]:
+    import numpy as np
+
     return [
         (name, np.concatenate([_offset_pairs(shape, o) for o in offsets]), fam)
         for name, fam, offsets in _family_offsets(s)
@@ -163,6 +177,8 @@ def _families(s: Structure, shape: tuple[int, ...]) -> list[tuple[str, np.ndarra
 
 
 def expand(s: Structure) -> Expanded:
+    import numpy as np
+
     shape = grid_shape(s)
     n = int(np.prod(shape))
     if isinstance(s, Cloth):

@@ -91,12 +91,18 @@ def _salvage_particle(raw: Any) -> Unvalidated | None:
         return None
 
 
-def check_scene(scene: Scene, *, ids_complete: bool = True) -> list[Problem]:
-    """Every cross-field problem of ``scene`` (which may come from :func:`partial_scene`)."""
+def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = False) -> list[Problem]:
+    """Every cross-field problem of ``scene``.
+
+    ``partial``: the scene comes from :func:`partial_scene` after pydantic
+    errors; rules that would only echo those errors are skipped.
+    """
     out: list[Problem] = []
     if scene.dt is not None and scene.duration is not None and scene.dt > scene.duration:
         out.append((("dt",), f"dt = {scene.dt!r} is longer than the duration {scene.duration!r}", False))
-    if not scene.particles and not scene.emitters and not scene.structures:
+    # With other errors present an empty scene is most likely a typo'd or
+    # broken section already reported, so this rule speaks only on its own.
+    if not partial and not scene.particles and not scene.emitters and not scene.structures:
         out.append(((), "the scene has no particles, structures or emitters: nothing to simulate", False))
 
     # Structure ids and the ids they generate.
