@@ -464,7 +464,9 @@ def main(argv: list[str] | None = None) -> None:
 
 def _main(argv: list[str] | None) -> None:
     try:
-        typer.Typer.__call__(app, args=argv, prog_name="animsim", standalone_mode=False)
+        # Without standalone mode, click *returns* the code of a typer.Exit
+        # raised in a command (interrupted 130, unstable 1) instead of raising.
+        status = typer.Typer.__call__(app, args=argv, prog_name="animsim", standalone_mode=False)
     except AnimsimError as exc:
         _err(str(exc))
         sys.exit(exc.exit_code)
@@ -496,4 +498,4 @@ def _main(argv: list[str] | None) -> None:
         _err(f"animsim: internal error: {type(exc).__name__}: {exc}")
         _err("this is a bug in animsim; run again with ANIMSIM_DEBUG=1 for the traceback")
         sys.exit(EXIT_FAILED)
-    sys.exit(0)
+    sys.exit(status if isinstance(status, int) and not isinstance(status, bool) else 0)
