@@ -21,7 +21,6 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-
 from conftest import ROOT, run_cli
 
 # A run long enough to be caught mid-way: 400 particles for 1e6 steps.
@@ -46,7 +45,8 @@ POLL = 0.02
 
 def _scene(n: int, template: str = LONG_SCENE) -> str:
     rows = "\n".join(
-        f"  - {{id: p{i}, mass: 1, position: [{i % 50}, {1 + i // 50}, 0], velocity: [0, 0, 1]}}" for i in range(n)
+        f"  - {{id: p{i}, mass: 1, position: [{i % 50}, {1 + i // 50}, 0], velocity: [0, 0, 1]}}"
+        for i in range(n)
     )
     return template.format(rows=rows)
 
@@ -167,7 +167,7 @@ def test_writes_through_dev_full_keep_the_old_files(
     def fdopen_dev_full(fd: int, mode: str = "r", *a: object, **kw: object):  # type: ignore[no-untyped-def]
         handle = real_fdopen(fd, mode, *a, **kw)
         handle.close()  # the real temporary file stays empty (and is removed on abort)
-        return open("/dev/full", mode, *a, **kw)  # noqa: SIM115
+        return open("/dev/full", mode, *a, **kw)
 
     monkeypatch.setattr(animsim.atomic.os, "fdopen", fdopen_dev_full)
     scene, out = old_outputs
@@ -211,7 +211,9 @@ def test_enospc_only_at_fsync_keeps_both_old_files(
 @contextlib.contextmanager
 def _tiny_tmpfs(path: Path, size: str) -> Iterator[Path]:
     path.mkdir()
-    made = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(path)], capture_output=True)
+    made = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(path)], capture_output=True
+    )
     if made.returncode != 0:
         pytest.skip(f"cannot mount a tmpfs here: {made.stderr.decode(errors='replace').strip()}")
     try:
@@ -363,7 +365,9 @@ def test_disk_check_refuses_and_can_be_skipped(
 
     import animsim.preflight
 
-    monkeypatch.setattr(animsim.preflight.shutil, "disk_usage", lambda p: shutil._ntuple_diskusage(10**9, 10**9 - 1000, 1000))  # type: ignore[attr-defined]
+    monkeypatch.setattr(
+        animsim.preflight.shutil, "disk_usage", lambda p: shutil._ntuple_diskusage(10**9, 10**9 - 1000, 1000)
+    )  # type: ignore[attr-defined]
     out = tmp_path / "o.csv"
     status, err = _main("run", scene_file, "-o", out)
     assert status == 2 and "is free" in err
@@ -381,17 +385,17 @@ def test_bad_limit_values_are_usage_errors(scene_file: Path) -> None:
 # --- bounded memory over a long run ----------------------------------------------------------
 
 RSS_PARTICLES = 5000
+# A strand without spring families is 5000 free particles that cost no YAML
+# parsing; no planes, so the time goes to stepping and recording.
 RSS_SCENE = """\
 duration: 100
 dt: 0.01
-record: {{every: 50}}
-particles:
-{rows}
+record: {every: 50}
+structures:
+  - {type: strand, id: s, start: [0, 10, 0], end: [50, 10, 0], count: 5000, mass: 1, velocity: [0, 5, 0]}
 forces:
-  - {{type: gravity}}
-  - {{type: drag, k: 0.05}}
-planes:
-  - {{point: [0, 0, 0], normal: [0, 1, 0], restitution: 0.8}}
+  - {type: gravity}
+  - {type: drag, k: 0.05}
 """
 # What the frames would take if they were kept: 201 frames x 5000 rows x
 # (position + velocity) = 48 MB. Growth must stay far below that.
@@ -418,7 +422,7 @@ def test_long_run_keeps_flat_resident_memory(tmp_path: Path) -> None:
     so this uses 5000 fixed particles, which stresses the same recording path.
     """
     scene = tmp_path / "many.yaml"
-    scene.write_text(_scene(RSS_PARTICLES, RSS_SCENE), encoding="utf-8")
+    scene.write_text(RSS_SCENE, encoding="utf-8")
     out = tmp_path / "out.csv"
     proc = _popen("run", scene, "-o", out, "-q", cwd=tmp_path)
     _wait_until_writing(tmp_path, proc, min_bytes=1)
@@ -433,7 +437,9 @@ def test_long_run_keeps_flat_resident_memory(tmp_path: Path) -> None:
     assert len(samples) >= 10, "the run was too short to sample"
     warm = samples[len(samples) // 5]  # after start-up and the first frames
     growth = max(samples) - warm
-    print(f"RSS: {len(samples)} samples, {warm} KiB after warm-up, peak {max(samples)} KiB, growth {growth} KiB")
+    print(
+        f"RSS: {len(samples)} samples, {warm} KiB after warm-up, peak {max(samples)} KiB, growth {growth} KiB"
+    )
     assert growth < RSS_GROWTH_LIMIT_KIB
     meta = json.loads(Path(f"{out}.meta.json").read_text())
     assert meta["frames"] == 201 and meta["status"] == "ok"
