@@ -30,6 +30,8 @@ def io_error(path: str | os.PathLike[str], exc: OSError) -> SimulationError:
     reason = exc.strerror or str(exc)
     if exc.errno == errno.ENOSPC:
         reason = "no space left on the device"
+    if str(path) == "-":
+        return SimulationError(f"could not write to stdout: {reason}")
     return SimulationError(f"could not write {path}: {reason}; any earlier file there is unchanged")
 
 

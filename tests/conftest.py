@@ -19,7 +19,9 @@ ROOT = Path(__file__).resolve().parents[1]
 SCENES = ROOT / "scenes"
 
 
-def run_cli(*args: str | os.PathLike[str], cwd: Path | None = None, timeout: float = 300, **kw) -> subprocess.CompletedProcess[str]:
+def run_cli(
+    *args: str | os.PathLike[str], cwd: Path | None = None, timeout: float = 300, **kw
+) -> subprocess.CompletedProcess[str]:
     env = dict(os.environ)
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
     env.pop("ANIMSIM_DEBUG", None)

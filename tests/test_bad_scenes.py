@@ -158,3 +158,34 @@ def test_raised_depth_limit_still_gives_no_traceback(tmp_path: Path) -> None:
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr
     assert "nesting too deep" in proc.stderr
+
+
+def test_every_problem_is_reported_in_one_go(tmp_path: Path) -> None:
+    """Cross-field rules run on the parts that validated, beside pydantic's errors."""
+    from animsim.errors import SceneError
+    from animsim.scene.loader import load_scene_text
+
+    text = (
+        "duration: 1\n"
+        "dt: 2\n"
+        "particles:\n"
+        '  - {id: a, mass: "1.0", position: [0, 0]}\n'
+        "  - {id: b, mass: 1, position: [0, 0]}\n"
+        "  - {id: b, mass: 1, position: [0, 0, 0, 0]}\n"
+        "  - {id: 3, position: [1, 1]}\n"
+        "springs:\n"
+        "  - {between: [a, c], ks: 1}\n"
+        "  - {between: [b, b], ks: -1}\n"
+    )
+    with pytest.raises(SceneError) as info:
+        load_scene_text(text, "s.yaml")
+    lines = str(info.value).splitlines()
+    assert lines == [
+        "s.yaml:2:5: dt: dt = 2 is longer than the duration 1",
+        "s.yaml:4:19: particles.0.mass: expected a number, got '1.0'",
+        "s.yaml:6:10: particles.2.id: duplicate id 'b' (also particles.1.id)",
+        "s.yaml:6:32: particles.2.position: expected at most 3 items, got 4 (a vector is [x, y, z], or [x, y] meaning z = 0)",
+        "s.yaml:7:5: particles.3.mass: a free particle has no mass; give mass > 0 or pinned: true",
+        "s.yaml:9:19: springs.0.between.1: no particle with id 'c'",
+        "s.yaml:10:27: springs.1.ks: must be >= 0.0, got -1",
+    ]

@@ -444,3 +444,73 @@ def test_long_run_keeps_flat_resident_memory(tmp_path: Path) -> None:
     meta = json.loads(Path(f"{out}.meta.json").read_text())
     assert meta["frames"] == 201 and meta["status"] == "ok"
     assert out.stat().st_size > 201 * RSS_PARTICLES * 50
+
+
+# --- the memory estimate against a real run ------------------------------------------------
+
+CLOTH_SCENE = """\
+duration: 0.02
+dt: 0.01
+integrator: rk4
+structures:
+  - {type: cloth, id: c, size: [1, 1], resolution: [400, 400], mass: 0.01,
+     structural: {ks: 10}, shear: {ks: 5}, bend: {ks: 1}}
+forces:
+  - {type: gravity}
+"""
+# The pre-flight only has to be right to within a small factor: it exists to
+# refuse runs that are off by orders of magnitude (a 4096^2 cloth), and must
+# not refuse runs that fit.
+ESTIMATE_LOW, ESTIMATE_HIGH = 0.5, 3.0
+_PEAK_RSS = """\
+import resource, sys
+from animsim.cli import main
+try:
+    main(sys.argv[1:])
+except SystemExit as exc:
+    print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, exc.code, file=sys.stderr)
+"""
+
+
+def _peak_rss_kib(*args: object, cwd: Path) -> int:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
+    proc = subprocess.run(
+        [sys.executable, "-c", _PEAK_RSS, *map(str, args)],
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    peak, code = proc.stderr.split()[-2:]
+    assert code in ("0", "None"), proc.stderr
+    return int(peak)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(sys.platform != "linux", reason="ru_maxrss is in KiB on Linux")
+def test_memory_estimate_is_close_to_a_real_run(tmp_path: Path) -> None:
+    """A 400x400 cloth with rk4 (160,000 particles, 956,002 springs)."""
+    from animsim.preflight import estimate
+    from animsim.scene.loader import load_scene_text
+
+    scene = tmp_path / "cloth.yaml"
+    scene.write_text(CLOTH_SCENE)
+    small = tmp_path / "small.yaml"
+    small.write_text(SMALL_SCENE.replace("dt: 0.001", "dt: 0.5"))
+    baseline = _peak_rss_kib("run", small, "-o", tmp_path / "small.csv", "-q", cwd=tmp_path)
+    peak = _peak_rss_kib("run", scene, "-o", tmp_path / "cloth.csv", "-q", cwd=tmp_path)
+    measured = (peak - baseline) * 1024
+    est = estimate(load_scene_text(CLOTH_SCENE).scene, steps=2).memory
+    print(f"memory: estimate {est / 2**20:.0f} MiB, measured {measured / 2**20:.0f} MiB above baseline")
+    assert ESTIMATE_LOW * measured <= est <= ESTIMATE_HIGH * measured
+
+
+def test_check_reports_failure_with_exit_1(tmp_path: Path) -> None:
+    """`animsim check` must fail (exit 1) when a scene is invalid, not print INVALID and exit 0."""
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("duration: 0\nparticles: [{id: a, mass: 1, position: [0, 0]}]\n")
+    proc = run_cli("check", bad)
+    assert proc.returncode == 1, proc.stderr
+    assert "INVALID" in proc.stderr and "Traceback" not in proc.stderr
