@@ -34,6 +34,7 @@ from animsim.errors import Diagnostic, SceneError, UsageError
 from animsim.scene.loader import (
     DEFAULT_MAX_DEPTH,
     DEFAULT_MAX_FILE_BYTES,
+    DEFAULT_MAX_MEMORY,
     DEFAULT_MAX_NODES,
     Limits,
     LoadedScene,
@@ -46,7 +47,6 @@ MIB = 1024 * KIB
 GIB = 1024 * MIB
 
 DEFAULT_MAX_STEPS = 100_000_000
-DEFAULT_MAX_MEMORY = 4 * GIB
 
 # --- memory cost model (bytes) ---------------------------------------------------
 # One (N, 3) float64 row: a position, a velocity, a force or a work vector.
@@ -146,7 +146,12 @@ class RunLimits:
 
     @property
     def loader(self) -> Limits:
-        return Limits(max_file_bytes=self.max_file_bytes, max_depth=self.max_depth, max_nodes=self.max_nodes)
+        return Limits(
+            max_file_bytes=self.max_file_bytes,
+            max_depth=self.max_depth,
+            max_nodes=self.max_nodes,
+            max_memory=self.max_memory,
+        )
 
 
 @dataclass

@@ -122,13 +122,22 @@ def test_alias_bomb_is_refused_fast_with_bounded_memory() -> None:
 
 def test_a_long_scene_written_out_in_full_is_not_an_alias_bomb(tmp_path: Path) -> None:
     """The alias limit counts what aliases add, not the nodes a user wrote."""
-    from animsim.scene.loader import load_scene
+    from animsim.errors import SceneError
+    from animsim.scene.loader import Limits, load_scene
 
-    n = 20_000  # about 200,000 written nodes, twice the alias limit
+    n = 300  # about 3,000 written nodes: three times the alias limit below
+    limits = Limits(max_nodes=1000)
     rows = "".join(f"  - {{id: p{i}, mass: 1, position: [{i}, 0, 0]}}\n" for i in range(n))
     path = tmp_path / "many.yaml"
     path.write_text(f"duration: 1\nparticles:\n{rows}", encoding="utf-8")
-    assert len(load_scene(path).scene.particles) == n
+    assert len(load_scene(path, limits).scene.particles) == n
+    # ... while 1,100 nodes added through one alias are refused at that alias.
+    path.write_text(
+        "x-a: &a [" + ", ".join(["1"] * 1100) + "]\nx-b: *a\n" + f"duration: 1\nparticles:\n{rows}"
+    )
+    with pytest.raises(SceneError) as info:
+        load_scene(path, limits)
+    assert f"{path}:2:6: aliases would expand the document by 1100 nodes" in str(info.value)
 
 
 @pytest.mark.parametrize(
@@ -189,3 +198,16 @@ def test_every_problem_is_reported_in_one_go(tmp_path: Path) -> None:
         "s.yaml:9:19: springs.0.between.1: no particle with id 'c'",
         "s.yaml:10:27: springs.1.ks: must be >= 0.0, got -1",
     ]
+
+
+def test_node_count_is_bounded_by_the_memory_budget() -> None:
+    """A file within the size limit can still hold millions of tiny nodes
+    (~1 KB each once parsed): the memory budget bounds the parse too."""
+    from animsim.errors import SceneError
+    from animsim.scene.loader import PARSE_NODE_BYTES, Limits, load_scene_text
+
+    text = "duration: 1\nx-many:\n" + "- 1\n" * 5000
+    with pytest.raises(SceneError) as info:
+        load_scene_text(text, "s.yaml", Limits(max_memory=1000 * PARSE_NODE_BYTES))
+    assert "more than 1000 nodes" in str(info.value) and "--max-memory" in str(info.value)
+    assert str(info.value).startswith("s.yaml:")
