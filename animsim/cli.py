@@ -15,7 +15,7 @@ import signal
 import sys
 import threading
 from contextlib import contextmanager
-from enum import Enum
+from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -185,9 +185,15 @@ def make_limits(
 DEFAULT_MAX_STEPS = 100_000_000
 
 
-class Format(str, Enum):
+class Format(StrEnum):
     csv = "csv"
     npz = "npz"
+    ply = "ply"  # a sequence of binary PLY files, one per recorded frame
+    usda = "usda"  # one USD ASCII file of animated points
+
+
+# Output suffix -> format, for `run -o` without --format (an existing folder means PLY).
+SUFFIX_FORMATS = {".npz": Format.npz, ".ply": Format.ply, ".usda": Format.usda}
 
 
 def _err(text: str) -> None:
@@ -230,6 +236,37 @@ def check_output_path(output: Path, scene_path: Path) -> None:
     check(output, scene_path)
 
 
+def output_format(output: Path | None, requested: Format | None) -> Format:
+    """The trajectory format: as asked, else from the suffix, else PLY for an existing folder, else CSV."""
+    if requested is not None:
+        return requested
+    if output is None or str(output) == "-":
+        return Format.csv
+    if output.suffix.lower() in SUFFIX_FORMATS:
+        return SUFFIX_FORMATS[output.suffix.lower()]
+    return Format.ply if output.is_dir() else Format.csv
+
+
+def check_ply_output(output: Path, scene_path: Path) -> None:
+    """Pre-flight for a PLY sequence: a pattern ``dir/stem.ply`` or an existing folder.
+
+    As for every format, the folder must already exist (cli.md: "The output
+    folder must exist"); the sink could create it, but a typo in a folder name
+    would then silently scatter frames somewhere new.
+    """
+    from animsim.export.ply import PLY_SUFFIX
+
+    if output.is_dir():
+        if not os.access(output, os.W_OK):
+            raise UsageError(f"{output}: the folder is not writable")
+        return
+    if output.suffix.lower() != PLY_SUFFIX:
+        raise UsageError(
+            f"{output}: the folder does not exist; create it, or name the frames like {output}/frames.ply"
+        )
+    check_output_path(output, scene_path)
+
+
 # --- run ----------------------------------------------------------------------------
 
 
@@ -248,7 +285,11 @@ def run(
     duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
     seed: Annotated[int | None, typer.Option(help="Override the random seed.")] = None,
     format: Annotated[
-        Format | None, typer.Option("--format", help="Trajectory format; default from the suffix, else csv.")
+        Format | None,
+        typer.Option(
+            "--format",
+            help="Trajectory format; default from the suffix (.npz, .ply, .usda; a folder means ply), else csv.",
+        ),
     ] = None,
     extra_columns: Annotated[
         bool, typer.Option("--extra-columns", help="Add age, size, r, g, b, a columns (particle systems).")
@@ -257,18 +298,26 @@ def run(
     *,
     limits: Any = None,
 ) -> None:
-    """Simulate SCENE and write its trajectory (CSV or NPZ) and a .meta.json beside it."""
+    """Simulate SCENE and write its trajectory and a .meta.json beside it.
+
+    Formats: CSV; NPZ; PLY (one binary file per frame, for Blender, Houdini,
+    ParaView: -o out/frames.ply gives out/frames_0000.ply, ...; an existing
+    folder gives <folder>/frames_0000.ply, ...); USD ASCII (-o anim.usda).
+    The output folder must exist.
+    """
     from animsim.preflight import check_disk
 
     to_stdout = output is not None and str(output) == "-"
-    out = output if output is not None else Path(f"{scene.stem}.csv")
-    fmt = format or (Format.npz if out.suffix.lower() == ".npz" else Format.csv)
-    if to_stdout and fmt is Format.npz:
-        raise UsageError("--format npz cannot go to stdout; give a file with -o")
+    fmt = output_format(output, format)
+    out = output if output is not None else Path(f"{scene.stem}.{fmt.value}")
+    if to_stdout and fmt is not Format.csv:
+        raise UsageError(f"--format {fmt.value} cannot go to stdout; give a file with -o")
     loaded, sc, est = prepare_scene(
         scene, limits, fmt=fmt.value, integrator=integrator, dt=dt, duration=duration, seed=seed
     )
-    if not to_stdout:
+    if fmt is Format.ply:
+        check_ply_output(out, scene)
+    elif not to_stdout:
         check_output_path(out, scene)
         check_disk(out, est, fmt.value, sc, limits)
     # Imported only now: a refused scene never pays for NumPy and the stepper.
@@ -277,10 +326,21 @@ def run(
     from animsim.simulate import run as simulate
 
     compiled = compile_scene(sc, loaded.name)
+    wrote = f"{out} and {out}.meta.json"
     if fmt is Format.npz:
         from animsim.export.npz import NpzSink
 
         sink: Any = NpzSink(out)
+    elif fmt is Format.ply:
+        from animsim.export.ply import PlySequenceSink
+
+        sink = PlySequenceSink(out, expected_frames=len(compiled.record_steps))
+    elif fmt is Format.usda:
+        from animsim.export.usda import USD_DEFAULT_TIME_CODES_PER_SECOND, UsdaSink
+
+        # Uneven frames are placed at time * rate: the scene's own frame rate when it has one.
+        fps = sc.record.fps
+        sink = UsdaSink(out, uneven_rate=fps if fps is not None else USD_DEFAULT_TIME_CODES_PER_SECOND)
     else:
         from animsim.export.csv import CsvSink
 
@@ -288,8 +348,12 @@ def run(
     extra = {"scene_sha256": loaded.sha256, "scene_file": str(scene)}
     with _graceful_stop() as stop, _progress(compiled.clock.steps, quiet) as progress:
         result = simulate(compiled, [sink], stop=stop, progress=progress, meta_extra=extra)
+    if fmt is Format.ply and sink.written:
+        first, last = sink.written[0], sink.written[-1]
+        span = f"{first}" if first == last else f"{first} .. {last.name}"
+        wrote = f"{len(sink.written)} PLY frames {span}, {sink.ids_path} and {out}.meta.json"
     if not quiet:
-        _summary(compiled, result, None if to_stdout else out)
+        _summary(compiled, result, None if to_stdout else wrote)
     if result.status == STATUS_UNSTABLE:
         assert result.failure is not None
         _err(f"{scene}: {result.failure.describe()}")
@@ -357,16 +421,17 @@ def _stderr_console():
     return Console(stderr=True)
 
 
-def _summary(compiled: Any, result: Any, out: Path | None) -> None:
-    stream_err = out is None  # trajectory went to stdout: keep stdout clean
+def _summary(compiled: Any, result: Any, wrote: str | None) -> None:
+    """Print the run summary; ``wrote`` names the files written (None: the trajectory went to stdout)."""
+    stream_err = wrote is None  # trajectory went to stdout: keep stdout clean
     lines = [
         f"{compiled.name}: {compiled.system.particle_count} particles, {compiled.system.spring_count} springs, "
         f"{result.steps_taken}/{compiled.clock.steps} steps of {compiled.clock.dt:g} s with {compiled.integrator_name}",
         f"  wall time {result.wall_time:.3f} s, {result.frames} frames, {result.force_evals} force evaluations",
         f"  energy {result.energy_start:.6g} J -> {result.energy_end:.6g} J, status {result.status}",
     ]
-    if out is not None:
-        lines.append(f"  wrote {out} and {out}.meta.json")
+    if wrote is not None:
+        lines.append(f"  wrote {wrote}")
     typer.echo("\n".join(lines), err=stream_err)
 
 
@@ -435,6 +500,363 @@ def check(
     ok = check_scenes(scenes, quiet=quiet, echo=typer.echo, echo_err=_err, limits=limits)
     if not ok:
         raise typer.Exit(EXIT_FAILED)
+
+
+# --- render -------------------------------------------------------------------------------
+
+
+@app.command()
+@limit_options
+def render(
+    source: Annotated[
+        Path,
+        typer.Argument(
+            help="A scene (simulated first) or a trajectory (.csv, .npz).", metavar="SCENE_OR_TRAJECTORY"
+        ),
+    ],
+    gif: Annotated[Path | None, typer.Option("--gif", help="Write an animated GIF here.")] = None,
+    mp4: Annotated[
+        Path | None, typer.Option("--mp4", help="Write an MP4 here (needs the mp4 extra: imageio-ffmpeg).")
+    ] = None,
+    fps: Annotated[
+        float, typer.Option("--fps", help="Frames per second; GIF delays come in 10 ms steps.")
+    ] = 25.0,
+    view: Annotated[
+        str, typer.Option("--view", help="xy, xz, yz (orthographic) or 3d (perspective).")
+    ] = "xy",
+    size: Annotated[str, typer.Option("--size", help="WIDTHxHEIGHT in pixels.")] = "480x480",
+    scene: Annotated[
+        Path | None,
+        typer.Option("--scene", help="The scene of a trajectory, to draw its springs and planes."),
+    ] = None,
+    azimuth: Annotated[float | None, typer.Option(help="3d camera: degrees around the up axis.")] = None,
+    elevation: Annotated[float | None, typer.Option(help="3d camera: degrees above the horizon.")] = None,
+    distance: Annotated[
+        float | None, typer.Option(help="3d camera: distance from the centre (m); default fits the bounds.")
+    ] = None,
+    dot_radius: Annotated[
+        float, typer.Option("--dot-radius", help="Radius in pixels of particles that have no size.")
+    ] = 3.0,
+    integrator: Annotated[str | None, typer.Option(help="Override the scene's integrator.")] = None,
+    dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
+    duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
+    *,
+    limits: Any = None,
+) -> None:
+    """Render an animation: particles as dots (size and colour over life), springs as lines, planes as the ground."""
+    from animsim.export.trajectory import is_trajectory, read_trajectory
+    from animsim.render import RenderOptions, render_scene, render_trajectory, validate
+    from animsim.scene import models as m
+
+    opts = RenderOptions(
+        fps=fps,
+        size=size,
+        view=view,
+        azimuth=azimuth,
+        elevation=elevation,
+        distance=distance,
+        dot_radius=dot_radius,
+    )
+    validate(gif, mp4, opts)
+    for out in (gif, mp4):
+        if out is not None:
+            check_output_path(out, source)
+    from_file = is_trajectory(source)
+    compiled = None
+    scene_path = scene if from_file else source
+    if scene_path is not None:
+        from animsim.compile import compile_scene
+
+        loaded, sc, _ = prepare_scene(scene_path, limits, integrator=integrator, dt=dt, duration=duration)
+        if not from_file:
+            # Record exactly the frames the animation shows.
+            sc = sc.model_copy(update={"record": m.Record(fps=fps)})
+        compiled = compile_scene(sc, loaded.name)
+    total = compiled.record_steps.size if (compiled is not None and not from_file) else None
+    with _frame_progress(total, quiet) as progress:
+        if from_file:
+            result = render_trajectory(
+                read_trajectory(source), gif, mp4, opts, compiled=compiled, progress=progress
+            )
+        else:
+            with _graceful_stop() as stop:
+                result = render_scene(compiled, gif, mp4, opts, progress=progress, stop=stop)
+    if not quiet:
+        outs = " and ".join(str(p) for p in result.outputs)
+        typer.echo(f"wrote {outs}: {result.frames} frames at {fps:g} fps, view {view}, {size}")
+    if result.status == "unstable":
+        _err(f"{source}: {result.failure.describe()}")
+        raise typer.Exit(EXIT_FAILED)
+    if result.status == "interrupted":
+        raise typer.Exit(EXIT_INTERRUPTED)
+
+
+@contextmanager
+def _frame_progress(total: int | None, quiet: bool):
+    if quiet or total is None or total < 50 or not sys.stderr.isatty():
+        yield None
+        return
+    from rich.progress import Progress
+
+    with Progress(transient=True, console=_stderr_console()) as bar:
+        task = bar.add_task("rendering", total=total)
+        yield lambda done: bar.update(task, completed=done)
+
+
+# --- sweep ------------------------------------------------------------------------------
+
+
+class Reference(StrEnum):
+    auto = "auto"
+    analytic = "analytic"
+    fine = "fine"
+
+
+@app.command()
+@limit_options
+def sweep(
+    scene: SceneArg,
+    set_: Annotated[
+        list[str],
+        typer.Option(
+            "--set",
+            help="KEY=V1,V2,...: a dotted key of the scene (springs.0.ks, structures.0.structural.ks, dt) "
+            "and its values; repeat for more axes.",
+            show_default=False,
+            metavar="KEY=V1,V2,...",
+        ),
+    ] = [],  # noqa: B006 (typer reads the default; never mutated)
+    integrators: Annotated[
+        str | None, typer.Option("--integrators", help="Comma-separated methods: one more axis.")
+    ] = None,
+    reference: Annotated[
+        Reference | None,
+        typer.Option(help="Add an error column against this reference (fine: RK4 at dt/16)."),
+    ] = None,
+    output: Annotated[Path | None, typer.Option("-o", "--output", help="The table as CSV.")] = None,
+    plot: Annotated[Path | None, typer.Option("--plot", help="Plot --y over --x (PNG, SVG, PDF).")] = None,
+    x: Annotated[str | None, typer.Option("--x", help="Swept key on the x axis; default the first.")] = None,
+    y: Annotated[
+        str | None, typer.Option("--y", help="Column to plot; default error with --reference, else drift.")
+    ] = None,
+    jobs: Annotated[int, typer.Option("--jobs", "-j", help="Local worker processes.", min=1)] = 1,
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            "--scheduler",
+            help="Dask scheduler address, or 'local' for a LocalCluster (--jobs workers); "
+            # \\[ keeps rich markup from eating the extra's name.
+            'needs pip install "animsim\\[dask]".',
+        ),
+    ] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No table, only the files.")] = False,
+    *,
+    limits: Any = None,
+) -> None:
+    """Run SCENE for every combination of --set values (and --integrators) and tabulate the outcome.
+
+    Each case is re-validated by the scene rules (a refused value is an
+    'invalid' row; a key that does not exist is an error before any run) and
+    gets its own seed from the scene's seed and its case number, so serial,
+    --jobs and --scheduler runs give the same rows. Unstable and invalid
+    cases are rows, not failures: the exit status is 0 once the table is
+    made, 1 only if a case crashed (status 'error').
+    """
+    from animsim.analysis import sweep as sw
+    from animsim.preflight import RunLimits
+    from animsim.scene.loader import load_scene
+
+    # The file limits apply here; each case's step and memory pre-flight
+    # would need the sweep's own variants (not done yet: see docs/limits.md).
+    loaded = load_scene(scene, (limits or RunLimits()).loader)
+    axes = [sw.parse_set(text) for text in set_]
+    if integrators is not None:
+        axes.append(sw.integrators_axis(integrators))
+    if not axes:
+        raise UsageError("sweep: give at least one --set KEY=V1,V2,... or --integrators")
+    sw.check_axes(axes)
+    keys = [a.key for a in axes]
+    x_key = x or keys[0]
+    y_col = y or ("error" if reference is not None else "drift")
+    if plot is not None:
+        if x_key not in keys:
+            raise UsageError(f"--x {x_key}: not a swept key (swept: {', '.join(keys)})")
+        if y_col not in sw.PLOT_COLUMNS or (y_col == "error" and reference is None):
+            cols = [c for c in sw.PLOT_COLUMNS if c != "error" or reference is not None]
+            raise UsageError(f"--y {y_col}: not a plottable column (choose from {', '.join(cols)})")
+        check_output_path(plot, scene)
+    if output is not None:
+        check_output_path(output, scene)
+    with _cases_progress(quiet) as progress:
+        table = sw.sweep(
+            loaded.data,
+            loaded.name,
+            str(scene),
+            axes,
+            reference=reference.value if reference is not None else None,
+            jobs=jobs,
+            scheduler=scheduler,
+            progress=progress,
+        )
+    if not quiet:
+        sw.print_table(table, _stdout_console())
+    if output is not None:
+        sw.write_csv(table, output)
+    if plot is not None:
+        sw.plot_table(table, plot, x_key, y_col)
+    counts = table.counts()
+    if scheduler is not None:
+        where = "Dask LocalCluster" if scheduler == "local" else f"Dask at {scheduler}"
+    else:
+        where = f"{jobs} processes" if jobs > 1 else "serial"
+    summary = ", ".join(f"{n} {status}" for status, n in counts.items())
+    wrote = [str(p) for p in (output, plot) if p is not None]
+    _err(f"{len(table.rows)} cases ({where}): {summary}" + (f"; wrote {', '.join(wrote)}" if wrote else ""))
+    if counts.get(sw.STATUS_ERROR):
+        raise typer.Exit(EXIT_FAILED)
+
+
+@contextmanager
+def _cases_progress(quiet: bool):
+    """A bar of finished cases on stderr, only on a terminal (cli.md)."""
+    if quiet or not sys.stderr.isatty():
+        yield None
+        return
+    from rich.progress import Progress
+
+    with Progress(transient=True, console=_stderr_console()) as bar:
+        task = bar.add_task("cases", total=None)
+
+        def update(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total)
+
+        yield update
+
+
+# Width of the printed table when stdout is not a terminal (a file or a pipe).
+PIPE_TABLE_WIDTH = 200
+
+
+def _stdout_console():
+    from rich.console import Console
+
+    return Console() if sys.stdout.isatty() else Console(width=PIPE_TABLE_WIDTH)
+
+
+# --- plot -------------------------------------------------------------------------------
+
+
+class PlotKind(StrEnum):
+    trajectory = "trajectory"
+    energy = "energy"
+
+
+@app.command()
+@limit_options
+def plot(
+    source: Annotated[
+        Path,
+        typer.Argument(
+            help="A scene (simulated first) or a trajectory (.csv, .npz).", metavar="SCENE_OR_TRAJECTORY"
+        ),
+    ],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Picture file: .png, .svg or .pdf.")],
+    kind: Annotated[
+        PlotKind, typer.Option("--kind", help="Paths of particles, or energy against time.")
+    ] = PlotKind.trajectory,
+    scene: Annotated[
+        Path | None, typer.Option("--scene", help="The scene of a trajectory (needed for --kind energy).")
+    ] = None,
+    view: Annotated[
+        str | None, typer.Option("--view", help="xy, xz or yz; default: the two widest axes.")
+    ] = None,
+    integrator: Annotated[str | None, typer.Option(help="Override the scene's integrator.")] = None,
+    dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
+    duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
+    *,
+    limits: Any = None,
+) -> None:
+    """Draw particle paths or the energy (kinetic, potential, total, and drift) of a run."""
+    from animsim.export.pictures import figure_format, plot_energy, plot_trajectory
+    from animsim.export.trajectory import TrajectoryCollector, is_trajectory, read_trajectory
+
+    figure_format(output)
+    if view is not None and view not in ("xy", "xz", "yz"):
+        raise UsageError(f"--view {view!r}: plot takes xy, xz or yz")
+    check_output_path(output, source)
+    from_file = is_trajectory(source)
+    scene_path = scene if from_file else source
+    compiled = None
+    if scene_path is not None:
+        from animsim.compile import compile_scene
+
+        loaded, sc, _ = prepare_scene(scene_path, limits, integrator=integrator, dt=dt, duration=duration)
+        compiled = compile_scene(sc, loaded.name)
+    if kind is PlotKind.energy:
+        if compiled is None:
+            raise UsageError("--kind energy needs the scene: give a scene, or --scene with the trajectory")
+        times, kinetic, potential = _energies(compiled, read_trajectory(source) if from_file else None)
+        plot_energy(
+            times,
+            kinetic,
+            potential,
+            output,
+            title=f"{compiled.name}: {compiled.integrator_name}, dt {compiled.clock.dt:g} s",
+            conservative=compiled.conservative,
+        )
+    else:
+        if from_file:
+            traj = read_trajectory(source)
+            name = source.stem
+        else:
+            from animsim.simulate import run as simulate
+
+            assert compiled is not None
+            collector = TrajectoryCollector()
+            simulate(compiled, [collector])
+            traj = collector.trajectory()
+            name = compiled.name
+        plot_trajectory(traj, output, view=view, title=name)
+    typer.echo(f"wrote {output}")
+
+
+def _energies(compiled: Any, traj: Any) -> tuple[Any, Any, Any]:
+    """Per-frame kinetic and potential energy, from a run or from a trajectory of the scene."""
+    import numpy as np
+
+    dyn = compiled.dynamics
+    times: list[float] = []
+    kinetic: list[float] = []
+    potential: list[float] = []
+    if traj is None:
+        from animsim.simulate import run as simulate
+
+        def observe(state: Any) -> None:
+            times.append(state.time)
+            kinetic.append(dyn.kinetic_energy(state.particle_velocity))
+            potential.append(dyn.potential_energy(state.particle_position))
+
+        simulate(compiled, [], observers=[observe])
+    else:
+        if compiled.emitters is not None:
+            raise UsageError("energy from a trajectory needs a scene without emitters; give the scene itself")
+        index_of = {pid: i for i, pid in enumerate(compiled.system.ids)}
+        try:
+            rows = np.array([index_of[pid] for pid in traj.ids], dtype=np.int64)
+        except KeyError as exc:
+            raise UsageError(
+                f"the trajectory has particle {exc.args[0]!r}, which the scene does not"
+            ) from None
+        x = compiled.initial.particle_position.copy()
+        v = compiled.initial.particle_velocity.copy()
+        for frame in traj.frames():
+            x[rows[frame.index]] = frame.position
+            v[rows[frame.index]] = frame.velocity
+            times.append(frame.time)
+            kinetic.append(dyn.kinetic_energy(v))
+            potential.append(dyn.potential_energy(x))
+    return np.array(times), np.array(kinetic), np.array(potential)
 
 
 # --- entry point ----------------------------------------------------------------------------

@@ -22,6 +22,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+# A contact approaching slower than the normal acceleration adds in this many
+# steps is resting, not bouncing (a restitution velocity threshold, as rigid
+# body engines use, scaled by the step so it vanishes as dt -> 0).
+RESTING_STEPS = 2.0
+
 
 @dataclass(frozen=True)
 class ImpulsePlane:
@@ -29,6 +34,11 @@ class ImpulsePlane:
     normal: np.ndarray  # (3,) unit
     restitution: float
     friction: float
+
+    @property
+    def offset(self) -> float:
+        """p.n: the plane is {x : x.n = offset}."""
+        return float(self.point @ self.normal)
 
 
 def _apply_friction(vt: np.ndarray, dvn: np.ndarray, mu: float) -> np.ndarray:
@@ -55,54 +65,80 @@ class PlaneColliders:
         v_old: np.ndarray,
         x: np.ndarray,
         v: np.ndarray,
-        dt: float,
+        dt: float | np.ndarray,
     ) -> bool:
-        """Resolve crossings of the step x_old -> x in place; True if anything changed."""
-        changed = False
-        movable = self.inv_mass > 0
+        """Resolve crossings of the step x_old -> x in place; True if anything changed.
+
+        ``dt`` may be an (N,) array of per-particle step lengths: an emitted
+        particle moves only for the rest of its birth step.
+
+        Cost: one pass over all particles per plane (a signed distance and a
+        comparison); everything else works on the few that reached a plane.
+        """
+        touched: list[np.ndarray] = []
         for pl in self.planes:
-            d_new = (x - pl.point) @ pl.normal
-            hit = np.flatnonzero((d_new < 0) & movable)
+            n = pl.normal
+            # Signed distance as x.n - p.n: no (N, 3) temporary.
+            d_new = x @ n - pl.offset
+            cand = np.flatnonzero(d_new <= 0)
+            if cand.size == 0:
+                continue
+            # Behind the plane, or exactly on it and still moving in (a contact
+            # that would cross next step: Lander's "colliding contact"); never
+            # pinned particles or dead pool slots.
+            d1 = d_new[cand]
+            keep = ((d1 < 0) | (v[cand] @ n < 0)) & (self.inv_mass[cand] > 0)
+            hit = cand[keep]
             if hit.size == 0:
                 continue
-            changed = True
-            n = pl.normal
-            d1 = d_new[hit]
-            d0 = np.maximum((x_old[hit] - pl.point) @ n, 0.0)
-            s = (d0 / (d0 - d1))[:, None]  # fraction of the step at impact, in [0, 1)
-            xo, vo = x_old[hit], v_old[hit]
-            mean_acc = (v[hit] - vo) / dt
-            xc = xo + s * (x[hit] - xo)
-            vc = vo + s * (v[hit] - vo)
+            touched.append(hit)
+            d1 = d1[keep]
+            xo, vo, xh, vh = x_old[hit], v_old[hit], x[hit], v[hit]
+            d0 = np.maximum(xo @ n - pl.offset, 0.0)
+            gap = d0 - d1
+            # fraction of the step at impact; a particle ending exactly on the plane touched it at the end
+            s = np.divide(d0, gap, out=np.ones_like(d0), where=gap > 0)[:, None]
+            dt_hit = dt if np.ndim(dt) == 0 else np.asarray(dt)[hit][:, None]
+            mean_acc = (vh - vo) / dt_hit
+            xc = xo + s * (xh - xo)
+            vc = vo + s * (vh - vo)
             # Reflect the approaching ones (Lander Eq. 3) with Coulomb friction.
+            # An approach slower than what the pressing acceleration adds in
+            # RESTING_STEPS steps is a resting contact: it stops instead of
+            # bouncing, so a particle at rest does not jitter.
             vn = vc @ n
             approaching = vn < 0
-            vn_new = np.where(approaching, -pl.restitution * vn, vn)
+            pressing = np.maximum(-(mean_acc @ n), 0.0)
+            resting = approaching & (-vn <= RESTING_STEPS * pressing * np.ravel(dt_hit))
+            e = np.where(resting, 0.0, pl.restitution)
+            vn_new = np.where(approaching, -e * vn, vn)
             vt = vc - vn[:, None] * n
             vt = _apply_friction(vt, np.abs(vn_new - vn), pl.friction)
             vr = vt + vn_new[:, None] * n
             # Fly on for the rest of the step.
-            r = (1.0 - s) * dt
-            xn = xc + r * vr + 0.5 * r * r * mean_acc
-            vnew = vr + r * mean_acc
-            x[hit] = xn
-            v[hit] = vnew
-        if changed:
-            self._project(x, v, movable)
-        return changed
+            r = (1.0 - s) * dt_hit
+            x[hit] = xc + r * vr + 0.5 * r * r * mean_acc
+            v[hit] = vr + r * mean_acc
+        if not touched:
+            return False
+        # Only particles moved above can be behind a plane now: every other
+        # one ended its step in front of all of them.
+        self._project(x, v, touched[0] if len(touched) == 1 else np.unique(np.concatenate(touched)))
+        return True
 
-    def _project(self, x: np.ndarray, v: np.ndarray, movable: np.ndarray) -> None:
-        """Put anything still behind a plane onto it and stop its inward motion."""
+    def _project(self, x: np.ndarray, v: np.ndarray, idx: np.ndarray) -> None:
+        """Put any of ``idx`` still behind a plane onto it and stop its inward motion."""
         for pl in self.planes:
-            d = (x - pl.point) @ pl.normal
-            behind = np.flatnonzero((d < 0) & movable)
-            if behind.size == 0:
-                continue
             n = pl.normal
-            xb = x[behind] - d[behind, None] * n
+            d = x[idx] @ n - pl.offset
+            sel = d < 0
+            if not sel.any():
+                continue
+            behind = idx[sel]
+            xb = x[behind] - d[sel, None] * n
             # Rounding can leave the projected point 1 ulp behind; nudge until it is not.
             for _ in range(4):
-                db = (xb - pl.point) @ n
+                db = xb @ n - pl.offset
                 still = db < 0
                 if not still.any():
                     break

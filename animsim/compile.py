@@ -133,16 +133,16 @@ def compile_scene(scene: m.Scene, name: str = "scene") -> Compiled:
         expanded.append((s, e, base))
 
     if scene.springs:
-        pairs = np.array([[index_of[a], index_of[b]] for a, b in (sp.between for sp in scene.springs)], dtype=np.int64)
+        pairs = np.array(
+            [[index_of[a], index_of[b]] for a, b in (sp.between for sp in scene.springs)], dtype=np.int64
+        )
         spring_pairs.append(pairs)
         spring_ks.append(np.array([sp.ks for sp in scene.springs]))
         spring_kd.append(np.array([sp.kd for sp in scene.springs]))
-        spring_rest.append(
-            np.array([np.nan if sp.rest == "auto" else sp.rest for sp in scene.springs])
-        )
+        spring_rest.append(np.array([np.nan if sp.rest == "auto" else sp.rest for sp in scene.springs]))
         families.append(("listed springs", 0, len(scene.springs)))
         spring_total += len(scene.springs)
-    for s, e, base in expanded:
+    for _, e, base in expanded:
         for group in e.springs:
             k = len(group.index)
             spring_pairs.append(group.index + base)
@@ -170,14 +170,15 @@ def compile_scene(scene: m.Scene, name: str = "scene") -> Compiled:
         particle_mass = np.concatenate([particle_mass, np.zeros(extra)])
         particle_pinned = np.concatenate([particle_pinned, np.zeros(extra, dtype=bool)])
         particle_alive = np.concatenate([np.ones(fixed_count, dtype=bool), np.zeros(extra, dtype=bool)])
-        stages.extend(emitters.labels)
     else:
         left_out.append("emitters: no births, deaths, ageing or over-life attributes")
 
     n = len(particle_mass)
     particle_mass = np.where(particle_pinned, 0.0, particle_mass)
     with np.errstate(divide="ignore"):
-        particle_inv_mass = np.where(particle_mass > 0, 1.0 / np.where(particle_mass > 0, particle_mass, 1.0), 0.0)
+        particle_inv_mass = np.where(
+            particle_mass > 0, 1.0 / np.where(particle_mass > 0, particle_mass, 1.0), 0.0
+        )
 
     if spring_pairs:
         spring_index = np.concatenate(spring_pairs)
@@ -206,7 +207,7 @@ def compile_scene(scene: m.Scene, name: str = "scene") -> Compiled:
     # --- force terms: only those the scene uses -----------------------------------
     terms: list[ForceTerm] = []
     present = set()
-    for f in scene.forces:
+    for force_index, f in enumerate(scene.forces):
         present.add(f.type)
         if isinstance(f, m.Gravity):
             terms.append(Gravity(np.array(f.g), system.particle_mass))
@@ -219,7 +220,7 @@ def compile_scene(scene: m.Scene, name: str = "scene") -> Compiled:
             if f.turbulence > 0:
                 from animsim.forces.turbulence import Turbulence
 
-                terms.append(Turbulence.from_scene(f, scene.seed, system.particle_mass))
+                terms.append(Turbulence.from_scene(f, scene.seed, system.particle_mass, stream=force_index))
                 present.add("turbulence")
         elif isinstance(f, m.Attractor):
             terms.append(Attractor(np.array(f.position), f.gm, f.softening, system.particle_mass))
@@ -268,12 +269,21 @@ def compile_scene(scene: m.Scene, name: str = "scene") -> Compiled:
     rec = record_steps(clock, every=scene.record.every, fps=scene.record.fps)
 
     moving_anchor = bool(np.any(particle_pinned & np.any(particle_velocity != 0, axis=1)))
-    conservative = dynamics.conservative and not moving_anchor and not scene.emitters and not penalty
+    lossy_planes = any(p.restitution < 1 or p.friction > 0 for p in scene.planes if p.response == "impulse")
+    conservative = (
+        dynamics.conservative
+        and not moving_anchor
+        and not scene.emitters
+        and not penalty
+        and not lossy_planes
+    )
 
     stages[:0] = [t.label for t in terms]
     stages.append(f"integrator: {integrator.name} ({integrator.description})")
     if colliders:
         stages.append(colliders.label)
+    if emitters is not None:
+        stages.extend(emitters.labels)  # they run after the step and its collisions
     stages.append(
         f"record: {len(rec)} frames of {clock.steps} steps"
         + (f" (every {scene.record.every})" if scene.record.every else "")
@@ -285,7 +295,11 @@ def compile_scene(scene: m.Scene, name: str = "scene") -> Compiled:
         ids=list(ids),
         spring_index=spring_index,
         has_emitters=emitters is not None,
-        extra={"planes": [(np.array(p.point), np.array(p.normal) / np.linalg.norm(p.normal)) for p in scene.planes]},
+        extra={
+            "planes": [
+                (np.array(p.point), np.array(p.normal) / np.linalg.norm(p.normal)) for p in scene.planes
+            ]
+        },
     )
     initial = State(
         particle_position=particle_position,

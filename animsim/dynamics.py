@@ -31,7 +31,9 @@ class Dynamics:
         """Write a = F/m into ``out``; pinned particles and dead slots get 0 (inverse mass 0)."""
         self.evaluations += 1
         self.force(x, v, t, out)
-        out *= self.system.particle_inv_mass[:, None]
+        inv_mass = self.system.particle_inv_mass
+        for j in range(out.shape[1]):  # per column: much faster than broadcasting (N, 1)
+            out[:, j] *= inv_mass
         return out
 
     def potential_energy(self, x: np.ndarray) -> float:

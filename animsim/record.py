@@ -74,13 +74,18 @@ def record_steps(clock: Clock, every: int | None = None, fps: float | None = Non
             idx = np.append(idx, n)
         return idx
     period = 1.0 / fps
-    count = int(math.floor(clock.duration / period * (1 + STEP_COUNT_RTOL))) + 1
+    count = math.floor(clock.duration / period * (1 + STEP_COUNT_RTOL)) + 1
     targets = np.arange(count, dtype=np.float64) * period
     if clock.divides:
-        idx = np.rint(targets / clock.duration * n)
-    else:
-        idx = np.rint(targets / clock.dt)
-    idx = np.clip(idx, 0, n).astype(np.int64)
+        idx = np.clip(np.rint(targets / clock.duration * n), 0, n).astype(np.int64)
+        return np.unique(idx)
+    # Uneven grid (shortened last step): compare the two neighbouring steps'
+    # actual times, so the final target lands on the final step.
+    lo = np.clip(np.floor(targets / clock.dt), 0, n).astype(np.int64)
+    hi = np.minimum(lo + 1, n)
+    t_lo = np.where(lo >= n, clock.duration, lo * clock.dt)
+    t_hi = np.where(hi >= n, clock.duration, hi * clock.dt)
+    idx = np.where(np.abs(t_hi - targets) < np.abs(targets - t_lo), hi, lo)
     return np.unique(idx)
 
 

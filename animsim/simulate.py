@@ -102,8 +102,12 @@ def run(
     progress: Callable[[int, int], None] | None = None,
     guard: Guard | None = None,
     meta_extra: dict[str, Any] | None = None,
+    observers: Sequence[Callable[[State], None]] = (),
 ) -> RunResult:
     """Simulate ``compiled`` from its initial state, streaming frames to ``sinks``.
+
+    ``observers`` are called with the live state at every recorded frame
+    (energy plots read whole states, which frames of alive rows are not).
 
     ``stop`` is polled at each step boundary (Ctrl-C handling sets it); the
     frames so far are kept and the status is ``interrupted``.
@@ -130,7 +134,7 @@ def run(
     try:
         frames = 0
         if record[0] == 0:
-            _emit(compiled, state, sinks)
+            _emit(compiled, state, sinks, observers)
             frames += 1
             next_rec = 1
         energy_start = dyn.energy(state.particle_position, state.particle_velocity)
@@ -158,7 +162,7 @@ def run(
                 status = STATUS_UNSTABLE
                 break
             if next_rec < len(record) and record[next_rec] == state.step:
-                _emit(compiled, state, sinks)
+                _emit(compiled, state, sinks, observers)
                 frames += 1
                 next_rec += 1
             if progress is not None:
@@ -192,7 +196,14 @@ def run(
     )
 
 
-def _emit(compiled: Compiled, state: State, sinks: Sequence[FrameSink]) -> None:
+def _emit(
+    compiled: Compiled,
+    state: State,
+    sinks: Sequence[FrameSink],
+    observers: Sequence[Callable[[State], None]] = (),
+) -> None:
+    for observe in observers:
+        observe(state)
     if not sinks:
         return
     if compiled.emitters is None:

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from conftest import ROOT, run_cli
+from tests.conftest import ROOT, run_cli
 
 CORPUS = ROOT / "tests" / "bad_scenes"
 MANIFEST = yaml.safe_load((CORPUS / "manifest.yaml").read_text(encoding="utf-8"))["scenes"]

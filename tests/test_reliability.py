@@ -21,7 +21,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from conftest import ROOT, run_cli
+from tests.conftest import ROOT, run_cli
 
 # A run long enough to be caught mid-way: 400 particles for 1e6 steps.
 LONG_SCENE = """\
@@ -264,7 +264,9 @@ def test_output_folder_missing(scene_file: Path, tmp_path: Path) -> None:
 
 
 def test_output_is_a_folder(scene_file: Path, tmp_path: Path) -> None:
-    _refused(run_cli("run", scene_file, "-o", tmp_path), "is a folder")
+    # Without --format an existing folder means a PLY sequence (issue 9); as a CSV it is refused.
+    for fmt in ("csv", "npz", "usda"):
+        _refused(run_cli("run", scene_file, "-o", tmp_path, "--format", fmt), "is a folder")
 
 
 def test_output_is_the_scene_itself_by_any_name(scene_file: Path, tmp_path: Path) -> None:

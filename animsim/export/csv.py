@@ -14,8 +14,8 @@ from typing import IO, Any
 
 import numpy as np
 
-from animsim.atomic import AtomicFile, commit_together, writing
-from animsim.export.meta import meta_file
+from animsim.atomic import AtomicFile, writing
+from animsim.export.meta import commit_with_meta
 from animsim.record import Frame, TrajectoryHeader
 
 HEADER = ("t", "id", "x", "y", "z", "vx", "vy", "vz")
@@ -98,12 +98,7 @@ class CsvSink:
                 with writing(self.path):
                     self._out.flush()
             return
-        try:
-            m = meta_file(self.path, meta) if self.write_meta else None
-        except BaseException:
-            self._file.abort()
-            raise
-        commit_together(self._file, m)
+        commit_with_meta(self._file, self.path, meta if self.write_meta else None)
 
     def abort(self) -> None:
         if self._file is not None:

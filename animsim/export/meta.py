@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from animsim.atomic import AtomicFile, writing
+from animsim.atomic import AtomicFile, commit_together, writing
 
 
 def meta_path(output: str | Path) -> Path:
@@ -23,3 +23,18 @@ def meta_file(output: str | Path, meta: dict[str, Any]) -> AtomicFile:
         f.abort()
         raise
     return f
+
+
+def commit_with_meta(data: AtomicFile, output: str | Path, meta: dict[str, Any] | None) -> None:
+    """Commit a finished output and its metadata together, or neither.
+
+    Both are made whole (flushed, fsynced, closed) before either is renamed,
+    so a full disk that shows only at fsync or close leaves the old
+    trajectory *and* the old metadata in place (see atomic.commit_together).
+    """
+    try:
+        staged = meta_file(output, meta) if meta is not None else None
+    except BaseException:
+        data.abort()
+        raise
+    commit_together(data, staged)

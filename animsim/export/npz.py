@@ -3,7 +3,11 @@
 Arrays: ``t`` (R,), ``particle`` (R,) int64 index into ``ids`` (P,) str,
 ``position`` (R, 3), ``velocity`` (R, 3), ``frame_time`` (F,) and
 ``frame_start`` (F+1,) row offsets, so frame k is rows
-``frame_start[k]:frame_start[k+1]``.
+``frame_start[k]:frame_start[k+1]``. Scenes with emitters add ``age`` (R,),
+``size`` (R,) and ``color`` (R, 4) (NaN for particles that have none).
+
+Unlike the CSV, the NPZ keeps frames in which no particle is alive (a
+particle system before its first birth), so it round-trips a run exactly.
 
 Frames stream to raw temporary files while the run goes; the ``.npz`` (an
 uncompressed zip of ``.npy`` files, as ``np.savez`` writes) is assembled at
@@ -21,8 +25,8 @@ from typing import IO, Any
 
 import numpy as np
 
-from animsim.atomic import AtomicFile, commit_together, writing
-from animsim.export.meta import meta_file
+from animsim.atomic import AtomicFile, writing
+from animsim.export.meta import commit_with_meta
 from animsim.record import Frame, TrajectoryHeader
 
 _COLUMNS = {
@@ -31,6 +35,7 @@ _COLUMNS = {
     "position": ((3,), np.float64),
     "velocity": ((3,), np.float64),
 }
+_EXTRA = {"age": ((), np.float64), "size": ((), np.float64), "color": ((4,), np.float64)}
 
 
 class NpzSink:
@@ -43,22 +48,31 @@ class NpzSink:
         self._frame_time: list[float] = []
         self._frame_start: list[int] = [0]
         self._ids: list[str] = []
+        self._columns = dict(_COLUMNS)
 
     def begin(self, header: TrajectoryHeader) -> None:
+        if header.has_emitters:
+            self._columns.update(_EXTRA)
         with writing(self.path):
             self._tmpdir = tempfile.TemporaryDirectory(prefix=".animsim-npz-", dir=self.path.parent)
-            for name in _COLUMNS:
+            for name in self._columns:
                 self._raw[name] = open(Path(self._tmpdir.name) / name, "wb")  # noqa: SIM115
         self._ids = list(header.ids)
 
     def write(self, frame: Frame) -> None:
         self._ids.extend(frame.new_ids)
         n = len(frame.index)
+        # A full disk shows here (or only at close): a clear error, never a traceback.
         with writing(self.path):
             self._raw["t"].write(np.full(n, frame.time, dtype=np.float64).tobytes())
             self._raw["particle"].write(np.asarray(frame.index, dtype=np.int64).tobytes())
             self._raw["position"].write(np.ascontiguousarray(frame.position, dtype=np.float64).tobytes())
             self._raw["velocity"].write(np.ascontiguousarray(frame.velocity, dtype=np.float64).tobytes())
+            if "age" in self._raw:
+                for name, shape in (("age", (n,)), ("size", (n,)), ("color", (n, 4))):
+                    value = getattr(frame, name)
+                    arr = np.full(shape, np.nan) if value is None else np.asarray(value, dtype=np.float64)
+                    self._raw[name].write(np.ascontiguousarray(arr).tobytes())
         self._rows += n
         self._frame_time.append(frame.time)
         self._frame_start.append(self._rows)
@@ -72,19 +86,18 @@ class NpzSink:
                     fh.close()
                 out = AtomicFile(self.path, "wb")
                 with zipfile.ZipFile(out.handle, "w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
-                    for name, (shape, dtype) in _COLUMNS.items():
+                    for name, (shape, dtype) in self._columns.items():
                         _write_npy(zf, name, Path(self._tmpdir.name) / name, (self._rows, *shape), dtype)
                     _write_array(zf, "ids", np.array(self._ids, dtype=str))
                     _write_array(zf, "frame_time", np.array(self._frame_time, dtype=np.float64))
                     _write_array(zf, "frame_start", np.array(self._frame_start, dtype=np.int64))
-            m = meta_file(self.path, meta) if self.write_meta else None
         except BaseException:
             if out is not None:
                 out.abort()
             self._cleanup()
             raise
         try:
-            commit_together(out, m)
+            commit_with_meta(out, self.path, meta if self.write_meta else None)
         finally:
             self._cleanup()
 

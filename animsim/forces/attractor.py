@@ -27,6 +27,7 @@ class Attractor:
     def potential(self, x: np.ndarray) -> float:
         r = x - self.center
         d = np.sqrt(np.einsum("ij,ij->i", r, r) + self.eps2)
-        with np.errstate(divide="ignore"):
+        # invalid too: a massless slot (a dead emitter slot) at the centre is 0/0, masked out here.
+        with np.errstate(divide="ignore", invalid="ignore"):
             u = np.where(d > 0, -self.gm * self.mass / d, 0.0)
         return float(u.sum())

@@ -36,5 +36,5 @@ class Integrator(ABC):
     def step(self, state: State, dt: float) -> None:
         """Advance positions and velocities by dt, in place."""
 
-    def reset(self) -> None:
+    def reset(self) -> None:  # noqa: B027 - optional hook, most methods cache nothing
         """Forget anything cached between steps."""

@@ -705,8 +705,19 @@ def _diagnostics(exc: ValidationError, data: dict[str, Any], marks: Marks, file:
         deeper = any(len(other) > len(path) and other[: len(path)] == path for other in groups)
         if deeper and all(e["type"] in _KIND or e["type"] == "literal_error" for e in groups[path]):
             del groups[path]
+    # One typo, one message: a missing key that an unknown sibling key's
+    # did-you-mean already names is not reported again.
+    suggested = set()
+    for path, errs in groups.items():
+        if any(e["type"] == "extra_forbidden" for e in errs):
+            allowed = sorted({f for m in _models_at(errs[0]["loc"][:-1]) for f in m.model_fields})
+            close = difflib.get_close_matches(str(path[-1]), allowed, n=1, cutoff=0.6)
+            if close:
+                suggested.add((*path[:-1], close[0]))
     out: list[Diagnostic] = []
     for path, errs in groups.items():
+        if errs[0]["type"] == "missing" and path in suggested:
+            continue
         msg, at_key = _message(path, errs, marks)
         if errs[0]["type"] == "missing":
             line, col = marks.at(path[:-1])

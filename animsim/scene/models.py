@@ -12,7 +12,7 @@ so that each error can name the exact key it is about.
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal, get_args
 
 from pydantic import (
     AfterValidator,
@@ -26,7 +26,7 @@ from pydantic import (
     model_validator,
 )
 
-INTEGRATOR_NAMES = (
+IntegratorName = Literal[
     "euler",
     "symplectic_euler",
     "euler_average",
@@ -35,7 +35,9 @@ INTEGRATOR_NAMES = (
     "rk4",
     "verlet",
     "implicit_euler",
-)
+]
+#: the names, in the order of the spec's table
+INTEGRATOR_NAMES: tuple[str, ...] = get_args(IntegratorName)
 DEFAULT_INTEGRATOR = "symplectic_euler"
 DEFAULT_DT = 0.01
 # Bounds that keep a typo from asking for an absurd lattice; issue 7's
@@ -47,7 +49,9 @@ DEFAULT_MAX_PARTICLES = 100_000
 
 
 class Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
+    # validate_default: defaults go through the same validators as user values
+    # (a default vector becomes the same 3-tuple a written one does).
+    model_config = ConfigDict(extra="forbid", strict=True, frozen=True, validate_default=True)
 
 
 def _to_vec3(v: list[float]) -> tuple[float, float, float]:
@@ -90,11 +94,9 @@ class SpringFamily(Model):
 
 class Particle(Model):
     id: Id
-    mass: NonNegative | None = Field(
-        None, description="kg, > 0; may be omitted or 0 only when pinned"
-    )
+    mass: NonNegative | None = Field(None, description="kg, > 0; may be omitted or 0 only when pinned")
     position: Vec3
-    velocity: Vec3 = (0.0, 0.0, 0.0)
+    velocity: Vec3 = [0.0, 0.0, 0.0]
     pinned: StrictBool = Field(
         False, description="forces never move it; it keeps its velocity (a moving anchor)"
     )
@@ -114,7 +116,7 @@ class Spring(Model):
 
 class Gravity(Model):
     type: Literal["gravity"]
-    g: Vec3 = (0.0, -9.81, 0.0)
+    g: Vec3 = [0.0, -9.81, 0.0]
 
 
 class Drag(Model):
@@ -133,16 +135,14 @@ class Wind(Model):
     type: Literal["wind"]
     velocity: Vec3 = Field(description="wind velocity, m/s")
     k: NonNegative = Field(description="coupling, f = k*(wind - v), N*s/m")
-    turbulence: NonNegative = Field(
-        0.0, description="standard deviation of the turbulent force, N"
-    )
+    turbulence: NonNegative = Field(0.0, description="standard deviation of the turbulent force, N")
     turbulence_scale: Positive = Field(1.0, description="length scale of the turbulence, m")
     turbulence_time: Positive = Field(1.0, description="time scale of the turbulence, s")
 
 
 class Attractor(Model):
     type: Literal["attractor"]
-    position: Vec3 = (0.0, 0.0, 0.0)
+    position: Vec3 = [0.0, 0.0, 0.0]
     gm: FiniteFloat = Field(description="G*M in m^3/s^2; f = -m*gm*r/|r|^3; negative repels")
     softening: NonNegative = Field(
         0.0,
@@ -227,13 +227,11 @@ class DiscShape(Model):
         return v
 
 
-Shape = Annotated[
-    PointShape | SphereShape | BoxShape | DiscShape, Field(discriminator="type")
-]
+Shape = Annotated[PointShape | SphereShape | BoxShape | DiscShape, Field(discriminator="type")]
 
 
 class VelocityDistribution(Model):
-    mean: Vec3 = (0.0, 0.0, 0.0)
+    mean: Vec3 = [0.0, 0.0, 0.0]
     spread: NonNegative = Field(0.0, description="standard deviation per component, m/s")
 
 
@@ -272,61 +270,58 @@ class Emitter(Model):
     mass: Positive = 0.01
     size: SizeOverLife = SizeOverLife()
     color: ColorOverLife = ColorOverLife()
-    max_particles: Annotated[StrictInt, Field(ge=1, le=MAX_EMITTER_PARTICLES)] = (
-        DEFAULT_MAX_PARTICLES
-    )
+    max_particles: Annotated[StrictInt, Field(ge=1, le=MAX_EMITTER_PARTICLES)] = DEFAULT_MAX_PARTICLES
     kill_box: KillBox | None = None
 
 
 # --- structures ---------------------------------------------------------------
 
 
-class Cloth(Model):
+def _lattice(dims: int) -> Any:
+    """A resolution: ``dims`` particle counts, each at least 2."""
+    return Annotated[
+        list[Annotated[StrictInt, Field(ge=2, le=MAX_RESOLUTION)]],
+        Field(min_length=dims, max_length=dims),
+    ]
+
+
+class _StructureCommon(Model):
+    """What every structure has: an id prefix, per-particle mass, start velocity, pins."""
+
+    id: StrictStr = Field(min_length=1, description="particle ids become <id>[i,...]")
+    mass: Positive = Field(description="per particle, kg")
+    velocity: Vec3 = Field([0.0, 0.0, 0.0], description="initial velocity of every particle, m/s")
+    pin: list[Id] = Field([], description="ids of particles held in place")
+
+
+class Cloth(_StructureCommon):
     type: Literal["cloth"]
-    id: StrictStr = Field(min_length=1)
-    origin: Vec3 = (0.0, 0.0, 0.0)
+    origin: Vec3 = [0.0, 0.0, 0.0]
     size: Vec2Positive = Field(description="extent along u and v, m")
     plane: Literal["xy", "xz", "yz"] = "xz"
-    resolution: Annotated[
-        list[Annotated[StrictInt, Field(ge=2, le=MAX_RESOLUTION)]],
-        Field(min_length=2, max_length=2),
-    ]
-    mass: Positive = Field(description="per particle, kg")
-    velocity: Vec3 = (0.0, 0.0, 0.0)
+    resolution: _lattice(2)  # type: ignore[valid-type]
     structural: SpringFamily | None = None
     shear: SpringFamily | None = None
     bend: SpringFamily | None = None
-    pin: list[Id] = []
 
 
-class Strand(Model):
+class Strand(_StructureCommon):
     type: Literal["strand"]
-    id: StrictStr = Field(min_length=1)
     start: Vec3
     end: Vec3
     count: Annotated[StrictInt, Field(ge=2, le=MAX_STRAND_COUNT)]
-    mass: Positive = Field(description="per particle, kg")
-    velocity: Vec3 = (0.0, 0.0, 0.0)
     stretch: SpringFamily | None = None
     bend: SpringFamily | None = None
-    pin: list[Id] = []
 
 
-class SoftBox(Model):
+class SoftBox(_StructureCommon):
     type: Literal["soft_box"]
-    id: StrictStr = Field(min_length=1)
-    center: Vec3 = (0.0, 0.0, 0.0)
+    center: Vec3 = [0.0, 0.0, 0.0]
     size: Annotated[list[Positive], Field(min_length=3, max_length=3)]
-    resolution: Annotated[
-        list[Annotated[StrictInt, Field(ge=2, le=MAX_RESOLUTION)]],
-        Field(min_length=3, max_length=3),
-    ]
-    mass: Positive = Field(description="per particle, kg")
-    velocity: Vec3 = (0.0, 0.0, 0.0)
+    resolution: _lattice(3)  # type: ignore[valid-type]
     edge: SpringFamily | None = None
     face_diagonal: SpringFamily | None = None
     body_diagonal: SpringFamily | None = None
-    pin: list[Id] = []
 
 
 Structure = Annotated[Cloth | Strand | SoftBox, Field(discriminator="type")]
@@ -334,17 +329,6 @@ STRUCTURE_TYPES = ("cloth", "strand", "soft_box")
 
 
 # --- integrator, record, scene ----------------------------------------------
-
-IntegratorName = Literal[
-    "euler",
-    "symplectic_euler",
-    "euler_average",
-    "midpoint",
-    "heun",
-    "rk4",
-    "verlet",
-    "implicit_euler",
-]
 
 
 class Adaptive(Model):
@@ -384,6 +368,7 @@ class Scene(Model):
         extra="forbid",
         strict=True,
         frozen=True,
+        validate_default=True,
         title="animsim scene",
         json_schema_extra={"$schema": "https://json-schema.org/draft/2020-12/schema"},
     )

@@ -1,0 +1,667 @@
+"""Particle systems: emitter pools with births, attributes, ageing and deaths.
+
+The course notes' "Basic Model of Particle Systems" (after Reeves 1983): at
+each frame new particles are born and given attributes, particles that have
+exceeded their life span are terminated, the rest are animated and their
+shading (size, colour) changes. This module does the bookkeeping; forces,
+integrators and plane collisions move emitted particles exactly like any
+other particle, because emitted particles live in the same global arrays.
+
+Storage
+    Each emitter owns a preallocated pool of ``max_particles`` slots appended
+    after the fixed particles (structure of arrays). A dead slot has mass 0
+    and inverse mass 0, so no force moves it and collisions skip it; its
+    velocity is zeroed so no integrator drifts it. ``state.particle_alive``
+    marks the alive slots. Memory is bounded by the cap, not by run length:
+    births are generated chunk by chunk as time advances.
+
+Births in time, independent of dt
+    Births are a random process in *time*, drawn from the emitter's own
+    random streams, never from the step: the birth times and every birth's
+    attributes are the same whatever dt or integrator is used. The rate
+    r(t) is ``rate`` or piecewise-linear keyframes (before the first and
+    after the last keyframe it holds that keyframe's value; two keyframes at
+    one time make a jump). ``rate_spread`` s is the standard deviation of the
+    rate itself, redrawn every RATE_NOISE_WINDOW of simulated time (Reeves's
+    "NParts = MeanParts + Rand() * VarParts", held for a fixed span of
+    simulated time instead of a frame so it does not depend on dt). Within
+    that, births form a Poisson process of intensity
+    lambda(t) = max(0, r(t) + s xi_w), drawn by thinning (Lewis and Shedler
+    1979): candidates at rate lambda_max, each kept with probability
+    lambda(t)/lambda_max. So births in T seconds of constant rate number
+    r T on average, with variance r T (+ s^2 w T from the rate noise,
+    w the noise window).
+
+Attributes (constrained randomization, course notes)
+    Position from the shape: a point; uniform inside a sphere by rejection
+    ("re-randomize if outside the radius", as the notes do it); uniform in a
+    box; uniform on a disc (rejection in the square, then laid in the plane
+    perpendicular to the normal). Velocity: mean + spread * N(0, 1) per
+    component. Lifetime: mean + spread * N(0, 1), redrawn while <= 0 (a
+    truncated Gaussian; since the mean is > 0 at least half of all draws are
+    kept, so the redraw loop ends quickly). Mass is the emitter's. Size and
+    RGBA colour are linear in age / lifetime between start and end.
+
+The rest of the birth step
+    A particle born at tau inside the step [t0, t1) is advanced for the rest
+    of it, r = t1 - tau, ballistically with the acceleration at birth,
+    x = x0 + r v0 + r^2/2 a0, v = v0 + r a0 (a0 = F(x0, v0)/m evaluated once
+    per step with births, at the step's midpoint time), then collided with
+    the impulse planes over that same partial step. Once per particle this
+    errs by O(r^3) in position and O(r^2) in velocity (the acceleration is
+    held constant, and taken at one time for the whole step), and the
+    velocity error carries into the position for the rest of the flight, so
+    emitted trajectories converge at order min(p, 2) for an integrator of
+    order p (measured: 1 for symplectic Euler, 2 for midpoint and for rk4).
+    A higher order would need one more force evaluation over every slot per
+    step, at the per-particle birth time, which the force contract (one
+    scalar t) does not offer.
+
+Deaths
+    At the exact age limit: a particle is alive for birth <= t < birth +
+    lifetime, so the same particles are alive at a recorded time whatever dt
+    is. Outside the optional ``kill_box``, checked at the end of every step
+    (this one depends on the trajectory, so on dt, like any position). A full
+    pool drops births: birth i is kept if, at its exact time, fewer than
+    ``max_particles`` are alive (counting deaths by age before it), which is
+    also independent of dt. Dropped births are counted in the run's metadata
+    (``summary``). Deaths by age of particles born in the same step do not
+    free slots for later births of that step (that matters only when
+    lifetimes are shorter than dt and the pool is full).
+
+Ids and order
+    Ids are ``<name>#<n>``, n counting the emitter's (kept) births from 0,
+    never reused. Each birth event's attributes are drawn whether or not the
+    pool has room, so raising ``max_particles`` does not change the
+    attributes drawn for later events. Frames hold the alive particles in
+    creation order: fixed particles first, then emitted ones by birth time
+    (ties by emitter order).
+
+Random streams
+    Every emitter has its own streams, seeded by ``np.random.SeedSequence``
+    from (scene seed, a hash of the emitter's name): one for birth times and
+    rate noise, one for attributes. Adding, removing or reordering another
+    emitter does not change this one's particles.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from animsim.collisions import PlaneColliders
+from animsim.record import Frame
+from animsim.scene import models as m
+from animsim.system import State, System
+
+#: The rate noise (``rate_spread``) is held for this span of simulated time, s.
+RATE_NOISE_WINDOW = 0.1
+#: Births are generated in chunks of about this many candidates, so memory is
+#: bounded by the chunk, not the run (a noise window is split if needed).
+CHUNK_BIRTHS = 4096
+#: Rate-noise draws above this many standard deviations are rare enough to
+#: ignore when sizing chunks (sizing only; it never truncates the noise).
+RATE_NOISE_SIGMAS = 4.0
+#: Volume of the unit ball over that of the cube [-1, 1]^3 (pi/6): the
+#: acceptance rate of sphere rejection sampling; the disc's is pi/4.
+BALL_ACCEPTANCE = np.pi / 6.0
+DISC_ACCEPTANCE = np.pi / 4.0
+#: Oversampling of rejection batches so one batch nearly always suffices.
+REJECTION_MARGIN = 1.2
+REJECTION_EXTRA = 16
+#: Tag that separates emitter streams from other uses of the scene seed.
+EMITTER_STREAM_TAG = 0x656D_6974  # "emit"
+#: Words of the name hash mixed into the seed (4 x 32 bits).
+NAME_HASH_WORDS = 4
+
+
+def _name_words(name: str) -> list[int]:
+    digest = hashlib.sha256(name.encode("utf-8")).digest()
+    return [int.from_bytes(digest[4 * i : 4 * i + 4], "little") for i in range(NAME_HASH_WORDS)]
+
+
+def parse_color(text: str) -> np.ndarray:
+    """``#rrggbb`` or ``#rrggbbaa`` -> RGBA floats in [0, 1] (alpha 1 when omitted)."""
+    digits = text[1:]
+    if len(digits) == 6:
+        digits += "ff"
+    return np.array([int(digits[i : i + 2], 16) / 255.0 for i in range(0, 8, 2)])
+
+
+@dataclass(frozen=True)
+class RateSchedule:
+    """Piecewise-linear births per second; holds the end values outside the keyframes.
+
+    ``times`` non-decreasing (s); equal times make a jump (right-continuous).
+    """
+
+    times: np.ndarray
+    values: np.ndarray
+
+    @classmethod
+    def from_spec(cls, rate: float | list[list[float]]) -> RateSchedule:
+        if isinstance(rate, list):
+            kf = np.array(rate, dtype=np.float64).reshape(-1, 2)
+            return cls(kf[:, 0].copy(), kf[:, 1].copy())
+        return cls(np.array([0.0]), np.array([float(rate)]))
+
+    @property
+    def constant(self) -> bool:
+        return bool(np.all(self.values == self.values[0]))
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        t = np.asarray(t, dtype=np.float64)
+        k = np.searchsorted(self.times, t, side="right")
+        lo = np.clip(k - 1, 0, len(self.times) - 1)
+        hi = np.clip(k, 0, len(self.times) - 1)
+        t0, t1 = self.times[lo], self.times[hi]
+        span = t1 - t0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            w = np.where(span > 0, (t - t0) / np.where(span > 0, span, 1.0), 0.0)
+        w = np.clip(w, 0.0, 1.0)
+        return self.values[lo] + w * (self.values[hi] - self.values[lo])
+
+    def max_over(self, a: float, b: float) -> float:
+        """An upper bound (the maximum) of the rate over [a, b]."""
+        inside = (self.times >= a) & (self.times <= b)
+        ends = self(np.array([a, b]))
+        return float(max(ends.max(), self.values[inside].max() if inside.any() else 0.0))
+
+    def describe(self) -> str:
+        if len(self.times) == 1:
+            return f"{self.values[0]:g}/s"
+        return "keyframes " + ", ".join(
+            f"{v:g}/s at {t:g} s" for t, v in zip(self.times, self.values, strict=True)
+        )
+
+
+class ShapeSampler:
+    """Uniform birth positions in an emitter shape (constrained randomization)."""
+
+    def __init__(self, shape: m.PointShape | m.SphereShape | m.BoxShape | m.DiscShape):
+        self.shape = shape
+        if isinstance(shape, m.DiscShape):
+            n = np.array(shape.normal) / np.linalg.norm(shape.normal)
+            # Any vector not parallel to n gives the in-plane basis (e1, e2).
+            helper = np.eye(3)[int(np.argmin(np.abs(n)))]
+            e1 = np.cross(n, helper)
+            e1 /= np.linalg.norm(e1)
+            self.basis = np.stack([e1, np.cross(n, e1)])  # (2, 3)
+
+    def describe(self) -> str:
+        s = self.shape
+        if isinstance(s, m.PointShape):
+            return f"point {list(s.position)}"
+        if isinstance(s, m.SphereShape):
+            return f"sphere at {list(s.center)} r = {s.radius:g} m (uniform inside, rejection)"
+        if isinstance(s, m.BoxShape):
+            return f"box {list(s.min)}..{list(s.max)}"
+        return f"disc at {list(s.center)} normal {list(s.normal)} r = {s.radius:g} m (rejection)"
+
+    def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        s = self.shape
+        if isinstance(s, m.PointShape):
+            return np.tile(np.array(s.position), (n, 1))
+        if isinstance(s, m.BoxShape):
+            lo, hi = np.array(s.min), np.array(s.max)
+            return lo + (hi - lo) * rng.random((n, 3))
+        if isinstance(s, m.SphereShape):
+            unit = _inside_unit_ball(rng, n, 3, BALL_ACCEPTANCE)
+            return np.array(s.center) + s.radius * unit
+        unit = _inside_unit_ball(rng, n, 2, DISC_ACCEPTANCE)
+        return np.array(s.center) + s.radius * (unit @ self.basis)
+
+
+def _inside_unit_ball(rng: np.random.Generator, n: int, dim: int, acceptance: float) -> np.ndarray:
+    """n points uniform in the unit ball of ``dim`` dimensions.
+
+    The notes' constrained randomization: draw in the cube [-1, 1]^dim and
+    re-randomize what falls outside the radius, in vectorised batches.
+    """
+    out = np.empty((n, dim))
+    have = 0
+    while have < n:
+        want = n - have
+        batch = rng.uniform(-1.0, 1.0, (int(want * REJECTION_MARGIN / acceptance) + REJECTION_EXTRA, dim))
+        keep = batch[np.einsum("ij,ij->i", batch, batch) <= 1.0][:want]
+        out[have : have + len(keep)] = keep
+        have += len(keep)
+    return out
+
+
+def _positive_gaussian(rng: np.random.Generator, n: int, mean: float, spread: float) -> np.ndarray:
+    """n draws of mean + spread*N(0, 1), each redrawn while <= 0 (a truncated Gaussian)."""
+    if spread == 0.0:
+        return np.full(n, mean)
+    out = np.empty(n)
+    have = 0
+    while have < n:
+        want = n - have
+        batch = mean + spread * rng.standard_normal(want + REJECTION_EXTRA)
+        keep = batch[batch > 0.0][:want]
+        out[have : have + len(keep)] = keep
+        have += len(keep)
+    return out
+
+
+@dataclass
+class Births:
+    """Birth events in time order: times (k,) s, position (k, 3), velocity (k, 3), lifetime (k,)."""
+
+    time: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray
+    lifetime: np.ndarray
+
+    @classmethod
+    def empty(cls) -> Births:
+        return cls(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
+
+    def __len__(self) -> int:
+        return len(self.time)
+
+    def split(self, before: float) -> tuple[Births, Births]:
+        k = int(np.searchsorted(self.time, before, side="left"))
+        head = Births(self.time[:k], self.position[:k], self.velocity[:k], self.lifetime[:k])
+        tail = Births(self.time[k:], self.position[k:], self.velocity[k:], self.lifetime[k:])
+        return head, tail
+
+    @staticmethod
+    def concat(parts: Sequence[Births]) -> Births:
+        if len(parts) == 1:
+            return parts[0]
+        return Births(
+            np.concatenate([p.time for p in parts]),
+            np.concatenate([p.position for p in parts]),
+            np.concatenate([p.velocity for p in parts]),
+            np.concatenate([p.lifetime for p in parts]),
+        )
+
+
+class BirthStream:
+    """The births of one emitter, generated chunk by chunk in absolute time.
+
+    Chunk c covers [c h, (c+1) h); the chunk length h divides the rate-noise
+    window. Both are fixed by the scene, never by dt, and each chunk draws
+    from the streams in a fixed order, so the events (and their attributes)
+    are a function of the seed and the scene only.
+    """
+
+    def __init__(self, spec: m.Emitter, seed: int):
+        self.spec = spec
+        self.seed = seed
+        self.rate = RateSchedule.from_spec(spec.rate)
+        self.spread = float(spec.rate_spread)
+        self.shape = ShapeSampler(spec.shape)
+        bound = float(self.rate.values.max()) + RATE_NOISE_SIGMAS * self.spread
+        self.chunks_per_window = max(1, int(np.ceil(bound * RATE_NOISE_WINDOW / CHUNK_BIRTHS)))
+        self.chunk_length = RATE_NOISE_WINDOW / self.chunks_per_window
+        self.v_mean = np.array(spec.velocity.mean)
+        self.reset()
+
+    def reset(self) -> None:
+        root = np.random.SeedSequence([self.seed, EMITTER_STREAM_TAG, *_name_words(self.spec.name)])
+        birth_ss, attr_ss = root.spawn(2)
+        self.rng_birth = np.random.default_rng(birth_ss)
+        self.rng_attr = np.random.default_rng(attr_ss)
+        self.next_chunk = 0
+        self.noise = 0.0
+        self.pending = Births.empty()
+
+    def _chunk(self) -> Births:
+        c = self.next_chunk
+        self.next_chunk += 1
+        a = c * self.chunk_length
+        b = (c + 1) * self.chunk_length
+        rb = self.rng_birth
+        if self.spread > 0 and c % self.chunks_per_window == 0:
+            self.noise = self.spread * float(rb.standard_normal())
+        lam_max = max(0.0, self.rate.max_over(a, b) + self.noise)
+        count = int(rb.poisson(lam_max * (b - a)))
+        t = np.sort(a + (b - a) * rb.random(count))
+        u = rb.random(count)  # thinning: keep with probability lambda(t) / lambda_max
+        if count:
+            lam = np.maximum(self.rate(t) + self.noise, 0.0)
+            t = t[u * lam_max < lam]
+        k = len(t)
+        ra = self.rng_attr
+        spec = self.spec
+        position = self.shape.sample(ra, k)
+        velocity = self.v_mean + spec.velocity.spread * ra.standard_normal((k, 3))
+        lifetime = _positive_gaussian(ra, k, spec.lifetime.mean, spec.lifetime.spread)
+        return Births(t, position, velocity, lifetime)
+
+    def take(self, t1: float) -> Births:
+        """Every birth event with time < t1 not taken yet, in time order."""
+        parts = [self.pending]
+        while self.next_chunk * self.chunk_length < t1:
+            parts.append(self._chunk())
+        events, self.pending = Births.concat(parts).split(t1)
+        return events
+
+
+class Pool:
+    """One emitter's slots [first, first + capacity) in the global arrays."""
+
+    def __init__(self, spec: m.Emitter, order: int, first: int, seed: int):
+        self.spec = spec
+        self.name = spec.name
+        self.order = order
+        self.first = first
+        self.capacity = int(spec.max_particles)
+        self.stream = BirthStream(spec, seed)
+        self.mass = float(spec.mass)
+        self.size0, self.size1 = float(spec.size.start), float(spec.size.end)
+        self.color0 = parse_color(spec.color.start)
+        self.color1 = parse_color(spec.color.end)
+        kb = spec.kill_box
+        self.kill_lo = None if kb is None else np.array(kb.min)
+        self.kill_hi = None if kb is None else np.array(kb.max)
+        cap = self.capacity
+        # Per-slot bookkeeping (structure of arrays), shape (capacity,).
+        self.slot_birth = np.zeros(cap)  # s
+        self.slot_death = np.full(cap, np.inf)  # s; inf for a dead slot
+        self.slot_lifetime = np.ones(cap)  # s
+        self.slot_serial = np.zeros(cap, dtype=np.int64)  # n of the id <name>#<n>
+        self.slot_table = np.full(cap, -1, dtype=np.int64)  # row in the id table, -1 = not yet recorded
+        self.reset_counters()
+
+    def reset_counters(self) -> None:
+        self.born = 0
+        self.dropped = 0
+        self.died_age = 0
+        self.died_kill_box = 0
+        self.alive_count = 0
+        self.peak_alive = 0
+        self.kinetic_energy_born = 0.0
+
+    def bind(self, system: System, state: State) -> None:
+        """Point at this run's arrays and empty the pool."""
+        sl = slice(self.first, self.first + self.capacity)
+        self.x = state.particle_position[sl]
+        self.v = state.particle_velocity[sl]
+        assert state.particle_alive is not None
+        self.alive = state.particle_alive[sl]
+        self.m = system.particle_mass[sl]
+        self.inv_m = system.particle_inv_mass[sl]
+        self.alive[:] = False
+        self.m[:] = 0.0
+        self.inv_m[:] = 0.0
+        self.x[:] = 0.0
+        self.v[:] = 0.0
+        self.slot_death[:] = np.inf
+        self.slot_table[:] = -1
+        self.stream.reset()
+        self.reset_counters()
+
+    def _kill(self, slots: np.ndarray) -> None:
+        self.alive[slots] = False
+        self.m[slots] = 0.0
+        self.inv_m[slots] = 0.0
+        self.v[slots] = 0.0  # a dead slot must not drift
+        self.slot_death[slots] = np.inf
+        self.alive_count -= len(slots)
+
+    def _accepted(self, events: Births, dying: np.ndarray) -> np.ndarray:
+        """Boolean mask of the events that find room in the pool, at their exact times.
+
+        With A0 alive at the step's start and D(b) of them dead by time b,
+        birth i (1-based) sees f_i = cap - A0 + D(b_i) free slots not taken by
+        earlier births; the kept count c_i = min(c_{i-1} + 1, f_i), whose
+        closed form (f non-decreasing) is c_i = i + min(0, min_{j<=i} f_j - j).
+        """
+        k = len(events)
+        if self.alive_count + k <= self.capacity:
+            return np.ones(k, dtype=bool)
+        deaths = np.sort(self.slot_death[dying])
+        free = self.capacity - self.alive_count + np.searchsorted(deaths, events.time, side="right")
+        i = np.arange(1, k + 1)
+        kept = i + np.minimum(0, np.minimum.accumulate(free - i))
+        return np.diff(kept, prepend=0) > 0
+
+    def births(self, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
+        """Take this step's births into free slots; return (global indices, birth times)."""
+        events = self.stream.take(t1)
+        dying = np.flatnonzero(self.slot_death <= t1)
+        keep = self._accepted(events, dying) if len(events) else np.zeros(0, dtype=bool)
+        if len(dying):
+            self.died_age += len(dying)
+            self._kill(dying)
+        n = int(np.count_nonzero(keep))
+        self.dropped += len(events) - n
+        if n == 0:
+            return np.zeros(0, dtype=np.int64), np.zeros(0)
+        if n != len(events):
+            events = Births(
+                events.time[keep], events.position[keep], events.velocity[keep], events.lifetime[keep]
+            )
+        slots = np.flatnonzero(~self.alive)[:n]
+        self.alive[slots] = True
+        self.m[slots] = self.mass
+        self.inv_m[slots] = 1.0 / self.mass
+        self.x[slots] = events.position
+        self.v[slots] = events.velocity
+        self.slot_birth[slots] = events.time
+        self.slot_lifetime[slots] = events.lifetime
+        self.slot_death[slots] = events.time + events.lifetime
+        self.slot_serial[slots] = self.born + np.arange(n)
+        self.slot_table[slots] = -1
+        self.born += n
+        self.alive_count += n
+        self.kinetic_energy_born += (
+            0.5 * self.mass * float(np.einsum("ij,ij->", events.velocity, events.velocity))
+        )
+        return self.first + slots, events.time
+
+    def deaths(self, t1: float, newborn: np.ndarray) -> bool:
+        """Newborns that already reached their age limit, and anything outside the kill box."""
+        changed = False
+        if len(newborn):
+            local = newborn - self.first
+            old = local[self.slot_death[local] <= t1]
+            if len(old):
+                self.died_age += len(old)
+                self._kill(old)
+                changed = True
+        if self.kill_lo is not None and self.alive_count:
+            x = self.x
+            outside = ((x < self.kill_lo) | (x > self.kill_hi)).any(axis=1) & self.alive
+            out = np.flatnonzero(outside)
+            if len(out):
+                self.died_kill_box += len(out)
+                self._kill(out)
+                changed = True
+        self.peak_alive = max(self.peak_alive, self.alive_count)
+        return changed
+
+    def summary(self) -> dict[str, Any]:
+        return {
+            "born": self.born,
+            "dropped": self.dropped,
+            "died_age": self.died_age,
+            "died_kill_box": self.died_kill_box,
+            "alive": self.alive_count,
+            "peak_alive": self.peak_alive,
+            "max_particles": self.capacity,
+            "kinetic_energy_born": self.kinetic_energy_born,
+        }
+
+
+class Emitters:
+    """All pools of a scene and the hooks the simulation loop calls.
+
+    ``reset`` before a run, ``advance`` after each step's integration and
+    collisions, ``frame`` to record, ``summary`` for the metadata.
+    """
+
+    def __init__(self, pools: list[Pool], first_index: int):
+        self.pools = pools
+        self.first_index = first_index
+        self.capacity = sum(p.capacity for p in pools)
+        self.names = [p.name for p in pools]
+        self._accel: np.ndarray | None = None
+        self._next_table = first_index
+        kill = [p.name for p in pools if p.kill_lo is not None]
+        self.labels = [
+            *(
+                f"emitter {p.name!r} births: {p.stream.rate.describe()}"
+                + (
+                    f" ± {p.stream.spread:g}/s (redrawn every {RATE_NOISE_WINDOW:g} s)"
+                    if p.stream.spread
+                    else ""
+                )
+                + f", Poisson in time from its own seeded stream; {p.stream.shape.describe()}; "
+                f"pool of {p.capacity} slots (full: births dropped and counted)"
+                for p in pools
+            ),
+            "emitter births inside a step: advanced for the rest of it with the force at birth "
+            "(one extra force evaluation per step with births), then collided",
+            "emitter ageing: size and RGBA colour linear over life",
+            "emitter deaths: at the exact age limit"
+            + (f"; kill box of {', '.join(repr(k) for k in kill)}" if kill else "; no kill box"),
+        ]
+
+    def reset(self, system: System, state: State) -> None:
+        for p in self.pools:
+            p.bind(system, state)
+        self._accel = np.zeros_like(state.particle_position)
+        self._next_table = self.first_index
+
+    def advance(self, compiled: Any, state: State, t0: float, t1: float) -> None:
+        """Births in [t0, t1), moved on to t1; then deaths at t1."""
+        born: list[np.ndarray] = []
+        times: list[np.ndarray] = []
+        for p in self.pools:
+            idx, tb = p.births(t0, t1)
+            born.append(idx)
+            times.append(tb)
+        newborn = np.concatenate(born)
+        changed = bool(len(newborn))
+        if len(newborn):
+            self._move_newborns(compiled, state, newborn, t1 - np.concatenate(times), 0.5 * (t0 + t1))
+        for p, idx in zip(self.pools, born, strict=True):
+            changed |= p.deaths(t1, idx)
+        if changed:
+            state.revision += 1  # integrators that cache a force must recompute it
+
+    def _move_newborns(
+        self, compiled: Any, state: State, idx: np.ndarray, rest: np.ndarray, t_mid: float
+    ) -> None:
+        """x += r v0 + r^2/2 a0, v += r a0 for the rest r of the birth step; then planes."""
+        x, v = state.particle_position, state.particle_velocity
+        assert self._accel is not None
+        # One evaluation over every slot: force terms hold per-particle arrays
+        # (mass) of the full system, so they cannot be evaluated on a subset.
+        a = compiled.dynamics.acceleration(x, v, t_mid, self._accel)[idx]
+        x0, v0 = x[idx], v[idx]
+        r = rest[:, None]
+        x1 = x0 + r * v0 + (0.5 * r * r) * a
+        v1 = v0 + r * a
+        if compiled.colliders is not None:
+            sub = PlaneColliders(compiled.colliders.planes, np.ones(len(idx)))
+            sub.apply(x0, v0, x1, v1, rest)
+        x[idx] = x1
+        v[idx] = v1
+
+    def frame(self, compiled: Any, state: State) -> Frame:
+        """The alive particles in creation order, with age, size and colour of the emitted ones."""
+        fixed = self.first_index
+        em_slots, em_order, em_birth, em_serial = [], [], [], []
+        for p in self.pools:
+            s = np.flatnonzero(p.alive)
+            em_slots.append(s + p.first)
+            em_order.append(np.full(len(s), p.order, dtype=np.int64))
+            em_birth.append(p.slot_birth[s])
+            em_serial.append(p.slot_serial[s])
+        slots = np.concatenate(em_slots)
+        order = np.concatenate(em_order)
+        birth = np.concatenate(em_birth)
+        serial = np.concatenate(em_serial)
+        sort = np.lexsort((serial, order, birth))
+        slots, order, birth, serial = slots[sort], order[sort], birth[sort], serial[sort]
+
+        # Id-table rows: assigned when a particle is first recorded, in creation order.
+        table = np.empty(len(slots), dtype=np.int64)
+        new_ids: list[str] = []
+        for p in self.pools:
+            mine = order == p.order
+            local = slots[mine] - p.first
+            table[mine] = p.slot_table[local]
+        fresh = np.flatnonzero(table < 0)
+        if len(fresh):
+            table[fresh] = self._next_table + np.arange(len(fresh))
+            self._next_table += len(fresh)
+            for p in self.pools:
+                mine = fresh[order[fresh] == p.order]
+                p.slot_table[slots[mine] - p.first] = table[mine]
+            names = self.names
+            new_ids = [
+                f"{names[o]}#{n}" for o, n in zip(order[fresh].tolist(), serial[fresh].tolist(), strict=True)
+            ]
+
+        n_fixed = fixed
+        n = n_fixed + len(slots)
+        age = np.full(n, np.nan)
+        size = np.full(n, np.nan)
+        color = np.full((n, 4), np.nan)
+        if len(slots):
+            a = state.time - birth
+            age[n_fixed:] = a
+            lifetime = np.empty(len(slots))
+            s0 = np.empty(len(slots))
+            s1 = np.empty(len(slots))
+            c0 = np.empty((len(slots), 4))
+            c1 = np.empty((len(slots), 4))
+            for p in self.pools:
+                mine = order == p.order
+                lifetime[mine] = p.slot_lifetime[slots[mine] - p.first]
+                s0[mine], s1[mine] = p.size0, p.size1
+                c0[mine], c1[mine] = p.color0, p.color1
+            life = np.clip(a / lifetime, 0.0, 1.0)
+            size[n_fixed:] = s0 + (s1 - s0) * life
+            color[n_fixed:] = c0 + (c1 - c0) * life[:, None]
+        rows = np.concatenate([np.arange(n_fixed, dtype=np.int64), slots])
+        index = np.concatenate([np.arange(n_fixed, dtype=np.int64), table])
+        return Frame(
+            step=state.step,
+            time=state.time,
+            index=index,
+            position=state.particle_position[rows],
+            velocity=state.particle_velocity[rows],
+            new_ids=new_ids,
+            age=age,
+            size=size,
+            color=color,
+        )
+
+    def particle_id(self, index: int) -> str | None:
+        """The id (``<name>#<n>``) of the particle alive in global slot ``index``, if any.
+
+        For messages that name a particle (the stability guard): a pool slot's
+        index means nothing to a user, its id does.
+        """
+        for p in self.pools:
+            local = index - p.first
+            if 0 <= local < p.capacity:
+                return f"{p.name}#{int(p.slot_serial[local])}" if p.alive[local] else None
+        return None
+
+    def summary(self) -> dict[str, Any]:
+        return {
+            "births_dropped": sum(p.dropped for p in self.pools),
+            "per_emitter": {p.name: p.summary() for p in self.pools},
+        }
+
+
+def build_emitters(scene: m.Scene, first_index: int) -> Emitters:
+    """One pool per emitter, in scene order, slots starting at ``first_index``."""
+    pools = []
+    start = first_index
+    for order, spec in enumerate(scene.emitters):
+        pools.append(Pool(spec, order, start, scene.seed))
+        start += spec.max_particles
+    return Emitters(pools, first_index)

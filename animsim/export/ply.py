@@ -1,0 +1,690 @@
+"""PLY point sequences: one binary PLY file per recorded frame.
+
+Format source: Greg Turk, "The PLY Polygon File Format" (Stanford, 1994),
+the description every PLY reader follows. A file is an ASCII header (``ply``,
+``format``, ``comment``/``obj_info``, ``element``/``property`` lines, each
+ending in a line feed, closed by ``end_header``) followed by the element data,
+here ``binary_little_endian 1.0``: the rows of each element back to back, every
+property in its declared type, no padding.
+
+What a file holds
+-----------------
+One ``vertex`` element, one row per particle alive in the frame, in the
+frame's row order (creation order), with these properties in this order:
+
+=======================  =================  ==================================
+property                 PLY type           meaning
+=======================  =================  ==================================
+``x y z``                ``double``         position, m
+``vx vy vz``             ``double``         velocity, m/s
+``id``                   ``int``            row of the id table (see below)
+``red green blue alpha`` ``uchar``          colour, ``round(255 * c)``
+``size``                 ``float``          particle size (radius), m
+=======================  =================  ==================================
+
+No ``face`` element: the file is a point cloud. Frames without ``size`` get
+:data:`DEFAULT_SIZE`, frames without ``color`` get opaque white.
+
+**double, not float, for positions and velocities.** The data is the
+simulation state and must read back bit for bit (the tests compare exactly);
+a float32 position of a particle 100 m from the origin is only good to about
+8 micrometres, visible as jitter in slow motion. Turk's format lists
+``double`` as a regular type, and the readers that matter accept it, then
+convert to their own single-precision storage, which costs the viewer nothing
+and keeps the file exact:
+
+* Blender 3.6+ (the C++ importer, ``source/blender/io/ply``): its header
+  parser knows ``double``/``float64`` and converts to float; ``red green blue
+  alpha`` become the colour attribute; since Blender 4.1 every other vertex
+  property (``vx``, ``size``, ``id``, ...) becomes a float point attribute.
+  Comments and ``obj_info`` lines are skipped. It reports an error for a file
+  with no vertices (a frame before an emitter's first particle) and it
+  assumes Z up: import with *Up = Y* (animsim is Y up).
+* ParaView/VTK (``vtkPLYReader``): reads ``x y z`` of any numeric type into
+  float points and ``red green blue`` as point colours; a file without a
+  ``face`` element is accepted. Other properties are ignored by older VTK,
+  and the points may come without vertex cells (show them with a point
+  representation such as Point Gaussian; not checked here).
+* Houdini: not checked here.
+
+Blender has a built-in integer ``id`` point attribute; how its importer
+treats a PLY property of that name is not checked here.
+
+Tools that insist on ``float`` get it with ``position_type="float"`` (the
+velocities follow); that file is then *not* exact.
+
+Files and naming
+----------------
+``path`` is either a file name ending in ``.ply`` (``out/frames.ply``: the
+sequence is ``out/frames_0000.ply``, ``out/frames_0001.ply``, ...) or a
+directory (``out/``: ``out/frames_0000.ply``, ...; stem :data:`DEFAULT_STEM`).
+An existing directory always counts as a directory. The number is the
+0-based index of the recorded frame (not the step; the step is in the
+header), zero-padded to a width fixed before the first frame: the digits of
+``expected_frames - 1`` but at least :data:`MIN_INDEX_WIDTH`, or
+:data:`DEFAULT_INDEX_WIDTH` when no count is given. Should a run record more
+frames than announced, the later numbers simply have more digits (readers
+that sort numerically, like Blender's sequence tools, still order them).
+Missing directories are created (and removed again by ``abort``).
+
+Header comments, one fact per line: ``comment generator animsim <version>``,
+``comment scene <name>``, ``comment frame <k>``, ``comment step <step>``,
+``comment time <t>`` (``repr`` of the float, so it reads back exactly) and
+``comment ids <stem>_ids.txt``.
+
+The id table
+------------
+PLY has no string type, so ``id`` is the int32 row of the run's id table:
+the header's ids followed by every frame's ``new_ids``, in that order. The
+table is written at ``close`` to the sidecar ``<stem>_ids.txt`` next to the
+frames: UTF-8, one id per line, line ``k`` (0-based) is id ``k``; a backslash,
+line feed or carriage return inside an id is written ``\\\\``, ``\\n``, ``\\r``
+(:func:`read_ids` undoes it).
+
+Atomicity
+---------
+Each frame file is written under a temporary name in its folder and renamed
+when whole (:class:`animsim.atomic.AtomicFile`); ``abort`` drops the frame in
+progress and deletes every file this sink wrote in this run (and the
+folders it created, when empty). ``close`` writes the id table and, as every
+trajectory sink does, ``<path>.meta.json`` (the path as given: ``frames.ply``
+gives ``frames.ply.meta.json``, a directory ``out`` gives ``out.meta.json``),
+each atomically. Then frame files of an earlier, longer animsim run with the
+same stem (numbers not written this time, header saying ``comment generator
+animsim``) are deleted so a sequence importer does not mix two runs; other
+files are never touched.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from animsim import __version__
+from animsim.atomic import AtomicFile
+from animsim.errors import SimulationError
+from animsim.export.meta import meta_file, meta_path
+from animsim.record import Frame, TrajectoryHeader
+
+PLY_SUFFIX = ".ply"
+DEFAULT_STEM = "frames"
+IDS_SIDECAR_SUFFIX = "_ids.txt"
+DEFAULT_INDEX_WIDTH = 5
+MIN_INDEX_WIDTH = 4
+
+DEFAULT_SIZE = 0.02  # m, when a frame has no sizes
+DEFAULT_RGBA = (1.0, 1.0, 1.0, 1.0)  # opaque white, when a frame has no colours
+COLOR_MAX = 255  # uchar channel for colour 1.0
+
+GENERATOR = "animsim"
+FORMAT_LINE = "format binary_little_endian 1.0"
+VERTEX_ELEMENT = "vertex"
+# Enough of a file to see its whole header when looking for stale frames.
+HEADER_PROBE_BYTES = 4096
+
+INT32_MAX = np.iinfo(np.int32).max
+
+# Writer-side PLY type names (Turk's names) and their little-endian numpy codes.
+POSITION_TYPES: dict[str, str] = {"double": "<f8", "float": "<f4"}
+ID_TYPE = ("int", "<i4")
+COLOR_TYPE = ("uchar", "u1")
+SIZE_TYPE = ("float", "<f4")
+
+POSITION_FIELDS = ("x", "y", "z")
+VELOCITY_FIELDS = ("vx", "vy", "vz")
+COLOR_FIELDS = ("red", "green", "blue", "alpha")
+
+# Reader side: every scalar type of the format, with the sized aliases
+# (``float32``, ``uint8``, ...) that later writers use.
+PLY_SCALAR_TYPES: dict[str, str] = {
+    "char": "i1",
+    "int8": "i1",
+    "uchar": "u1",
+    "uint8": "u1",
+    "short": "i2",
+    "int16": "i2",
+    "ushort": "u2",
+    "uint16": "u2",
+    "int": "i4",
+    "int32": "i4",
+    "uint": "u4",
+    "uint32": "u4",
+    "float": "f4",
+    "float32": "f4",
+    "double": "f8",
+    "float64": "f8",
+}
+PLY_FORMATS = {"ascii": "", "binary_little_endian": "<", "binary_big_endian": ">"}
+
+
+class PlyFormatError(ValueError):
+    """A file that is not well-formed PLY (or uses something this reader lacks)."""
+
+
+def vertex_dtype(position_type: str = "double") -> np.dtype:
+    """The packed little-endian row layout of a vertex, in header order."""
+    p = POSITION_TYPES[position_type]
+    fields: list[tuple[str, str]] = [(n, p) for n in POSITION_FIELDS]
+    fields += [(n, p) for n in VELOCITY_FIELDS]
+    fields.append(("id", ID_TYPE[1]))
+    fields += [(n, COLOR_TYPE[1]) for n in COLOR_FIELDS]
+    fields.append(("size", SIZE_TYPE[1]))
+    return np.dtype(fields)
+
+
+def _property_lines(position_type: str) -> list[str]:
+    lines = [f"property {position_type} {n}" for n in POSITION_FIELDS + VELOCITY_FIELDS]
+    lines.append(f"property {ID_TYPE[0]} id")
+    lines += [f"property {COLOR_TYPE[0]} {n}" for n in COLOR_FIELDS]
+    lines.append(f"property {SIZE_TYPE[0]} size")
+    return lines
+
+
+def _comment_text(text: str) -> str:
+    """One header line's worth of text: no line breaks, ASCII only."""
+    one_line = " ".join(text.splitlines()) if text else ""
+    return one_line.encode("ascii", "backslashreplace").decode("ascii")
+
+
+def escape_id(ident: str) -> str:
+    """An id as one sidecar line (see the module docstring)."""
+    return ident.replace("\\", "\\\\").replace("\n", "\\n").replace("\r", "\\r")
+
+
+_UNESCAPE = re.compile(r"\\(.)")
+_UNESCAPE_MAP = {"\\": "\\", "n": "\n", "r": "\r"}
+
+
+def unescape_id(line: str) -> str:
+    """Inverse of :func:`escape_id`."""
+    return _UNESCAPE.sub(lambda m: _UNESCAPE_MAP.get(m.group(1), m.group(0)), line)
+
+
+def read_ids(path: str | os.PathLike[str]) -> list[str]:
+    """The id table from a ``<stem>_ids.txt`` sidecar."""
+    text = Path(path).read_text(encoding="utf-8")
+    return [unescape_id(line) for line in text.split("\n")[:-1]]
+
+
+def sequence_layout(path: str | os.PathLike[str]) -> tuple[Path, str]:
+    """``(directory, stem)`` of the sequence a user path names (module docstring)."""
+    p = Path(path)
+    if not p.is_dir() and p.suffix.lower() == PLY_SUFFIX:
+        return p.parent, p.stem
+    return p, DEFAULT_STEM
+
+
+def index_width(expected_frames: int | None) -> int:
+    """Digits of the frame numbers (module docstring)."""
+    if expected_frames is None:
+        return DEFAULT_INDEX_WIDTH
+    if expected_frames < 0:
+        raise ValueError(f"expected_frames must be >= 0, got {expected_frames}")
+    return max(MIN_INDEX_WIDTH, len(str(max(expected_frames - 1, 0))))
+
+
+def _rgba_bytes(color: np.ndarray | None, n: int) -> np.ndarray:
+    """(n, 4) uint8 colours; NaN counts as 0, values are clipped to [0, 1]."""
+    if color is None:
+        return np.broadcast_to(np.rint(np.asarray(DEFAULT_RGBA) * COLOR_MAX).astype(np.uint8), (n, 4))
+    c = np.nan_to_num(np.asarray(color, dtype=np.float64), nan=0.0)
+    return np.rint(np.clip(c, 0.0, 1.0) * COLOR_MAX).astype(np.uint8)
+
+
+def validate_frame(frame: Frame, table_size: int) -> int:
+    """Row count of ``frame``; ValueError when its arrays disagree or ``index``
+    points outside an id table of ``table_size`` ids (a simulator bug)."""
+    n = int(np.shape(frame.index)[0]) if np.ndim(frame.index) == 1 else -1
+    problems = []
+    if table_size - 1 > INT32_MAX:
+        problems.append(f"id table of {table_size} ids does not fit the int32 id property")
+    if n < 0:
+        problems.append(f"index has shape {np.shape(frame.index)}")
+    else:
+        for name, arr, shape in (
+            ("position", frame.position, (n, 3)),
+            ("velocity", frame.velocity, (n, 3)),
+            ("size", frame.size, (n,)),
+            ("color", frame.color, (n, 4)),
+        ):
+            if arr is not None and np.shape(arr) != shape:
+                problems.append(f"{name} has shape {np.shape(arr)}, expected {shape}")
+        if n and (np.min(frame.index) < 0 or np.max(frame.index) >= table_size):
+            problems.append(f"index outside the id table of {table_size} ids")
+    if problems:
+        raise ValueError(f"frame at step {frame.step}: " + "; ".join(problems))
+    return n
+
+
+class PlySequenceSink:
+    """A :class:`animsim.record.FrameSink` writing one binary PLY file per frame.
+
+    ``path``: ``.ply`` file name pattern or directory (see the module
+    docstring). ``expected_frames``: how many frames the run will record, to
+    fix the width of the numbers (pass ``len(record_steps)``).
+    ``position_type``: ``"double"`` (default, exact) or ``"float"`` for x y z
+    and vx vy vz. ``remove_stale``: delete leftover frames of an earlier
+    animsim run at ``close``. ``write_meta``: also write the run's metadata
+    to ``<path>.meta.json`` (:mod:`animsim.export.meta`), as the other
+    trajectory sinks do.
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        expected_frames: int | None = None,
+        position_type: str = "double",
+        remove_stale: bool = True,
+        write_meta: bool = True,
+    ) -> None:
+        if position_type not in POSITION_TYPES:
+            raise ValueError(f"position_type must be one of {sorted(POSITION_TYPES)}, got {position_type!r}")
+        self.directory, self.stem = sequence_layout(path)
+        self.width = index_width(expected_frames)
+        self.position_type = position_type
+        self.remove_stale = remove_stale
+        self.write_meta = write_meta
+        self.output = Path(path)  # as given; the metadata goes to <output>.meta.json
+        self.meta_path = meta_path(path)
+        self.dtype = vertex_dtype(position_type)
+        self.written: list[Path] = []  # files committed by this run, in order
+        self._ids: list[str] = []
+        self._scene = ""
+        self._created_dirs: list[Path] = []
+        self._pending: AtomicFile | None = None
+        self._sidecars_pending: list[AtomicFile] = []
+        self._sidecars: list[Path] = []  # id table and metadata, once committed
+        self._state = "new"
+
+    @property
+    def ids_path(self) -> Path:
+        return self.directory / f"{self.stem}{IDS_SIDECAR_SUFFIX}"
+
+    def frame_path(self, k: int) -> Path:
+        """File of recorded frame ``k`` (0-based)."""
+        return self.directory / f"{self.stem}_{k:0{self.width}d}{PLY_SUFFIX}"
+
+    # -- FrameSink -----------------------------------------------------------
+
+    def begin(self, header: TrajectoryHeader) -> None:
+        if self._state != "new":
+            raise RuntimeError("begin() called twice")
+        self._ids = list(header.ids)
+        self._scene = header.scene_name
+        missing = []
+        d = self.directory
+        while not d.exists() and d != d.parent:
+            missing.append(d)
+            d = d.parent
+        try:
+            self.directory.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise SimulationError(f"could not create {self.directory}: {exc.strerror or exc}") from exc
+        self._created_dirs = missing  # deepest first
+        self._state = "open"
+
+    def write(self, frame: Frame) -> None:
+        if self._state != "open":
+            raise RuntimeError(f"write() on a sink that is {self._state}")
+        n = validate_frame(frame, len(self._ids) + len(frame.new_ids))
+        self._ids.extend(frame.new_ids)
+        k = len(self.written)
+        data = self.encode(frame, n)
+        header = self.header_text(frame, k, n).encode("ascii")
+        target = self.frame_path(k)
+        try:
+            self._pending = AtomicFile(target, "wb")
+            self._pending.handle.write(header)
+            self._pending.handle.write(data.data)
+        except OSError as exc:
+            if self._pending is not None:
+                self._pending.abort()
+                self._pending = None
+            raise SimulationError(f"could not write {target}: {exc.strerror or exc}") from exc
+        pending, self._pending = self._pending, None
+        pending.commit()
+        self.written.append(target)
+
+    def close(self, meta: dict[str, Any]) -> None:
+        """Write the id table and the metadata; the sequence is then complete.
+
+        Should this fail, the sink stays abortable: ``abort`` still removes
+        everything of this run.
+        """
+        if self._state != "open":
+            raise RuntimeError(f"close() on a sink that is {self._state}")
+        self._state = "closing"
+        try:
+            ids_file = AtomicFile(self.ids_path, "w")
+            self._sidecars_pending.append(ids_file)
+            ids_file.handle.write("".join(escape_id(i) + "\n" for i in self._ids))
+            if self.write_meta:
+                self._sidecars_pending.append(meta_file(self.output, meta))
+        except OSError as exc:
+            raise SimulationError(f"could not write {self.ids_path}: {exc.strerror or exc}") from exc
+        while self._sidecars_pending:
+            f = self._sidecars_pending[0]
+            f.commit()
+            self._sidecars_pending.pop(0)
+            self._sidecars.append(f.path)
+        self._state = "closed"
+        if self.remove_stale:
+            self._remove_stale()
+
+    def abort(self) -> None:
+        if self._state in ("aborted", "closed"):
+            return
+        self._state = "aborted"
+        if self._pending is not None:
+            self._pending.abort()
+            self._pending = None
+        for f in self._sidecars_pending:
+            f.abort()
+        self._sidecars_pending.clear()
+        for path in [*self.written, *self._sidecars]:
+            with contextlib.suppress(FileNotFoundError):
+                path.unlink()
+        self.written.clear()
+        self._sidecars.clear()
+        for d in self._created_dirs:
+            with contextlib.suppress(OSError):
+                d.rmdir()  # only succeeds when empty: never removes foreign files
+
+    # -- encoding ------------------------------------------------------------
+
+    def header_text(self, frame: Frame, k: int, n: int) -> str:
+        """The ASCII header of frame ``k`` with ``n`` vertices."""
+        lines = [
+            "ply",
+            FORMAT_LINE,
+            f"comment generator {GENERATOR} {__version__}",
+            f"comment scene {_comment_text(self._scene)}",
+            f"comment frame {k}",
+            f"comment step {int(frame.step)}",
+            f"comment time {float(frame.time)!r}",
+            f"comment ids {_comment_text(self.ids_path.name)}",
+            f"element {VERTEX_ELEMENT} {n}",
+            *_property_lines(self.position_type),
+            "end_header",
+        ]
+        return "\n".join(lines) + "\n"
+
+    def encode(self, frame: Frame, n: int) -> np.ndarray:
+        """The frame's rows as a packed structured array (no per-particle loop)."""
+        rows = np.empty(n, dtype=self.dtype)
+        pos = np.asarray(frame.position, dtype=np.float64).reshape(n, 3)
+        vel = np.asarray(frame.velocity, dtype=np.float64).reshape(n, 3)
+        for j, name in enumerate(POSITION_FIELDS):
+            rows[name] = pos[:, j]
+        for j, name in enumerate(VELOCITY_FIELDS):
+            rows[name] = vel[:, j]
+        rows["id"] = np.asarray(frame.index, dtype=np.int64)
+        rgba = _rgba_bytes(frame.color, n)
+        for j, name in enumerate(COLOR_FIELDS):
+            rows[name] = rgba[:, j]
+        rows["size"] = DEFAULT_SIZE if frame.size is None else np.asarray(frame.size)
+        return rows
+
+    def _remove_stale(self) -> None:
+        pattern = re.compile(rf"{re.escape(self.stem)}_(\d+){re.escape(PLY_SUFFIX)}")
+        ours = {p.name for p in self.written}
+        marker = f"\ncomment generator {GENERATOR} ".encode("ascii")
+        for entry in self._listdir():
+            if not pattern.fullmatch(entry.name) or entry.name in ours:
+                continue
+            try:
+                with open(entry, "rb") as fh:
+                    head = fh.read(HEADER_PROBE_BYTES)
+            except OSError:
+                continue
+            if head.startswith(b"ply") and marker in head.split(b"end_header", 1)[0]:
+                with contextlib.suppress(OSError):
+                    entry.unlink()
+
+    def _listdir(self) -> Iterable[Path]:
+        try:
+            return [p for p in self.directory.iterdir() if p.is_file()]
+        except OSError:
+            return []
+
+
+# -- reading -----------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class PlyProperty:
+    name: str
+    type: str  # PLY type name as written in the header
+    list_count_type: str | None = None  # set for ``property list <count> <type> <name>``
+
+
+@dataclass(frozen=True)
+class PlyElement:
+    name: str
+    count: int
+    properties: tuple[PlyProperty, ...]
+
+
+class PlyData(dict[str, np.ndarray]):
+    """One element's properties by name, plus what the header said.
+
+    Scalar properties are 1-D arrays in native byte order; list properties are
+    object arrays holding one array per row.
+    """
+
+    def __init__(
+        self,
+        columns: dict[str, np.ndarray],
+        *,
+        format: str,
+        comments: list[str],
+        obj_info: list[str],
+        elements: list[PlyElement],
+        element: str,
+        trailing: int,
+    ) -> None:
+        super().__init__(columns)
+        self.format = format
+        self.comments = comments
+        self.obj_info = obj_info
+        self.elements = elements
+        self.element = element
+        self.trailing = trailing  # bytes (binary) or tokens (ascii) after the last element
+
+    def comment_values(self) -> dict[str, str]:
+        """``comment key value`` lines as a dict (last one wins)."""
+        out: dict[str, str] = {}
+        for c in self.comments:
+            key, _, value = c.partition(" ")
+            out[key] = value
+        return out
+
+
+def _scalar_code(type_name: str) -> str:
+    try:
+        return PLY_SCALAR_TYPES[type_name]
+    except KeyError:
+        raise PlyFormatError(f"unknown PLY type {type_name!r}") from None
+
+
+def _parse_header(fh: Any) -> tuple[str, list[str], list[str], list[PlyElement]]:
+    first = fh.readline().rstrip(b"\r\n")
+    if first != b"ply":
+        raise PlyFormatError("not a PLY file (first line is not 'ply')")
+    fmt = ""
+    comments: list[str] = []
+    obj_info: list[str] = []
+    elements: list[tuple[str, int, list[PlyProperty]]] = []
+    while True:
+        raw = fh.readline()
+        if not raw:
+            raise PlyFormatError("header has no end_header line")
+        line = raw.rstrip(b"\r\n").decode("ascii", "replace")
+        keyword, _, rest = line.partition(" ")
+        words = line.split()
+        if keyword == "end_header":
+            break
+        if keyword == "comment":
+            comments.append(rest)
+        elif keyword == "obj_info":
+            obj_info.append(rest)
+        elif keyword == "format":
+            if len(words) != 3 or words[1] not in PLY_FORMATS or words[2] != "1.0":
+                raise PlyFormatError(f"unsupported format line {line!r}")
+            fmt = words[1]
+        elif keyword == "element":
+            if len(words) != 3 or not words[2].isdigit():
+                raise PlyFormatError(f"bad element line {line!r}")
+            elements.append((words[1], int(words[2]), []))
+        elif keyword == "property":
+            if not elements:
+                raise PlyFormatError(f"property before any element: {line!r}")
+            if len(words) == 5 and words[1] == "list":
+                _scalar_code(words[2])
+                _scalar_code(words[3])
+                prop = PlyProperty(words[4], words[3], words[2])
+            elif len(words) == 3:
+                _scalar_code(words[1])
+                prop = PlyProperty(words[2], words[1])
+            else:
+                raise PlyFormatError(f"bad property line {line!r}")
+            elements[-1][2].append(prop)
+        else:
+            raise PlyFormatError(f"unknown header line {line!r}")
+    if not fmt:
+        raise PlyFormatError("header has no format line")
+    return fmt, comments, obj_info, [PlyElement(n, c, tuple(p)) for n, c, p in elements]
+
+
+def _read_binary(
+    data: bytes, endian: str, elements: list[PlyElement], wanted: str
+) -> tuple[dict[str, np.ndarray], int]:
+    offset = 0
+    result: dict[str, np.ndarray] = {}
+    for el in elements:
+        if all(p.list_count_type is None for p in el.properties):
+            dt = np.dtype([(p.name, endian + _scalar_code(p.type)) for p in el.properties])
+            size = dt.itemsize * el.count
+            if offset + size > len(data):
+                raise PlyFormatError(f"file ends inside element {el.name!r}")
+            rows = np.frombuffer(data, dtype=dt, count=el.count, offset=offset)
+            offset += size
+            cols = {p.name: rows[p.name].astype(rows[p.name].dtype.newbyteorder("=")) for p in el.properties}
+        else:
+            cols, offset = _read_binary_rows(data, offset, endian, el)
+        if el.name == wanted:
+            result = cols
+    return result, len(data) - offset
+
+
+def _read_binary_rows(
+    data: bytes, offset: int, endian: str, el: PlyElement
+) -> tuple[dict[str, np.ndarray], int]:
+    """Row by row, for elements with list properties (faces of other tools' files)."""
+    cols: dict[str, list[Any]] = {p.name: [] for p in el.properties}
+
+    def take(code: str, count: int) -> np.ndarray:
+        nonlocal offset
+        dt = np.dtype(endian + code)
+        if offset + dt.itemsize * count > len(data):
+            raise PlyFormatError(f"file ends inside element {el.name!r}")
+        out = np.frombuffer(data, dtype=dt, count=count, offset=offset)
+        offset += dt.itemsize * count
+        return out.astype(dt.newbyteorder("="))
+
+    for _ in range(el.count):
+        for p in el.properties:
+            if p.list_count_type is None:
+                cols[p.name].append(take(_scalar_code(p.type), 1)[0])
+            else:
+                length = int(take(_scalar_code(p.list_count_type), 1)[0])
+                cols[p.name].append(take(_scalar_code(p.type), length))
+    return {p.name: _column(cols[p.name], p) for p in el.properties}, offset
+
+
+def _column(values: list[Any], prop: PlyProperty) -> np.ndarray:
+    if prop.list_count_type is None:
+        return np.array(values, dtype=_scalar_code(prop.type))
+    col = np.empty(len(values), dtype=object)
+    col[:] = values
+    return col
+
+
+def _read_ascii(data: bytes, elements: list[PlyElement], wanted: str) -> tuple[dict[str, np.ndarray], int]:
+    tokens = data.split()
+    pos = 0
+    result: dict[str, np.ndarray] = {}
+    for el in elements:
+        props = el.properties
+        if all(p.list_count_type is None for p in props):
+            need = el.count * len(props)
+            if pos + need > len(tokens):
+                raise PlyFormatError(f"file ends inside element {el.name!r}")
+            table = np.array(tokens[pos : pos + need], dtype=bytes).reshape(el.count, len(props))
+            pos += need
+            cols = {p.name: _parse_tokens(table[:, j], p.type) for j, p in enumerate(props)}
+        else:
+            acc: dict[str, list[Any]] = {p.name: [] for p in props}
+            for _ in range(el.count):
+                for p in props:
+                    if pos >= len(tokens):
+                        raise PlyFormatError(f"file ends inside element {el.name!r}")
+                    if p.list_count_type is None:
+                        acc[p.name].append(_parse_tokens(np.array(tokens[pos : pos + 1]), p.type)[0])
+                        pos += 1
+                    else:
+                        length = int(tokens[pos])
+                        chunk = np.array(tokens[pos + 1 : pos + 1 + length], dtype=bytes)
+                        if len(chunk) != length:
+                            raise PlyFormatError(f"file ends inside element {el.name!r}")
+                        acc[p.name].append(_parse_tokens(chunk, p.type))
+                        pos += 1 + length
+            cols = {p.name: _column(acc[p.name], p) for p in props}
+        if el.name == wanted:
+            result = cols
+    return result, len(tokens) - pos
+
+
+def _parse_tokens(tokens: np.ndarray, type_name: str) -> np.ndarray:
+    code = _scalar_code(type_name)
+    try:
+        if code.startswith("f"):
+            return tokens.astype(np.float64).astype(code)
+        return tokens.astype(np.int64).astype(code)
+    except ValueError as exc:
+        raise PlyFormatError(f"bad {type_name} value: {exc}") from None
+
+
+def read_ply(path: str | os.PathLike[str], element: str = VERTEX_ELEMENT) -> PlyData:
+    """Read one element of a PLY file (ascii or binary, either byte order).
+
+    Returns its properties by name (see :class:`PlyData`); the other elements
+    are parsed and skipped. Raises :class:`PlyFormatError` when the file is
+    malformed or shorter than its header says, or lacks ``element``.
+    """
+    with open(path, "rb") as fh:
+        fmt, comments, obj_info, elements = _parse_header(fh)
+        data = fh.read()
+    if element not in {e.name for e in elements}:
+        raise PlyFormatError(f"no element {element!r} in {path}")
+    if fmt == "ascii":
+        cols, trailing = _read_ascii(data, elements, element)
+    else:
+        cols, trailing = _read_binary(data, PLY_FORMATS[fmt], elements, element)
+    return PlyData(
+        cols,
+        format=fmt,
+        comments=comments,
+        obj_info=obj_info,
+        elements=elements,
+        element=element,
+        trailing=trailing,
+    )

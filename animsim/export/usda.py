@@ -1,0 +1,416 @@
+"""USD ASCII (``.usda``): the whole run as one animated ``UsdGeomPoints`` prim.
+
+Format sources: Pixar's USD documentation, "UsdGeomPoints" and
+"UsdGeomPointBased" (attribute names and types), "UsdGeom: Stage Metrics"
+(``upAxis``, ``metersPerUnit``), "UsdStage" time codes (``startTimeCode``,
+``endTimeCode``, ``timeCodesPerSecond``) and the ``.usda`` text syntax as
+written by USD itself (``#usda 1.0``, layer metadata in parentheses,
+``attr.timeSamples = { code: value, ... }``).
+
+What the file holds
+-------------------
+::
+
+    #usda 1.0
+    ( customLayerData, defaultPrim, start/endTimeCode, timeCodesPerSecond,
+      framesPerSecond, metersPerUnit = 1, upAxis = "Y" )
+    def Xform "<scene>"
+    {
+        def Points "particles"
+        {
+            custom uniform string[] animsim:idTable   # the id strings
+            float3[]   extent.timeSamples             # bounds incl. widths/2
+            int64[]    ids.timeSamples                # row of animsim:idTable
+            point3f[]  points.timeSamples             # position, m
+            color3f[]  primvars:displayColor          # RGB, vertex interpolation
+            float[]    primvars:displayOpacity        # alpha, vertex interpolation
+            vector3f[] velocities.timeSamples         # m/s (USD: units per second)
+            float[]    widths.timeSamples             # diameter = 2 * size, vertex
+        }
+    }
+
+Every time-sampled attribute has one sample per recorded frame, all at the
+same time codes. ``ids`` (int64 in ``UsdGeomPoints``) gives each point's
+identity, which is what USD uses to follow points when the count changes
+between samples (emitters); its values are rows of the run's id table (header
+ids then each frame's ``new_ids``), and the table itself is the
+``animsim:idTable`` string array. Frames without size/colour get width
+``2 * DEFAULT_SIZE`` and opaque white, as the PLY export does.
+
+The scene name becomes the root prim's name with every character outside
+``[A-Za-z0-9_]`` replaced by ``_`` (and a leading ``_`` before a digit); the
+original name is in the prim's ``doc``.
+
+Time codes
+----------
+When the recorded frames are evenly spaced in time (within
+:data:`EVEN_SPACING_RTOL` of the period), frame ``k`` is time code ``k`` and
+``timeCodesPerSecond`` is the recorded frame rate ``1 / period`` (snapped to
+an integer when within that tolerance). Otherwise (``every=n`` with a
+shortened last interval, ``fps`` recording on a step grid that does not
+divide the frame period, a dt that does not divide the duration) the time
+code of a frame at time ``t`` is ``t * rate`` with ``rate`` the sink's
+``uneven_rate`` (default 24, USD's own default; pass the requested fps). The
+exact frame times and steps are always in ``customLayerData`` (``animsim``
+dictionary, ``frameTimes`` and ``frameSteps``), together with the run's
+``close`` metadata (status and so on).
+
+Precision
+---------
+USD's schema types are single precision (``point3f``, ``vector3f``,
+``float``). Numbers are written with Python's ``repr`` of the float64 value,
+the shortest text that reads back to the same double, so the file itself
+holds the simulation exactly; USD parses the text as a double and rounds
+once to float32, which is the same as ``numpy.float32(value)``.
+
+Streaming and atomicity
+-----------------------
+A ``.usda`` prim must be written in one piece, while frames arrive one by
+one. Each attribute's samples therefore go, one line per frame, to its own
+temporary file in the target's folder; ``close`` writes the final file under
+a temporary name (:class:`animsim.atomic.AtomicFile`), copying the sample
+lines in with their time codes, and renames it when whole; then
+``<path>.meta.json``, like every trajectory sink. Memory stays
+bounded by one frame plus one time and step per frame. ``abort`` removes the
+temporary files and leaves no trace.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import re
+import tempfile
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+from animsim import __version__
+from animsim.atomic import AtomicFile
+from animsim.errors import SimulationError
+from animsim.export.meta import meta_file
+from animsim.export.ply import DEFAULT_RGBA, DEFAULT_SIZE, validate_frame
+from animsim.record import Frame, TrajectoryHeader
+
+USDA_MAGIC = "#usda 1.0"
+UP_AXIS = "Y"
+METERS_PER_UNIT = 1
+POINTS_PRIM = "particles"
+FALLBACK_ROOT = "scene"
+ID_TABLE_ATTR = "animsim:idTable"
+META_DICT = "animsim"
+GENERATOR = f"animsim {__version__}"
+
+# USD's default timeCodesPerSecond; used for uneven frames unless told otherwise.
+USD_DEFAULT_TIME_CODES_PER_SECOND = 24.0
+# Frames count as evenly spaced when every time is within this fraction of
+# the period from its slot; also the tolerance for snapping the rate to an integer.
+EVEN_SPACING_RTOL = 1e-9
+
+# Keys of the ``animsim`` dictionary the sink writes itself (meta cannot override them).
+RESERVED_META_KEYS = frozenset({"timeCodes", "frameTimes", "frameSteps"})
+
+INDENT = "    "
+VERTEX_INTERPOLATION = "vertex"
+
+
+class _Attribute:
+    """One time-sampled attribute: its declaration and its sample text."""
+
+    def __init__(self, name: str, usd_type: str, interpolation: str | None = None) -> None:
+        self.name = name
+        self.usd_type = usd_type
+        self.interpolation = interpolation
+
+
+# In the order they appear in the file (alphabetical, as USD writes them).
+ATTRIBUTES: tuple[_Attribute, ...] = (
+    _Attribute("extent", "float3[]"),
+    _Attribute("ids", "int64[]"),
+    _Attribute("points", "point3f[]"),
+    _Attribute("primvars:displayColor", "color3f[]", VERTEX_INTERPOLATION),
+    _Attribute("primvars:displayOpacity", "float[]", VERTEX_INTERPOLATION),
+    _Attribute("velocities", "vector3f[]"),
+    _Attribute("widths", "float[]", VERTEX_INTERPOLATION),
+)
+
+_ESCAPES = {"\\": "\\\\", '"': '\\"', "\n": "\\n", "\r": "\\r", "\t": "\\t"}
+_CONTROL = re.compile(r"[\x00-\x1f\x7f]")
+
+
+def usd_string(text: str) -> str:
+    """A double-quoted USD string literal."""
+    out = "".join(_ESCAPES.get(ch, ch) for ch in text)
+    return '"' + _CONTROL.sub(lambda m: f"\\x{ord(m.group(0)):02x}", out) + '"'
+
+
+def prim_name(scene_name: str) -> str:
+    """A valid USD prim name for a scene (module docstring)."""
+    name = re.sub(r"[^A-Za-z0-9_]", "_", scene_name)
+    if not name:
+        return FALLBACK_ROOT
+    return "_" + name if name[0].isdigit() else name
+
+
+def format_floats(values: np.ndarray) -> str:
+    """``[a, b, ...]`` with each float64 as its ``repr``."""
+    return "[" + ", ".join(map(repr, np.asarray(values, dtype=np.float64).ravel().tolist())) + "]"
+
+
+def format_tuples(values: np.ndarray, width: int) -> str:
+    """``[(a, b, c), ...]`` for an (n, width) float array, ``repr`` per number."""
+    flat = list(map(repr, np.asarray(values, dtype=np.float64).ravel().tolist()))
+    groups = map(", ".join, zip(*(flat[j::width] for j in range(width)), strict=True))
+    return "[" + ", ".join(map("({})".format, groups)) + "]"
+
+
+def format_ints(values: np.ndarray) -> str:
+    return "[" + ", ".join(map(str, np.asarray(values, dtype=np.int64).tolist())) + "]"
+
+
+def _repeated(item: str, n: int) -> str:
+    return "[" + ", ".join([item] * n) + "]"
+
+
+def format_time_code(code: float) -> str:
+    """Integers without a fraction (``3``), others as ``repr`` (``3.125``)."""
+    return str(int(code)) if float(code).is_integer() else repr(float(code))
+
+
+def time_codes(times: list[float], uneven_rate: float) -> tuple[list[float], float, bool]:
+    """``(codes, timeCodesPerSecond, even)`` for the recorded frame times."""
+    count = len(times)
+    if count < 2:
+        return [0.0] * count, uneven_rate, True
+    period = (times[-1] - times[0]) / (count - 1)
+    if period > 0:
+        slots = times[0] + period * np.arange(count)
+        if np.all(np.abs(np.asarray(times) - slots) <= EVEN_SPACING_RTOL * period):
+            rate = 1.0 / period
+            if abs(rate - round(rate)) <= EVEN_SPACING_RTOL * rate:
+                rate = float(round(rate))
+            return [float(k) for k in range(count)], rate, True
+    return [t * uneven_rate for t in times], uneven_rate, False
+
+
+def _usd_value(key: str, value: Any, depth: int) -> Iterator[str]:
+    """Lines of one ``customLayerData`` dictionary entry."""
+    pad = INDENT * depth
+    if isinstance(value, np.generic):
+        value = value.item()
+    label = usd_string(str(key))
+    if isinstance(value, dict):
+        yield f"{pad}dictionary {label} = {{"
+        for k, v in value.items():
+            yield from _usd_value(k, v, depth + 1)
+        yield f"{pad}}}"
+    elif isinstance(value, bool):
+        yield f"{pad}bool {label} = {'true' if value else 'false'}"
+    elif isinstance(value, int) and -(2**63) <= value < 2**63:
+        yield f"{pad}int64 {label} = {value}"
+    elif isinstance(value, float):
+        yield f"{pad}double {label} = {value!r}"
+    elif value is not None:
+        yield f"{pad}string {label} = {usd_string(str(value))}"
+
+
+class UsdaSink:
+    """A :class:`animsim.record.FrameSink` writing one ``.usda`` file at close.
+
+    ``path``: the ``.usda`` file. ``uneven_rate``: time codes per second
+    when the frames are not evenly spaced (see the module docstring; pass
+    the scene's ``record.fps`` when it has one). ``write_meta``: also write
+    ``<path>.meta.json`` (:mod:`animsim.export.meta`), as the other
+    trajectory sinks do.
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        uneven_rate: float = USD_DEFAULT_TIME_CODES_PER_SECOND,
+        write_meta: bool = True,
+    ) -> None:
+        if not (math.isfinite(uneven_rate) and uneven_rate > 0):
+            raise ValueError(f"uneven_rate must be a positive number, got {uneven_rate}")
+        self.path = Path(path)
+        self.uneven_rate = float(uneven_rate)
+        self.write_meta = write_meta
+        self._ids: list[str] = []
+        self._scene = ""
+        self._times: list[float] = []
+        self._steps: list[int] = []
+        self._tmp: dict[str, tuple[Path, IO[str]]] = {}
+        self._pending: list[AtomicFile] = []  # the .usda, then the metadata
+        self._committed: list[Path] = []  # of those, renamed into place by a close in progress
+        self._state = "new"
+
+    # -- FrameSink -----------------------------------------------------------
+
+    def begin(self, header: TrajectoryHeader) -> None:
+        if self._state != "new":
+            raise RuntimeError("begin() called twice")
+        self._ids = list(header.ids)
+        self._scene = header.scene_name
+        self._state = "open"
+        folder = self.path.parent
+        try:
+            for attr in ATTRIBUTES:
+                slug = attr.name.replace(":", "_")
+                fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=f".{slug}.tmp", dir=folder)
+                self._tmp[attr.name] = (Path(tmp), os.fdopen(fd, "w", encoding="utf-8"))
+        except OSError as exc:
+            self._discard_temporaries()
+            self._state = "aborted"
+            raise SimulationError(f"could not write next to {self.path}: {exc}") from exc
+
+    def write(self, frame: Frame) -> None:
+        if self._state != "open":
+            raise RuntimeError(f"write() on a sink that is {self._state}")
+        n = validate_frame(frame, len(self._ids) + len(frame.new_ids))
+        self._ids.extend(frame.new_ids)
+        try:
+            for name, text in self.sample_texts(frame, n).items():
+                fh = self._tmp[name][1]
+                fh.write(text + "\n")
+                fh.flush()  # a full disk shows up now, not at close
+        except OSError as exc:
+            raise SimulationError(f"could not write {self.path}: {exc}") from exc
+        self._times.append(float(frame.time))
+        self._steps.append(int(frame.step))
+
+    def close(self, meta: dict[str, Any]) -> None:
+        """Assemble the ``.usda`` (and ``<path>.meta.json``), then rename them into place."""
+        if self._state != "open":
+            raise RuntimeError(f"close() on a sink that is {self._state}")
+        self._state = "closing"
+        try:
+            for _, fh in self._tmp.values():
+                fh.close()
+            self._pending.append(AtomicFile(self.path, "w"))
+            self._assemble(self._pending[0].handle, meta)
+            if self.write_meta:
+                self._pending.append(meta_file(self.path, meta))
+        except OSError as exc:
+            self.abort()
+            raise SimulationError(f"could not write {self.path}: {exc}") from exc
+        try:
+            while self._pending:
+                self._pending[0].commit()
+                self._committed.append(self._pending.pop(0).path)
+        except BaseException:
+            self.abort()  # also removes the .usda when only its metadata failed
+            raise
+        self._discard_temporaries()
+        self._state = "closed"
+
+    def abort(self) -> None:
+        if self._state in ("aborted", "closed"):
+            return
+        self._state = "aborted"
+        for f in self._pending:
+            f.abort()
+        self._pending.clear()
+        for path in self._committed:
+            with contextlib.suppress(OSError):
+                path.unlink()
+        self._committed.clear()
+        self._discard_temporaries()
+
+    # -- encoding ------------------------------------------------------------
+
+    @staticmethod
+    def sample_texts(frame: Frame, n: int) -> dict[str, str]:
+        """Each attribute's value for this frame, as USD text on one line."""
+        pos = np.asarray(frame.position, dtype=np.float64).reshape(n, 3)
+        vel = np.asarray(frame.velocity, dtype=np.float64).reshape(n, 3)
+        if frame.size is None:
+            widths = np.full(n, 2.0 * DEFAULT_SIZE)
+            widths_text = _repeated(repr(2.0 * DEFAULT_SIZE), n)
+        else:
+            widths = 2.0 * np.asarray(frame.size, dtype=np.float64).reshape(n)
+            widths_text = format_floats(widths)
+        if frame.color is None:  # the default colour: repeat its text, no formatting per point
+            r, g, b, a = map(repr, map(float, DEFAULT_RGBA))
+            color_text = _repeated(f"({r}, {g}, {b})", n)
+            opacity_text = _repeated(a, n)
+        else:
+            rgba = np.asarray(frame.color, dtype=np.float64).reshape(n, 4)
+            color_text = format_tuples(rgba[:, :3], 3)
+            opacity_text = format_floats(rgba[:, 3])
+        if n:
+            half = widths[:, None] / 2.0
+            extent = np.stack([(pos - half).min(axis=0), (pos + half).max(axis=0)])
+        else:
+            extent = np.zeros((2, 3))
+        return {
+            "extent": format_tuples(extent, 3),
+            "ids": format_ints(frame.index),
+            "points": format_tuples(pos, 3),
+            "primvars:displayColor": color_text,
+            "primvars:displayOpacity": opacity_text,
+            "velocities": format_tuples(vel, 3),
+            "widths": widths_text,
+        }
+
+    def _assemble(self, out: IO[str], meta: dict[str, Any]) -> None:
+        codes, rate, even = time_codes(self._times, self.uneven_rate)
+        codes_text = [format_time_code(c) for c in codes]
+        root = prim_name(self._scene)
+        info = {k: v for k, v in meta.items() if str(k) not in RESERVED_META_KEYS}
+        info["timeCodes"] = "frame index" if even else f"time * {rate!r}"
+        w = out.write
+        w(f"{USDA_MAGIC}\n(\n")
+        w(f"{INDENT}customLayerData = {{\n")
+        w(f"{INDENT * 2}string generator = {usd_string(GENERATOR)}\n")
+        w(f"{INDENT * 2}dictionary {META_DICT} = {{\n")
+        for key, value in info.items():
+            for line in _usd_value(key, value, 3):
+                w(line + "\n")
+        w(f"{INDENT * 3}double[] frameTimes = {format_floats(np.asarray(self._times))}\n")
+        w(f"{INDENT * 3}int64[] frameSteps = {format_ints(np.asarray(self._steps))}\n")
+        w(f"{INDENT * 2}}}\n{INDENT}}}\n")
+        w(f"{INDENT}defaultPrim = {usd_string(root)}\n")
+        w(f"{INDENT}endTimeCode = {codes_text[-1] if codes else '0'}\n")
+        w(f"{INDENT}framesPerSecond = {format_time_code(rate)}\n")
+        w(f"{INDENT}metersPerUnit = {METERS_PER_UNIT}\n")
+        w(f"{INDENT}startTimeCode = {codes_text[0] if codes else '0'}\n")
+        w(f"{INDENT}timeCodesPerSecond = {format_time_code(rate)}\n")
+        w(f"{INDENT}upAxis = {usd_string(UP_AXIS)}\n)\n\n")
+        w(f"def Xform {usd_string(root)} (\n{INDENT}doc = {usd_string(self._scene)}\n)\n{{\n")
+        w(f"{INDENT}def Points {usd_string(POINTS_PRIM)}\n{INDENT}{{\n")
+        ids = ", ".join(map(usd_string, self._ids))
+        w(f"{INDENT * 2}custom uniform string[] {ID_TABLE_ATTR} = [{ids}]\n")
+        for attr in ATTRIBUTES:
+            self._copy_samples(w, attr, codes_text)
+        w(f"{INDENT}}}\n}}\n")
+
+    def _copy_samples(self, w: Callable[[str], Any], attr: _Attribute, codes: list[str]) -> None:
+        if attr.interpolation is not None:
+            w(f"{INDENT * 2}{attr.usd_type} {attr.name} (\n")
+            w(f"{INDENT * 3}interpolation = {usd_string(attr.interpolation)}\n")
+            w(f"{INDENT * 2})\n")
+        if not codes:
+            return
+        w(f"{INDENT * 2}{attr.usd_type} {attr.name}.timeSamples = {{\n")
+        tmp_path = self._tmp[attr.name][0]
+        count = 0
+        with open(tmp_path, encoding="utf-8") as fh:
+            for count, line in enumerate(fh, start=1):
+                if count > len(codes):
+                    break
+                w(f"{INDENT * 3}{codes[count - 1]}: {line.rstrip(chr(10))},\n")
+        if count != len(codes):
+            raise OSError(f"sample file of {attr.name} has the wrong number of frames")
+        w(f"{INDENT * 2}}}\n")
+
+    def _discard_temporaries(self) -> None:
+        for path, fh in self._tmp.values():
+            with contextlib.suppress(OSError):
+                fh.close()
+            with contextlib.suppress(OSError):
+                path.unlink()
+        self._tmp.clear()

@@ -1,0 +1,199 @@
+"""Where independent cases run: in this process, in local processes, or on Dask.
+
+One function, :func:`map_cases`, used by ``animsim sweep`` (and meant for
+``compare``): it applies ``fn`` to every case and returns the results **in
+case order**, whatever finished first, so a table built from them does not
+depend on where it ran.
+
+* ``jobs=1`` and no scheduler: a plain loop in this process (the default; the
+  quietest for timings).
+* ``jobs=N``: a :class:`concurrent.futures.ProcessPoolExecutor` with the
+  ``spawn`` start method. Spawn (not fork) because forking a process that
+  holds threads (BLAS pools, rich, a Dask client) can deadlock, and it behaves
+  the same on Linux, macOS and Windows. ``fn`` and the cases must therefore be
+  picklable: a module-level function and plain data.
+* ``scheduler="local"``: a throwaway ``distributed.LocalCluster`` (``jobs``
+  worker processes, one thread each; or the Dask default when ``jobs`` is 1).
+* ``scheduler="tcp://host:8786"`` (any address ``distributed.Client`` takes):
+  an existing cluster, whose workers must be able to import animsim.
+* ``scheduler=<distributed.Client>``: a client the caller already holds (tests
+  use an in-process ``LocalCluster(processes=False)``, which starts fastest).
+
+``distributed`` is optional (the ``dask`` extra) and imported only when a
+scheduler is asked for.
+
+A case whose call raises does not lose the others: with ``on_error`` the
+exception becomes that case's result (``on_error(case, exc)``); without it,
+the first failure is raised after every case has finished or failed.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from typing import Any, TypeVar
+
+from animsim.errors import UsageError
+
+C = TypeVar("C")
+R = TypeVar("R")
+Progress = Callable[[int, int], None]  # (cases done, total)
+
+LOCAL_SCHEDULER = "local"
+DASK_INSTALL_HINT = 'pip install "animsim[dask]"  (or: pip install "distributed>=2024.1")'
+# How long to wait for a remote scheduler before telling the user (s).
+CONNECT_TIMEOUT = 10.0
+# One thread per Dask worker: the cases are NumPy-bound and hold the GIL.
+THREADS_PER_WORKER = 1
+
+
+def map_cases(
+    fn: Callable[[C], R],
+    cases: Sequence[C],
+    *,
+    jobs: int = 1,
+    scheduler: Any = None,
+    on_error: Callable[[C, BaseException], R] | None = None,
+    progress: Progress | None = None,
+) -> list[R]:
+    """``[fn(case) for case in cases]``, run serially, on local processes or on Dask.
+
+    See the module docstring for ``jobs`` and ``scheduler``. Results come back
+    in the order of ``cases``; ``progress(done, total)`` is called as each
+    case finishes, in the order they finish.
+    """
+    tick = _ticker(progress, len(cases))
+    if jobs < 1:
+        raise UsageError(f"--jobs: must be at least 1, not {jobs}")
+    cases = list(cases)
+    if scheduler is not None:
+        return _map_dask(fn, cases, scheduler, jobs, on_error, tick)
+    if jobs == 1 or len(cases) <= 1:
+        results = []
+        for c in cases:
+            results.append(_call(fn, c, on_error))
+            tick()
+        return results
+    return _map_processes(fn, cases, jobs, on_error, tick)
+
+
+def _ticker(progress: Progress | None, total: int) -> Callable[[], None]:
+    done = 0
+
+    def tick() -> None:
+        nonlocal done
+        done += 1
+        if progress is not None:
+            progress(done, total)
+
+    return tick
+
+
+def _call(fn: Callable[[C], R], case: C, on_error: Callable[[C, BaseException], R] | None) -> R:
+    if on_error is None:
+        return fn(case)
+    try:
+        return fn(case)
+    except Exception as exc:
+        return on_error(case, exc)
+
+
+def _collect(
+    cases: list[C],
+    outcomes: list[tuple[bool, Any]],
+    on_error: Callable[[C, BaseException], R] | None,
+) -> list[R]:
+    """Results in case order; failures through ``on_error``, else the first one raised."""
+    results: list[R] = []
+    for case, (ok, value) in zip(cases, outcomes, strict=True):
+        if ok:
+            results.append(value)
+        elif on_error is not None:
+            results.append(on_error(case, value))
+        else:
+            raise value
+    return results
+
+
+def _map_processes(
+    fn: Callable[[C], R],
+    cases: list[C],
+    jobs: int,
+    on_error: Callable[[C, BaseException], R] | None,
+    tick: Callable[[], None],
+) -> list[R]:
+    context = multiprocessing.get_context("spawn")
+    workers = min(jobs, len(cases))
+    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+        futures = [pool.submit(fn, c) for c in cases]
+        for _ in as_completed(futures):
+            tick()
+        outcomes: list[tuple[bool, Any]] = []
+        for f in futures:
+            try:
+                outcomes.append((True, f.result()))
+            except Exception as exc:  # the case raised, or its worker died
+                outcomes.append((False, exc))
+    return _collect(cases, outcomes, on_error)
+
+
+def _import_distributed() -> Any:
+    try:
+        import distributed
+    except ImportError:
+        raise UsageError(
+            f"--scheduler needs the optional package 'distributed', which is not installed: {DASK_INSTALL_HINT}"
+        ) from None
+    return distributed
+
+
+def _map_dask(
+    fn: Callable[[C], R],
+    cases: list[C],
+    scheduler: Any,
+    jobs: int,
+    on_error: Callable[[C, BaseException], R] | None,
+    tick: Callable[[], None],
+) -> list[R]:
+    distributed = _import_distributed()
+    if not isinstance(scheduler, str):  # a Client the caller owns (and closes)
+        return _gather(distributed, scheduler, fn, cases, on_error, tick)
+    if scheduler == LOCAL_SCHEDULER:
+        # dashboard_address=None: no web server, no port to collide with.
+        with (
+            distributed.LocalCluster(
+                n_workers=jobs if jobs > 1 else None,
+                threads_per_worker=THREADS_PER_WORKER,
+                dashboard_address=None,
+            ) as cluster,
+            distributed.Client(cluster) as client,
+        ):
+            return _gather(distributed, client, fn, cases, on_error, tick)
+    try:
+        client = distributed.Client(scheduler, timeout=CONNECT_TIMEOUT)
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise UsageError(f"--scheduler {scheduler}: cannot reach the Dask scheduler: {exc}") from None
+    with client:
+        return _gather(distributed, client, fn, cases, on_error, tick)
+
+
+def _gather(
+    distributed: Any,
+    client: Any,
+    fn: Callable[[C], R],
+    cases: list[C],
+    on_error: Callable[[C, BaseException], R] | None,
+    tick: Callable[[], None],
+) -> list[R]:
+    # pure=False: two equal cases are still two runs (their wall times differ).
+    futures = client.map(fn, cases, pure=False)
+    for _ in distributed.as_completed(futures):
+        tick()
+    outcomes: list[tuple[bool, Any]] = []
+    for f in futures:
+        try:
+            outcomes.append((True, f.result()))
+        except Exception as exc:
+            outcomes.append((False, exc))
+    return _collect(cases, outcomes, on_error)

@@ -1,0 +1,215 @@
+"""``animsim render``: turn a scene or a trajectory into a GIF or MP4.
+
+Orchestration only: it validates every option before any simulation work,
+simulates a scene (recording at the animation's frame rate), and streams the
+frames into :class:`~animsim.export.animation.AnimationSink`. The camera is
+fixed for the whole animation, so the bounds must be known before the first
+frame: a scene is simulated once for its bounds and once more to draw (runs
+are deterministic, so both passes see the same frames), which keeps memory at
+one frame whatever the run's length.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from animsim.errors import UsageError
+from animsim.record import Frame, TrajectoryHeader
+
+
+@dataclass(frozen=True)
+class RenderOptions:
+    fps: float = 25.0
+    size: str = "480x480"
+    view: str = "xy"
+    azimuth: float | None = None
+    elevation: float | None = None
+    distance: float | None = None
+    dot_radius: float = 3.0  # px, for particles without a size
+
+
+@dataclass
+class RenderResult:
+    frames: int
+    outputs: list[Path]
+    status: str
+    failure: Any = None
+
+
+class _BoundsSink:
+    """Running min/max of every finite position, nothing else kept."""
+
+    def __init__(self) -> None:
+        self.lo = np.full(3, np.inf)
+        self.hi = np.full(3, -np.inf)
+
+    def begin(self, header: TrajectoryHeader) -> None:
+        pass
+
+    def write(self, frame: Frame) -> None:
+        p = frame.position
+        if len(p):
+            finite = p[np.isfinite(p).all(axis=1)]
+            if len(finite):
+                self.lo = np.minimum(self.lo, finite.min(axis=0))
+                self.hi = np.maximum(self.hi, finite.max(axis=0))
+
+    def close(self, meta: dict[str, Any]) -> None:
+        pass
+
+    def abort(self) -> None:
+        pass
+
+
+def _bounds(lo: np.ndarray, hi: np.ndarray, planes: list[tuple[np.ndarray, np.ndarray]]) -> Any:
+    from animsim.export.raster import bounds_from_positions
+
+    pts = [p for p in (lo, hi) if np.isfinite(p).all()]
+    # Keep the ground in view: the point where each plane is anchored.
+    pts.extend(np.asarray(point, dtype=np.float64) for point, _ in planes)
+    if not pts:
+        pts = [np.zeros(3)]
+    return bounds_from_positions(np.stack(pts))
+
+
+def _up_axis(scene: Any) -> str:
+    """z-up when the scene's gravity points down z, else y-up (the language's default)."""
+    for f in getattr(scene, "forces", ()):
+        if f.type == "gravity":
+            g = np.abs(np.asarray(f.g))
+            return "z" if g[2] > max(g[0], g[1]) else "y"
+    return "y"
+
+
+def validate(gif: Path | None, mp4: Path | None, opts: RenderOptions) -> tuple[int, int]:
+    """Check every option before any work; UsageError (exit 2) when one is wrong."""
+    from animsim.export.animation import _require_ffmpeg, check_fps
+    from animsim.export.raster import VIEWS, parse_size
+
+    if gif is None and mp4 is None:
+        raise UsageError("give --gif PATH and/or --mp4 PATH")
+    try:
+        size = parse_size(opts.size)
+        for path, fmt in ((gif, "gif"), (mp4, "mp4")):
+            if path is not None:
+                check_fps(opts.fps, fmt)
+        if mp4 is not None and (size[0] % 2 or size[1] % 2):
+            raise ValueError(f"MP4 needs an even width and height, got {size[0]}x{size[1]}")
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    if not (np.isfinite(opts.dot_radius) and opts.dot_radius > 0):
+        raise UsageError(f"--dot-radius {opts.dot_radius}: must be a number of pixels > 0")
+    if opts.view not in VIEWS:
+        raise UsageError(f"--view {opts.view!r}: choose one of {', '.join(VIEWS)}")
+    if gif is not None and gif.suffix.lower() != ".gif":
+        raise UsageError(f"--gif {gif}: the file name must end in .gif")
+    if mp4 is not None:
+        if mp4.suffix.lower() != ".mp4":
+            raise UsageError(f"--mp4 {mp4}: the file name must end in .mp4")
+        _require_ffmpeg()
+    return size
+
+
+def _sinks(
+    gif: Path | None,
+    mp4: Path | None,
+    opts: RenderOptions,
+    bounds: Any,
+    planes: list[tuple[np.ndarray, np.ndarray]],
+    up: str,
+    progress: Callable[[int], object] | None,
+) -> list[Any]:
+    from animsim.export.animation import AnimationSink
+
+    camera: dict[str, Any] = {"up": up, "distance": opts.distance, "dot_radius": opts.dot_radius}
+    if opts.azimuth is not None:
+        camera["azimuth"] = opts.azimuth
+    if opts.elevation is not None:
+        camera["elevation"] = opts.elevation
+    out = []
+    for k, path in enumerate(p for p in (gif, mp4) if p is not None):
+        out.append(
+            AnimationSink(
+                path,
+                fps=opts.fps,
+                size=opts.size,
+                view=opts.view,
+                bounds=bounds,
+                planes=planes,
+                progress=progress if k == 0 else None,
+                **camera,
+            )
+        )
+    return out
+
+
+def render_scene(
+    compiled: Any,
+    gif: Path | None,
+    mp4: Path | None,
+    opts: RenderOptions,
+    *,
+    progress: Callable[[int], object] | None = None,
+    stop: Callable[[], bool] | None = None,
+) -> RenderResult:
+    """Simulate (recording at the frame rate) and draw. ``compiled`` must record at opts.fps."""
+    from animsim.simulate import run
+
+    planes = compiled.header.extra.get("planes", [])
+    bounds_sink = _BoundsSink()
+    run(compiled, [bounds_sink])
+    bounds = _bounds(bounds_sink.lo, bounds_sink.hi, planes)
+    sinks = _sinks(gif, mp4, opts, bounds, planes, _up_axis(compiled.scene), progress)
+    result = run(compiled, sinks, stop=stop)
+    return RenderResult(
+        frames=result.frames,
+        outputs=[s.path for s in sinks],
+        status=result.status,
+        failure=result.failure,
+    )
+
+
+def render_trajectory(
+    traj: Any,
+    gif: Path | None,
+    mp4: Path | None,
+    opts: RenderOptions,
+    *,
+    compiled: Any = None,
+    progress: Callable[[int], object] | None = None,
+) -> RenderResult:
+    """Draw a trajectory read from a file; with its scene, springs and planes too."""
+    spring_index = np.zeros((0, 2), dtype=np.int64)
+    planes: list[tuple[np.ndarray, np.ndarray]] = []
+    up = "y"
+    if compiled is not None:
+        planes = compiled.header.extra.get("planes", [])
+        up = _up_axis(compiled.scene)
+        # Springs join scene indices; the trajectory numbers its ids itself.
+        pos_of = {pid: k for k, pid in enumerate(traj.ids)}
+        ids = compiled.system.ids
+        pairs = compiled.system.spring_index
+        keep = [(pos_of.get(ids[a]), pos_of.get(ids[b])) for a, b in pairs.tolist()]
+        spring_index = np.array([p for p in keep if None not in p], dtype=np.int64).reshape(-1, 2)
+    lo, hi = traj.bounds()
+    bounds = _bounds(lo, hi, planes)
+    sinks = _sinks(gif, mp4, opts, bounds, planes, up, progress)
+    header = TrajectoryHeader(scene_name="trajectory", ids=[], spring_index=spring_index, has_emitters=False)
+    try:
+        for s in sinks:
+            s.begin(header)
+        for frame in traj.frames():
+            for s in sinks:
+                s.write(frame)
+        for s in sinks:
+            s.close({"status": "ok"})
+    except BaseException:
+        for s in sinks:
+            s.abort()
+        raise
+    return RenderResult(frames=traj.frame_count, outputs=[s.path for s in sinks], status="ok")

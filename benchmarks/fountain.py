@@ -1,0 +1,96 @@
+"""Time a 100 000-particle fountain on the NumPy path: steps per second.
+
+The emitter fills its pool of 100 000 slots (50 000 births/s, lifetimes of
+2 s +- 0.1 s), particles fly up, fall back and bounce on a ground plane with
+friction. The warm-up (the pool filling) is not timed: only the steady state,
+with about 100 000 alive particles, births and deaths every step, is.
+Nothing is written (no sinks), so this is the stepping cost alone.
+
+Two configurations are timed: the fountain as described, and the same
+without its ground plane, which separates the cost of plane collisions (about
+half the drops rest on the ground, and each is collided every step) from that
+of the emitter, forces and integrator. Each is the best of ``--repeat`` runs,
+because a shared machine's load only ever makes a run slower.
+
+Run from the project root: ``python benchmarks/fountain.py [--steps N]``.
+Target (issue 3): >= 200 steps/s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from animsim.compile import compile_scene, with_overrides
+from animsim.scene.loader import load_scene_text
+from animsim.simulate import run
+
+PARTICLES = 100_000
+RATE = 50_000  # births/s; with 2 s lifetimes the pool is full in steady state
+DT = 0.005
+WARMUP = 2.5  # s of simulated time before timing starts (the pool is full by then)
+
+SCENE = f"""
+name: fountain-benchmark
+duration: 10.0
+dt: {DT}
+seed: 1
+record: {{every: 1000000}}
+forces:
+  - {{type: gravity, g: [0, -9.81, 0]}}
+PLANES_HERE
+emitters:
+  - name: fountain
+    rate: {RATE}
+    shape: {{type: disc, center: [0, 0.05, 0], normal: [0, 1, 0], radius: 0.05}}
+    velocity: {{mean: [0, 6, 0], spread: 0.6}}
+    lifetime: {{mean: 2.0, spread: 0.1}}
+    mass: 0.001
+    max_particles: {PARTICLES}
+"""
+
+
+GROUND = """planes:
+  - {point: [0, 0, 0], normal: [0, 1, 0], restitution: 0.4, friction: 0.2}
+"""
+
+
+def steps_per_second(steps: int, ground: bool) -> tuple[float, dict]:
+    """Steady-state steps/s of the fountain, and the run's emitter summary."""
+    warm_steps = round(WARMUP / DT)
+    loaded = load_scene_text(SCENE.replace("PLANES_HERE", GROUND if ground else ""))
+    scene = with_overrides(loaded.scene, duration=(warm_steps + steps) * DT)
+    compiled = compile_scene(scene, loaded.name)
+    marks: dict[int, float] = {}
+
+    def progress(step: int, _total: int) -> None:
+        if step == warm_steps:
+            marks[step] = time.perf_counter()
+
+    result = run(compiled, [], progress=progress)
+    end = time.perf_counter()
+    return steps / (end - marks[warm_steps]), result.meta["emitters"]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--steps", type=int, default=400, help="timed steps after the warm-up")
+    ap.add_argument("--repeat", type=int, default=3, help="runs per configuration; the best counts")
+    args = ap.parse_args()
+    for ground, label in ((True, "with ground plane"), (False, "without ground plane")):
+        runs = [steps_per_second(args.steps, ground) for _ in range(args.repeat)]
+        best, summary = max(runs, key=lambda r: r[0])
+        alive = summary["per_emitter"]["fountain"]["alive"]
+        print(
+            f"fountain {label}: {best:.0f} steps/s (best of {args.repeat}; all: "
+            f"{', '.join(f'{r[0]:.0f}' for r in runs)}), {alive} alive of {PARTICLES} slots, "
+            f"symplectic_euler, dt {DT}, {args.steps} steps timed after {round(WARMUP / DT)} warm-up steps"
+        )
+
+
+if __name__ == "__main__":
+    main()
