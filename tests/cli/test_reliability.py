@@ -21,6 +21,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+
 from tests.conftest import ROOT, run_cli
 
 # A run long enough to be caught mid-way: 400 particles for 1e6 steps.

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+
 from tests.conftest import ROOT, run_cli
 
 CORPUS = ROOT / "tests" / "bad_scenes"

@@ -24,9 +24,10 @@ from typing import Any
 
 import pytest
 import yaml
-from tests.conftest import run_cli
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
+
+from tests.conftest import run_cli
 
 EXAMPLES = 150
 SUBPROCESS_EXAMPLES = 4
