@@ -550,24 +550,31 @@ def parse_yaml(text: str, file: str, limits: Limits = Limits()) -> tuple[Any, Ma
 
 # PyYAML contexts that name where a bracket or quote was opened.
 _OPENED = {
-    "while parsing a flow sequence": "the [ opened here is not closed",
-    "while parsing a flow mapping": "the { opened here is not closed",
-    "while scanning a quoted scalar": "the quote opened here is not closed",
+    "while parsing a flow sequence": "the [",
+    "while parsing a flow mapping": "the {",
+    "while scanning a quoted scalar": "the quote",
 }
 
 
 def _syntax_diagnostic(exc: yaml.MarkedYAMLError, file: str) -> Diagnostic:
-    """A YAML syntax error at the place a person would look first."""
+    """A YAML syntax error where PyYAML noticed it, naming where an unclosed bracket started."""
     mark = exc.problem_mark or exc.context_mark
     line, col = (mark.line + 1, mark.column + 1) if mark else (1, 1)
-    problem = exc.problem or ""
+    problem = exc.problem or "invalid YAML"
+    cm = exc.context_mark
     opened = _OPENED.get(exc.context or "")
-    if opened and exc.context_mark is not None:
-        # An unclosed bracket is noticed far from where it was opened; point at the opening.
-        where = f"line {line}, column {col}"
-        line, col = exc.context_mark.line + 1, exc.context_mark.column + 1
-        return Diagnostic(file, line, col, "", f"YAML syntax: {opened} ({problem} at {where})")
-    msg = " ".join(s for s in (exc.context, problem) if s)
+    if opened and cm is not None:
+        # An unclosed bracket is noticed far from where it was opened: say where that was.
+        where = f"started at line {cm.line + 1}, column {cm.column + 1}"
+        return Diagnostic(file, line, col, "", f"YAML syntax: {opened} {where} is not closed: {problem}")
+    msg = problem
+    if exc.context:
+        started = (
+            f" (started at line {cm.line + 1}, column {cm.column + 1})"
+            if cm and mark and cm.line != mark.line
+            else ""
+        )
+        msg = f"{exc.context}{started}: {problem}"
     if "'\\t'" in msg or "\t" in msg:
         msg += " (YAML does not allow tabs for indentation; use spaces)"
     return Diagnostic(file, line, col, "", f"YAML syntax: {msg}")
@@ -662,10 +669,10 @@ _KIND = {
 
 # pydantic bound errors: (how to say it, the ctx key holding the bound)
 _BOUND = {
-    "greater_than": (">", "gt"),
-    "greater_than_equal": (">=", "ge"),
-    "less_than": ("<", "lt"),
-    "less_than_equal": ("<=", "le"),
+    "greater_than": ("greater than", "gt"),
+    "greater_than_equal": ("greater than or equal to", "ge"),
+    "less_than": ("less than", "lt"),
+    "less_than_equal": ("less than or equal to", "le"),
 }
 _VECTOR_KEYS = {
     "position",
@@ -770,7 +777,9 @@ def _message(path: Path_, errs: list[dict[str, Any]], marks: Marks) -> tuple[str
             msg += f" (write it without a decimal point or exponent: {int(value)})"
     elif first["type"] in _BOUND and "ctx" in first:
         op, key = _BOUND[first["type"]]
-        msg = f"must be {op} {first['ctx'][key]!r}, got {_short(first['input'])}"
+        bound = first["ctx"][key]
+        shown = f"{bound:g}" if isinstance(bound, float) else repr(bound)
+        msg = f"must be {op} {shown}, got {_short(first['input'])}"
     elif first["type"] in ("too_short", "too_long") and "ctx" in first:
         ctx = first["ctx"]
         lo, hi = ctx.get("min_length"), ctx.get("max_length")

@@ -197,7 +197,7 @@ def test_every_problem_is_reported_in_one_go(tmp_path: Path) -> None:
         "s.yaml:6:32: particles.2.position: expected at most 3 items, got 4 (a vector is [x, y, z], or [x, y] meaning z = 0)",
         "s.yaml:7:5: particles.3.mass: a free particle has no mass; give mass > 0 or pinned: true",
         "s.yaml:9:19: springs.0.between.1: no particle with id 'c'",
-        "s.yaml:10:27: springs.1.ks: must be >= 0.0, got -1",
+        "s.yaml:10:27: springs.1.ks: must be greater than or equal to 0, got -1",
     ]
 
 
