@@ -8,10 +8,12 @@ problem, 2 the input or the usage is wrong, 130 interrupted.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
 import sys
+import threading
 from contextlib import contextmanager
 from enum import StrEnum
 from pathlib import Path
@@ -64,10 +66,6 @@ def _root(
 # --- shared options ---------------------------------------------------------------
 
 SceneArg = Annotated[Path, typer.Argument(help="The scene file (YAML).", show_default=False, metavar="SCENE")]
-MaxFileSize = Annotated[int, typer.Option("--max-file-size", help="Largest scene file in bytes.", min=1)]
-MaxDepth = Annotated[int, typer.Option("--max-depth", help="Deepest YAML nesting.", min=1)]
-MaxNodes = Annotated[int, typer.Option("--max-nodes", help="Most YAML nodes after alias expansion.", min=1)]
-MaxSteps = Annotated[int, typer.Option("--max-steps", help="Most steps a run may take.", min=1)]
 BackendOpt = Annotated[
     str,
     typer.Option(
@@ -76,7 +74,119 @@ BackendOpt = Annotated[
     ),
 ]
 
-DEFAULT_MAX_STEPS = 100_000_000
+_LIMITS_PANEL = "Limits (spec: Errors and limits)"
+
+# The limit options, shared by every command that loads a scene (see
+# limit_options). Sizes take suffixes (50MiB, 4GiB); counts take 1e9.
+_LIMIT_PARAMS: dict[str, tuple[Any, Any]] = {
+    "max_file_size": (
+        Annotated[
+            str,
+            typer.Option(
+                "--max-file-size", help="Largest scene file, e.g. 50MiB.", rich_help_panel=_LIMITS_PANEL
+            ),
+        ],
+        "50MiB",
+    ),
+    "max_depth": (
+        Annotated[
+            int,
+            typer.Option("--max-depth", help="Deepest YAML nesting.", min=1, rich_help_panel=_LIMITS_PANEL),
+        ],
+        100,
+    ),
+    "max_nodes": (
+        Annotated[
+            int,
+            typer.Option(
+                "--max-nodes", help="Most YAML nodes aliases may add.", min=1, rich_help_panel=_LIMITS_PANEL
+            ),
+        ],
+        100_000,
+    ),
+    "max_steps": (
+        Annotated[
+            str,
+            typer.Option(
+                "--max-steps", help="Most steps a run may take (1e8).", rich_help_panel=_LIMITS_PANEL
+            ),
+        ],
+        "100000000",
+    ),
+    "max_memory": (
+        Annotated[
+            str,
+            typer.Option(
+                "--max-memory",
+                help="Memory budget for the live state, e.g. 4GiB.",
+                rich_help_panel=_LIMITS_PANEL,
+            ),
+        ],
+        "4GiB",
+    ),
+    "disk_check": (
+        Annotated[
+            bool,
+            typer.Option(
+                "--disk-check/--no-disk-check",
+                help="Refuse a run whose estimated output exceeds the free disk space.",
+                rich_help_panel=_LIMITS_PANEL,
+            ),
+        ],
+        True,
+    ),
+}
+
+
+def limit_options(func: Any) -> Any:
+    """Give a command the limit options; it receives them as ``limits: RunLimits``.
+
+    One decorator instead of six parameters copied into every command, so
+    run, check, explain and any later command (compare, render, ...) take the
+    same options with the same defaults and the same parsing.
+    """
+    import functools
+    import inspect
+
+    sig = inspect.signature(func, eval_str=True)
+    if "limits" not in sig.parameters:
+        raise TypeError(f"{func.__name__} must take a 'limits' parameter")
+    params = [p for p in sig.parameters.values() if p.name != "limits"]
+    params += [
+        inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=default, annotation=annotation)
+        for name, (annotation, default) in _LIMIT_PARAMS.items()
+    ]
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        values = {name: kwargs.pop(name, default) for name, (_, default) in _LIMIT_PARAMS.items()}
+        kwargs["limits"] = make_limits(**values)
+        return func(*args, **kwargs)
+
+    wrapper.__signature__ = sig.replace(parameters=params)  # type: ignore[attr-defined]
+    wrapper.__annotations__ = {p.name: p.annotation for p in params}
+    return wrapper
+
+
+def make_limits(
+    max_file_size: str | int = "50MiB",
+    max_depth: int = 100,
+    max_nodes: int = 100_000,
+    max_steps: str | int = "100000000",
+    max_memory: str | int = "4GiB",
+    disk_check: bool = True,
+):
+    """RunLimits from the options' values (sizes and counts parsed here, once)."""
+    from animsim.preflight import RunLimits, parse_count, parse_size
+
+    return RunLimits(
+        max_file_bytes=parse_size(str(max_file_size), "--max-file-size"),
+        max_depth=max_depth,
+        max_nodes=max_nodes,
+        max_steps=parse_count(str(max_steps), "--max-steps"),
+        max_memory=parse_size(str(max_memory), "--max-memory"),
+        disk_check=disk_check,
+    )
 
 
 class Format(StrEnum):
@@ -97,12 +207,6 @@ def _backend(name: str) -> str:
     if name not in BACKENDS:
         raise UsageError(f"--backend: unknown backend {name!r} (valid: {', '.join(BACKENDS)})")
     return name
-
-
-def _limits(max_file_size: int, max_depth: int, max_nodes: int):
-    from animsim.scene.loader import Limits
-
-    return Limits(max_file_bytes=max_file_size, max_depth=max_depth, max_nodes=max_nodes)
 
 
 def _err(text: str) -> None:
@@ -139,23 +243,10 @@ def _graceful_stop():
 
 
 def check_output_path(output: Path, scene_path: Path) -> None:
-    """Refuse, before any step, an output that cannot be written."""
-    parent = output.parent if str(output.parent) else Path(".")
-    if not parent.exists():
-        raise UsageError(f"{output}: the folder {parent} does not exist")
-    if not parent.is_dir():
-        raise UsageError(f"{output}: {parent} is not a folder")
-    if output.is_dir():
-        raise UsageError(f"{output}: is a folder; give a file name")
-    try:
-        if output.exists() and output.resolve() == scene_path.resolve():
-            raise UsageError(f"{output}: is the scene file itself; choose another output")
-    except OSError:
-        pass
-    if output.resolve() == scene_path.resolve():
-        raise UsageError(f"{output}: is the scene file itself; choose another output")
-    if not os.access(parent, os.W_OK):
-        raise UsageError(f"{output}: the folder {parent} is not writable")
+    """Refuse, before any step, an output that cannot be written (see animsim.preflight)."""
+    from animsim.preflight import check_output_path as check
+
+    check(output, scene_path)
 
 
 def output_format(output: Path | None, requested: Format | None) -> Format:
@@ -193,6 +284,7 @@ def check_ply_output(output: Path, scene_path: Path) -> None:
 
 
 @app.command()
+@limit_options
 def run(
     scene: SceneArg,
     output: Annotated[
@@ -216,11 +308,9 @@ def run(
         bool, typer.Option("--extra-columns", help="Add age, size, r, g, b, a columns (particle systems).")
     ] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
-    max_file_size: MaxFileSize = 50 * 1024 * 1024,
-    max_depth: MaxDepth = 100,
-    max_nodes: MaxNodes = 100_000,
-    max_steps: MaxSteps = DEFAULT_MAX_STEPS,
     backend: BackendOpt = "numpy",
+    *,
+    limits: Any = None,
 ) -> None:
     """Simulate SCENE and write its trajectory and a .meta.json beside it.
 
@@ -229,27 +319,27 @@ def run(
     folder gives <folder>/frames_0000.ply, ...); USD ASCII (-o anim.usda).
     The output folder must exist.
     """
-    from animsim.compile import compile_scene, with_overrides
-    from animsim.scene.loader import load_scene
-    from animsim.simulate import STATUS_INTERRUPTED, STATUS_UNSTABLE
-    from animsim.simulate import run as simulate
+    from animsim.preflight import check_disk
 
-    loaded = load_scene(scene, _limits(max_file_size, max_depth, max_nodes))
-    sc = with_overrides(loaded.scene, integrator=integrator, dt=dt, duration=duration, seed=seed)
     to_stdout = output is not None and str(output) == "-"
     fmt = output_format(output, format)
     out = output if output is not None else Path(f"{scene.stem}.{fmt.value}")
     if to_stdout and fmt is not Format.csv:
         raise UsageError(f"--format {fmt.value} cannot go to stdout; give a file with -o")
+    loaded, sc, est = prepare_scene(
+        scene, limits, fmt=fmt.value, integrator=integrator, dt=dt, duration=duration, seed=seed
+    )
     if fmt is Format.ply:
         check_ply_output(out, scene)
     elif not to_stdout:
         check_output_path(out, scene)
+        check_disk(out, est, fmt.value, sc, limits)
+    # Imported only now: a refused scene never pays for NumPy and the stepper.
+    from animsim.compile import compile_scene
+    from animsim.simulate import STATUS_INTERRUPTED, STATUS_UNSTABLE
+    from animsim.simulate import run as simulate
+
     compiled = compile_scene(sc, loaded.name, backend=_backend(backend))
-    if compiled.clock.steps > max_steps:
-        raise UsageError(
-            f"{scene}: {compiled.clock.steps} steps is more than the limit of {max_steps} (raise it with --max-steps)"
-        )
     from animsim.analysis import stability
 
     report = stability.analyse(compiled)
@@ -295,6 +385,36 @@ def run(
         raise typer.Exit(EXIT_INTERRUPTED)
 
 
+def prepare_scene(
+    scene: Path,
+    limits: Any,
+    *,
+    fmt: str = "csv",
+    integrator: str | None = None,
+    dt: float | None = None,
+    duration: float | None = None,
+    seed: int | None = None,
+) -> tuple[Any, Any, Any]:
+    """Load SCENE, apply overrides and check the step and memory limits.
+
+    Every command that compiles a scene goes through here, so none of them
+    allocates before the pre-flight has said the scene fits. Returns
+    (LoadedScene, Scene with overrides, preflight.Estimate).
+    """
+    from animsim.preflight import RunLimits, check_limits
+    from animsim.scene.loader import load_scene
+
+    limits = limits or RunLimits()
+    loaded = load_scene(scene, limits.loader)
+    sc = loaded.scene
+    if any(v is not None for v in (integrator, dt, duration, seed)):
+        from animsim.compile import with_overrides  # imports every force and integrator: only when needed
+
+        sc = with_overrides(sc, integrator=integrator, dt=dt, duration=duration, seed=seed)
+    est = check_limits(loaded, sc, limits, fmt=fmt, overridden=dt is not None or duration is not None)
+    return loaded, sc, est
+
+
 @contextmanager
 def _progress(total: int, quiet: bool):
     """A rich progress bar on stderr, only on a terminal and only for long runs."""
@@ -338,17 +458,18 @@ def _summary(compiled: Any, result: Any, wrote: str | None) -> None:
 
 
 @app.command()
+@limit_options
 def explain(
     scene: SceneArg,
     integrator: Annotated[str | None, typer.Option(help="Explain with this integrator instead.")] = None,
     backend: BackendOpt = "numpy",
+    *,
+    limits: Any = None,
 ) -> None:
     """Show what SCENE compiles to: counts, the stages run each step, and what was left out."""
-    from animsim.compile import compile_scene, with_overrides
-    from animsim.scene.loader import load_scene
+    from animsim.compile import compile_scene
 
-    loaded = load_scene(scene)
-    sc = with_overrides(loaded.scene, integrator=integrator)
+    loaded, sc, _ = prepare_scene(scene, limits, integrator=integrator)
     c = compile_scene(sc, loaded.name, backend=_backend(backend))
     s = c.system
     typer.echo(f"scene {c.name!r} ({scene})")
@@ -386,14 +507,17 @@ def schema() -> None:
 
 
 @app.command()
+@limit_options
 def check(
     scenes: Annotated[list[Path], typer.Argument(help="Scene files.", show_default=False)],
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Only problems.")] = False,
+    *,
+    limits: Any = None,
 ) -> None:
     """Validate, analyse and run each scene; exit 0 only if every one is valid and stable."""
     from animsim.analysis.check import check_scenes
 
-    ok = check_scenes(scenes, quiet=quiet, echo=typer.echo, echo_err=_err)
+    ok = check_scenes(scenes, quiet=quiet, echo=typer.echo, echo_err=_err, limits=limits)
     if not ok:
         raise typer.Exit(EXIT_FAILED)
 
@@ -402,6 +526,7 @@ def check(
 
 
 @app.command()
+@limit_options
 def render(
     source: Annotated[
         Path,
@@ -436,6 +561,8 @@ def render(
     dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
     duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
+    *,
+    limits: Any = None,
 ) -> None:
     """Render an animation: particles as dots (size and colour over life), springs as lines, planes as the ground."""
     from animsim.export.trajectory import is_trajectory, read_trajectory
@@ -459,11 +586,9 @@ def render(
     compiled = None
     scene_path = scene if from_file else source
     if scene_path is not None:
-        from animsim.compile import compile_scene, with_overrides
-        from animsim.scene.loader import load_scene
+        from animsim.compile import compile_scene
 
-        loaded = load_scene(scene_path)
-        sc = with_overrides(loaded.scene, integrator=integrator, dt=dt, duration=duration)
+        loaded, sc, _ = prepare_scene(scene_path, limits, integrator=integrator, dt=dt, duration=duration)
         if not from_file:
             # Record exactly the frames the animation shows.
             sc = sc.model_copy(update={"record": m.Record(fps=fps)})
@@ -511,6 +636,7 @@ class ReferenceKind(StrEnum):
 
 
 @app.command()
+@limit_options
 def sweep(
     scene: SceneArg,
     set_: Annotated[
@@ -547,6 +673,8 @@ def sweep(
         ),
     ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No table, only the files.")] = False,
+    *,
+    limits: Any = None,
 ) -> None:
     """Run SCENE for every combination of --set values (and --integrators) and tabulate the outcome.
 
@@ -558,9 +686,12 @@ def sweep(
     made, 1 only if a case crashed (status 'error').
     """
     from animsim.analysis import sweep as sw
+    from animsim.preflight import RunLimits
     from animsim.scene.loader import load_scene
 
-    loaded = load_scene(scene)
+    # The file limits apply here; each case's step and memory pre-flight
+    # would need the sweep's own variants (not done yet: see docs/limits.md).
+    loaded = load_scene(scene, (limits or RunLimits()).loader)
     axes = [sw.parse_set(text) for text in set_]
     if integrators is not None:
         axes.append(sw.integrators_axis(integrators))
@@ -639,6 +770,7 @@ def _stdout_console():
 
 
 @app.command()
+@limit_options
 def compare(
     scene: SceneArg,
     integrators: Annotated[
@@ -671,7 +803,8 @@ def compare(
     fail_on_unstable: Annotated[
         bool, typer.Option("--fail-on-unstable", help="Exit 1 if any run was unstable.")
     ] = False,
-    max_steps: MaxSteps = DEFAULT_MAX_STEPS,
+    *,
+    limits: Any = None,
 ) -> None:
     """Run SCENE with each integrator at each step size; report error against run time.
 
@@ -691,9 +824,10 @@ def compare(
     from animsim.analysis.compare import compare as run_compare
     from animsim.analysis.compare import parse_dts, parse_integrators, summary_lines, table, write_csv
     from animsim.export.plots import plot_format, write_compare_plot
-    from animsim.scene.loader import load_scene
 
-    loaded = load_scene(scene)
+    # The scene's own file, step and memory limits; each step size is checked
+    # against --max-steps again below, before any run.
+    loaded, _, _ = prepare_scene(scene, limits)
     names = parse_integrators(integrators)
     dts = parse_dts(dt, loaded.scene)
     for path in (output, plot):
@@ -711,7 +845,7 @@ def compare(
             reference=reference.value,
             repeat=repeat,
             progress=progress,
-            max_steps=max_steps,
+            max_steps=limits.max_steps,
         )
     console.print(table(result))
     for line in summary_lines(result):
@@ -754,6 +888,7 @@ class PlotKind(StrEnum):
 
 
 @app.command()
+@limit_options
 def plot(
     source: Annotated[
         Path,
@@ -774,6 +909,8 @@ def plot(
     integrator: Annotated[str | None, typer.Option(help="Override the scene's integrator.")] = None,
     dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
     duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
+    *,
+    limits: Any = None,
 ) -> None:
     """Draw particle paths or the energy (kinetic, potential, total, and drift) of a run."""
     from animsim.export.pictures import figure_format, plot_energy, plot_trajectory
@@ -787,11 +924,9 @@ def plot(
     scene_path = scene if from_file else source
     compiled = None
     if scene_path is not None:
-        from animsim.compile import compile_scene, with_overrides
-        from animsim.scene.loader import load_scene
+        from animsim.compile import compile_scene
 
-        loaded = load_scene(scene_path)
-        sc = with_overrides(loaded.scene, integrator=integrator, dt=dt, duration=duration)
+        loaded, sc, _ = prepare_scene(scene_path, limits, integrator=integrator, dt=dt, duration=duration)
         compiled = compile_scene(sc, loaded.name)
     if kind is PlotKind.energy:
         if compiled is None:
@@ -862,14 +997,33 @@ def _energies(compiled: Any, traj: Any) -> tuple[Any, Any, Any]:
 # --- entry point ----------------------------------------------------------------------------
 
 
+def _sigterm_as_interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt
+
+
 def main(argv: list[str] | None = None) -> None:
     """Run the app; every AnimsimError becomes a message and an exit status, never a traceback."""
+    # Outside a run's step loop (loading, compiling, assembling an NPZ), SIGTERM
+    # unwinds like Ctrl-C, so temporary files are removed and the status is 130
+    # instead of the process vanishing mid-write.
+    old_term = None
+    if (
+        threading.current_thread() is threading.main_thread()
+        and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL
+    ):
+        old_term = signal.signal(signal.SIGTERM, _sigterm_as_interrupt)
     try:
-        # Without standalone mode click *returns* the code of a typer.Exit
-        # instead of raising it: it must become the process status.
-        code = typer.Typer.__call__(app, args=argv, prog_name="animsim", standalone_mode=False)
-        if isinstance(code, int) and code != 0:
-            sys.exit(code)
+        _main(argv)
+    finally:
+        if old_term is not None:
+            signal.signal(signal.SIGTERM, old_term)
+
+
+def _main(argv: list[str] | None) -> None:
+    try:
+        # Without standalone mode, click *returns* the code of a typer.Exit
+        # raised in a command (interrupted 130, unstable 1) instead of raising.
+        status = typer.Typer.__call__(app, args=argv, prog_name="animsim", standalone_mode=False)
     except AnimsimError as exc:
         _err(str(exc))
         sys.exit(exc.exit_code)
@@ -878,6 +1032,18 @@ def main(argv: list[str] | None = None) -> None:
     except (typer.Abort, KeyboardInterrupt):
         _err("animsim: interrupted")
         sys.exit(EXIT_INTERRUPTED)
+    except BrokenPipeError:
+        # The reader of stdout went away (`animsim run -o - | head`): not an error to report.
+        with contextlib.suppress(OSError):
+            sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - silences the flush at exit
+        sys.exit(EXIT_FAILED)
+    except MemoryError:
+        _err("animsim: out of memory; lower the scene's size or --max-memory so the pre-flight refuses it")
+        sys.exit(EXIT_FAILED)
+    except OSError as exc:  # a write that failed outside the atomic sinks (e.g. stdout on a full disk)
+        where = f"{exc.filename}: " if exc.filename else ""
+        _err(f"animsim: {where}{exc.strerror or exc}")
+        sys.exit(EXIT_FAILED)
     except Exception as exc:  # click usage errors and anything unexpected
         # Typer vendors its own copy of click, so match click's exceptions by
         # their base class name rather than importing click.
@@ -889,4 +1055,4 @@ def main(argv: list[str] | None = None) -> None:
         _err(f"animsim: internal error: {type(exc).__name__}: {exc}")
         _err("this is a bug in animsim; run again with ANIMSIM_DEBUG=1 for the traceback")
         sys.exit(EXIT_FAILED)
-    sys.exit(0)
+    sys.exit(status if isinstance(status, int) and not isinstance(status, bool) else 0)

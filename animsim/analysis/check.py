@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 from animsim.errors import AnimsimError
 
@@ -26,16 +27,18 @@ def check_scenes(
     quiet: bool = False,
     echo: Callable[[str], None] = print,
     echo_err: Callable[[str], None] = print,
+    limits: Any = None,
 ) -> bool:
+    """``limits`` (a preflight.RunLimits) bounds every scene as ``animsim run`` would."""
+    from animsim.cli import prepare_scene
     from animsim.compile import compile_scene
-    from animsim.scene.loader import load_scene
     from animsim.simulate import STATUS_OK, run
 
     all_ok = True
     for path in paths:
         try:
-            loaded = load_scene(path)
-            compiled = compile_scene(loaded.scene, loaded.name)
+            loaded, scene, _ = prepare_scene(path, limits)
+            compiled = compile_scene(scene, loaded.name)
         except AnimsimError as exc:
             echo_err(str(exc))
             echo_err(f"{path}: INVALID")

@@ -14,7 +14,7 @@ from typing import IO, Any
 
 import numpy as np
 
-from animsim.atomic import AtomicFile
+from animsim.atomic import AtomicFile, writing
 from animsim.export.meta import commit_with_meta
 from animsim.record import Frame, TrajectoryHeader
 
@@ -51,7 +51,8 @@ class CsvSink:
             self._out = self._file.handle
         self._ids = [quote_id(i) for i in header.ids]
         cols = HEADER + (EXTRA_HEADER if self.extra else ())
-        self._out.write(",".join(cols) + "\n")
+        with writing(self.path):
+            self._out.write(",".join(cols) + "\n")
 
     def write(self, frame: Frame) -> None:
         assert self._out is not None
@@ -71,7 +72,9 @@ class CsvSink:
                 f"{t},{ids[k]},{a!r},{b!r},{c!r},{d!r},{e!r},{f!r},{x}\n"
                 for k, (a, b, c, d, e, f), x in zip(index, rows, extra, strict=True)
             ]
-        self._out.write("".join(lines))
+        # A full disk shows here (or only at close): a clear error, never a traceback.
+        with writing(self.path):
+            self._out.write("".join(lines))
 
     @staticmethod
     def _extra_cells(frame: Frame) -> list[str]:
@@ -92,7 +95,8 @@ class CsvSink:
     def close(self, meta: dict[str, Any]) -> None:
         if self._file is None:
             if self._out is not None:
-                self._out.flush()
+                with writing(self.path):
+                    self._out.flush()
             return
         commit_with_meta(self._file, self.path, meta if self.write_meta else None)
 

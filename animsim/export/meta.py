@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from animsim.atomic import AtomicFile
+from animsim.atomic import AtomicFile, commit_together, writing
 
 
 def meta_path(output: str | Path) -> Path:
@@ -16,22 +16,25 @@ def meta_path(output: str | Path) -> Path:
 def meta_file(output: str | Path, meta: dict[str, Any]) -> AtomicFile:
     """Write the metadata to a temporary file; the caller commits it."""
     f = AtomicFile(meta_path(output), "w")
-    f.handle.write(json.dumps(meta, indent=2, sort_keys=True, allow_nan=True) + "\n")
+    try:
+        with writing(f.path):
+            f.handle.write(json.dumps(meta, indent=2, sort_keys=True, allow_nan=True) + "\n")
+    except BaseException:
+        f.abort()
+        raise
     return f
 
 
 def commit_with_meta(data: AtomicFile, output: str | Path, meta: dict[str, Any] | None) -> None:
-    """Commit a finished output and then its metadata, or neither.
+    """Commit a finished output and its metadata together, or neither.
 
-    The metadata is staged before the data is renamed into place, so a
-    failure to write it leaves no trajectory without its description.
+    Both are made whole (flushed, fsynced, closed) before either is renamed,
+    so a full disk that shows only at fsync or close leaves the old
+    trajectory *and* the old metadata in place (see atomic.commit_together).
     """
-    staged = meta_file(output, meta) if meta is not None else None
     try:
-        data.commit()
+        staged = meta_file(output, meta) if meta is not None else None
     except BaseException:
-        if staged is not None:
-            staged.abort()
+        data.abort()
         raise
-    if staged is not None:
-        staged.commit()
+    commit_together(data, staged)

@@ -16,6 +16,7 @@ the end, so memory stays bounded by one frame.
 
 from __future__ import annotations
 
+import contextlib
 import shutil
 import tempfile
 import zipfile
@@ -24,7 +25,7 @@ from typing import IO, Any
 
 import numpy as np
 
-from animsim.atomic import AtomicFile
+from animsim.atomic import AtomicFile, writing
 from animsim.export.meta import commit_with_meta
 from animsim.record import Frame, TrajectoryHeader
 
@@ -50,43 +51,49 @@ class NpzSink:
         self._columns = dict(_COLUMNS)
 
     def begin(self, header: TrajectoryHeader) -> None:
-        self._tmpdir = tempfile.TemporaryDirectory(prefix=".animsim-npz-", dir=self.path.parent)
         if header.has_emitters:
             self._columns.update(_EXTRA)
-        for name in self._columns:
-            self._raw[name] = open(Path(self._tmpdir.name) / name, "wb")  # noqa: SIM115
+        with writing(self.path):
+            self._tmpdir = tempfile.TemporaryDirectory(prefix=".animsim-npz-", dir=self.path.parent)
+            for name in self._columns:
+                self._raw[name] = open(Path(self._tmpdir.name) / name, "wb")  # noqa: SIM115
         self._ids = list(header.ids)
 
     def write(self, frame: Frame) -> None:
         self._ids.extend(frame.new_ids)
         n = len(frame.index)
-        self._raw["t"].write(np.full(n, frame.time, dtype=np.float64).tobytes())
-        self._raw["particle"].write(np.asarray(frame.index, dtype=np.int64).tobytes())
-        self._raw["position"].write(np.ascontiguousarray(frame.position, dtype=np.float64).tobytes())
-        self._raw["velocity"].write(np.ascontiguousarray(frame.velocity, dtype=np.float64).tobytes())
-        if "age" in self._raw:
-            for name, shape in (("age", (n,)), ("size", (n,)), ("color", (n, 4))):
-                value = getattr(frame, name)
-                arr = np.full(shape, np.nan) if value is None else np.asarray(value, dtype=np.float64)
-                self._raw[name].write(np.ascontiguousarray(arr).tobytes())
+        # A full disk shows here (or only at close): a clear error, never a traceback.
+        with writing(self.path):
+            self._raw["t"].write(np.full(n, frame.time, dtype=np.float64).tobytes())
+            self._raw["particle"].write(np.asarray(frame.index, dtype=np.int64).tobytes())
+            self._raw["position"].write(np.ascontiguousarray(frame.position, dtype=np.float64).tobytes())
+            self._raw["velocity"].write(np.ascontiguousarray(frame.velocity, dtype=np.float64).tobytes())
+            if "age" in self._raw:
+                for name, shape in (("age", (n,)), ("size", (n,)), ("color", (n, 4))):
+                    value = getattr(frame, name)
+                    arr = np.full(shape, np.nan) if value is None else np.asarray(value, dtype=np.float64)
+                    self._raw[name].write(np.ascontiguousarray(arr).tobytes())
         self._rows += n
         self._frame_time.append(frame.time)
         self._frame_start.append(self._rows)
 
     def close(self, meta: dict[str, Any]) -> None:
         assert self._tmpdir is not None
-        for fh in self._raw.values():
-            fh.close()
-        out = AtomicFile(self.path, "wb")
+        out: AtomicFile | None = None
         try:
-            with zipfile.ZipFile(out.handle, "w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
-                for name, (shape, dtype) in self._columns.items():
-                    _write_npy(zf, name, Path(self._tmpdir.name) / name, (self._rows, *shape), dtype)
-                _write_array(zf, "ids", np.array(self._ids, dtype=str))
-                _write_array(zf, "frame_time", np.array(self._frame_time, dtype=np.float64))
-                _write_array(zf, "frame_start", np.array(self._frame_start, dtype=np.int64))
+            with writing(self.path):
+                for fh in self._raw.values():
+                    fh.close()
+                out = AtomicFile(self.path, "wb")
+                with zipfile.ZipFile(out.handle, "w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
+                    for name, (shape, dtype) in self._columns.items():
+                        _write_npy(zf, name, Path(self._tmpdir.name) / name, (self._rows, *shape), dtype)
+                    _write_array(zf, "ids", np.array(self._ids, dtype=str))
+                    _write_array(zf, "frame_time", np.array(self._frame_time, dtype=np.float64))
+                    _write_array(zf, "frame_start", np.array(self._frame_start, dtype=np.int64))
         except BaseException:
-            out.abort()
+            if out is not None:
+                out.abort()
             self._cleanup()
             raise
         try:
@@ -96,12 +103,14 @@ class NpzSink:
 
     def abort(self) -> None:
         for fh in self._raw.values():
-            fh.close()
+            with contextlib.suppress(OSError):
+                fh.close()
         self._cleanup()
 
     def _cleanup(self) -> None:
         if self._tmpdir is not None:
-            self._tmpdir.cleanup()
+            with contextlib.suppress(OSError):
+                self._tmpdir.cleanup()
             self._tmpdir = None
 
 

@@ -25,6 +25,7 @@ from typing import Annotated, Any, Union, get_args, get_origin
 
 import yaml
 from pydantic import BaseModel, ValidationError
+from yaml.events import AliasEvent
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
 from animsim.errors import Diagnostic, SceneError, UsageError
@@ -36,9 +37,24 @@ Path_ = tuple[str | int, ...]
 DEFAULT_MAX_FILE_BYTES = 50 * 1024 * 1024
 DEFAULT_MAX_DEPTH = 100
 DEFAULT_MAX_NODES = 100_000
+DEFAULT_MAX_MEMORY = 4 * 1024**3
+# What one YAML node costs from parse to validated scene (PyYAML node and
+# marks, our data and mark tables, pydantic's models): ~960 bytes measured
+# on a 50,000-particle scene. A 50 MB file of "- 1" lines is 12 million
+# nodes; the memory budget, not only the file size, must bound it.
+PARSE_NODE_BYTES = 1024
+
+_UTF8_BOM = b"\xef\xbb\xbf"
+_READ_CHUNK = 1024 * 1024
 
 _TAG = "tag:yaml.org,2002:"
 _ALLOWED_TAGS = {f"{_TAG}{t}" for t in ("str", "int", "float", "bool", "null", "map", "seq")}
+# Which node kind each allowed tag may sit on (``!!map [1, 2]`` is refused).
+_TAG_KIND: dict[str, type[Node]] = {
+    **{f"{_TAG}{t}": ScalarNode for t in ("str", "int", "float", "bool", "null")},
+    f"{_TAG}map": MappingNode,
+    f"{_TAG}seq": SequenceNode,
+}
 
 # YAML 1.2 core schema (https://yaml.org/spec/1.2.2/#1032-tag-resolution).
 _NULL = re.compile(r"^(~|null|Null|NULL|)$")
@@ -61,6 +77,12 @@ class Limits:
     max_file_bytes: int = DEFAULT_MAX_FILE_BYTES
     max_depth: int = DEFAULT_MAX_DEPTH
     max_nodes: int = DEFAULT_MAX_NODES
+    max_memory: int = DEFAULT_MAX_MEMORY
+
+    @property
+    def max_written_nodes(self) -> int:
+        """Nodes as written that fit the memory budget (see PARSE_NODE_BYTES)."""
+        return max(1, self.max_memory // PARSE_NODE_BYTES)
 
 
 @dataclass
@@ -114,12 +136,21 @@ class _Loader(yaml.SafeLoader):
     """Safe composer with a depth limit and YAML 1.2 plain-scalar resolution."""
 
     max_depth = DEFAULT_MAX_DEPTH
+    max_written = DEFAULT_MAX_MEMORY // PARSE_NODE_BYTES
+    max_memory = DEFAULT_MAX_MEMORY
 
     def __init__(self, stream: str):
         super().__init__(stream)
         self._depth = 0
+        #: nodes as written (an alias counts once), for the alias-expansion limit
+        self.written = 0
+        #: every alias in document order: (line, column, anchor, the node it names)
+        self.aliases: list[tuple[int, int, str, Node]] = []
 
     def compose_node(self, parent: Node | None, index: Any) -> Node:  # type: ignore[override]
+        # The check comes before PyYAML's own recursion, so 3000 nested "[" or
+        # "- " never reach Python's recursion limit (PyYAML's scanner and
+        # parser are iterative; only this composer recurses).
         self._depth += 1
         try:
             if self._depth > self.max_depth:
@@ -130,6 +161,22 @@ class _Loader(yaml.SafeLoader):
                     (),
                     f"nesting deeper than {self.max_depth} levels (raise it with --max-depth)",
                 )
+            self.written += 1
+            if self.written > self.max_written:
+                mark = self.peek_event().start_mark
+                raise _Fault(
+                    mark.line + 1,
+                    mark.column + 1,
+                    (),
+                    f"the document has more than {self.max_written} nodes; reading it would need more "
+                    f"than the memory budget of {self.max_memory} bytes (raise it with --max-memory)",
+                )
+            if self.check_event(AliasEvent):
+                event = self.peek_event()
+                node = super().compose_node(parent, index)
+                mark = event.start_mark
+                self.aliases.append((mark.line + 1, mark.column + 1, str(event.anchor), node))
+                return node
             return super().compose_node(parent, index)
         finally:
             self._depth -= 1
@@ -171,10 +218,96 @@ def _yaml11_hint(value: str) -> str | None:
     return None
 
 
+def _expansion(root: Node) -> tuple[dict[int, int], dict[int, int]]:
+    """Size and depth of every node's subtree with aliases expanded, per ``id(node)``.
+
+    Computed on the composed graph, where an alias is the anchored node itself,
+    so each node is visited once: a "billion laughs" file costs as many steps
+    as it has distinct nodes, not as many as it would expand to. Iterative,
+    because a chain of aliases can be far deeper than the written nesting.
+    Raises ``_Fault`` for an alias that refers to a node containing itself.
+    """
+    size: dict[int, int] = {}
+    depth: dict[int, int] = {}
+    on_stack: set[int] = set()
+    stack: list[tuple[Node, bool]] = [(root, False)]
+    while stack:
+        node, children_done = stack.pop()
+        key = id(node)
+        if children_done:
+            kids = _children(node)
+            size[key] = 1 + sum(size[id(k)] for k in kids)
+            depth[key] = 1 + max((depth[id(k)] for k in kids), default=0)
+            on_stack.discard(key)
+            continue
+        if key in size:
+            continue
+        if key in on_stack:
+            line, col = _mark(node)
+            raise _Fault(
+                line, col, (), "an alias refers to the collection that contains it (a recursive structure)"
+            )
+        on_stack.add(key)
+        stack.append((node, True))
+        for kid in _children(node):
+            kid_key = id(kid)
+            if kid_key in on_stack:
+                line, col = _mark(node)
+                raise _Fault(
+                    line,
+                    col,
+                    (),
+                    "an alias refers to the collection that contains it (a recursive structure)",
+                )
+            if kid_key not in size:
+                stack.append((kid, False))
+    return size, depth
+
+
+def _children(node: Node) -> list[Node]:
+    if isinstance(node, SequenceNode):
+        return list(node.value)
+    if isinstance(node, MappingNode):
+        return [n for pair in node.value for n in pair]
+    return []
+
+
+def _check_expansion(root: Node, loader: _Loader, limits: Limits) -> None:
+    """Refuse, before building any data, a document that aliases blow up.
+
+    The limit counts the nodes aliases *add* (the expanded size minus the
+    nodes as written), so a long scene written out in full is never mistaken
+    for an alias bomb. Merge keys are counted in full (an upper bound).
+    """
+    if not loader.aliases:
+        return
+    size, depth = _expansion(root)
+    added = size[id(root)] - loader.written
+    if added > limits.max_nodes:
+        line, col, anchor, _ = max(loader.aliases, key=lambda a: (size[id(a[3])], -a[0], -a[1]))
+        raise _Fault(
+            line,
+            col,
+            (),
+            f"aliases would expand the document by {added} nodes, more than the limit of "
+            f"{limits.max_nodes} (the largest is *{anchor}; raise it with --max-nodes)",
+        )
+    if depth[id(root)] > limits.max_depth:
+        line, col, anchor, _ = max(loader.aliases, key=lambda a: (depth[id(a[3])], -a[0], -a[1]))
+        raise _Fault(
+            line,
+            col,
+            (),
+            f"aliases nest the document {depth[id(root)]} levels deep, more than the limit of "
+            f"{limits.max_depth} (the deepest is *{anchor}; raise it with --max-depth)",
+        )
+
+
 class _Builder:
     """Turns composed nodes into Python data, recording marks as it goes."""
 
     def __init__(self, max_nodes: int):
+        """``max_nodes`` bounds the whole build: a safety net behind ``_check_expansion``."""
         self.marks = Marks()
         self.max_nodes = max_nodes
         self.count = 0
@@ -197,6 +330,11 @@ class _Builder:
             raise _Fault(
                 line, col, path, f"the tag {shown} is not allowed in a scene (nothing is ever executed)"
             )
+        kind = _TAG_KIND.get(node.tag)
+        if kind is not None and not isinstance(node, kind):
+            line, col = _mark(node)
+            shown = node.tag.replace(_TAG, "!!")
+            raise _Fault(line, col, path, f"the tag {shown} does not fit this kind of value")
         if isinstance(node, ScalarNode):
             return self._scalar(node, path)
         if isinstance(node, SequenceNode):
@@ -213,6 +351,8 @@ class _Builder:
             if tag == "null":
                 return None
             if tag == "bool":
+                if not _BOOL.match(v):  # an explicit !!bool "yes" is not YAML 1.2
+                    raise ValueError(v)
                 return v.lower() == "true"
             if tag == "int":
                 if v.startswith("0o"):
@@ -293,11 +433,22 @@ def read_scene_file(path: str | Path, limits: Limits = Limits()) -> bytes:
             f"{p}: {st.st_size} bytes is more than the {limits.max_file_bytes}-byte limit "
             "(raise it with --max-file-size)"
         )
+    # Read in chunks: read(limit + 1) would allocate the whole 50 MB limit up
+    # front for every scene, and the size may change after the stat.
+    chunks: list[bytes] = []
+    total = 0
     try:
         with p.open("rb") as fh:
-            return fh.read(limits.max_file_bytes + 1)
+            while chunk := fh.read(_READ_CHUNK):
+                total += len(chunk)
+                if total > limits.max_file_bytes:
+                    raise UsageError(
+                        f"{p}: more than the {limits.max_file_bytes}-byte limit (raise it with --max-file-size)"
+                    )
+                chunks.append(chunk)
     except OSError as exc:
         raise UsageError(f"{p}: cannot read: {exc.strerror}") from None
+    return b"".join(chunks)
 
 
 def load_scene(path: str | Path, limits: Limits = Limits()) -> LoadedScene:
@@ -321,12 +472,20 @@ def load_scene_bytes(raw: bytes, file: str, limits: Limits = Limits()) -> Loaded
         )
     # Top-level keys starting with x- are free for anchors (as in Compose files).
     body = {k: v for k, v in data.items() if not (isinstance(k, str) and k.startswith("x-"))}
+    from animsim.scene.validate import check_scene, partial_scene  # late: validate imports structures
+
     try:
         scene = Scene.model_validate(body)
     except ValidationError as exc:
-        raise SceneError(_diagnostics(exc, body, marks, file)) from None
-    from animsim.scene.validate import check_scene  # late: validate imports structures
-
+        # Report the cross-field problems of the parts that did validate too,
+        # so one round of fixes is enough (never twice for one key).
+        found = _diagnostics(exc, body, marks, file)
+        partial, ids_complete = partial_scene(body)
+        seen = {d.path for d in found}
+        for p, msg, key in check_scene(partial, ids_complete=ids_complete, partial=True):
+            if _dotted(p) not in seen:
+                found.append(Diagnostic(file, *marks.at(p, prefer_key=key), _dotted(p), msg))
+        raise SceneError(found) from None
     problems = check_scene(scene)
     if problems:
         raise SceneError(
@@ -336,55 +495,89 @@ def load_scene_bytes(raw: bytes, file: str, limits: Limits = Limits()) -> Loaded
 
 
 def _decode(raw: bytes, file: str) -> str:
-    if raw.startswith(b"\xef\xbb\xbf"):
-        raw = raw[3:]
+    """UTF-8 text (a leading BOM is allowed and dropped); a bad byte is reported by line and column."""
+    if raw.startswith(_UTF8_BOM):
+        raw = raw[len(_UTF8_BOM) :]
     try:
         return raw.decode("utf-8")
     except UnicodeDecodeError as exc:
-        before = raw[: exc.start]
-        line = before.count(b"\n") + 1
-        col = exc.start - (before.rfind(b"\n") + 1) + 1
-        raise SceneError(
-            [Diagnostic(file, line, col, "", f"the file is not valid UTF-8 (byte 0x{raw[exc.start]:02x})")]
-        ) from None
+        line_start = raw.rfind(b"\n", 0, exc.start) + 1
+        line = raw.count(b"\n", 0, exc.start) + 1
+        # Columns count characters, as editors do, not bytes.
+        col = len(raw[line_start : exc.start].decode("utf-8", errors="replace")) + 1
+        hint = ""
+        if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
+            hint = "; it looks like UTF-16: save it as UTF-8"
+        msg = f"the file is not valid UTF-8 (byte 0x{raw[exc.start]:02x}){hint}"
+        raise SceneError([Diagnostic(file, line, col, "", msg)]) from None
 
 
 def parse_yaml(text: str, file: str, limits: Limits = Limits()) -> tuple[Any, Marks]:
     """Parse one YAML document into plain data and its marks."""
-    loader = _Loader(text)
-    loader.max_depth = limits.max_depth
     try:
+        loader = _Loader(text)  # PyYAML's reader checks for unprintable characters here
+        loader.max_depth = limits.max_depth
+        loader.max_written = limits.max_written_nodes
+        loader.max_memory = limits.max_memory
         try:
             node = loader.get_single_node()
         finally:
             loader.dispose()
         if node is None:
             return None, Marks()
-        builder = _Builder(limits.max_nodes)
+        _check_expansion(node, loader, limits)
+        builder = _Builder(loader.written + limits.max_nodes)
         return builder.build(node, ()), builder.marks
     except _Fault as f:
         raise SceneError([Diagnostic(file, f.line, f.column, _dotted(f.path), f.message)]) from None
     except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark or exc.context_mark
-        line, col = (mark.line + 1, mark.column + 1) if mark else (1, 1)
-        msg = exc.problem or "invalid YAML"
-        if exc.context:
-            cm = exc.context_mark
-            opened = (
-                f" (started at line {cm.line + 1}, column {cm.column + 1})"
-                if cm and mark and cm.line != mark.line
-                else ""
-            )
-            msg = f"{exc.context}{opened}: {msg}"
-        if "\t" in msg or "found character '\\t'" in msg:
-            msg += " (YAML does not allow tabs for indentation; use spaces)"
-        raise SceneError([Diagnostic(file, line, col, "", f"YAML syntax: {msg}")]) from None
+        raise SceneError([_syntax_diagnostic(exc, file)]) from None
+    except yaml.reader.ReaderError as exc:
+        # PyYAML gives a character offset; turn it into a line and column.
+        before = text[: exc.position]
+        line = before.count("\n") + 1
+        col = exc.position - (before.rfind("\n") + 1) + 1
+        char = exc.character if isinstance(exc.character, str) else chr(exc.character)
+        msg = f"the character U+{ord(char):04X} is not allowed in YAML (control characters must be escaped)"
+        raise SceneError([Diagnostic(file, line, col, "", msg)]) from None
     except yaml.YAMLError as exc:
         raise SceneError([Diagnostic(file, 1, 1, "", f"YAML: {exc}")]) from None
-    except RecursionError:
+    except RecursionError:  # pragma: no cover - the depth checks come first; kept as a last guard
         raise SceneError(
             [Diagnostic(file, 1, 1, "", f"nesting too deep (the limit is {limits.max_depth})")]
         ) from None
+
+
+# PyYAML contexts that name where a bracket or quote was opened.
+_OPENED = {
+    "while parsing a flow sequence": "the [",
+    "while parsing a flow mapping": "the {",
+    "while scanning a quoted scalar": "the quote",
+}
+
+
+def _syntax_diagnostic(exc: yaml.MarkedYAMLError, file: str) -> Diagnostic:
+    """A YAML syntax error where PyYAML noticed it, naming where an unclosed bracket started."""
+    mark = exc.problem_mark or exc.context_mark
+    line, col = (mark.line + 1, mark.column + 1) if mark else (1, 1)
+    problem = exc.problem or "invalid YAML"
+    cm = exc.context_mark
+    opened = _OPENED.get(exc.context or "")
+    if opened and cm is not None:
+        # An unclosed bracket is noticed far from where it was opened: say where that was.
+        where = f"started at line {cm.line + 1}, column {cm.column + 1}"
+        return Diagnostic(file, line, col, "", f"YAML syntax: {opened} {where} is not closed: {problem}")
+    msg = problem
+    if exc.context:
+        started = (
+            f" (started at line {cm.line + 1}, column {cm.column + 1})"
+            if cm and mark and cm.line != mark.line
+            else ""
+        )
+        msg = f"{exc.context}{started}: {problem}"
+    if "'\\t'" in msg or "\t" in msg:
+        msg += " (YAML does not allow tabs for indentation; use spaces)"
+    return Diagnostic(file, line, col, "", f"YAML syntax: {msg}")
 
 
 # --- pydantic errors -> diagnostics ---------------------------------------------
@@ -420,7 +613,10 @@ def _unwrap(tp: Any) -> list[Any]:
     if origin is Annotated:
         return _unwrap(get_args(tp)[0])
     if origin is Union or origin is types.UnionType:
-        return [alt for a in get_args(tp) for alt in _unwrap(a)]
+        out: list[Any] = []
+        for a in get_args(tp):
+            out.extend(_unwrap(a))
+        return out
     return [tp]
 
 
@@ -434,7 +630,7 @@ def _models_at(loc: tuple[Any, ...]) -> list[type[BaseModel]]:
                 if isinstance(alt, type) and issubclass(alt, BaseModel):
                     if isinstance(seg, str) and seg in alt.model_fields:
                         nxt.append(alt.model_fields[seg].annotation)
-                    elif isinstance(seg, str) and _tag_of(alt) == seg:
+                    elif isinstance(seg, str) and seg in (_tag_of(alt), alt.__name__):
                         nxt.append(alt)
                 elif get_origin(alt) is list and isinstance(seg, int):
                     nxt.append(get_args(alt)[0])
@@ -471,6 +667,29 @@ _KIND = {
 }
 
 
+# pydantic bound errors: (how to say it, the ctx key holding the bound)
+_BOUND = {
+    "greater_than": ("greater than", "gt"),
+    "greater_than_equal": ("greater than or equal to", "ge"),
+    "less_than": ("less than", "lt"),
+    "less_than_equal": ("less than or equal to", "le"),
+}
+_VECTOR_KEYS = {
+    "position",
+    "velocity",
+    "g",
+    "point",
+    "normal",
+    "center",
+    "origin",
+    "start",
+    "end",
+    "min",
+    "max",
+    "mean",
+}
+
+
 def _short(value: Any) -> str:
     r = repr(value)
     return r if len(r) <= 40 else r[:37] + "..."
@@ -486,6 +705,13 @@ def _diagnostics(exc: ValidationError, data: dict[str, Any], marks: Marks, file:
         else:
             key, _ = _data_path(loc, data)
         groups.setdefault(key, []).append(err)
+    # A union reports each branch: when the value matched one branch's shape
+    # (a mapping for IntegratorSpec) and failed deeper, the other branches'
+    # "is not one of the names" errors are noise about the same value.
+    for path in list(groups):
+        deeper = any(len(other) > len(path) and other[: len(path)] == path for other in groups)
+        if deeper and all(e["type"] in _KIND or e["type"] == "literal_error" for e in groups[path]):
+            del groups[path]
     # One typo, one message: a missing key that an unknown sibling key's
     # did-you-mean already names is not reported again.
     suggested = set()
@@ -540,12 +766,27 @@ def _message(path: Path_, errs: list[dict[str, Any]], marks: Marks) -> tuple[str
         msg = f"expected {kinds}, got {_short(first['input'])}"
     elif first["type"] in _KIND:
         msg = f"expected {_KIND[first['type']]}, got {_short(first['input'])}"
+        value = first["input"]
         if (
             first["type"] in ("float_type", "int_type")
-            and isinstance(first["input"], int)
-            and not isinstance(first["input"], bool)
+            and isinstance(value, int)
+            and not isinstance(value, bool)
         ):
-            msg = f"the number {_short(first['input'])} is too large"
+            msg = f"the number {_short(value)} is too large"
+        elif first["type"] == "int_type" and isinstance(value, float) and value.is_integer():
+            msg += f" (write it without a decimal point or exponent: {int(value)})"
+    elif first["type"] in _BOUND and "ctx" in first:
+        op, key = _BOUND[first["type"]]
+        bound = first["ctx"][key]
+        shown = f"{bound:g}" if isinstance(bound, float) else repr(bound)
+        msg = f"must be {op} {shown}, got {_short(first['input'])}"
+    elif first["type"] in ("too_short", "too_long") and "ctx" in first:
+        ctx = first["ctx"]
+        lo, hi = ctx.get("min_length"), ctx.get("max_length")
+        want = f"at least {lo}" if first["type"] == "too_short" else f"at most {hi}"
+        msg = f"expected {want} items, got {ctx.get('actual_length')}"
+        if path and path[-1] in _VECTOR_KEYS:
+            msg += " (a vector is [x, y, z], or [x, y] meaning z = 0)"
     elif first["type"] == "finite_number":
         msg = "must be a finite number (no .nan, .inf, or overflowing values)"
     elif first["type"] == "value_error":

@@ -14,10 +14,13 @@ later stages can use array slices instead of index lists.
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import numpy as np
+if TYPE_CHECKING:  # numpy is imported where arrays are built, so validating a scene
+    import numpy as np  # (and refusing a bad one) does not pay for importing it
 
 from animsim.scene.models import Cloth, SoftBox, SpringFamily, Strand, Structure
 
@@ -54,13 +57,19 @@ def grid_shape(s: Structure) -> tuple[int, ...]:
 
 
 def particle_count(s: Structure) -> int:
-    return int(np.prod(grid_shape(s)))
+    return math.prod(grid_shape(s))  # exact Python int: no overflow for absurd resolutions
 
 
 def structure_spring_count(s: Structure) -> int:
-    """Number of springs the structure generates, without generating them."""
+    """Number of springs the structure generates, counted without generating them
+    (the memory pre-flight calls this on lattices far too large to build)."""
     shape = grid_shape(s)
-    return sum(len(pairs) for _, pairs, _ in _families(s, shape, count_only=True))
+    total = 0
+    for _name, _fam, offsets in _family_offsets(s):
+        for offset in offsets:
+            if all(abs(o) < n for n, o in zip(shape, offset, strict=True)):
+                total += math.prod(n - abs(o) for n, o in zip(shape, offset, strict=True))
+    return total
 
 
 _ID_RE = re.compile(r"^(?P<base>.*)\[(?P<idx>-?\d+(?:,-?\d+)*)\]$")
@@ -83,17 +92,24 @@ def local_index(s: Structure, pid: str) -> int | None:
     idx = parsed[1]
     if len(idx) != len(shape) or any(not 0 <= i < n for i, n in zip(idx, shape, strict=True)):
         return None
-    return int(np.ravel_multi_index(idx, shape))
+    flat = 0
+    for i, n in zip(idx, shape, strict=True):  # row-major, as np.ravel_multi_index
+        flat = flat * n + i
+    return flat
 
 
 def format_id(base: str, shape: tuple[int, ...]) -> list[str]:
     """All ids of a structure in creation order."""
+    import numpy as np
+
     grids = np.indices(shape).reshape(len(shape), -1).T
     return [f"{base}[{','.join(map(str, row))}]" for row in grids.tolist()]
 
 
 def _pairs(shape: tuple[int, ...], a: tuple[slice, ...], b: tuple[slice, ...]) -> np.ndarray:
     """Index pairs between two shifted sub-blocks of the grid."""
+    import numpy as np
+
     flat = np.arange(int(np.prod(shape)), dtype=np.int64).reshape(shape)
     return np.stack([flat[a].ravel(), flat[b].ravel()], axis=1)
 
@@ -111,6 +127,8 @@ def _offset_pairs(shape: tuple[int, ...], offset: tuple[int, ...]) -> np.ndarray
 
     Negative offset components are handled by swapping which block is shifted.
     """
+    import numpy as np
+
     a: list[slice] = []
     b: list[slice] = []
     for n, o in zip(shape, offset, strict=True):
@@ -125,40 +143,41 @@ def _offset_pairs(shape: tuple[int, ...], offset: tuple[int, ...]) -> np.ndarray
     return _pairs(shape, tuple(a), tuple(b))
 
 
-def _families(
-    s: Structure, shape: tuple[int, ...], count_only: bool = False
-) -> list[tuple[str, np.ndarray, SpringFamily]]:
-    out: list[tuple[str, np.ndarray, SpringFamily]] = []
-
-    def add(name: str, fam: SpringFamily | None, offsets: list[tuple[int, ...]]) -> None:
-        if fam is None:
-            return
-        pairs = np.concatenate([_offset_pairs(shape, o) for o in offsets])
-        out.append((name, pairs, fam))
-
+def _family_offsets(s: Structure) -> list[tuple[str, SpringFamily, list[tuple[int, ...]]]]:
+    """The spring families a structure asks for, each with its grid offsets."""
     if isinstance(s, Cloth):
-        add("structural", s.structural, [(1, 0), (0, 1)])
-        add("shear", s.shear, [(1, 1), (1, -1)])
-        add("bend", s.bend, [(2, 0), (0, 2)])
+        spec = [
+            ("structural", s.structural, [(1, 0), (0, 1)]),
+            ("shear", s.shear, [(1, 1), (1, -1)]),
+            ("bend", s.bend, [(2, 0), (0, 2)]),
+        ]
     elif isinstance(s, Strand):
-        add("stretch", s.stretch, [(1,)])
-        add("bend", s.bend, [(2,)])
+        spec = [("stretch", s.stretch, [(1,)]), ("bend", s.bend, [(2,)])]
     else:
-        add("edge", s.edge, [(1, 0, 0), (0, 1, 0), (0, 0, 1)])
-        add(
-            "face_diagonal",
-            s.face_diagonal,
-            [(1, 1, 0), (1, -1, 0), (1, 0, 1), (1, 0, -1), (0, 1, 1), (0, 1, -1)],
-        )
-        add(
-            "body_diagonal",
-            s.body_diagonal,
-            [(1, 1, 1), (1, 1, -1), (1, -1, 1), (1, -1, -1)],
-        )
-    return out
+        spec = [
+            ("edge", s.edge, [(1, 0, 0), (0, 1, 0), (0, 0, 1)]),
+            (
+                "face_diagonal",
+                s.face_diagonal,
+                [(1, 1, 0), (1, -1, 0), (1, 0, 1), (1, 0, -1), (0, 1, 1), (0, 1, -1)],
+            ),
+            ("body_diagonal", s.body_diagonal, [(1, 1, 1), (1, 1, -1), (1, -1, 1), (1, -1, -1)]),
+        ]
+    return [(name, fam, offsets) for name, fam, offsets in spec if fam is not None]
+
+
+def _families(s: Structure, shape: tuple[int, ...]) -> list[tuple[str, np.ndarray, SpringFamily]]:
+    import numpy as np
+
+    return [
+        (name, np.concatenate([_offset_pairs(shape, o) for o in offsets]), fam)
+        for name, fam, offsets in _family_offsets(s)
+    ]
 
 
 def expand(s: Structure) -> Expanded:
+    import numpy as np
+
     shape = grid_shape(s)
     n = int(np.prod(shape))
     if isinstance(s, Cloth):

@@ -2,14 +2,24 @@
 
 Each problem is returned as (path, message, at_key) so the loader can put the
 file's line and column on it; all problems are collected, none stops the rest.
+
+When some parts of a scene fail pydantic validation, :func:`partial_scene`
+keeps the parts that did validate so these rules still run on them and the
+user sees every problem in one go, not one round of fixes per kind of rule.
+A rule whose inputs did not validate is skipped (never guessed at).
 """
 
 from __future__ import annotations
 
 import difflib
 import itertools
+import math
+from dataclasses import dataclass
+from typing import Any, get_args
 
-from animsim.scene.models import Scene
+from pydantic import TypeAdapter, ValidationError
+
+from animsim.scene.models import Id, Particle, Scene
 from animsim.scene.structures import local_index, parse_structure_id
 
 Problem = tuple[tuple[str | int, ...], str, bool]
@@ -20,16 +30,86 @@ def _suggest(word: str, choices: list[str]) -> str:
     return f"; did you mean '{close[0]}'?" if close else ""
 
 
-def check_scene(scene: Scene) -> list[Problem]:
+@dataclass(frozen=True)
+class Unvalidated:
+    """A particle that failed validation but whose id did not: it still counts
+    as existing (springs may name it) and still takes part in duplicate checks."""
+
+    id: str
+
+
+_PARTIAL_LISTS = ("particles", "springs", "emitters", "structures")
+
+
+def partial_scene(body: dict[str, Any]) -> tuple[Scene, bool]:
+    """The parts of ``body`` that validate on their own, as an unvalidated Scene.
+
+    List items that fail are None (particles: :class:`Unvalidated` when their
+    id is fine), so indices still match the file. ``duration`` and ``dt`` are
+    None when they fail. Returns (scene, ids_complete): ``ids_complete`` is
+    False when some particle or structure id could not be known, so rules
+    about missing ids must not run.
+    """
+    fields: dict[str, Any] = {}
+    ids_complete = True
+    for name in _PARTIAL_LISTS:
+        raw = body.get(name, [])
+        if not isinstance(raw, list):
+            fields[name] = []
+            ids_complete = ids_complete and name not in ("particles", "structures")
+            continue
+        item_type = get_args(Scene.model_fields[name].annotation)[0]
+        adapter: TypeAdapter[Any] = TypeAdapter(item_type)
+        items: list[Any] = []
+        for raw_item in raw:
+            try:
+                items.append(adapter.validate_python(raw_item, strict=True))
+            except ValidationError:
+                item = _salvage_particle(raw_item) if name == "particles" else None
+                if item is None and name in ("particles", "structures"):
+                    ids_complete = False
+                items.append(item)
+        fields[name] = items
+    for name in ("duration", "dt"):
+        value = body.get(name, Scene.model_fields[name].default)
+        ok = (
+            isinstance(value, int | float)
+            and not isinstance(value, bool)
+            and math.isfinite(value)
+            and value > 0
+        )
+        fields[name] = value if ok else None
+    return Scene.model_construct(**fields), ids_complete
+
+
+def _salvage_particle(raw: Any) -> Unvalidated | None:
+    if not isinstance(raw, dict) or "id" not in raw:
+        return None
+    try:
+        return Unvalidated(TypeAdapter(Id).validate_python(raw["id"], strict=True))
+    except ValidationError:
+        return None
+
+
+def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = False) -> list[Problem]:
+    """Every cross-field problem of ``scene``.
+
+    ``partial``: the scene comes from :func:`partial_scene` after pydantic
+    errors; rules that would only echo those errors are skipped.
+    """
     out: list[Problem] = []
-    if scene.dt > scene.duration:
+    if scene.dt is not None and scene.duration is not None and scene.dt > scene.duration:
         out.append((("dt",), f"dt = {scene.dt!r} is longer than the duration {scene.duration!r}", False))
-    if not scene.particles and not scene.emitters and not scene.structures:
+    # With other errors present an empty scene is most likely a typo'd or
+    # broken section already reported, so this rule speaks only on its own.
+    if not partial and not scene.particles and not scene.emitters and not scene.structures:
         out.append(((), "the scene has no particles, structures or emitters: nothing to simulate", False))
 
     # Structure ids and the ids they generate.
     structures = {}
     for i, s in enumerate(scene.structures):
+        if s is None:
+            continue
         if s.id in structures:
             out.append((("structures", i, "id"), f"duplicate structure id {s.id!r}", False))
         else:
@@ -50,6 +130,8 @@ def check_scene(scene: Scene) -> list[Problem]:
     # Particles: unique ids (after 1 -> "1"), masses.
     first_seen: dict[str, int] = {}
     for i, p in enumerate(scene.particles):
+        if p is None:
+            continue
         if p.id == "":
             out.append((("particles", i, "id"), "an id must not be empty", False))
         if p.id in first_seen:
@@ -64,7 +146,7 @@ def check_scene(scene: Scene) -> list[Problem]:
             first_seen[p.id] = i
         if structure_of(p.id) is not None:
             out.append((("particles", i, "id"), f"id {p.id!r} is also generated by a structure", False))
-        if not p.pinned and (p.mass is None or p.mass == 0):
+        if isinstance(p, Particle) and not p.pinned and (p.mass is None or p.mass == 0):
             what = "has no mass" if p.mass is None else "has mass 0"
             out.append(
                 (
@@ -76,9 +158,11 @@ def check_scene(scene: Scene) -> list[Problem]:
 
     known = list(first_seen)
     for i, sp in enumerate(scene.springs):
+        if sp is None:
+            continue
         a, b = sp.between
         for k, pid in enumerate((a, b)):
-            if pid not in first_seen and structure_of(pid) is None:
+            if ids_complete and pid not in first_seen and structure_of(pid) is None:
                 out.append(
                     (
                         ("springs", i, "between", k),
@@ -97,6 +181,8 @@ def check_scene(scene: Scene) -> list[Problem]:
 
     names: dict[str, int] = {}
     for i, e in enumerate(scene.emitters):
+        if e is None:
+            continue
         if e.name in names:
             out.append((("emitters", i, "name"), f"duplicate emitter name {e.name!r}", False))
         names.setdefault(e.name, i)

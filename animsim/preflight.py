@@ -1,0 +1,366 @@
+"""Pre-flight: everything that can be known to fail before the first step.
+
+The spec ("Errors and limits") asks that a run which would exceed its limits
+be refused before any step, with the place in the scene to blame and exit
+status 2, and that a broken output path be refused the same way. This module
+holds those limits and the estimates behind them:
+
+* the step count, computed without building the schedule (a duration of
+  1e300 s must not allocate a 1e300-entry array);
+* the memory the live state will take, estimated from particle, spring and
+  emitter-pool counts *before* anything is allocated (a 4096x4096 cloth is
+  refused, not attempted);
+* the output path (folder exists, is writable, is not the scene itself,
+  is not a device) and the free disk against the estimated output size.
+
+The estimates are deliberately simple sums of named per-item costs; they are
+meant to catch a run that is off by orders of magnitude, not to predict RSS
+to the megabyte. Each limit has a command-line option to raise it.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import shutil
+import stat
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from animsim.errors import Diagnostic, SceneError, UsageError
+from animsim.scene.loader import (
+    DEFAULT_MAX_DEPTH,
+    DEFAULT_MAX_FILE_BYTES,
+    DEFAULT_MAX_MEMORY,
+    DEFAULT_MAX_NODES,
+    Limits,
+    LoadedScene,
+)
+from animsim.scene.models import Scene
+from animsim.scene.structures import particle_count, structure_spring_count
+
+KIB = 1024
+MIB = 1024 * KIB
+GIB = 1024 * MIB
+
+DEFAULT_MAX_STEPS = 100_000_000
+
+# --- memory cost model (bytes) ---------------------------------------------------
+# One (N, 3) float64 row: a position, a velocity, a force or a work vector.
+VECTOR_BYTES = 24
+# (N, 3) vectors every run holds whatever the integrator: state x and v, the
+# initial copy of both, the force accumulator, the collision snapshot of x and
+# v, and NumPy temporaries inside force terms and integrators (rounded up).
+BASE_VECTORS = 11
+# Work vectors each integrator preallocates (RK engine: 2 per stage + 2).
+INTEGRATOR_VECTORS = {
+    "euler": 4,
+    "symplectic_euler": 1,
+    "euler_average": 2,
+    "midpoint": 6,
+    "heun": 6,
+    "rk4": 10,
+    "verlet": 3,
+    "implicit_euler": 12,  # CG vectors and the linearised system's work arrays
+}
+# Mass, inverse mass, pinned and alive flags.
+PARTICLE_SCALAR_BYTES = 18
+# An id as a Python str in the id list plus its entry in compile's index dict.
+ID_BYTES = 120
+# Index pair, rest length, ks, kd, scatter weights and the per-step (S, 3)
+# temporaries of the spring force (difference, direction, relative velocity).
+SPRING_BYTES = 256
+# The linearised implicit step adds a 3x3 block per spring in both directions.
+IMPLICIT_SPRING_BYTES = 2 * 9 * 8 * 2
+# An emitter pool slot: age, lifetime, size and RGBA over life, birth order.
+EMITTER_SLOT_BYTES = 96
+# Per recorded frame: the record-step index, and for NPZ the frame time and
+# row offset kept as Python objects until the file is assembled.
+FRAME_BYTES = {"csv": 8, "npz": 84}
+
+# --- output size model (bytes) -------------------------------------------------------
+# A float64 written with repr() is 17-20 characters for full precision.
+CSV_NUMBER_CHARS = 20
+CSV_NUMBERS_PER_ROW = 7  # t, x, y, z, vx, vy, vz
+CSV_SEPARATORS_PER_ROW = 8  # seven commas and a newline
+# NPZ: t, particle index, position and velocity, float64/int64; the rows are
+# written once to raw temporary files and once more into the zip.
+NPZ_ROW_BYTES = 8 + 8 + 24 + 24
+NPZ_COPIES = 2
+# The .meta.json and the file system's own rounding.
+OUTPUT_SLACK_BYTES = 1 * MIB
+# Emitter populations: a rate or lifetime this many standard deviations above
+# its mean bounds the alive count for the disk estimate.
+SPREAD_SIGMAS = 3
+
+_SIZE = re.compile(r"^\s*([0-9]+(?:\.[0-9]*)?(?:[eE][+-]?[0-9]+)?)\s*([kKmMgGtT]?)(i?)[bB]?\s*$")
+_UNIT_POWER = {"": 0, "k": 1, "m": 2, "g": 3, "t": 4}
+
+
+def parse_size(text: str, option: str) -> int:
+    """Bytes from ``"4GiB"``, ``"500M"``, ``"50MB"`` or a plain number.
+
+    Binary and decimal prefixes are both read as binary (1 K = 1024): the
+    limits are rough guards, and "4G" meaning 4 GiB surprises nobody.
+    """
+    m = _SIZE.match(str(text))
+    if not m:
+        raise UsageError(f"{option}: {text!r} is not a size (examples: 50MiB, 4GiB, 1000000)")
+    value = float(m.group(1)) * 1024 ** _UNIT_POWER[m.group(2).lower()]
+    if not math.isfinite(value) or value < 1:
+        raise UsageError(f"{option}: {text!r} must be at least 1 byte")
+    return int(value)
+
+
+def parse_count(text: str, option: str) -> int:
+    """A positive whole number, also written ``1e9`` or ``1_000_000``."""
+    try:
+        value = float(str(text).replace("_", ""))
+    except ValueError:
+        raise UsageError(f"{option}: {text!r} is not a number") from None
+    if not math.isfinite(value) or value < 1 or value != int(value):
+        raise UsageError(f"{option}: {text!r} must be a whole number >= 1")
+    return int(value)
+
+
+def format_bytes(n: float) -> str:
+    for unit, size in (("GiB", GIB), ("MiB", MIB), ("KiB", KIB)):
+        if n >= size:
+            return f"{n / size:.3g} {unit}"
+    return f"{int(n)} bytes"
+
+
+@dataclass(frozen=True)
+class RunLimits:
+    """Every limit of the spec, as set on the command line."""
+
+    max_file_bytes: int = DEFAULT_MAX_FILE_BYTES
+    max_depth: int = DEFAULT_MAX_DEPTH
+    max_nodes: int = DEFAULT_MAX_NODES
+    max_steps: int = DEFAULT_MAX_STEPS
+    max_memory: int = DEFAULT_MAX_MEMORY
+    disk_check: bool = True
+
+    @property
+    def loader(self) -> Limits:
+        return Limits(
+            max_file_bytes=self.max_file_bytes,
+            max_depth=self.max_depth,
+            max_nodes=self.max_nodes,
+            max_memory=self.max_memory,
+        )
+
+
+@dataclass
+class Estimate:
+    """What a run will need, computed from counts only."""
+
+    steps: int
+    frames: int
+    particles: int  # listed + structures
+    springs: int
+    pool_slots: int  # emitter pool capacity (preallocated)
+    alive_emitted: int  # expected peak of alive emitted particles (disk estimate)
+    births: int  # upper bound on births over the run (each keeps an id)
+    memory: int  # bytes of live state
+    # (path into the scene, bytes, what) for each part, largest blame first
+    parts: list[tuple[tuple[str | int, ...], int, str]] = field(default_factory=list)
+
+    @property
+    def rows_per_frame(self) -> int:
+        return self.particles + self.alive_emitted
+
+    def output_bytes(self, fmt: str, mean_id_chars: float) -> int:
+        rows = self.frames * self.rows_per_frame
+        if fmt == "npz":
+            return rows * NPZ_ROW_BYTES * NPZ_COPIES + OUTPUT_SLACK_BYTES
+        row = CSV_NUMBERS_PER_ROW * CSV_NUMBER_CHARS + CSV_SEPARATORS_PER_ROW + mean_id_chars
+        return int(rows * row) + OUTPUT_SLACK_BYTES
+
+
+def step_count(duration: float, dt: float, max_steps: int) -> int | None:
+    """The fixed schedule's step count, or None when it exceeds ``max_steps``.
+
+    Never builds the schedule and never overflows: a ratio beyond the limit is
+    refused before ``round`` or ``ceil`` sees it.
+    """
+    q = duration / dt
+    if not math.isfinite(q) or q > max_steps + 1:
+        return None
+    from animsim.record import Clock
+
+    steps = Clock.make(duration, dt).steps
+    return steps if steps <= max_steps else None
+
+
+def _frame_count(scene: Scene, steps: int) -> int:
+    if scene.record.fps is not None:
+        span = min(scene.duration * scene.record.fps, float(steps))
+        return min(steps + 1, math.floor(span) + 2)
+    every = scene.record.every or 1
+    return min(steps + 1, steps // every + 2)
+
+
+def _emitter_numbers(e: Any, duration: float) -> tuple[int, int]:
+    """(expected peak alive, upper bound on births) for one emitter."""
+    peak = max(kf[1] for kf in e.rate) if isinstance(e.rate, list) else e.rate
+    peak += SPREAD_SIGMAS * e.rate_spread
+    life = e.lifetime.mean + SPREAD_SIGMAS * e.lifetime.spread
+    births = min(peak * duration, 1e18) + 1
+    alive = min(float(e.max_particles), peak * life + 1, births)
+    return math.ceil(alive), math.ceil(births)
+
+
+def estimate(scene: Scene, steps: int, fmt: str = "csv") -> Estimate:
+    """Count what the scene will hold and what that costs, without building it."""
+    vectors = BASE_VECTORS + INTEGRATOR_VECTORS.get(scene.integrator_name, max(INTEGRATOR_VECTORS.values()))
+    per_particle = vectors * VECTOR_BYTES + PARTICLE_SCALAR_BYTES + ID_BYTES
+    per_spring = SPRING_BYTES + (IMPLICIT_SPRING_BYTES if scene.integrator_name == "implicit_euler" else 0)
+    parts: list[tuple[tuple[str | int, ...], int, str]] = []
+
+    listed = len(scene.particles)
+    parts.append((("particles",), listed * per_particle, f"{listed} particles"))
+    parts.append((("springs",), len(scene.springs) * per_spring, f"{len(scene.springs)} springs"))
+    particles, springs = listed, len(scene.springs)
+    for i, s in enumerate(scene.structures):
+        n, k = particle_count(s), structure_spring_count(s)
+        particles += n
+        springs += k
+        where = ("structures", i, "count" if s.type == "strand" else "resolution")
+        parts.append(
+            (where, n * per_particle + k * per_spring, f"{s.type} {s.id!r}: {n} particles, {k} springs")
+        )
+    pool = alive = births = 0
+    for i, e in enumerate(scene.emitters):
+        a, b = _emitter_numbers(e, scene.duration)
+        pool += e.max_particles
+        alive += a
+        births += b
+        cost = e.max_particles * (per_particle + EMITTER_SLOT_BYTES) + b * ID_BYTES
+        what = f"emitter {e.name!r}: a pool of {e.max_particles} particles and up to {b} births"
+        parts.append((("emitters", i, "max_particles"), cost, what))
+    frames = _frame_count(scene, steps)
+    parts.append((("record",), frames * FRAME_BYTES.get(fmt, 8), f"{frames} recorded frames"))
+    parts.sort(key=lambda p: -p[1])
+    return Estimate(
+        steps=steps,
+        frames=frames,
+        particles=particles,
+        springs=springs,
+        pool_slots=pool,
+        alive_emitted=alive,
+        births=births,
+        memory=sum(p[1] for p in parts),
+        parts=parts,
+    )
+
+
+def _where(loaded: LoadedScene, path: tuple[str | int, ...]) -> tuple[int, int]:
+    return loaded.marks.at(path, prefer_key=True)
+
+
+def check_limits(
+    loaded: LoadedScene, scene: Scene, limits: RunLimits, *, fmt: str = "csv", overridden: bool = False
+) -> Estimate:
+    """Refuse a run that exceeds its step or memory limit; return the estimate.
+
+    ``scene`` is ``loaded.scene`` with any command-line overrides applied;
+    when they changed dt or the duration the message blames the options, not
+    a line of the file.
+    """
+    steps = step_count(scene.duration, scene.dt, limits.max_steps)
+    if steps is None:
+        q = scene.duration / scene.dt
+        shown = f"{q:.3g}" if math.isfinite(q) else "too many"
+        msg = (
+            f"the run would take {shown} steps (duration {scene.duration:g} s / dt {scene.dt:g} s), "
+            f"more than the limit of {limits.max_steps} (raise it with --max-steps)"
+        )
+        if overridden:
+            raise UsageError(f"{loaded.file}: {msg}")
+        path = ("dt",) if "dt" in loaded.data else ("duration",)
+        raise SceneError([Diagnostic(loaded.file, *_where(loaded, path), path[0], msg)])
+    est = estimate(scene, steps, fmt)
+    if est.memory > limits.max_memory:
+        path, cost, what = est.parts[0]
+        msg = (
+            f"the run needs about {format_bytes(est.memory)} for its live state "
+            f"({what}: {format_bytes(cost)}), more than the budget of "
+            f"{format_bytes(limits.max_memory)} (raise it with --max-memory)"
+        )
+        dotted = ".".join(str(p) for p in path)
+        raise SceneError([Diagnostic(loaded.file, *_where(loaded, path), dotted, msg)])
+    return est
+
+
+# --- output --------------------------------------------------------------------------
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """True when a and b name one file (also through symlinks, hard links or ``..``)."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        pass
+    try:
+        return a.resolve() == b.resolve()
+    except (OSError, RuntimeError):  # RuntimeError: a symlink loop
+        return False
+
+
+def check_output_path(output: Path, scene_path: Path) -> None:
+    """Refuse, before any step, an output that cannot be written or must not be."""
+    from animsim.export.meta import meta_path
+
+    parent = output.parent if str(output.parent) else Path(".")
+    if not parent.exists():
+        raise UsageError(f"{output}: the folder {parent} does not exist")
+    if not parent.is_dir():
+        raise UsageError(f"{output}: {parent} is not a folder")
+    for target in (output, meta_path(output)):
+        try:
+            st = target.stat()
+        except FileNotFoundError:
+            continue
+        except OSError as exc:
+            raise UsageError(f"{target}: cannot use it as output: {exc.strerror}") from None
+        if stat.S_ISDIR(st.st_mode):
+            raise UsageError(f"{target}: is a folder; give a file name")
+        if not stat.S_ISREG(st.st_mode):
+            # Outputs are replaced by renaming a finished file over them:
+            # doing that to /dev/null or a FIFO would replace the device.
+            raise UsageError(f"{target}: is not a regular file; write to '-' (stdout) to pipe the trajectory")
+    for target in (output, meta_path(output)):
+        if _same_file(target, scene_path):
+            raise UsageError(f"{target}: is the scene file itself; choose another output")
+    # The honest test of "can I write there": create and remove a file, as
+    # the run will (os.access says yes to root even on a read-only mount).
+    try:
+        fd, probe = tempfile.mkstemp(prefix=f".{output.name}.", suffix=".probe", dir=parent)
+    except OSError as exc:
+        raise UsageError(f"{output}: cannot create files in {parent}: {exc.strerror}") from None
+    os.close(fd)
+    os.unlink(probe)
+
+
+def check_disk(output: Path, est: Estimate, fmt: str, scene: Scene, limits: RunLimits) -> None:
+    """Refuse a run whose estimated output does not fit the free disk space."""
+    if not limits.disk_check:
+        return
+    parent = output.parent if str(output.parent) else Path(".")
+    ids = [p.id for p in scene.particles] + [f"{s.id}[000,000]" for s in scene.structures]
+    mean_id = (sum(len(i) for i in ids) / len(ids)) if ids else 12.0
+    need = est.output_bytes(fmt, mean_id)
+    try:
+        free = shutil.disk_usage(parent).free
+    except OSError:
+        return  # a file system that cannot say: the run finds out, atomically
+    if need > free:
+        raise UsageError(
+            f"{output}: the output needs about {format_bytes(need)} ({est.frames} frames of up to "
+            f"{est.rows_per_frame} rows) but only {format_bytes(free)} is free in {parent} "
+            "(record fewer frames with record: {every: n}, or skip this check with --no-disk-check)"
+        )
