@@ -24,6 +24,8 @@ negative semidefinite), so it is solved with conjugate gradients and a Jacobi
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
@@ -122,7 +124,13 @@ class ImplicitEuler(Integrator):
         if info != 0:
             # Not converged (or broke down): the same system, solved directly, rather
             # than a half-solved step passed off as backward Euler.
-            dv = spla.spsolve(a_mat.tocsc(), rhs)
+            # A singular system (it happens only when the step is meaningless,
+            # e.g. extreme stiffness against tiny masses) gives NaN, which the
+            # watchdog reports as an unstable run with its fix; SciPy's own
+            # warning would only repeat that, without the where and why.
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", spla.MatrixRankWarning)
+                dv = spla.spsolve(a_mat.tocsc(), rhs)
             self.direct_solves += 1
         dv[pinned] = 0.0
         self._dv[:] = dv
