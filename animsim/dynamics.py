@@ -20,6 +20,9 @@ class Dynamics:
         self.terms = tuple(terms)
         self.evaluations = 0
         self._force = np.zeros((system.particle_count, 3))
+        # Pinned particles are driven, never pushed: an infinite force on one
+        # times its zero inverse mass would be NaN and poison a moving anchor.
+        self._pinned = np.flatnonzero(system.particle_pinned)
 
     def force(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> np.ndarray:
         out.fill(0.0)
@@ -34,6 +37,8 @@ class Dynamics:
         inv_mass = self.system.particle_inv_mass
         for j in range(out.shape[1]):  # per column: much faster than broadcasting (N, 1)
             out[:, j] *= inv_mass
+        if len(self._pinned):
+            out[self._pinned] = 0.0
         return out
 
     def potential_energy(self, x: np.ndarray) -> float:
