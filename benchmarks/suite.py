@@ -46,7 +46,7 @@ TINY_STEPS = 20_000
 TINY_RECORD_EVERY = 100
 IO_GRID = 64  # 64 x 64 = 4096 rows per frame
 IO_FRAMES = 25
-WORKLOADS = ("cloth", "particles", "tiny", "io", "render")
+WORKLOADS = ("cloth", "particles", "fountain", "tiny", "io", "render")
 
 
 @dataclass
@@ -332,15 +332,10 @@ def bench_particles(settings: Settings) -> Table:
         "M particle-steps/s",
         1.0,
     )
-    emitters = in_tree("animsim.emitters")
     table.notes.append(
         "animsim runs fixed particles (a strand without springs) started from the peers' initial state, "
-        "with its impulse plane (time of impact, restitution); the peers also respawn particles by age"
-        + (
-            " (animsim.emitters exists, but an emitter scene is not wired into this suite yet)"
-            if emitters
-            else " (animsim.emitters is absent in this build)"
-        )
+        "with its impulse plane (time of impact, restitution); the peers also respawn particles by age. "
+        "The emitter path (births, deaths, pools) is timed in its own table below (fountain)."
     )
     use_numba = numba_ok(table.notes)
     for n in settings.particle_counts:
@@ -443,15 +438,42 @@ def bench_io(settings: Settings) -> Table:
 
 
 def bench_render(settings: Settings) -> Table:
-    table = Table("Rendering", "frames/s", 1.0)
-    if not in_tree("animsim.export.animation"):
-        table.notes.append(
-            "skipped: `animsim.export.animation` is absent in this build (a colleague's issue)"
-        )
-    else:
-        table.notes.append(
-            "skipped: `animsim.export.animation` exists but its API is not wired into this suite yet"
-        )
+    """Issue 6: frames/s of the whole GIF path (raster, palette, LZW, write) for 500 particles."""
+    from animsim.export.animation import AnimationSink
+    from animsim.export.raster import bounds_from_positions
+    from animsim.record import Frame, TrajectoryHeader
+    from benchmarks import render_speed as R
+
+    table = Table(
+        f"Rendering: a {R.GOAL_FPS:.0f}-frames/s goal at 500 particles, 480x480, streamed to a GIF",
+        "frames/s",
+        1.0,
+    )
+    n, frames = 500, (60 if settings is QUICK else 120)
+    positions, all_springs = R.cloth(n, 2000, frames)
+    bounds = bounds_from_positions([*positions, np.zeros((1, 3))])
+    index, zeros = np.arange(n), np.zeros((n, 3))
+    for view in ("xy", "3d"):
+        contenders = []
+        for springs in (np.zeros((0, 2), dtype=np.int64), all_springs):
+            header = TrajectoryHeader("bench", [str(i) for i in range(n)], springs, False)
+            tmp = Path(tempfile.mkdtemp(prefix="animsim-render-"))
+
+            def gif(header=header, view=view, tmp=tmp) -> None:
+                sink = AnimationSink(
+                    tmp / "b.gif", size=(480, 480), view=view, bounds=bounds, planes=[R.GROUND]
+                )
+                sink.begin(header)
+                for k, p in enumerate(positions):
+                    sink.write(Frame(k, k / 25, index, p, zeros))
+                sink.close({})
+
+            label = f"animsim GIF, {len(springs):,} springs"
+            contenders.append(Contender(label, gif, frames))
+        sample(contenders, settings)
+        add_rows(table, f"{view} view, {n} particles", contenders, None)
+    table.notes.append(f"a call renders and writes {frames} frames of a waving cloth over a ground plane")
+    print("  render done", flush=True)
     return table
 
 
@@ -486,6 +508,32 @@ def startup() -> list[str]:
         status = "ok" if out.returncode == 0 else f"exit {out.returncode}: {out.stderr.strip()[:200]}"
         lines.append(f"| `animsim run tiny.yaml --backend {backend}` | {wall:.2f} s | {status} |")
     return lines
+
+
+def bench_fountain(settings: Settings) -> Table:
+    """Issue 3's particle system: a 100k-particle fountain in steady state (benchmarks/fountain.py)."""
+    from benchmarks import fountain as F
+
+    table = Table(
+        f"Particle system: {F.PARTICLES:,}-slot fountain in steady state (emitter, births, deaths; "
+        f"symplectic Euler, dt = {F.DT * 1000:g} ms)",
+        "steps/s",
+        1.0,
+    )
+    steps = 100 if settings is QUICK else 300
+    for ground, label in ((True, "with a ground plane (restitution, friction)"), (False, "no plane")):
+        runs = [F.steps_per_second(steps, ground) for _ in range(max(2, settings.samples // 2))]
+        rates = [r for r, _ in runs]
+        alive = runs[-1][1]["per_emitter"]["fountain"]["alive"]
+        c = Contender(f"animsim numpy, {label}", lambda: None, 1, f"{alive:,} alive")
+        c.rates = rates
+        add_rows(table, f"fountain {F.PARTICLES:.0e}", [c], None)
+    table.notes.append(
+        f"each sample times {steps} steps after {round(F.WARMUP / F.DT)} warm-up steps that fill the pool; "
+        "spread over whole runs, not sub-samples"
+    )
+    print("  fountain done", flush=True)
+    return table
 
 
 def render_markdown(tables: list[Table], header: list[str], start_lines: list[str], elapsed: float) -> str:
@@ -545,6 +593,7 @@ def main(argv: list[str] | None = None) -> int:
         "tiny": bench_tiny,
         "io": bench_io,
         "render": bench_render,
+        "fountain": bench_fountain,
     }
     tables = []
     for name in WORKLOADS:
