@@ -283,6 +283,16 @@ def check_limits(
             raise UsageError(f"{loaded.file}: {msg}")
         path = ("dt",) if "dt" in loaded.data else ("duration",)
         raise SceneError([Diagnostic(loaded.file, *_where(loaded, path), path[0], msg)])
+    adaptive = scene.adaptive
+    if adaptive is not None and step_count(scene.duration, adaptive.dt_min, limits.max_steps) is None:
+        # Step doubling may shrink the step down to dt_min: bound the worst case too.
+        msg = (
+            f"an adaptive run may take up to {scene.duration / adaptive.dt_min:.3g} steps "
+            f"(duration {scene.duration:g} s / dt_min {adaptive.dt_min:g} s), more than the limit of "
+            f"{limits.max_steps}; raise dt_min, or the limit with --max-steps"
+        )
+        path = ("integrator", "adaptive", "dt_min")
+        raise SceneError([Diagnostic(loaded.file, *_where(loaded, path), "integrator.adaptive.dt_min", msg)])
     est = estimate(scene, steps, fmt)
     if est.memory > limits.max_memory:
         path, cost, what = est.parts[0]

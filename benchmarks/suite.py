@@ -219,7 +219,8 @@ structures:
 
 
 def numpy_contender(compiled, label: str, note: str = "") -> Contender:
-    """One step of the NumPy loop's work: integrate, collide, guard."""
+    """The NumPy loop's work for ``guard.stride`` steps: integrate and collide each
+    step, then one watchdog check, as ``simulate.run`` does."""
     from animsim.simulate import Guard
 
     state = compiled.fresh_state()
@@ -227,17 +228,19 @@ def numpy_contender(compiled, label: str, note: str = "") -> Contender:
     integ.reset()
     x_old = np.empty_like(state.particle_position)
     v_old = np.empty_like(state.particle_velocity)
+    stride = guard.stride
 
     def call() -> None:
-        if colliders is not None:
-            np.copyto(x_old, state.particle_position)
-            np.copyto(v_old, state.particle_velocity)
-        integ.step(state, dt)
-        if colliders is not None:
-            colliders.apply(x_old, v_old, state.particle_position, state.particle_velocity, dt)
+        for _ in range(stride):
+            if colliders is not None:
+                np.copyto(x_old, state.particle_position)
+                np.copyto(v_old, state.particle_velocity)
+            integ.step(state, dt)
+            if colliders is not None:
+                colliders.apply(x_old, v_old, state.particle_position, state.particle_velocity, dt)
         guard.check(state)
 
-    return Contender(label, call, 1, note)
+    return Contender(label, call, stride, note)
 
 
 def numba_contender(compiled, threads: int, label: str) -> Contender:

@@ -153,3 +153,16 @@ def test_schema_command_prints_json():
     r = run_cli("schema")
     assert r.returncode == 0
     assert json.loads(r.stdout)["title"] == "animsim scene"
+
+
+def test_adaptive_worst_case_steps_are_bounded_before_the_run(tmp_path):
+    scene = tmp_path / "adaptive.yaml"
+    scene.write_text(
+        "duration: 1000\ndt: 0.01\n"
+        "integrator: {method: rk4, adaptive: {tolerance: 1e-6, dt_min: 1e-9, dt_max: 0.1}}\n"
+        "particles: [{id: a, mass: 1, position: [0, 0]}]\n"
+    )
+    r = run_cli("run", scene, "-o", tmp_path / "a.csv")
+    assert r.returncode == 2
+    assert f"{scene}:3:" in r.stderr and "integrator.adaptive.dt_min" in r.stderr
+    assert not (tmp_path / "a.csv").exists()
