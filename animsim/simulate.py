@@ -299,24 +299,11 @@ def run(
         meta.update(meta_extra or {})
         if emitters is not None:
             meta["emitters"] = emitters.summary()
-        for sink in sinks:
-            sink.close(meta)
+        return finish(sinks, state, dyn, status, wall, energy_start, energy_end, frames, failure, meta)
     except BaseException:
         for sink in sinks:
             sink.abort()
         raise
-    return RunResult(
-        status=status,
-        steps_taken=state.step,
-        wall_time=wall,
-        energy_start=energy_start,
-        energy_end=energy_end,
-        force_evals=dyn.evaluations,
-        frames=frames,
-        final_state=state,
-        failure=failure,
-        meta=meta,
-    )
 
 
 def _copy_state(dst: State, src: State) -> None:
@@ -364,6 +351,35 @@ def _frame_copy(compiled: Compiled, state: State) -> Frame:
         index=_all_index(compiled),
         position=state.particle_position.copy(),
         velocity=state.particle_velocity.copy(),
+    )
+
+
+def finish(
+    sinks: Sequence[FrameSink],
+    state: State,
+    dyn: Any,
+    status: str,
+    wall: float,
+    energy_start: float,
+    energy_end: float,
+    frames: int,
+    failure: Failure | None,
+    meta: dict[str, Any],
+) -> RunResult:
+    """Close the sinks with the run's metadata and say how it went (every backend's last act)."""
+    for sink in sinks:
+        sink.close(meta)
+    return RunResult(
+        status=status,
+        steps_taken=state.step,
+        wall_time=wall,
+        energy_start=energy_start,
+        energy_end=energy_end,
+        force_evals=dyn.evaluations,
+        frames=frames,
+        final_state=state,
+        failure=failure,
+        meta=meta,
     )
 
 

@@ -36,22 +36,15 @@ from typing import Any
 
 import numpy as np
 
+from animsim.scene.models import INTEGRATOR_NAMES
+
 #: explicit methods that amplify an undamped oscillation at every step size
 #: (|R(iy)| > 1 for every real y != 0; euler_average has det = 1 + (h omega)^2 / 2)
 WEAKLY_UNSTABLE = ("euler", "euler_average", "midpoint", "heun")
 #: methods without a step-size limit on linear damped springs
 UNCONDITIONAL = ("implicit_euler",)
 #: order in which the analysis lists methods
-METHOD_ORDER = (
-    "euler",
-    "symplectic_euler",
-    "euler_average",
-    "midpoint",
-    "heun",
-    "rk4",
-    "verlet",
-    "implicit_euler",
-)
+METHOD_ORDER = INTEGRATOR_NAMES  # the order of the spec's table
 #: stability polynomials R(z) of the explicit Runge-Kutta methods (coefficients of z^0, z^1, ...)
 RK_POLYNOMIALS: dict[str, tuple[float, ...]] = {
     "euler": (1.0, 1.0),

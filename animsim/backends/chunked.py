@@ -29,7 +29,7 @@ def run_chunked(
     guard: Any,
     meta_extra: dict[str, Any] | None,
 ) -> Any:
-    from animsim.simulate import STATUS_INTERRUPTED, STATUS_OK, STATUS_UNSTABLE, RunResult, _emit, _meta
+    from animsim.simulate import STATUS_INTERRUPTED, STATUS_OK, STATUS_UNSTABLE, _emit, _meta, finish
 
     state = compiled.fresh_state()
     dyn = compiled.dynamics
@@ -91,21 +91,8 @@ def run_chunked(
         meta = _meta(compiled, status, state, wall, energy_start, energy_end, frames, failure)
         meta["backend"] = compiled.backend
         meta.update(meta_extra or {})
-        for sink in sinks:
-            sink.close(meta)
+        return finish(sinks, state, dyn, status, wall, energy_start, energy_end, frames, failure, meta)
     except BaseException:
         for sink in sinks:
             sink.abort()
         raise
-    return RunResult(
-        status=status,
-        steps_taken=state.step,
-        wall_time=wall,
-        energy_start=energy_start,
-        energy_end=energy_end,
-        force_evals=dyn.evaluations,
-        frames=frames,
-        final_state=state,
-        failure=failure,
-        meta=meta,
-    )
