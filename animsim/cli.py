@@ -803,6 +803,24 @@ def compare(
     fail_on_unstable: Annotated[
         bool, typer.Option("--fail-on-unstable", help="Exit 1 if any run was unstable.")
     ] = False,
+    jobs: Annotated[
+        int,
+        typer.Option(
+            "--jobs",
+            "-j",
+            min=1,
+            help="Worker processes for the rows. Default 1 (serial): timings need a quiet machine, "
+            "and parallel rows share the cores they are timed on; the errors are the same either way.",
+        ),
+    ] = 1,
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            "--scheduler",
+            help="Dask scheduler address, or 'local' for a LocalCluster (--jobs workers); "
+            'needs pip install "animsim\\[dask]". Same caveat on timings as --jobs.',
+        ),
+    ] = None,
     *,
     limits: Any = None,
 ) -> None:
@@ -846,6 +864,8 @@ def compare(
             repeat=repeat,
             progress=progress,
             max_steps=limits.max_steps,
+            jobs=jobs,
+            scheduler=scheduler,
         )
     console.print(table(result))
     for line in summary_lines(result):

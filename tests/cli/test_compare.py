@@ -263,3 +263,34 @@ def test_fine_reference_agrees_with_the_closed_form():
     assert fine.reference.description.startswith("DOP853")
     for a, b in zip(exact.rows, fine.rows, strict=True):
         assert b.error == pytest.approx(a.error, rel=1e-6, abs=1e-11)
+
+
+def test_parallel_rows_equal_serial_rows(tmp_path):
+    """--jobs and a Dask LocalCluster measure the same errors; only `seconds` may differ."""
+    import csv as _csv
+
+    from tests.conftest import run_cli
+
+    def rows(*extra):
+        out = tmp_path / f"c{len(extra)}.csv"
+        r = run_cli(
+            "compare",
+            SCENES / "oscillator.yaml",
+            "--integrators",
+            "euler,rk4",
+            "--dt",
+            "0.01,0.005",
+            "--repeat",
+            "1",
+            "-o",
+            out,
+            *extra,
+        )
+        assert r.returncode == 0, r.stderr
+        with out.open() as fh:
+            return [{k: v for k, v in row.items() if k != "seconds"} for row in _csv.DictReader(fh)]
+
+    serial = rows()
+    assert len(serial) == 4
+    assert rows("--jobs", "2") == serial
+    assert rows("--scheduler", "local", "--jobs", "2") == serial
