@@ -101,13 +101,14 @@ def test_bad_options_exit_2_before_simulating(tmp_path, args, fragment):
     assert not (tmp_path / "x.gif").exists()
 
 
-def test_mp4_without_ffmpeg_is_a_clear_error(tmp_path):
-    pytest.importorskip("PIL")
-    try:
-        import imageio_ffmpeg  # noqa: F401
+def test_mp4_without_ffmpeg_is_a_clear_error(monkeypatch, tmp_path):
+    """Without the mp4 extra, --mp4 is refused before any work, naming the extra."""
+    import sys
 
-        pytest.skip("imageio-ffmpeg is installed")
-    except ImportError:
-        pass
-    r = run_cli("render", SCENES / "orbit.yaml", "--mp4", tmp_path / "o.mp4")
-    assert r.returncode == 2 and "animsim[mp4]" in r.stderr
+    from animsim.errors import AnimsimError
+    from animsim.render import RenderOptions, validate
+
+    monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)  # as if not installed
+    with pytest.raises(AnimsimError, match=r"animsim\[mp4\]") as info:
+        validate(None, tmp_path / "o.mp4", RenderOptions())
+    assert info.value.exit_code == 2
