@@ -7,13 +7,12 @@ sizes and one timing repeat, so the whole file stays fast.
 from __future__ import annotations
 
 import csv
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+from tests.conftest import run_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENES = ROOT / "scenes"
@@ -62,22 +61,9 @@ springs:
 """
 
 
-def animsim(*args, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    env.pop("ANIMSIM_DEBUG", None)
-    return subprocess.run(
-        [sys.executable, "-m", "animsim", *map(str, args)],
-        capture_output=True,
-        text=True,
-        cwd=cwd,
-        env=env,
-        timeout=300,
-    )
-
-
 def test_auto_picks_the_closed_form_for_the_projectile_and_writes_the_csv(tmp_path):
     out = tmp_path / "table.csv"
-    r = animsim(
+    r = run_cli(
         "compare", SCENES / "drag_projectile.yaml", "--integrators", "euler,rk4",
         "--dt", "0.02,0.01", "--repeat", "1", "-o", out,
     )  # fmt: skip
@@ -106,7 +92,7 @@ def test_auto_picks_the_closed_form_for_the_projectile_and_writes_the_csv(tmp_pa
 
 def test_conservative_scene_reports_energy_error(tmp_path):
     out = tmp_path / "t.csv"
-    r = animsim(
+    r = run_cli(
         "compare", SCENES / "oscillator.yaml", "--integrators", "symplectic_euler",
         "--dt", "0.01", "--repeat", "1", "-o", out,
     )  # fmt: skip
@@ -118,12 +104,12 @@ def test_conservative_scene_reports_energy_error(tmp_path):
 def test_auto_picks_a_converged_run_for_a_cloth_and_analytic_is_refused(tmp_path):
     path = tmp_path / "cloth.yaml"
     path.write_text(CLOTH)
-    r = animsim("compare", path, "--integrators", "verlet,rk4", "--dt", "0.01,0.005", "--repeat", "1")
+    r = run_cli("compare", path, "--integrators", "verlet,rk4", "--dt", "0.01,0.005", "--repeat", "1")
     assert r.returncode == 0, r.stderr
     assert "reference: fine: DOP853" in r.stdout
     assert "no closed form" in r.stdout
 
-    r = animsim("compare", path, "--reference", "analytic", "--integrators", "rk4", "--dt", "0.01")
+    r = run_cli("compare", path, "--reference", "analytic", "--integrators", "rk4", "--dt", "0.01")
     assert r.returncode == 2
     assert "no closed form" in r.stderr and "--reference fine" in r.stderr
     assert "Traceback" not in r.stderr
@@ -134,7 +120,7 @@ def test_stiff_spring_with_explicit_euler_gives_unstable_rows_not_a_crash(tmp_pa
     path.write_text(STIFF)
     out = tmp_path / "stiff.csv"
     args = ("compare", path, "--integrators", "euler,rk4", "--dt", "0.01,0.001", "--repeat", "1", "-o", out)
-    r = animsim(*args)
+    r = run_cli(*args)
     assert r.returncode == 0, r.stderr  # the comparison itself completed
     assert "Traceback" not in r.stderr
     table = list(csv.DictReader(out.open(newline="")))
@@ -151,13 +137,13 @@ def test_stiff_spring_with_explicit_euler_gives_unstable_rows_not_a_crash(tmp_pa
             assert int(t["steps"]) < round(2.0 / float(t["dt"]))  # stopped early
     assert "euler at dt = 0.01: unstable" in r.stdout
 
-    r = animsim(*args, "--fail-on-unstable")
+    r = run_cli(*args, "--fail-on-unstable")
     assert r.returncode == 1
 
 
 def test_plot_is_a_valid_png_with_both_panels(tmp_path):
     png = tmp_path / "wp.png"
-    r = animsim(
+    r = run_cli(
         "compare", SCENES / "oscillator.yaml", "--integrators", "euler,midpoint,rk4",
         "--dt", "0.01,0.005,0.0025", "--repeat", "1", "--plot", png,
     )  # fmt: skip
@@ -204,7 +190,7 @@ def test_plot_bytes_are_deterministic_for_the_same_comparison(tmp_path):
     ],
 )
 def test_bad_options_exit_2_before_running(tmp_path, args, message):
-    r = animsim("compare", SCENES / "oscillator.yaml", *args, cwd=tmp_path)
+    r = run_cli("compare", SCENES / "oscillator.yaml", *args, cwd=tmp_path)
     assert r.returncode == 2
     assert message in r.stderr
     assert "Traceback" not in r.stderr
@@ -268,8 +254,6 @@ def test_fine_reference_agrees_with_the_closed_form():
 def test_parallel_rows_equal_serial_rows(tmp_path):
     """--jobs and a Dask LocalCluster measure the same errors; only `seconds` may differ."""
     import csv as _csv
-
-    from tests.conftest import run_cli
 
     def rows(*extra):
         out = tmp_path / f"c{len(extra)}.csv"

@@ -16,17 +16,9 @@ import numpy as np
 import pytest
 
 from tests.conftest import simulate_text
+from tests.numerics.theory import ORDER_TOLERANCE, ORDERS
 
-ORDERS = {
-    "euler": 1,
-    "symplectic_euler": 1,
-    "euler_average": 1,
-    "midpoint": 2,
-    "heun": 2,
-    "rk4": 4,
-    "verlet": 2,
-}
-ORDER_TOL = 0.2
+ORDER_TOL = ORDER_TOLERANCE
 
 
 def observed_order(dts, errors):

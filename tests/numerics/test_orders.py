@@ -15,21 +15,13 @@ import pytest
 from animsim.analysis.compare import compare, parse_integrators
 from animsim.integrators import REGISTRY
 from animsim.scene.loader import load_scene
+from tests.numerics.theory import ORDER_TOLERANCE, ORDERS
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
 STEP_SIZES = (0.01, 0.005, 0.0025)
 DURATION = 1.0
-TOLERANCE = 0.2
-EXPECTED = {
-    "euler": 1,
-    "symplectic_euler": 1,
-    "euler_average": 1,
-    "midpoint": 2,
-    "heun": 2,
-    "rk4": 4,
-    "verlet": 2,
-    "implicit_euler": 1,  # measured once issue 5 registers it
-}
+TOLERANCE = ORDER_TOLERANCE
+EXPECTED = ORDERS
 METHODS = [name for name in EXPECTED if name in REGISTRY]
 SCENE_NAMES = ("oscillator", "damped_oscillator", "drag_projectile")
 
