@@ -27,7 +27,6 @@ from animsim.scene.structures import expand
 from animsim.system import State, System
 
 
-
 @dataclass
 class Compiled:
     """Everything a run needs, and a description of it for ``explain``."""

@@ -238,7 +238,7 @@ def validate_case_data(data: dict[str, Any], file: str) -> Any:
     from animsim.scene.validate import check_scene
 
     try:
-        scene = Scene.model_validate(data)
+        scene = Scene.model_validate(data, context={"marks": True})
     except ValidationError as exc:
         # The loader's own wording (did-you-mean and all); marks are irrelevant
         # here since the values came from the command line.

@@ -475,7 +475,7 @@ def load_scene_bytes(raw: bytes, file: str, limits: Limits = Limits()) -> Loaded
     from animsim.scene.validate import check_scene, partial_scene  # late: validate imports structures
 
     try:
-        scene = Scene.model_validate(body)
+        scene = Scene.model_validate(body, context={"marks": True})
     except ValidationError as exc:
         # Report the cross-field problems of the parts that did validate too,
         # so one round of fixes is enough (never twice for one key).

@@ -19,6 +19,7 @@ from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
+    PrivateAttr,
     StrictBool,
     StrictInt,
     StrictStr,
@@ -36,6 +37,8 @@ IntegratorName = Literal[
     "verlet",
     "implicit_euler",
 ]
+#: the "file" of diagnostics about a scene built in Python (it has no lines)
+PYTHON_SOURCE = "<python>"
 #: the names, in the order of the spec's table
 INTEGRATOR_NAMES: tuple[str, ...] = get_args(IntegratorName)
 DEFAULT_INTEGRATOR = "symplectic_euler"
@@ -373,6 +376,9 @@ class Scene(Model):
         json_schema_extra={"$schema": "https://json-schema.org/draft/2020-12/schema"},
     )
 
+    #: where a loaded scene came from ({"file", "sha256"}), for the metadata; not part of the scene
+    _source: dict[str, str] | None = PrivateAttr(default=None)
+
     name: StrictStr | None = Field(None, description="defaults to the file stem")
     duration: Positive = Field(description="simulated seconds")
     dt: Positive = Field(DEFAULT_DT, description="step size, s; <= duration")
@@ -385,6 +391,25 @@ class Scene(Model):
     planes: list[Plane] = []
     emitters: list[Emitter] = []
     structures: list[Structure] = []
+
+    @model_validator(mode="after")
+    def _cross_checks(self, info: Any) -> Scene:
+        """The rules that span sections (a spring to an unknown id, ...), for scenes built in
+        Python. The loader runs them itself, with line marks (context ``{"marks": True}``)."""
+        if info.context and info.context.get("marks"):
+            return self
+        from animsim.errors import Diagnostic, SceneError
+        from animsim.scene.validate import check_scene
+
+        problems = check_scene(self)
+        if problems:
+            raise SceneError(
+                [
+                    Diagnostic(PYTHON_SOURCE, 0, 0, ".".join(str(p) for p in path), message)
+                    for path, message, _ in problems
+                ]
+            )
+        return self
 
     @property
     def integrator_name(self) -> str:
