@@ -25,7 +25,7 @@ import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # numpy is imported where arrays are built, so validating a scene
     import numpy as np  # (and refusing a bad one) does not pay for importing it
@@ -295,3 +295,21 @@ def _expand_mesh(s: MeshStructure, scene_dir: Path | None) -> Expanded:
         grid_shape=(n,),
         faces=parts.triangles,
     )
+
+
+def connectivity(expanded: list[tuple[str, Expanded, int]]) -> tuple[Any, ...]:
+    """:class:`animsim.record.Connectivity` of each expanded structure (id, expansion, first row)."""
+    import numpy as np
+
+    from animsim.record import Connectivity
+
+    out = []
+    for name, e, first in expanded:
+        n = len(e.ids)
+        for kind, table in (("mesh", e.faces), ("curves", e.curves)):
+            if table is None or len(table) == 0:
+                continue
+            t = np.asarray(table, dtype=np.int64)
+            counts = np.full(len(t), t.shape[1], dtype=np.int64)
+            out.append(Connectivity(name, kind, first, n, counts, t.ravel()))
+    return tuple(out)
