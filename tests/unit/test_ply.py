@@ -31,8 +31,9 @@ EXPECTED_PROPERTIES = [
     ("uchar", "blue"),
     ("uchar", "alpha"),
     ("float", "size"),
+    ("float", "radius"),  # the size again, under the name Blender's point clouds use
 ]
-ROW_BYTES = 6 * 8 + 4 + 4 * 1 + 4
+ROW_BYTES = 6 * 8 + 4 + 4 * 1 + 4 + 4
 
 
 def header_for(ids: list[str], *, emitters: bool = False) -> TrajectoryHeader:
@@ -316,7 +317,7 @@ def test_float_positions_option(tmp_path: Path) -> None:
     data = read_ply(path)
     assert data["x"].dtype == np.float32
     assert np.array_equal(data["x"], frames[0].position[:, 0].astype(np.float32))
-    assert path.stat().st_size == len("\n".join(raw_header(path))) + 1 + 3 * (6 * 4 + 12)
+    assert path.stat().st_size == len("\n".join(raw_header(path))) + 1 + 3 * (6 * 4 + 16)
 
 
 def test_ids_with_line_breaks_survive_the_sidecar(tmp_path: Path) -> None:

@@ -214,7 +214,10 @@ def test_time_samples_equal_the_frames_exactly(tmp_path: Path) -> None:
         assert np.array_equal(s["points"].values[k], frame.position)
         assert np.array_equal(s["velocities"].values[k], frame.velocity)
         assert np.array_equal(s["widths"].values[k], 2.0 * frame.size)
-        assert np.array_equal(s["primvars:displayColor"].values[k], frame.color[:, :3])
+        # Scene colours are sRGB; displayColor holds them in linear light (IEC 61966-2-1).
+        c = frame.color[:, :3]
+        linear = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+        assert np.array_equal(s["primvars:displayColor"].values[k], linear)
         assert np.array_equal(s["primvars:displayOpacity"].values[k], frame.color[:, 3])
         assert np.array_equal(s["ids"].values[k], frame.index)
         half = frame.size[:, None]
