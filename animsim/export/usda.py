@@ -503,7 +503,9 @@ class UsdaSink:
         w(f"{INDENT}metersPerUnit = {METERS_PER_UNIT}\n")
         w(f"{INDENT}startTimeCode = {codes_text[0] if codes else '0'}\n")
         w(f"{INDENT}timeCodesPerSecond = {format_time_code(rate)}\n")
-        w(f"{INDENT}upAxis = {usd_string(UP_AXIS)}\n)\n\n")
+        # USD knows Y or Z up; a run whose gravity pulls along -z says Z (meta "up_axis").
+        up = "Z" if meta.get("up_axis") == "z" else UP_AXIS
+        w(f"{INDENT}upAxis = {usd_string(up)}\n)\n\n")
         w(f"def Xform {usd_string(root)} (\n{INDENT}doc = {usd_string(self._scene)}\n)\n{{\n")
         for i, prim in enumerate(self._prims):
             if i:
