@@ -34,19 +34,21 @@ Springs
   two corners opposite that edge (the classic "bend across the edge" spring
   of mass-spring cloth); pairs that are already an edge, or repeat, are
   dropped.
-* volume (soft bodies): interior struts. Each vertex gets a vertex normal
+* volume (soft bodies): interior struts, joining each vertex to the far
+  side of the body seen straight through it. Each vertex gets a normal
   (area-weighted sum of its triangles' normals, made outward by the sign
-  of the enclosed volume). From vertex ``i`` the candidates are the vertices
-  ``j`` that lie inside a cone of :data:`STRUT_CONE_DEGREES` around the
-  inward normal ``-n_i`` and whose own normal faces the other way
-  (``n_i . n_j < 0``): the far side of the body seen straight through it.
-  Vertex ``i`` is joined to its :data:`STRUTS_PER_VERTEX` nearest candidates;
-  duplicate pairs are merged. On a sphere this joins each vertex to the ones
-  around its antipode; on a torus it joins the two sides of the tube (the
-  nearest far side), not the two sides of the hole. The choice uses no
-  random numbers, so it is the same on every run. It costs O(n^2) distance
-  evaluations once, at load, which is why soft bodies have the lower vertex
-  limit.
+  of the enclosed volume) and casts a ray inward, along ``-n_i``. The
+  candidates are the vertices ``j`` within ``h`` of that ray (``h`` the
+  longest edge of the mesh, so a ray that crosses a triangle always has a
+  candidate) whose own normal faces the other way (``n_i . n_j < 0``). Of
+  those, only the first surface the ray meets counts (distance along the
+  ray at most ``h`` beyond the nearest candidate), and vertex ``i`` is joined
+  to the :data:`STRUTS_PER_VERTEX` candidates closest to the ray; duplicate
+  pairs are merged. On a sphere this joins each vertex to the vertices
+  around its antipode; on a torus it joins the two sides of the tube, not
+  the two sides of the hole. No random numbers are involved, so the choice is
+  the same on every run. It costs O(n^2) distance evaluations once, at
+  load, which is why soft bodies have the lower vertex limit.
 
 Mass
 ----
@@ -80,7 +82,6 @@ MAX_MESH_FACES = 1_000_000
 MAX_SOFT_BODY_VERTICES = 20_000
 MAX_MESH_FILE_BYTES = 200 * 1024 * 1024
 STRUTS_PER_VERTEX = 3
-STRUT_CONE_DEGREES = 30.0
 # A triangle counts as zero-area below this fraction of the squared size of the mesh.
 ZERO_AREA_RTOL = 1e-12
 _CHUNK = 64  # rows of the strut distance matrix computed at once
@@ -515,19 +516,21 @@ def struts(x: np.ndarray, tri: np.ndarray) -> np.ndarray:
 
     n = len(x)
     normal = vertex_normals(x, tri)
-    cos_cone = math.cos(math.radians(STRUT_CONE_DEGREES))
+    edges = _topology(tri, n).edges
+    h = float(np.linalg.norm(x[edges[:, 0]] - x[edges[:, 1]], axis=1).max())
     pairs = []
     for start in range(0, n, _CHUNK):
         rows = slice(start, min(start + _CHUNK, n))
         d = x[None, :, :] - x[rows, None, :]  # (r, n, 3): from i to every j
-        dist = np.linalg.norm(d, axis=2)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            along = -np.einsum("rnk,rk->rn", d, normal[rows]) / dist  # cos of the angle to -n_i
+        t = -np.einsum("rnk,rk->rn", d, normal[rows])  # distance along the inward ray
+        perp2 = np.einsum("rnk,rnk->rn", d, d) - t * t  # squared distance from the ray
         facing_away = (normal[rows] @ normal.T) < 0
-        ok = (along >= cos_cone) & facing_away & (dist > 0)
-        score = np.where(ok, dist, np.inf)
+        near_ray = (t > 0) & facing_away & (perp2 < h * h)
+        first = np.where(near_ray, t, np.inf).min(axis=1, keepdims=True)  # the first surface hit
+        ok = near_ray & (t <= first + h)
+        score = np.where(ok, perp2, np.inf)
         k = min(STRUTS_PER_VERTEX, n - 1)
-        best = np.argpartition(score, k - 1, axis=1)[:, :k] if k < n else np.argsort(score, axis=1)
+        best = np.argpartition(score, k - 1, axis=1)[:, :k]
         good = np.take_along_axis(score, best, axis=1) < np.inf
         i = np.broadcast_to(np.arange(rows.start, rows.stop)[:, None], best.shape)
         pairs.append(np.stack([i[good], best[good]], axis=1))
