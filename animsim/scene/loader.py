@@ -486,7 +486,7 @@ def load_scene_bytes(raw: bytes, file: str, limits: Limits = Limits()) -> Loaded
             if _dotted(p) not in seen:
                 found.append(Diagnostic(file, *marks.at(p, prefer_key=key), _dotted(p), msg))
         raise SceneError(found) from None
-    problems = _mesh_problems(scene, file) + check_scene(scene)
+    problems = mesh_problems(scene, file) + check_scene(scene)
     if problems:
         raise SceneError(
             [Diagnostic(file, *marks.at(p, prefer_key=key), _dotted(p), msg) for p, msg, key in problems]
@@ -494,7 +494,7 @@ def load_scene_bytes(raw: bytes, file: str, limits: Limits = Limits()) -> Loaded
     return LoadedScene(scene=scene, file=file, sha256=sha, marks=marks, data=body, source=text)
 
 
-def _mesh_problems(scene: Scene, file: str) -> list[tuple[Path_, str, bool]]:
+def mesh_problems(scene: Scene, file: str) -> list[tuple[Path_, str, bool]]:
     """Read the mesh files of ``type: mesh`` structures, relative to the scene's folder."""
     if not any(s.type == "mesh" for s in scene.structures):
         return []

@@ -298,3 +298,12 @@ def test_usd_text_names_the_structures(cli, tmp_path: Path) -> None:
     text = out.read_text()
     assert re.search(r'def Mesh "sheet"\n    \{\n        custom uniform string\[\] animsim:ids', text)
     assert "framesPerSecond = 25" in text and "timeCodesPerSecond = 25" in text
+
+
+def test_sweep_cases_read_the_mesh_relative_to_the_scene(cli, tmp_path: Path) -> None:
+    done = cli(
+        "sweep", SCENES / "soft_ball.yaml", "--set", "structures.0.volume.ks=100,300", "--set", "duration=0.05",
+        cwd=tmp_path,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "2 cases (serial): 2 ok" in done.stdout
