@@ -306,4 +306,4 @@ def test_sweep_cases_read_the_mesh_relative_to_the_scene(cli, tmp_path: Path) ->
         cwd=tmp_path,
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
-    assert "2 cases (serial): 2 ok" in done.stdout
+    assert "2 cases (serial): 2 ok" in done.stderr
