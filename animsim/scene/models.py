@@ -327,8 +327,72 @@ class SoftBox(_StructureCommon):
     body_diagonal: SpringFamily | None = None
 
 
-Structure = Annotated[Cloth | Strand | SoftBox, Field(discriminator="type")]
-STRUCTURE_TYPES = ("cloth", "strand", "soft_box")
+class AxisAngle(Model):
+    """A right-handed rotation about ``axis`` by ``angle`` degrees."""
+
+    axis: Vec3 = Field(description="need not be unit length; must not be zero")
+    angle: FiniteFloat = Field(description="degrees, right-handed about the axis")
+
+    @field_validator("axis")
+    @classmethod
+    def _nonzero(cls, v: tuple[float, float, float]) -> tuple[float, float, float]:
+        if v == (0.0, 0.0, 0.0):
+            raise ValueError("the axis must not be zero")
+        return v
+
+
+class PinBox(Model):
+    min: Vec3
+    max: Vec3
+
+    @model_validator(mode="after")
+    def _ordered(self) -> PinBox:
+        if any(a > b for a, b in zip(self.min, self.max, strict=True)):
+            raise ValueError("min must not exceed max in any axis")
+        return self
+
+
+class PinInside(Model):
+    inside: PinBox = Field(description="pin every vertex inside this box (world coordinates, m)")
+
+
+MAX_MESH_VERTICES = 200_000
+
+
+class MeshStructure(Model):
+    """A triangle or polygon mesh from a file, turned into particles and springs."""
+
+    type: Literal["mesh"]
+    id: StrictStr = Field(
+        min_length=1, description="particle ids become <id>[k], k = vertex index in the file"
+    )
+    file: StrictStr = Field(
+        min_length=1, description="OBJ or PLY (STL with the 'mesh' extra), relative to the scene file"
+    )
+    mode: Literal["soft_body", "cloth"] = Field(
+        description="soft_body: a closed surface kept full by interior struts; cloth: a sheet"
+    )
+    mass: Positive = Field(description="total mass, kg, spread over the vertices by area")
+    scale: Positive = 1.0
+    rotation: AxisAngle | None = Field(None, description="applied after scale, before position")
+    position: Vec3 = Field([0.0, 0.0, 0.0], description="added after scale and rotation, m")
+    velocity: Vec3 = Field([0.0, 0.0, 0.0], description="initial velocity of every vertex, m/s")
+    stretch: SpringFamily | None = Field(None, description="one spring per mesh edge")
+    bend: SpringFamily | None = Field(
+        None, description="across each interior edge, between the two opposite vertices"
+    )
+    volume: SpringFamily | None = Field(None, description="soft_body only: interior struts")
+    pin: list[Annotated[StrictInt, Field(ge=0)]] | PinInside = Field(
+        [], description="vertex indices, or {inside: {min, max}}"
+    )
+
+    # The geometry read from ``file`` (animsim.scene.meshes.MeshGeometry),
+    # attached by the loader once the file has been checked; not a scene key.
+    _geometry: Any = PrivateAttr(None)
+
+
+Structure = Annotated[Cloth | Strand | SoftBox | MeshStructure, Field(discriminator="type")]
+STRUCTURE_TYPES = ("cloth", "strand", "soft_box", "mesh")
 
 
 # --- integrator, record, scene ----------------------------------------------
