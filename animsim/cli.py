@@ -686,7 +686,9 @@ def sweep(
     if output is not None:
         sw.write_csv(table, output)
     if plot is not None:
-        sw.plot_table(table, plot, x_key, y_col)
+        from animsim.export import sweep_plot
+
+        sweep_plot.plot_table(table, plot, x_key, y_col)
     counts = table.counts()
     if scheduler is not None:
         where = "Dask LocalCluster" if scheduler == "local" else f"Dask at {scheduler}"
