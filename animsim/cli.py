@@ -1024,6 +1024,7 @@ def _compare_progress(total: int):
 class PlotKind(StrEnum):
     trajectory = "trajectory"
     energy = "energy"
+    phase = "phase"
 
 
 @app.command()
@@ -1037,7 +1038,12 @@ def plot(
     ],
     output: Annotated[Path, typer.Option("-o", "--output", help="Picture file: .png, .svg or .pdf.")],
     kind: Annotated[
-        PlotKind, typer.Option("--kind", help="Paths of particles, or energy against time.")
+        PlotKind,
+        typer.Option(
+            "--kind",
+            help="Paths of particles; energy against time (kinetic, gravitational, spring, ...); "
+            "or phase: position against velocity per particle and axis.",
+        ),
     ] = PlotKind.trajectory,
     scene: Annotated[
         Path | None, typer.Option("--scene", help="The scene of a trajectory (needed for --kind energy).")
@@ -1048,11 +1054,19 @@ def plot(
     integrator: Annotated[str | None, typer.Option(help="Override the scene's integrator.")] = None,
     dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
     duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
+    integrators: Annotated[
+        str | None,
+        typer.Option("--integrators", help="--kind phase: comma-separated methods, overlaid."),
+    ] = None,
+    particles: Annotated[
+        str | None,
+        typer.Option("--particles", help="--kind phase: comma-separated particle ids; default up to 3."),
+    ] = None,
     *,
     limits: Any = None,
 ) -> None:
-    """Draw particle paths or the energy (kinetic, potential, total, and drift) of a run."""
-    from animsim.export.pictures import figure_format, plot_energy, plot_trajectory
+    """Draw particle paths, the energy of a run split into its parts (and its drift), or phase portraits."""
+    from animsim.export.pictures import figure_format, plot_trajectory
     from animsim.export.trajectory import TrajectoryCollector, is_trajectory, read_trajectory
 
     figure_format(output)
@@ -1060,6 +1074,25 @@ def plot(
         raise UsageError(f"--view {view!r}: plot takes xy, xz or yz")
     check_output_path(output, source)
     from_file = is_trajectory(source)
+    if kind is not PlotKind.phase and (integrators is not None or particles is not None):
+        raise UsageError("--integrators and --particles go with --kind phase")
+    if kind is PlotKind.phase:
+        from animsim.export.phase import phase_command
+
+        phase_command(
+            source,
+            output,
+            from_file=from_file,
+            scene=scene,
+            prepare=lambda path, **kw: prepare_scene(path, limits, **kw),
+            integrators=integrators,
+            particles=particles,
+            integrator=integrator,
+            dt=dt,
+            duration=duration,
+        )
+        typer.echo(f"wrote {output}")
+        return
     scene_path = scene if from_file else source
     compiled = None
     if scene_path is not None:
@@ -1070,11 +1103,13 @@ def plot(
     if kind is PlotKind.energy:
         if compiled is None:
             raise UsageError("--kind energy needs the scene: give a scene, or --scene with the trajectory")
-        times, kinetic, potential = _energies(compiled, read_trajectory(source) if from_file else None)
-        plot_energy(
+        from animsim.export.phase import energy_parts_of
+        from animsim.export.pictures import plot_energy_parts
+
+        times, parts = energy_parts_of(compiled, read_trajectory(source) if from_file else None)
+        plot_energy_parts(
             times,
-            kinetic,
-            potential,
+            parts,
             output,
             title=f"{compiled.name}: {compiled.integrator_name}, dt {compiled.clock.dt:g} s",
             conservative=compiled.conservative,

@@ -43,8 +43,19 @@
   const QUANT_DEAD = 65535;
   const QUANT_MAX = 65534;
 
-  async function decodePositions(desc) {
-    const q = await decode(desc);
+  // Undo the Python side's delta_shuffle: low bytes, then high bytes, of frame-to-frame differences.
+  function unshuffleDeltas(bytes, frames) {
+    const count = bytes.length / 2;
+    const q = new Uint16Array(count);
+    for (let i = 0; i < count; i++) q[i] = bytes[i] | (bytes[count + i] << 8);
+    const stride = frames ? count / frames : 0;
+    for (let i = stride; i < count; i++) q[i] = (q[i] + q[i - stride]) & 0xffff;
+    return q;
+  }
+
+  async function decodePositions(desc, frames) {
+    const raw = await decode(desc);
+    const q = desc.enc === "delta16" ? unshuffleDeltas(raw, frames) : raw;
     const lo = desc.lo, hi = desc.hi;
     const out = new Float32Array(q.length);
     const scale = [0, 1, 2].map((a) => (hi[a] - lo[a]) / QUANT_MAX);
@@ -276,7 +287,7 @@ void main() { o = u_col; }`;
       const h1 = X, h2 = world.upName === "z" ? [0, -1, 0] : Z;
       const dir = add(add(scale3(h1, Math.cos(el) * Math.sin(az)), scale3(h2, Math.cos(el) * Math.cos(az))), scale3(up, Math.sin(el)));
       const fov = (35 * Math.PI) / 180;
-      const dist = (0.85 * R / Math.sin(fov / 2)) / camera.zoom; // the bounding sphere is loose: frame a little tighter
+      const dist = (0.75 * R / Math.sin(fov / 2)) / camera.zoom; // the bounding sphere is loose: frame a little tighter
       const eye = add(c, scale3(dir, dist));
       const proj = perspective(fov, aspect, Math.max(dist - 4 * R, dist * 1e-3), dist + 4 * R);
       return { mvp: mul(proj, lookAt(eye, c, up)), proj };
@@ -337,11 +348,14 @@ void main() { o = u_col; }`;
 
     async load() {
       const d = this.data;
-      this.pos = await decodePositions(d.pos);
+      this.pos = await decodePositions(d.pos, this.frames);
       this.springs = await decode(d.springs);
       this.pinned = await decode(d.pinned);
       this.colors = await decode(d.colors);
       this.sizes = await decode(d.sizes);
+      // Per particle (the same every frame): uploaded once; per frame: the frame's slice each time.
+      this.colorsPerFrame = !!(d.colors && d.colors.per_frame);
+      this.sizesPerFrame = !!(d.sizes && d.sizes.per_frame);
     }
 
     initGL() {
@@ -367,12 +381,12 @@ void main() { o = u_col; }`;
       if (this.colors) {
         this.colBuf = gl.createBuffer();
         gl.bindBuffer(gl.ARRAY_BUFFER, this.colBuf);
-        gl.bufferData(gl.ARRAY_BUFFER, Math.max(n, 1) * 4, gl.DYNAMIC_DRAW);
+        gl.bufferData(gl.ARRAY_BUFFER, this.colorsPerFrame ? Math.max(n, 1) * 4 : this.colors, gl.DYNAMIC_DRAW);
       }
       if (this.sizes) {
         this.sizeBuf = gl.createBuffer();
         gl.bindBuffer(gl.ARRAY_BUFFER, this.sizeBuf);
-        gl.bufferData(gl.ARRAY_BUFFER, Math.max(n, 1) * 4, gl.DYNAMIC_DRAW);
+        gl.bufferData(gl.ARRAY_BUFFER, this.sizesPerFrame ? Math.max(n, 1) * 4 : this.sizes, gl.DYNAMIC_DRAW);
       }
       if (this.pinned) {
         this.pinBuf = gl.createBuffer();
@@ -529,11 +543,11 @@ void main() { o = u_col; }`;
       if (k >= 0 && n > 0) {
         gl.bindBuffer(gl.ARRAY_BUFFER, this.posBuf);
         gl.bufferSubData(gl.ARRAY_BUFFER, 0, this.pos, k * n * 3, n * 3);
-        if (this.colBuf) {
+        if (this.colBuf && this.colorsPerFrame) {
           gl.bindBuffer(gl.ARRAY_BUFFER, this.colBuf);
           gl.bufferSubData(gl.ARRAY_BUFFER, 0, this.colors, k * n * 4, n * 4);
         }
-        if (this.sizeBuf) {
+        if (this.sizeBuf && this.sizesPerFrame) {
           gl.bindBuffer(gl.ARRAY_BUFFER, this.sizeBuf);
           gl.bufferSubData(gl.ARRAY_BUFFER, 0, this.sizes, k * n, n);
         }
