@@ -852,6 +852,13 @@ void main() { o = u_col; }`;
         return { width: w, height: h, rgba: btoa(bin) };
       },
       software: () => panels.some((p) => p.software),
+      // Decoded position of particle j in frame k of panel i (null when not alive), to check the decoding.
+      position: (i, k, j) => {
+        const p = panels[i], o = (k * p.n + j) * 3;
+        return p.pos[o] >= DEAD ? null : [p.pos[o], p.pos[o + 1], p.pos[o + 2]];
+      },
+      labels: () => panels.map((p) => p.el.querySelector(".as-label").textContent),
+      marks: () => panels.map((p) => (p.mark.classList.contains("on") ? p.mark.textContent : "")),
       frameShown: (i) => panels[i].lastFrame,
       setView: (v) => { camera.view = v; document.getElementById("as-view").value = v; resetCamera(false); },
       orbit: (daz, del) => { camera.az += daz; camera.el = Math.min(89, Math.max(-89, camera.el + del)); state.dirty = true; },
