@@ -590,7 +590,9 @@ def render(
             check_output_path(out, source)
     from_file = is_trajectory(source)
     if integrators is not None:
-        _render_side_by_side(source, integrators, gif, mp4, opts, from_file, integrator, dt, duration, quiet, limits)
+        _render_side_by_side(
+            source, integrators, gif, mp4, opts, from_file, integrator, dt, duration, quiet, limits
+        )
         return
     compiled = None
     scene_path = scene if from_file else source
@@ -640,7 +642,9 @@ def _render_side_by_side(
     from animsim.scene import models as m
 
     if from_file:
-        raise UsageError("--integrators simulates the scene once per method: give the scene, not a trajectory")
+        raise UsageError(
+            "--integrators simulates the scene once per method: give the scene, not a trajectory"
+        )
     if integrator is not None:
         raise UsageError("give --integrator or --integrators, not both")
     names = parse_integrators(integrators)

@@ -142,7 +142,9 @@ def main(argv: list[str] | None = None) -> int:
         points_page(pages[f"{args.points} points"], args.points, args.frames)
         driver = start_browser(str(folder / "profile"))
         try:
-            print(f"{'page':<22} {'MB':>6} {'redraw':<12} {'frames':>6} {'mean ms':>8} {'p95 ms':>7} {'max ms':>7}")
+            print(
+                f"{'page':<22} {'MB':>6} {'redraw':<12} {'frames':>6} {'mean ms':>8} {'p95 ms':>7} {'max ms':>7}"
+            )
             for name, path in pages.items():
                 mb = path.stat().st_size / 1e6
                 for how in ("paused", "on change", "every frame"):

@@ -48,7 +48,9 @@ def phase_command(
         from animsim.export.trajectory import read_trajectory
 
         if integrators is not None:
-            raise UsageError("--integrators simulates the scene once per method: give the scene, not a trajectory")
+            raise UsageError(
+                "--integrators simulates the scene once per method: give the scene, not a trajectory"
+            )
         traj = read_trajectory(source)
         dense = dense_frames(traj)
         runs.append(PhaseRun(source.name, list(traj.ids), dense["position"], dense["velocity"]))

@@ -204,7 +204,9 @@ def phase_particles(run: PhaseRun, pinned: np.ndarray, requested: list[str] | No
     free = np.flatnonzero(~pinned)
     if len(free) == 0:
         raise UsageError("--kind phase: every particle is pinned, nothing moves")
-    picks = np.unique(np.linspace(0, len(free) - 1, min(PHASE_DEFAULT_PARTICLES, len(free))).round().astype(int))
+    picks = np.unique(
+        np.linspace(0, len(free) - 1, min(PHASE_DEFAULT_PARTICLES, len(free))).round().astype(int)
+    )
     return [int(free[i]) for i in picks]
 
 
@@ -241,9 +243,7 @@ def plot_phase(
     plt = _pyplot()
     axes = axes if axes is not None else phase_axes(runs, rows)
     nrows, ncols = len(rows), len(axes)
-    fig, grid = plt.subplots(
-        nrows, ncols, figsize=(3.6 * ncols + 0.6, 3.2 * nrows + 0.6), squeeze=False
-    )
+    fig, grid = plt.subplots(nrows, ncols, figsize=(3.6 * ncols + 0.6, 3.2 * nrows + 0.6), squeeze=False)
     colours = plt.get_cmap("tab10")
     for r, row in enumerate(rows):
         for c, a in enumerate(axes):

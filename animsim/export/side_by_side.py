@@ -143,7 +143,9 @@ class SideBySide:
             y = pad
             y += self.painter.draw(view, pad, y, self.labels[p], LABEL_RGB)
             t = self.times[min(k, len(self.times) - 1)] if self.times else 0.0
-            self.painter.draw(view, pad, self.height - pad - self.painter.size - 4, f"t = {t:.2f} s", LABEL_RGB)
+            self.painter.draw(
+                view, pad, self.height - pad - self.painter.size - 4, f"t = {t:.2f} s", LABEL_RGB
+            )
             if frozen and self.marks[p]:
                 self.painter.draw(view, pad, y + 2, self.marks[p], MARK_RGB)
                 b = BORDER_PX
@@ -192,7 +194,11 @@ def render_side_by_side(
         camera_opts["elevation"] = opts.elevation
     camera = make_camera(opts.view, _bounds(lo, hi, planes), size, **camera_opts)
     sbs = SideBySide(runs, compiled, size, camera, planes, opts.dot_radius)
-    writers = [w for w in (_gif_writer(gif, sbs.image_size, opts.fps), _mp4_writer(mp4, sbs.image_size, opts.fps)) if w]
+    writers = [
+        w
+        for w in (_gif_writer(gif, sbs.image_size, opts.fps), _mp4_writer(mp4, sbs.image_size, opts.fps))
+        if w
+    ]
     try:
         for k in range(sbs.count):
             image = sbs.compose(k)

@@ -204,7 +204,7 @@ class ViewerPanel:
         for shape in self.shapes:
             if not isinstance(shape, Shape):
                 raise ValueError(f"shapes must be Shape objects, got {type(shape).__name__}")
-            for key, width in (("position", 3), ("orientation", 4)):
+            for key in ("position", "orientation"):
                 value = getattr(shape, key)
                 if value is not None and np.ndim(value) == 2 and len(value) != f:
                     raise ValueError(f"a per-frame shape {key} needs one row per frame ({f})")

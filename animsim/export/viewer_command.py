@@ -82,7 +82,9 @@ def write_view(
         from animsim.analysis.compare import parse_integrators
 
         if from_file:
-            raise UsageError("--integrators simulates the scene once per method: give the scene, not a trajectory")
+            raise UsageError(
+                "--integrators simulates the scene once per method: give the scene, not a trajectory"
+            )
         if integrator is not None:
             raise UsageError("give --integrator or --integrators, not both")
         names = parse_integrators(integrators)

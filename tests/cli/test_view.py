@@ -145,9 +145,13 @@ def test_plot_phase_and_energy_parts(tmp_path):
     one = tmp_path / "one.png"
     r = run_cli("plot", SCENES / "spring_pendulum.yaml", "--kind", "phase", "--particles", "bob", "-o", one)
     assert r.returncode == 0, r.stderr
-    r = run_cli("plot", SCENES / "spring_pendulum.yaml", "--kind", "phase", "--particles", "nobody", "-o", one)
+    r = run_cli(
+        "plot", SCENES / "spring_pendulum.yaml", "--kind", "phase", "--particles", "nobody", "-o", one
+    )
     assert r.returncode == 2 and "no particle 'nobody'" in r.stderr
-    r = run_cli("plot", SCENES / "spring_pendulum.yaml", "--kind", "energy", "--integrators", "rk4", "-o", one)
+    r = run_cli(
+        "plot", SCENES / "spring_pendulum.yaml", "--kind", "energy", "--integrators", "rk4", "-o", one
+    )
     assert r.returncode == 2 and "--kind phase" in r.stderr
     energy = tmp_path / "energy.png"
     assert run_cli("plot", SCENES / "spring_pendulum.yaml", "--kind", "energy", "-o", energy).returncode == 0
