@@ -16,9 +16,10 @@ network. The data is embedded in a JSON block:
 
 A 32 x 32 cloth over 2 s at 25 fps is about 0.3 MB.
 
-The public entry points are :func:`viewer_html` (arrays in, page out; what
-``Trajectory._repr_html_`` calls) and :func:`panels_html` (several runs side
-by side, played in step). :func:`simulate_panel` is the one place here that
+The public entry points are :func:`viewer_html` (arrays in, page out),
+:func:`panels_html` (several runs side by side, played in step) and
+:func:`iframe_html` (a page wrapped for a notebook cell: what
+``Trajectory._repr_html_`` returns). :func:`simulate_panel` is the one place here that
 runs a simulation.
 """
 
@@ -420,6 +421,23 @@ def viewer_html(
     return panels_html([panel], title=title, up=up, view=view)
 
 
+def iframe_html(page: str, height: int = 760) -> str:
+    """``page`` inside an ``<iframe srcdoc>``: what a notebook cell shows.
+
+    The frame keeps the page's element ids and script apart from the
+    notebook's and from other viewers in the same notebook; ``sandbox``
+    lets its script run and nothing else (the page needs no storage, forms
+    or network).
+    """
+    if not (isinstance(height, int) and height > 0):
+        raise ValueError(f"height must be a whole number of pixels > 0, got {height!r}")
+    doc = _html_escape(page)
+    return (
+        f'<iframe srcdoc="{doc}" sandbox="allow-scripts" title="animsim viewer" '
+        f'style="width: 100%; height: {height}px; border: 0;"></iframe>'
+    )
+
+
 # --------------------------------------------------------------------------
 # From runs and trajectory files
 # --------------------------------------------------------------------------
@@ -543,6 +561,7 @@ __all__ = [
     "Shape",
     "ViewerPanel",
     "dense_frames",
+    "iframe_html",
     "panel_from_trajectory",
     "panels_html",
     "planes_as_shapes",

@@ -190,3 +190,30 @@ def test_one_panel_per_integrator_and_the_failed_one_is_marked(browser, pages):
     assert browser.execute_script(f"return {v}.frameShown(0)") == euler_frames - 1
     assert browser.execute_script(f"return {v}.frameShown(2)") == last
     assert severe(browser) == []
+
+
+def test_two_viewers_in_one_notebook_page(browser, tmp_path):
+    """What a notebook shows: each viewer in its own sandboxed frame, both running."""
+    from animsim.export.viewer import iframe_html, viewer_html
+
+    t = np.linspace(0.0, 1.0, 11)
+    one = viewer_html(t, np.stack([np.zeros((11, 3)) + t[:, None] * [1, 0, 0]], axis=1), label="first")
+    two = viewer_html(t, np.stack([np.zeros((11, 3)) + t[:, None] * [0, 1, 0]], axis=1), label="second")
+    page = tmp_path / "notebook.html"
+    page.write_text(f"<!DOCTYPE html><html><body>{iframe_html(one)}{iframe_html(two)}</body></html>")
+    browser.get_log("browser")
+    browser.get(page.as_uri())
+    frames = browser.find_elements("css selector", "iframe")
+    assert len(frames) == 2
+    labels = []
+    for frame in frames:
+        browser.switch_to.frame(frame)
+        deadline = time.monotonic() + 60
+        while not browser.execute_script("return !!(window.animsimViewer && window.animsimViewer.ready)"):
+            assert time.monotonic() < deadline, "a framed viewer did not start"
+            time.sleep(0.05)
+        labels += browser.execute_script("return window.animsimViewer.labels()")
+        assert browser.execute_script("return window.animsimViewer.errors") == []
+        browser.switch_to.default_content()
+    assert labels == ["first", "second"]
+    assert severe(browser) == []

@@ -224,3 +224,20 @@ def test_dense_frames_fill_dead_particles_with_nan():
     assert np.isnan(dense["position"][0, 1]).all()
     np.testing.assert_array_equal(dense["position"][1, 1], [6, 7, 8])
     assert dense["color"] is None
+
+
+def test_iframe_wraps_the_page_for_a_notebook():
+    from html import unescape
+
+    from animsim.export.viewer import iframe_html
+
+    t, pos = swirl()
+    page = viewer_html(t, pos, label='say "hi" & <b>')
+    frame = iframe_html(page, height=500)
+    m = re.fullmatch(
+        r'<iframe srcdoc="([^"]*)" sandbox="allow-scripts" [^>]*height: 500px[^>]*></iframe>', frame
+    )
+    assert m is not None
+    assert unescape(m.group(1)) == page
+    with pytest.raises(ValueError, match="height"):
+        iframe_html(page, height=0)
