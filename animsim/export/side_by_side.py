@@ -27,8 +27,8 @@ MARK_RGB = (1.0, 0.2, 0.2)  # a pure palette red: the GIF palette has it exactly
 DIVIDER_RGB = (0.42, 0.42, 0.42)
 DIVIDER_PX = 2
 BORDER_PX = 3  # the red outline of a frozen (failed) panel
-LABEL_SCALE = 1 / 24  # label height as a fraction of the panel's smaller side
-MIN_LABEL_PX = 11
+LABEL_SCALE = 1 / 20  # label height as a fraction of the panel's smaller side
+MIN_LABEL_PX = 13
 
 
 def compile_each(scene: Any, name: str, integrators: Sequence[str] | None) -> list[Any]:
