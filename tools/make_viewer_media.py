@@ -72,14 +72,18 @@ def main() -> None:
             (1000, 860),
             "const v = window.animsimViewer; v.orbit(-20, 5); v.setFrame(12);",
         )
-        screenshot(side, MEDIA / "viewer_side_by_side.png", (1200, 820), "window.animsimViewer.setFrame(115);")
+        screenshot(
+            side, MEDIA / "viewer_side_by_side.png", (1200, 820), "window.animsimViewer.setFrame(115);"
+        )
     gif = MEDIA / "side_by_side.gif"
     animsim("render", "scenes/spring_pendulum.yaml", *SIDE, "--gif", str(gif), "--size", "300x260", "-q")
     with Image.open(gif) as im:
         frames = [f.convert("RGB") for f in ImageSequence.Iterator(im)]
     frames[115].save(MEDIA / "side_by_side_frame.png", optimize=True)
     print("wrote", (MEDIA / "side_by_side_frame.png").relative_to(ROOT))
-    animsim("plot", "scenes/spring_pendulum.yaml", "--kind", "phase", *SIDE, "-o", "docs/media/phase_pendulum.png")
+    animsim(
+        "plot", "scenes/spring_pendulum.yaml", "--kind", "phase", *SIDE, "-o", "docs/media/phase_pendulum.png"
+    )
 
 
 if __name__ == "__main__":
