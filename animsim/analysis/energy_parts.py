@@ -24,12 +24,17 @@ PARTS = ("kinetic", "rotational", "gravitational", "spring", "other")
 
 
 def term_part(term: Any) -> str:
-    """Which part a force term's potential belongs to, from the term's class name.
+    """Which part a force term's potential belongs to.
 
-    Gravity (uniform field) and attractors (point masses) store gravitational
-    energy; Hooke springs (listed, grid and structure springs) store spring
-    energy; anything else with a potential (penalty contact) is "other".
+    An element may say so itself with an ``energy_part`` attribute; otherwise
+    the class name decides: gravity (uniform field) and attractors (point
+    masses) store gravitational energy; Hooke springs (listed, grid and
+    structure springs) store spring energy; anything else with a potential
+    (penalty contact) is "other".
     """
+    declared = getattr(term, "energy_part", None)
+    if declared in PARTS:
+        return str(declared)
     name = type(term).__name__.lower()
     if "gravity" in name or "attractor" in name:
         return "gravitational"

@@ -533,7 +533,7 @@ def simulate_panel(compiled: Any, label: str | None = None, stop: Any = None) ->
     """
     from animsim.analysis.energy_parts import EnergyRecorder
     from animsim.export.trajectory import TrajectoryCollector
-    from animsim.simulate import run
+    from animsim.engine import run
 
     collector = TrajectoryCollector()
     energy = EnergyRecorder(compiled.dynamics)
