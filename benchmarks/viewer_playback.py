@@ -8,7 +8,10 @@ between ``requestAnimationFrame`` callbacks are recorded for ``--seconds``:
 * ``paused``: nothing drawn, the browser's own rate (the baseline);
 * ``on change``: the viewer as users get it (it redraws a panel when its frame
   or the camera changes);
-* ``every frame``: every panel redrawn on every display frame (the worst case).
+* ``every frame``: every panel redrawn on every display frame (the worst case);
+  here the page also waits for each frame's drawing to finish (``gl.finish``)
+  and reports that time ("draw ms"): the work a frame costs, whatever the
+  display rate.
 
 A page that keeps up with the display shows a mean interval of one display
 frame (16.7 ms at 60 Hz). Headless Chromium draws WebGL in software
@@ -144,6 +147,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             print(
                 f"{'page':<22} {'MB':>6} {'redraw':<12} {'frames':>6} {'mean ms':>8} {'p95 ms':>7} {'max ms':>7}"
+                f" {'draw ms':>8} {'draw p95':>8}"
             )
             for name, path in pages.items():
                 mb = path.stat().st_size / 1e6
@@ -152,6 +156,11 @@ def main(argv: list[str] | None = None) -> int:
                     print(
                         f"{name:<22} {mb:6.2f} {how:<12} {s['frames']:6d} {s['mean_ms']:8.2f} "
                         f"{s['p95_ms']:7.2f} {s['max_ms']:7.2f}"
+                        + (
+                            f" {s['draw_mean_ms']:8.2f} {s['draw_p95_ms']:8.2f}"
+                            if how == "every frame"
+                            else ""
+                        )
                     )
         finally:
             driver.quit()
