@@ -532,8 +532,8 @@ def simulate_panel(compiled: Any, label: str | None = None, stop: Any = None) ->
     the public Python API is one edit here).
     """
     from animsim.analysis.energy_parts import EnergyRecorder
-    from animsim.export.trajectory import TrajectoryCollector
     from animsim.engine import run
+    from animsim.export.trajectory import TrajectoryCollector
 
     collector = TrajectoryCollector()
     energy = EnergyRecorder(compiled.dynamics)
