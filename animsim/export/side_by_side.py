@@ -25,7 +25,7 @@ from animsim.errors import SimulationError
 LABEL_RGB = (0.92, 0.92, 0.92)
 MARK_RGB = (1.0, 0.2, 0.2)  # a pure palette red: the GIF palette has it exactly
 DIVIDER_RGB = (0.42, 0.42, 0.42)
-DIVIDER_PX = 2
+DIVIDER_PX = 2  # even, so panels of an even width give an even MP4
 BORDER_PX = 3  # the red outline of a frozen (failed) panel
 LABEL_SCALE = 1 / 20  # label height as a fraction of the panel's smaller side
 MIN_LABEL_PX = 13
@@ -248,8 +248,9 @@ class _Mp4Writer:
 
         ffmpeg = _require_ffmpeg()
         self.path = path
-        # H.264 in yuv420p needs even sides: the composed width may be odd, pad it by a column.
-        self.size = (size[0] + size[0] % 2, size[1] + size[1] % 2)
+        # H.264 in yuv420p needs even sides: render.validate insists on an even panel, and
+        # k panels with k - 1 dividers of DIVIDER_PX (even) stay even.
+        self.size = size
         self.file = AtomicFile(path, "wb")
         self.video = ffmpeg.write_frames(
             str(self.file.tmp_path),
@@ -265,11 +266,7 @@ class _Mp4Writer:
     def add(self, image: np.ndarray, delay_cs: int) -> None:
         from animsim.export.raster import to_rgb8
 
-        rgb = to_rgb8(image)
-        h, w = rgb.shape[:2]
-        if (w, h) != self.size:
-            rgb = np.pad(rgb, ((0, self.size[1] - h), (0, self.size[0] - w), (0, 0)), mode="edge")
-        self.video.send(np.ascontiguousarray(rgb))
+        self.video.send(np.ascontiguousarray(to_rgb8(image)))
 
     def commit(self) -> None:
         video, self.video = self.video, None

@@ -156,3 +156,18 @@ def test_plot_phase_and_energy_parts(tmp_path):
     energy = tmp_path / "energy.png"
     assert run_cli("plot", SCENES / "spring_pendulum.yaml", "--kind", "energy", "-o", energy).returncode == 0
     assert energy.stat().st_size > 10_000
+
+
+def test_render_side_by_side_mp4(tmp_path):
+    imageio_ffmpeg = pytest.importorskip("imageio_ffmpeg")
+    out = tmp_path / "side.mp4"
+    r = run_cli(
+        "render", SCENES / "spring_pendulum.yaml", "--integrators", "euler,rk4", "--mp4", out,
+        "--size", "160x120", "--duration", "1",
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    # Read back by ffmpeg itself (through imageio-ffmpeg), not by our writer.
+    reader = imageio_ffmpeg.read_frames(str(out))
+    meta = reader.__next__()
+    assert tuple(meta["size"]) == (2 * 160 + 2, 120)
+    assert sum(1 for _ in reader) == 26  # 1 s at 25 fps, both ends
