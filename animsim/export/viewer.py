@@ -479,6 +479,16 @@ def _pinned_for(compiled: Any, ids: Sequence[str]) -> np.ndarray:
     return np.array([pid in pinned for pid in ids], dtype=bool)
 
 
+def scene_shapes(compiled: Any) -> list[Shape]:
+    """The geometry of a compiled scene the viewer draws around the particles.
+
+    Today: its planes (ground and walls, impulse and penalty alike). The one
+    place to add colliders and rigid bodies (with per-frame poses) as they
+    come.
+    """
+    return planes_as_shapes(compiled.header.extra.get("planes", []))
+
+
 def panel_label(compiled: Any) -> str:
     return f"{compiled.integrator_name}, dt = {compiled.clock.dt:g} s"
 
@@ -499,7 +509,7 @@ def panel_from_trajectory(
     if compiled is not None:
         springs = _springs_for(compiled, traj.ids)
         pinned = _pinned_for(compiled, traj.ids)
-        shapes = planes_as_shapes(compiled.header.extra.get("planes", []))
+        shapes = scene_shapes(compiled)
     return ViewerPanel(
         times=traj.times,
         positions=dense["position"],
@@ -566,6 +576,7 @@ __all__ = [
     "panels_html",
     "planes_as_shapes",
     "quantise_positions",
+    "scene_shapes",
     "simulate_panel",
     "viewer_html",
 ]

@@ -171,3 +171,12 @@ def test_render_side_by_side_mp4(tmp_path):
     meta = reader.__next__()
     assert tuple(meta["size"]) == (2 * 160 + 2, 120)
     assert sum(1 for _ in reader) == 26  # 1 s at 25 fps, both ends
+
+
+def test_view_draws_the_scene_planes(tmp_path):
+    out = tmp_path / "balls.html"
+    r = run_cli("view", SCENES / "bouncing_balls.yaml", "-o", out, "--duration", "0.5", "-q")
+    assert r.returncode == 0, r.stderr
+    (panel,) = page_data(out)["panels"]
+    planes = [s for s in panel["shapes"] if s["kind"] == "plane"]
+    assert planes and all(np.isclose(np.linalg.norm(s["normal"]), 1.0) for s in planes)
