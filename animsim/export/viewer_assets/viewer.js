@@ -194,7 +194,7 @@
     const helper = Math.abs(n[0]) < 0.9 ? X : Y;
     const u = norm(cross(n, helper)), v = cross(n, u);
     const c0 = sub(centre, scale3(n, dot(sub(centre, shape.point), n)));
-    const ext = 2.5 * radius;
+    const ext = 1.6 * radius;
     const step = niceStep(ext / 6);
     const k = Math.ceil(ext / step);
     const lines = [];
