@@ -14,6 +14,10 @@ from animsim.atomic import AtomicFile
 from animsim.errors import UsageError
 
 
+#: pages above this size get a note on stderr (they still work; they open slowly)
+LARGE_PAGE_BYTES = 50_000_000
+
+
 @dataclass
 class ViewSummary:
     text: str = ""
@@ -135,4 +139,9 @@ def write_view(
     summary.bytes = size
     what = f"{len(panels)} panels" if len(panels) > 1 else "1 panel"
     summary.text = f"wrote {output} ({_megabytes(size)}): {what}, {frames} frames, {particles} particles"
+    if size > LARGE_PAGE_BYTES:
+        summary.notes.append(
+            f"{output} is {_megabytes(size)}: browsers take a while to open such a page; "
+            "a lower --fps or a shorter --duration makes it smaller"
+        )
     return summary

@@ -51,7 +51,8 @@ pytestmark = pytest.mark.skipif(
 
 @pytest.fixture(scope="module")
 def browser(tmp_path_factory):
-    webdriver = pytest.importorskip("selenium.webdriver")
+    # selenium comes with the test extra: a missing one is an error, not a reason to skip.
+    from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
 
     opts = webdriver.ChromeOptions()
@@ -77,7 +78,10 @@ def pages(tmp_path_factory):
         "-o", side, "-q",
     )  # fmt: skip
     assert r.returncode == 0, r.stderr
-    return {"cloth": cloth, "side": side}
+    smoke = folder / "smoke.html"
+    r = run_cli("view", SCENES / "smoke.yaml", "--duration", "3", "--view", "xy", "-o", smoke, "-q")
+    assert r.returncode == 0, r.stderr
+    return {"cloth": cloth, "side": side, "smoke": smoke}
 
 
 def open_page(driver, path: Path) -> None:
@@ -171,6 +175,25 @@ def test_decoded_positions_match_the_run(browser, pages):
             want = frames[k].position[j]
             assert got is not None
             assert np.abs(np.array(got) - want).max() <= (hi - lo).max() / 65534 + 1e-6
+
+
+def test_particle_colour_and_size_follow_the_emitter(browser, pages):
+    open_page(browser, pages["smoke"])
+    frames = browser.execute_script("return window.animsimViewer.frameCount")
+
+    def ink(k):
+        set_frame(browser, k)
+        img = pixels(browser, 0)[..., :3].astype(int)
+        return img[np.any(img != img[0, 0], axis=2)]
+
+    early, late = ink(frames // 6), ink(frames - 1)
+    assert len(late) > 2 * len(early) > 0  # smoke puffs grow over life
+    # Smoke is grey (the emitter's colours), not the default blue of particles without colour.
+    for px in (early, late):
+        grey = (np.abs(px[:, 0] - px[:, 1]) < 16) & (np.abs(px[:, 1] - px[:, 2]) < 16)
+        assert grey.mean() > 0.9
+    assert early.mean() > late.mean()  # bright when young, darker and fading when old
+    assert severe(browser) == []
 
 
 def test_one_panel_per_integrator_and_the_failed_one_is_marked(browser, pages):

@@ -37,6 +37,16 @@ def test_view_cloth_writes_one_small_self_contained_page(tmp_path):
     assert set(panel["energy"]) >= {"kinetic", "gravitational", "spring", "potential", "total"}
 
 
+def test_view_is_deterministic(tmp_path):
+    a, b = tmp_path / "a.html", tmp_path / "b.html"
+    for out in (a, b):
+        r = run_cli("view", SCENES / "fountain.yaml", "--duration", "1", "-o", out, "-q")
+        assert r.returncode == 0, r.stderr
+    assert a.read_bytes() == b.read_bytes()
+    (panel,) = page_data(a)["panels"]
+    assert panel["colors"]["per_frame"] and panel["sizes"] is not None  # colour and size over life
+
+
 def test_view_side_by_side_marks_the_unstable_run(tmp_path):
     out = tmp_path / "side.html"
     r = run_cli("view", SCENES / "spring_pendulum.yaml", *SIDE, "-o", out)
