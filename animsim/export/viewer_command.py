@@ -100,7 +100,14 @@ def write_view(
             loaded, sc, _ = prepare(scene, integrator=integrator, dt=dt, duration=duration)
             compiled = compile_scene(sc, loaded.name)
         traj = read_trajectory(source)
-        energies = energies_from_trajectory(compiled, traj) if compiled is not None else None
+        energies = None
+        if compiled is not None and compiled.emitters is not None:
+            # Who was alive with what mass is not in the file: no energy rather than a wrong one.
+            summary.notes.append(
+                "no energy plot: a particle system's energy needs the scene itself, not a trajectory"
+            )
+        elif compiled is not None:
+            energies = energies_from_trajectory(compiled, traj)
         panels.append(panel_from_trajectory(traj, compiled, energies=energies, label=source.name))
         title = source.name if compiled is None else f"{compiled.name} ({source.name})"
         up = "y" if compiled is None else _up_axis(compiled.scene)

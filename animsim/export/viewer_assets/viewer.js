@@ -220,7 +220,7 @@ void main() {
   gl_Position = u_mvp * vec4(a_pos, 1.0);
   float s = (a_size > 0.0) ? a_size * u_pxScale / gl_Position.w : u_defPx;
   if (a_pin > 0.5) s = max(s, 1.8 * u_defPx);
-  gl_PointSize = clamp(s, 1.5, 96.0);
+  gl_PointSize = clamp(s, 2.0, 96.0);
   v_px = gl_PointSize;
 }`;
   const POINT_FS = `#version 300 es
@@ -292,11 +292,15 @@ void main() { o = u_col; }`;
       const proj = perspective(fov, aspect, Math.max(dist - 4 * R, dist * 1e-3), dist + 4 * R);
       return { mvp: mul(proj, lookAt(eye, c, up)), proj };
     }
-    const setup = { xy: [Z, Y], xz: [[0, -1, 0], Z], yz: [X, Z] }[camera.view];
+    // Each flat view looks from the positive side of its third axis, the first axis to the
+    // right and the second up (as `animsim render` draws them). For xz that is a mirror image
+    // (looking down +y with z up puts x to the left), so its x is flipped back.
+    const setup = { xy: [Z, Y, 1], xz: [Y, Z, -1], yz: [X, Z, 1] }[camera.view];
     const eye = add(c, scale3(setup[0], 3 * R));
     const half = (1.08 * R) / camera.zoom;
     const proj = ortho(half * Math.max(aspect, 1), half / Math.min(aspect, 1), 0.01 * R, 6 * R);
-    return { mvp: mul(proj, lookAt(eye, c, setup[1])), proj };
+    const mirror = new Float32Array([setup[2], 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]);
+    return { mvp: mul(mul(mirror, proj), lookAt(eye, c, setup[1])), proj };
   }
 
   // Screen drag -> world pan, in the plane facing the camera.
@@ -589,6 +593,12 @@ void main() { o = u_col; }`;
     prepareEnergy() {
       const e = this.data.energy;
       const c = this.energyCanvas;
+      if (!e) {
+        // A trajectory without its scene has no energy: no plot rather than an empty box.
+        c.style.display = "none";
+        this.plotBox = null;
+        return;
+      }
       const dpr = window.devicePixelRatio || 1;
       const w = Math.max(1, Math.round(c.clientWidth * dpr)), h = Math.max(1, Math.round(c.clientHeight * dpr));
       c.width = w;
