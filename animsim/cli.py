@@ -1134,44 +1134,6 @@ def plot(
     typer.echo(f"wrote {output}")
 
 
-def _energies(compiled: Any, traj: Any) -> tuple[Any, Any, Any]:
-    """Per-frame kinetic and potential energy, from a run or from a trajectory of the scene."""
-    import numpy as np
-
-    dyn = compiled.dynamics
-    times: list[float] = []
-    kinetic: list[float] = []
-    potential: list[float] = []
-    if traj is None:
-        from animsim.engine import run as simulate
-
-        def observe(state: Any) -> None:
-            times.append(state.time)
-            kinetic.append(dyn.kinetic_energy(state.particle_velocity))
-            potential.append(dyn.potential_energy(state.particle_position))
-
-        simulate(compiled, [], observers=[observe])
-    else:
-        if compiled.emitters is not None:
-            raise UsageError("energy from a trajectory needs a scene without emitters; give the scene itself")
-        index_of = {pid: i for i, pid in enumerate(compiled.system.ids)}
-        try:
-            rows = np.array([index_of[pid] for pid in traj.ids], dtype=np.int64)
-        except KeyError as exc:
-            raise UsageError(
-                f"the trajectory has particle {exc.args[0]!r}, which the scene does not"
-            ) from None
-        x = compiled.initial.particle_position.copy()
-        v = compiled.initial.particle_velocity.copy()
-        for frame in traj.frames():
-            x[rows[frame.index]] = frame.position
-            v[rows[frame.index]] = frame.velocity
-            times.append(frame.time)
-            kinetic.append(dyn.kinetic_energy(v))
-            potential.append(dyn.potential_energy(x))
-    return np.array(times), np.array(kinetic), np.array(potential)
-
-
 # --- entry point ----------------------------------------------------------------------------
 
 
