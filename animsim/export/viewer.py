@@ -525,6 +525,55 @@ def panel_from_trajectory(
     )
 
 
+def trajectory_html(traj: Any, *, shapes: Sequence[Shape] = (), height: int = 760) -> str:
+    """The viewer of an :class:`animsim.Trajectory` for a notebook cell (its ``_repr_html_``).
+
+    With the compiled scene the trajectory came from (``traj.compiled``, set
+    by ``animsim.simulate``): springs, pinned particles, planes, and the
+    energy plot (for scenes without emitters). ``shapes``: more geometry to
+    draw (rigid bodies, colliders). A run the watchdog stopped shows its last
+    frame marked.
+    """
+    compiled = getattr(traj, "compiled", None)
+    long = getattr(traj, "frames_long", None)
+    failure = getattr(traj, "failure", None)
+    status = getattr(traj, "status", "ok") or "ok"
+    failure_time = failure.time if failure is not None else None
+    if long is not None:
+        energies = None
+        if compiled is not None and compiled.emitters is None:
+            from animsim.export.viewer_command import energies_from_trajectory
+
+            energies = energies_from_trajectory(compiled, long)
+        panel = panel_from_trajectory(
+            long,
+            compiled,
+            energies=energies,
+            label=panel_label(compiled) if compiled is not None else "",
+            status=status,
+            failure_time=failure_time,
+        )
+    else:  # dense arrays only
+        panel = ViewerPanel(
+            times=traj.times,
+            positions=traj.positions,
+            springs=_springs_for(compiled, traj.ids) if compiled is not None else None,
+            pinned=_pinned_for(compiled, traj.ids) if compiled is not None else None,
+            shapes=scene_shapes(compiled) if compiled is not None else (),
+            status=status,
+            failure_time=failure_time,
+        )
+    if shapes:
+        panel.shapes = (*panel.shapes, *shapes)
+    title = compiled.name if compiled is not None else ""
+    up = "y"
+    if compiled is not None:
+        from animsim.render import _up_axis
+
+        up = _up_axis(compiled.scene)
+    return iframe_html(panels_html([panel], title=title, up=up), height=height)
+
+
 @dataclass
 class PanelRun:
     """What :func:`simulate_panel` returns: the panel and the run's outcome."""
@@ -578,5 +627,6 @@ __all__ = [
     "quantise_positions",
     "scene_shapes",
     "simulate_panel",
+    "trajectory_html",
     "viewer_html",
 ]

@@ -13,7 +13,6 @@ import numpy as np
 from animsim.atomic import AtomicFile
 from animsim.errors import UsageError
 
-
 #: pages above this size get a note on stderr (they still work; they open slowly)
 LARGE_PAGE_BYTES = 50_000_000
 

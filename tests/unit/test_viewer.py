@@ -241,3 +241,22 @@ def test_iframe_wraps_the_page_for_a_notebook():
     assert unescape(m.group(1)) == page
     with pytest.raises(ValueError, match="height"):
         iframe_html(page, height=0)
+
+
+def test_a_simulated_trajectory_shows_itself_in_a_notebook():
+    from html import unescape
+
+    import animsim
+
+    traj = animsim.simulate(animsim.loads(PENDULUM, name="bob"))
+    frame = traj._repr_html_()
+    assert frame.startswith("<iframe srcdoc=")
+    page = unescape(re.search(r'srcdoc="([^"]*)"', frame).group(1))
+    (panel,) = page_data(page)["panels"]
+    assert panel["n"] == 2 and len(panel["times"]) == len(traj.times)
+    assert panel["springs"] is not None and panel["pinned"] is not None
+    # The energy of every frame, from the frames, matches the scene's own energy at the start.
+    compiled = traj.compiled
+    state = compiled.fresh_state()
+    start = compiled.dynamics.energy(state.particle_position, state.particle_velocity)
+    assert panel["energy"]["total"][0] == pytest.approx(start, rel=1e-6)
