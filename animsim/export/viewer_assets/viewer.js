@@ -517,6 +517,8 @@ void main() { o = u_col; }`;
       this.el.classList.toggle("frozen", frozen);
       if (frozen) this.mark.textContent = this.data.mark;
       const resized = this.resize();
+      // A page that was hidden (a collapsed notebook cell) gets its plot drawn once it has a size.
+      if (this.data.energy && Math.max(1, Math.round(this.energyCanvas.clientWidth * (window.devicePixelRatio || 1))) !== this.energyW) this.prepareEnergy();
       if (k !== this.lastFrame || force || resized) this.drawScene(k);
       this.lastFrame = k;
       this.drawEnergy(k, t);
@@ -603,6 +605,7 @@ void main() { o = u_col; }`;
       const w = Math.max(1, Math.round(c.clientWidth * dpr)), h = Math.max(1, Math.round(c.clientHeight * dpr));
       c.width = w;
       c.height = h;
+      this.energyW = w;
       const bg = document.createElement("canvas");
       bg.width = w;
       bg.height = h;
@@ -612,7 +615,7 @@ void main() { o = u_col; }`;
       if (!e || !this.frames) {
         g.fillStyle = "#999";
         g.font = `${11 * dpr}px sans-serif`;
-        g.fillText("no energy for this view", 8 * dpr, h / 2);
+        g.fillText("no frames", 8 * dpr, h / 2);
         this.plotBox = null;
         c.getContext("2d").drawImage(bg, 0, 0);
         return;
