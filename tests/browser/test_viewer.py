@@ -110,6 +110,11 @@ def pixels(driver, panel: int) -> np.ndarray:
     return rgba.reshape(shot["height"], shot["width"], 4)
 
 
+def ink_fraction(img: np.ndarray) -> float:
+    """Share of pixels that differ from the corner (background) pixel."""
+    return float(np.any(img[..., :3] != img[0, 0, :3], axis=2).mean())
+
+
 def set_frame(driver, k: int) -> None:
     driver.execute_script(f"window.animsimViewer.setFrame({k})")
     time.sleep(0.15)  # a few animation frames, so overlays follow
@@ -152,6 +157,39 @@ def test_cloth_plays_without_errors_and_the_slider_moves_the_picture(browser, pa
     browser.execute_script(f"{v}.setView('xy')")
     set_frame(browser, 30)
     assert np.any(pixels(browser, 0) != later, axis=2).mean() > 0.002
+    assert severe(browser) == []
+
+
+def test_mouse_orbits_pans_and_zooms(browser, pages):
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.actions.wheel_input import ScrollOrigin
+    from selenium.webdriver.common.keys import Keys
+
+    open_page(browser, pages["cloth"])
+    set_frame(browser, 20)
+    canvas = browser.find_element("css selector", "canvas.as-gl")
+
+    def changed(before, after):
+        return np.any(before != after, axis=2).mean() > 0.002
+
+    start = pixels(browser, 0)
+    ActionChains(browser).drag_and_drop_by_offset(canvas, 80, 30).perform()  # orbit
+    time.sleep(0.15)
+    orbited = pixels(browser, 0)
+    assert changed(start, orbited)
+    ActionChains(browser).key_down(Keys.SHIFT).drag_and_drop_by_offset(canvas, 60, 0).key_up(
+        Keys.SHIFT
+    ).perform()
+    time.sleep(0.15)  # shift-drag pans
+    panned = pixels(browser, 0)
+    assert changed(orbited, panned)
+    ActionChains(browser).scroll_from_origin(ScrollOrigin.from_element(canvas), 0, -400).perform()
+    time.sleep(0.15)  # the wheel zooms in: the cloth covers more of the picture
+    zoomed = pixels(browser, 0)
+    assert ink_fraction(zoomed) > 1.2 * ink_fraction(panned)
+    browser.find_element("id", "as-reset").click()
+    time.sleep(0.15)
+    assert np.array_equal(pixels(browser, 0), start)  # back to where it started
     assert severe(browser) == []
 
 
