@@ -272,7 +272,7 @@ def delta_shuffle(codes: np.ndarray) -> np.ndarray:
     high bytes are mostly 0 or 255: long runs for deflate. Exactly invertible
     (the browser adds the differences back up modulo 2**16).
     """
-    flat = codes.reshape(len(codes), -1).astype(np.int32)
+    flat = codes.reshape(len(codes), int(np.prod(codes.shape[1:]))).astype(np.int32)
     diff = flat.copy()
     diff[1:] -= flat[:-1]
     d16 = (diff % 65536).astype("<u2").reshape(-1)

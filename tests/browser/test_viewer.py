@@ -284,3 +284,19 @@ def test_two_viewers_in_one_notebook_page(browser, tmp_path):
         browser.switch_to.default_content()
     assert labels == ["first", "second"]
     assert severe(browser) == []
+
+
+@pytest.mark.parametrize(("frames", "particles"), [(0, 3), (3, 0), (1, 1)])
+def test_degenerate_runs_open_without_errors(browser, tmp_path, frames, particles):
+    """No frames (a run written to a file only), nothing alive, a single still frame."""
+    from animsim.export.viewer import viewer_html
+
+    page = tmp_path / "edge.html"
+    t = np.arange(frames) * 0.1
+    page.write_text(viewer_html(t, np.zeros((frames, particles, 3)), energies=None), encoding="utf-8")
+    open_page(browser, page)
+    set_frame(browser, 0)
+    browser.find_element("id", "as-play").click()
+    time.sleep(0.3)
+    assert browser.execute_script("return window.animsimViewer.errors") == []
+    assert severe(browser) == []

@@ -260,3 +260,11 @@ def test_a_simulated_trajectory_shows_itself_in_a_notebook():
     state = compiled.fresh_state()
     start = compiled.dynamics.energy(state.particle_position, state.particle_velocity)
     assert panel["energy"]["total"][0] == pytest.approx(start, rel=1e-6)
+
+
+@pytest.mark.parametrize(("frames", "particles"), [(0, 3), (3, 0)])
+def test_empty_runs_make_a_page(frames, particles):
+    data = page_data(viewer_html(np.zeros(frames), np.zeros((frames, particles, 3))))
+    (panel,) = data["panels"]
+    assert panel["n"] == particles and panel["times"] == [0.0] * frames
+    assert panel["pos"]["empty"] is True
