@@ -24,23 +24,10 @@ PARTS = ("kinetic", "rotational", "gravitational", "spring", "other")
 
 
 def term_part(term: Any) -> str:
-    """Which part a force term's potential belongs to.
-
-    An element may say so itself with an ``energy_part`` attribute; otherwise
-    the class name decides: gravity (uniform field) and attractors (point
-    masses) store gravitational energy; Hooke springs (listed, grid and
-    structure springs) store spring energy; anything else with a potential
-    (penalty contact) is "other".
-    """
-    declared = getattr(term, "energy_part", None)
-    if declared in PARTS:
-        return str(declared)
-    name = type(term).__name__.lower()
-    if "gravity" in name or "attractor" in name:
-        return "gravitational"
-    if "spring" in name:
-        return "spring"
-    return "other"
+    """Which part a force term's potential belongs to: the element says so itself
+    (``energy_part``, see :mod:`animsim.elements`); "other" when it names none."""
+    declared = getattr(term, "energy_part", "other")
+    return str(declared) if declared in PARTS else "other"
 
 
 def rotational_energy(system: Any, state: Any) -> float | None:
