@@ -23,7 +23,12 @@ one-step matrix <= 1: closed forms where they are short (explicit Euler
 h <= 2 zeta / omega, i.e. c/k for one spring; symplectic Euler
 h <= 2 (sqrt(zeta^2 + 1) - zeta) / omega, i.e. (sqrt(c^2 + 4km) - c)/k),
 otherwise a scan and bisection of the exact one-step matrix (RK4:
-2 sqrt(2) / omega undamped). Explicit Euler, euler_average, midpoint and
+2 sqrt(2) / omega undamped). The matrices are the integrators' code as
+written, including what a method carries from one step to the next: Verlet
+reuses the acceleration taken at its predicted velocity as the next step's
+first one, so its state is (x, v, a) and, with damping, its limit is lower
+than the textbook velocity Verlet's (2 (sqrt 2 - 1) / omega instead of
+2 / omega at zeta = 0.5). Explicit Euler, euler_average, midpoint and
 Heun amplify an undamped oscillation at every dt > 0 (|R(i y)| > 1 for all
 y != 0), so with zeta = 0 they have no stable dt. Backward Euler is A-stable.
 """
@@ -63,16 +68,30 @@ BISECTION_STEPS = 60
 GROUPING_DIGITS = 12
 
 
+#: size of each method's one-step state: (x, v), and for Verlet (x, v, a) with a
+#: the acceleration it caches from the end of one step for the start of the next
+STATE_SIZE: dict[str, int] = {name: 2 for name in INTEGRATOR_NAMES} | {"verlet": 3}
+
+
 def one_step_matrix(method: str, h: np.ndarray, omega: np.ndarray, zeta: np.ndarray) -> np.ndarray:
-    """The (..., 2, 2) matrix mapping (x, v) to the next step's (x, v) for
+    """The (..., d, d) matrix mapping one step's state to the next for
     x'' = -omega^2 x - 2 zeta omega x', exactly as the method in
-    :mod:`animsim.integrators` computes it."""
+    :mod:`animsim.integrators` computes it (d = STATE_SIZE[method]).
+
+    The state is (x, v), except for Verlet: it reuses the acceleration taken
+    at the end of a step, with the *predicted* velocity v + h a0, as the next
+    step's first acceleration instead of recomputing it at the corrected
+    velocity. That cached a is part of what one step hands to the next, so
+    Verlet's state is (x, v, a); with damping its limit is well below the
+    textbook velocity Verlet's (the 2x2 matrix with a recomputed, Hairer, Lubich
+    and Wanner, "Geometric Numerical Integration", I.1.4).
+    """
     h, omega, zeta = np.broadcast_arrays(
         np.asarray(h, float), np.asarray(omega, float), np.asarray(zeta, float)
     )
     k = omega**2  # stiffness per unit mass
     c = 2.0 * zeta * omega  # damping per unit mass
-    out = np.empty((*h.shape, 2, 2))
+    out = np.zeros((*h.shape, STATE_SIZE.get(method, 2), STATE_SIZE.get(method, 2)))
     if method in RK_POLYNOMIALS:
         # R(hA) for A = [[0, 1], [-k, -c]], by Horner's rule on 2x2 matrices
         a = np.zeros((*h.shape, 2, 2))
@@ -91,20 +110,24 @@ def one_step_matrix(method: str, h: np.ndarray, omega: np.ndarray, zeta: np.ndar
         out[..., 0, 0] = 1.0 + h * out[..., 1, 0]
         out[..., 0, 1] = h * out[..., 1, 1]
         return out
-    if method in ("euler_average", "verlet"):
-        # both: x1 = x + h v + h^2/2 a0, predicted vp = v + h a0
-        x1 = np.stack([1.0 - 0.5 * h * h * k, h - 0.5 * h * h * c], axis=-1)
-        vp = np.stack([-h * k, 1.0 - h * c], axis=-1)
+    if method == "euler_average":
+        # a0 = -k x - c v; v1 = v + h a0; x1 = x + h (v + v1)/2 = x + h v + h^2/2 a0
+        out[..., 0, 0] = 1.0 - 0.5 * h * h * k
+        out[..., 0, 1] = h - 0.5 * h * h * c
+        out[..., 1, 0] = -h * k
+        out[..., 1, 1] = 1.0 - h * c
+        return out
+    if method == "verlet":
+        # State (x, v, a0), a0 the cached acceleration (symplectic.Verlet.step):
+        #   x1 = x + h v + h^2/2 a0,  vp = v + h a0,  a1 = -k x1 - c vp,
+        #   v1 = v + h/2 (a0 + a1),   next a0 = a1.
+        zero, one = np.zeros_like(h), np.ones_like(h)
+        x1 = np.stack([one, h, 0.5 * h * h], axis=-1)
+        vp = np.stack([zero, one, h], axis=-1)
+        a1 = -k[..., None] * x1 - c[..., None] * vp
         out[..., 0, :] = x1
-        if method == "euler_average":
-            out[..., 1, :] = vp
-        else:
-            # v1 = v + h/2 (a0 + a1), a1 = -k x1 - c vp (velocity Verlet, damping at the prediction)
-            a0 = np.stack([-k, -c], axis=-1)
-            a1 = -k[..., None] * x1 - c[..., None] * vp
-            out[..., 1, :] = np.stack([np.zeros_like(h), np.ones_like(h)], axis=-1) + 0.5 * h[..., None] * (
-                a0 + a1
-            )
+        out[..., 1, :] = np.stack([zero, one, 0.5 * h], axis=-1) + 0.5 * h[..., None] * a1
+        out[..., 2, :] = a1
         return out
     if method == "implicit_euler":
         # (I - hA) y1 = y0
@@ -116,8 +139,26 @@ def one_step_matrix(method: str, h: np.ndarray, omega: np.ndarray, zeta: np.ndar
     raise KeyError(method)
 
 
+def initial_state_map(method: str, omega: np.ndarray, zeta: np.ndarray) -> np.ndarray:
+    """(..., d, 2): the method's full state at the start of a run from (x, v).
+
+    Verlet computes its first acceleration, a = -omega^2 x - 2 zeta omega v;
+    every other method's state is (x, v) itself.
+    """
+    omega, zeta = np.broadcast_arrays(np.asarray(omega, float), np.asarray(zeta, float))
+    d = STATE_SIZE.get(method, 2)
+    out = np.zeros((*omega.shape, d, 2))
+    out[..., 0, 0] = out[..., 1, 1] = 1.0
+    if d == 3:
+        out[..., 2, 0] = -(omega**2)
+        out[..., 2, 1] = -2.0 * zeta * omega
+    return out
+
+
 def spectral_radius(m: np.ndarray) -> np.ndarray:
-    """Largest |eigenvalue| of each 2x2 matrix in (..., 2, 2), from trace and determinant."""
+    """Largest |eigenvalue| of each square matrix in (..., d, d) (2x2: from trace and determinant)."""
+    if m.shape[-1] != 2:
+        return np.abs(np.linalg.eigvals(m)).max(axis=-1)
     tr = m[..., 0, 0] + m[..., 1, 1]
     det = m[..., 0, 0] * m[..., 1, 1] - m[..., 0, 1] * m[..., 1, 0]
     disc = np.sqrt((0.25 * tr * tr - det).astype(complex))
