@@ -16,7 +16,6 @@ from typing import Any
 import numpy as np
 
 from animsim import __version__
-from animsim.analysis.watchdog import BLOWUP_FACTOR
 from animsim.compile import Compiled
 from animsim.record import Frame, FrameSink
 from animsim.system import State
@@ -111,7 +110,7 @@ class Guard:
             return None
         with np.errstate(over="ignore", invalid="ignore"):
             h, b, growth = self.watch.growth(state)
-        if growth <= BLOWUP_FACTOR:  # False for NaN too: an overflowed energy is a blow-up
+        if growth <= self.watch.allowance:  # False for NaN too: an overflowed energy is a blow-up
             return None
         particle, spring = self.watch.blame(state)
         reason = f"the mechanical energy {h:.3g} J is {growth:.3g} times what the forces put in ({b:.3g} J)"
