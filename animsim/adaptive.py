@@ -14,7 +14,10 @@ Wanner I, II.4, "Richardson extrapolation"). The step is
   2^(p+1) times the local error, so the doubled step should still pass.
 
 Steps are shortened to land exactly on the record clock's times, without
-changing the step size the controller carries on with.
+changing the step size the controller carries on with, and every step stays
+within [dt_min, dt_max] (:func:`next_step`): a step that would leave less than
+dt_min before a record time is stretched to land on it, or, where that would
+pass dt_max, the rest is split in two equal steps.
 """
 
 from __future__ import annotations
@@ -32,6 +35,40 @@ DOUBLING_BASE = 2.0
 #: a step this close (relative) to the distance left lands on the record time, so
 #: rounding in the accumulated time never leaves a sliver of a step behind
 LANDING_SLACK = 1e-6
+
+
+#: a rest shorter than dt_min by up to this fraction of dt_min counts as a sliver too, so
+#: rounding in the accumulated time cannot turn a rest of exactly dt_min into a step below it
+SLIVER_SLACK = 1e-3
+
+
+def next_step(h: float, distance: float, dt_min: float, dt_max: float) -> tuple[float, bool]:
+    """The step to try next and whether it lands on the record time ``distance`` ahead.
+
+    ``h`` is the controller's step size, kept within [dt_min, dt_max]. The
+    step is h, except near the record time:
+
+    * the whole distance when it is at most h (within LANDING_SLACK), or
+      when a step of h would leave less than dt_min and the distance is at most
+      dt_max (one step of at most h + dt_min instead of h and a sliver);
+    * half the distance when a step of h would leave less than dt_min but the
+      distance is beyond dt_max: two equal steps, each at most dt_max (the
+      distance is below h + dt_min <= 2 dt_max) and at least dt_min whenever
+      dt_max >= 2 dt_min.
+
+    So every step is within [dt_min, dt_max], except one that lands on a
+    record time closer than dt_min to the previous one (the record clock's own
+    spacing, which no step size can avoid).
+    """
+    h = min(max(h, dt_min), dt_max)
+    sliver = distance - h < dt_min * (1.0 + SLIVER_SLACK)
+    if distance <= h * (1.0 + LANDING_SLACK) and distance <= dt_max:
+        return distance, True
+    if sliver:
+        if distance <= dt_max:
+            return distance, True
+        return 0.5 * distance, False
+    return h, False
 
 
 def _copy_into(dst: State, src: State) -> None:
@@ -117,8 +154,7 @@ class StepDoubling:
         nominal = clock.steps
         for target in targets:
             while state.time < target:
-                landing = target - state.time <= h * (1.0 + LANDING_SLACK)
-                h_try = target - state.time if landing else h
+                h_try, landing = next_step(h, target - state.time, self.dt_min, self.dt_max)
                 self.integ.reset()  # Verlet's cached force belongs to one trajectory
                 _copy_into(big, state)
                 self._substep(big, h_try)
