@@ -449,9 +449,18 @@ def _summary(compiled: Any, result: Any, wrote: str | None) -> None:
         f"  wall time {result.wall_time:.3f} s, {result.frames} frames, {result.force_evals} force evaluations",
         f"  energy {result.energy_start:.6g} J -> {result.energy_end:.6g} J, status {result.status}",
     ]
+    lines.extend(_summary_notes(compiled, result))
     if wrote is not None:
         lines.append(f"  wrote {wrote}")
     typer.echo("\n".join(lines), err=stream_err)
+
+
+def _summary_notes(compiled: Any, result: Any) -> list[str]:
+    """Summary lines about what the numbers mean: the method really run."""
+    from animsim.analysis.effective import fallback_note
+
+    note = fallback_note(compiled)
+    return [] if note is None else [f"  note: {note}"]
 
 
 # --- explain ------------------------------------------------------------------------
@@ -479,7 +488,12 @@ def explain(
     )
     typer.echo(f"  {c.clock.steps} steps of {c.clock.dt:g} s to t = {c.clock.duration:g} s, seed {c.seed}")
     typer.echo("each step runs:")
+    from animsim.analysis.effective import fallback_note
+
+    note = fallback_note(c)
     for stage in c.stages:
+        if note is not None and stage.startswith("integrator:"):
+            stage = f"integrator: {note}"  # what the step really computes
         typer.echo(f"  + {stage}")
     typer.echo("left out (the scene does not need them):")
     for item in c.left_out:

@@ -67,6 +67,11 @@ def check_scenes(
         from animsim.analysis import stability
 
         report = stability.analyse(compiled)
+        from animsim.analysis.effective import fallback_note
+
+        fallback = fallback_note(compiled)
+        if fallback is not None:
+            notes.append(f"note: {fallback}")
         if report is not None:
             notes.extend(report.lines())
             if report.dt_exceeds_limit:
