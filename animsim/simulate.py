@@ -296,6 +296,9 @@ def run(
         meta = _meta(compiled, status, state, wall, energy_start, energy_end, frames, failure)
         meta.update(extra_meta)
         meta.update(meta_extra or {})
+        from animsim.analysis.drift import annotate
+
+        annotate(meta, compiled)  # energy drift as a verdict of its own, in the metadata
         if emitters is not None:
             meta["emitters"] = emitters.summary()
         return finish(sinks, state, dyn, status, wall, energy_start, energy_end, frames, failure, meta)

@@ -91,6 +91,9 @@ def run_chunked(
         meta = _meta(compiled, status, state, wall, energy_start, energy_end, frames, failure)
         meta["backend"] = compiled.backend
         meta.update(meta_extra or {})
+        from animsim.analysis.drift import annotate
+
+        annotate(meta, compiled)  # energy drift as a verdict of its own, in the metadata
         return finish(sinks, state, dyn, status, wall, energy_start, energy_end, frames, failure, meta)
     except BaseException:
         for sink in sinks:
