@@ -29,7 +29,7 @@ def _energy_report(compiled: Any, result: Any, drift_warn: float) -> str:
     verdict = drift(compiled, result.energy_start, result.energy_end, drift_warn)
     if verdict.relative is None:
         return f"{text}, {verdict.text()}"
-    return f"{text}, {verdict.text()} (conservative: the drift is integration error)"
+    return f"{text}, {verdict.text()}: integration error, the scene being conservative"
 
 
 def check_scenes(
