@@ -75,7 +75,9 @@ def test_check_reports_the_drift_and_warns(tmp_path):
     scene.write_text(GAINING_SPRING)
     res = run_cli("check", scene)
     assert res.returncode == 0, res.stderr  # stable: a warning, not a failure
-    assert "energy drift +" in res.stdout and ": integration error, the scene being conservative" in res.stdout
+    assert (
+        "energy drift +" in res.stdout and ": integration error, the scene being conservative" in res.stdout
+    )
     assert f"{scene}: warning: energy drift" in res.stderr
     res = run_cli("check", scene, "--drift-warn", "1e4")
     assert res.returncode == 0 and "warning" not in res.stderr
