@@ -9,7 +9,8 @@ BLOWUP_FACTOR times what the forces put in, times the method's own bounded
 energy swing at that step when the step is within its limit. For each method the step dt of an
 undamped oscillator (k = 1 N/m, m = 1 kg, omega = 1 rad/s, released from rest
 at 0.1 m stretch) is bisected between a stable and an unstable value, for a
-fixed number of steps (the horizon). Methods with a real stability limit give
+fixed number of steps (the horizon). The rest length is long (1000 m) so the
+spring stays linear over the large but bounded swings near a limit. Methods with a real stability limit give
 the same number at every horizon; weakly unstable ones (|R| > 1 for every
 dt > 0) give a number that shrinks as the horizon grows, which is the point.
 The theory column comes from :mod:`animsim.analysis.stability`.
@@ -40,9 +41,9 @@ dt: {dt!r}
 integrator: {method}
 particles:
   - {{id: anchor, pinned: true, position: [0, 0, 0]}}
-  - {{id: bob, mass: 1.0, position: [1.1, 0, 0]}}
+  - {{id: bob, mass: 1.0, position: [1000.1, 0, 0]}}
 springs:
-  - {{between: [anchor, bob], ks: 1.0, rest: 1.0}}
+  - {{between: [anchor, bob], ks: 1.0, rest: 1000.0}}
 """
 
 
@@ -114,7 +115,8 @@ euler_average, midpoint and Heun, which amplify an undamped oscillation at
 every step size (|R(iy)| > 1 for all y != 0).
 
 **Measured** is what animsim's own watchdog lets through: the step of a
-k = 1 N/m, m = 1 kg oscillator released from 0.1 m stretch is bisected
+k = 1 N/m, m = 1 kg oscillator (rest length 1000 m, so it stays linear)
+released from 0.1 m stretch is bisected
 ({bisection} steps, omega*dt searched in [{lo:g}, {hi:g}]) between a run that
 ends `ok` and one the watchdog stops as `unstable` (a value not finite, or
 the energy above {factor:g} times what the forces put in, times the bounded
