@@ -44,9 +44,9 @@ def check_scenes(
     """``limits`` (a preflight.RunLimits) bounds every scene as ``animsim run`` would;
     ``drift_warn`` (percent) is the energy drift above which a conservative scene gets a warning."""
     from animsim.analysis.drift import DEFAULT_DRIFT_WARN_PERCENT, drift
-    from animsim.cli import prepare_scene
+    from animsim.api import prepare_file as prepare_scene
     from animsim.compile import compile_scene
-    from animsim.simulate import STATUS_OK, run
+    from animsim.engine import STATUS_OK, run
 
     warn = DEFAULT_DRIFT_WARN_PERCENT if drift_warn is None else drift_warn
     all_ok = True

@@ -55,10 +55,10 @@ ESTIMATE_LOW, ESTIMATE_HIGH = 0.5, 3.0
 @pytest.mark.parametrize("rate,cap", [(1e6, 1000), (1e5, 20_000), (2e6, 100)])
 def test_the_estimate_is_close_to_the_traced_memory_of_a_run(rate, cap):
     from animsim.compile import compile_scene
+    from animsim.engine import STATUS_OK, run
     from animsim.preflight import estimate, step_count
     from animsim.record import MemorySink
     from animsim.scene.loader import load_scene_text
-    from animsim.simulate import STATUS_OK, run
 
     loaded = load_scene_text(spray(rate, cap))
     est = estimate(loaded.scene, step_count(1.0, 0.01, 10**8)).memory

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from animsim.adaptive import next_step
-from animsim.simulate import STATUS_OK
+from animsim.engine import STATUS_OK
+from animsim.steppers import next_step
 from tests.conftest import simulate_text
 
 # Record times every 1.000006 ms against dt_max = 1 ms: a step of dt_max leaves 6e-9 s before

@@ -14,7 +14,7 @@ import pytest
 
 from animsim.analysis.stability import analyse, energy_excursion, one_step_matrix
 from animsim.analysis.watchdog import BLOWUP_FACTOR, ENERGY_FLOOR_J
-from animsim.simulate import STATUS_OK, STATUS_UNSTABLE
+from animsim.engine import STATUS_OK, STATUS_UNSTABLE
 from tests.conftest import simulate_text
 
 # A long rest length keeps the 1-D spring linear over the near-limit swing (amplitude up to 2 m).
