@@ -381,7 +381,7 @@ def _lattice(dims: int) -> Any:
 class _StructureCommon(Model):
     """What every structure has: an id prefix, per-particle mass, start velocity, pins."""
 
-    id: StrictStr = Doc(description="particle ids become <id>[i,...]", min_length=1, example="sheet")
+    id: StrictStr = Doc(description="particle ids become <id>[i,j]", min_length=1, example="sheet")
     mass: Positive = Doc(description="mass of each particle", unit="kg", example=0.01)
     velocity: Vec3 = Doc([0.0, 0.0, 0.0], "initial velocity of every particle", unit="m/s")
     pin: list[Id] = Doc([], "ids of particles held in place", example=["sheet[0,0]", "sheet[19,0]"])
@@ -420,6 +420,9 @@ class Strand(_StructureCommon):
     """Hair, rope or chain: particles in a line, stretch springs and skip-one bend springs."""
 
     type: Literal["strand"] = Doc(description="selects this structure")
+    # id and pin again only for examples that fit a strand (the order of keys stays the common one)
+    id: StrictStr = Doc(description="particle ids become <id>[i]", min_length=1, example="hair")
+    pin: list[Id] = Doc([], "ids of particles held in place", example=["hair[0]"])
     start: Vec3 = Doc(description="position of particle [0]", unit="m", example=[0, 2, 0])
     end: Vec3 = Doc(description="position of the last particle [count-1]", unit="m", example=[0, 1, 0])
     count: Annotated[StrictInt, Field(ge=2, le=MAX_STRAND_COUNT)] = Doc(
@@ -439,6 +442,8 @@ class SoftBox(_StructureCommon):
     """A jello cube: a 3-D lattice with edge, face-diagonal and body-diagonal springs."""
 
     type: Literal["soft_box"] = Doc(description="selects this structure")
+    id: StrictStr = Doc(description="particle ids become <id>[i,j,k]", min_length=1, example="jello")
+    pin: list[Id] = Doc([], "ids of particles held in place", example=["jello[0,0,0]"])
     center: Vec3 = Doc([0.0, 0.0, 0.0], "centre of the box", unit="m", example=[0, 1, 0])
     size: Annotated[list[Positive], Field(min_length=3, max_length=3)] = Doc(
         description="edge lengths along x, y, z", unit="m", example=[0.5, 0.5, 0.5]
@@ -550,8 +555,33 @@ class Scene(Model):
         "infinite one-sided colliders (a floor, a wall)",
         example=[{"point": [0, 0, 0], "normal": [0, 1, 0]}],
     )
-    emitters: list[Emitter] = Doc([], "particle systems")
-    structures: list[Structure] = Doc([], "generators of particles and springs: cloth, strand, soft_box")
+    emitters: list[Emitter] = Doc(
+        [],
+        "particle systems",
+        example=[
+            {
+                "name": "smoke",
+                "rate": 200,
+                "shape": {"type": "point", "position": [0, 0, 0]},
+                "lifetime": {"mean": 2.0},
+            }
+        ],
+    )
+    structures: list[Structure] = Doc(
+        [],
+        "generators of particles and springs: cloth, strand, soft_box",
+        example=[
+            {
+                "type": "strand",
+                "id": "rope",
+                "start": [0, 2, 0],
+                "end": [1, 2, 0],
+                "count": 10,
+                "mass": 0.1,
+                "stretch": {"ks": 500},
+            }
+        ],
+    )
 
     @property
     def integrator_name(self) -> str:
