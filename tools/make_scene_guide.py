@@ -67,7 +67,7 @@ def _cell(text: str) -> str:
 
 
 def _anchor(def_name: str) -> str:
-    return "key-" + re.sub(r"(?<!^)(?=[A-Z])", "-", def_name).lower()
+    return "key-" + re.sub(r"[^a-z0-9]+", "-", _title(def_name)).strip("-")
 
 
 def _bounds(p: dict[str, Any]) -> str:
@@ -124,8 +124,12 @@ def type_text(p: dict[str, Any]) -> str:
     return "any"
 
 
+# Headings for models whose class name reads badly as one.
+TITLES = {"IntegratorSpec": "integrator as a mapping", "Scene": "scene"}
+
+
 def _title(def_name: str) -> str:
-    return re.sub(r"(?<!^)(?=[A-Z])", " ", def_name).lower()
+    return TITLES.get(def_name) or re.sub(r"(?<!^)(?=[A-Z])", " ", def_name).lower()
 
 
 # --- the key reference -----------------------------------------------------------------
