@@ -92,3 +92,14 @@ def test_the_tutorial_scenes_check_clean(tmp_path):
     proc = run_cli("check", *names, cwd=tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert proc.stdout.count(": ok (") == 4, proc.stdout
+
+
+def test_every_key_row_has_meaning_and_example():
+    rows = [r for r in GUIDE.read_text(encoding="utf-8").splitlines() if r.startswith("| `")]
+    keys = [r for r in rows if r.count(" | ") >= 5]  # the six-column key tables
+    assert len(keys) > 100
+    for row in keys:
+        cells = [c.strip() for c in row.strip("|").split(" | ")]
+        key, meaning, example = cells[0], cells[-2], cells[-1]
+        assert meaning, row
+        assert example.startswith(f"`{key.strip('`')}: "), row
