@@ -20,7 +20,7 @@ are thrown away; ``animsim`` means this checkout's ``python -m animsim``.
 
 What changes from run to run is normalised before comparing (never in the
 written file): wall-clock times (the ``wall_time`` and ``seconds`` columns,
-``wall time 0.52 s``, ``steps, 0.94 s;``), absolute paths, table rules and
+``wall time 0.52 s``, ``steps, 0.94 s;``, ``about 12 s`` estimates), absolute paths, table rules and
 column padding (a wider time can widen a column and move a wrap). Everything
 else, every number of the physics included, must match exactly.
 ``tests/unit/test_docs_outputs.py`` runs :func:`stale_blocks`.
@@ -50,6 +50,7 @@ TIMING_TEXT = [
     (re.compile(r"wall time \d+(?:\.\d+)? s"), "wall time <time> s"),
     (re.compile(r"steps, \d+(?:\.\d+)? s;"), "steps, <time> s;"),
     (re.compile(r"\d+(?:\.\d+)? s wall"), "<time> s wall"),
+    (re.compile(r"about \d+(?:\.\d+)? (?:s|min)\b"), "about <time>"),  # compare's cost estimate
 ]
 BOX = re.compile(r"[│┃━─╇┿╈╋┏┓┗┛┡┩┳┻├┤┼└┘┌┐┬┴╭╮╰╯═║╔╗╚╝╠╣╦╩╬]")
 

@@ -117,3 +117,10 @@ def test_quoted_outputs_are_what_the_commands_print_now():
         "stale command output in the docs (run python tools/make_docs_outputs.py): "
         + ", ".join(f"{b.file.name}: {b.command}" for b, _ in stale)
     )
+
+
+def test_normalise_hides_the_cost_estimate():
+    a = "comparing 3 methods at 4 step sizes: 24 runs, 9,000 steps on numba: about 2.3 s plus the reference"
+    b = a.replace("about 2.3 s", "about 1.4 min")
+    assert mdo.normalise(a) == mdo.normalise(b)
+    assert mdo.normalise(a) != mdo.normalise(a.replace("9,000", "9,001"))
