@@ -23,9 +23,8 @@ from animsim.integrators import integrator_class
 from animsim.integrators.base import Integrator
 from animsim.record import Clock, TrajectoryHeader, record_steps
 from animsim.scene import models as m
-from animsim.scene.structures import expand
+from animsim.scene.structures import connectivity, expand
 from animsim.system import State, System
-
 
 
 @dataclass
@@ -302,6 +301,7 @@ def compile_scene(
                 (np.array(p.point), np.array(p.normal) / np.linalg.norm(p.normal)) for p in scene.planes
             ]
         },
+        connectivity=connectivity([(s.id, e, base) for s, e, base in expanded]),
     )
     initial = State(
         particle_position=particle_position,

@@ -171,11 +171,25 @@ def register(model: type) -> Callable[[Builder], Builder]:
     return wrap
 
 
+#: packages whose every module may hold elements (found, not listed: a new force family
+#: is a new module in animsim/forces and nothing else here)
+ELEMENT_PACKAGES = ("animsim.forces",)
+#: single modules that hold elements
+ELEMENT_MODULES = ("animsim.collisions",)
+
+
+@functools.cache
 def _load_element_modules() -> None:
-    # Importing a module registers its builders; the list is the one place that
-    # names them, like an entry-point table.
-    from animsim import collisions  # noqa: F401
-    from animsim.forces import attractor, drag, gravity, penalty, wind  # noqa: F401
+    # Importing a module registers its builders.
+    import importlib
+    import pkgutil
+
+    for package in ELEMENT_PACKAGES:
+        pkg = importlib.import_module(package)
+        for info in pkgutil.iter_modules(pkg.__path__):
+            importlib.import_module(f"{package}.{info.name}")
+    for module in ELEMENT_MODULES:
+        importlib.import_module(module)
 
 
 def build_elements(specs: Iterable[Any], ctx: BuildContext) -> list[Any]:

@@ -568,9 +568,7 @@ class Emitters(StepStage):
         if changed:
             state.revision += 1  # integrators that cache a force must recompute it
 
-    def _move_newborns(
-        self, state: State, idx: np.ndarray, rest: np.ndarray, t_mid: float
-    ) -> None:
+    def _move_newborns(self, state: State, idx: np.ndarray, rest: np.ndarray, t_mid: float) -> None:
         """x += r v0 + r^2/2 a0, v += r a0 for the rest r of the birth step; then planes."""
         x, v = state.particle_position, state.particle_velocity
         assert self._accel is not None

@@ -20,6 +20,7 @@ import numpy as np
 from animsim import __version__
 from animsim.analysis.watchdog import BLOWUP_FACTOR
 from animsim.compile import Compiled
+from animsim.export.meta import run_facts
 from animsim.record import Frame, FrameSink
 from animsim.system import State
 
@@ -428,4 +429,5 @@ def _meta(
     }
     if failure is not None:
         meta["failure"] = failure.as_dict()
+    meta.update(run_facts(compiled, state))
     return meta

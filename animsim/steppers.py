@@ -159,9 +159,7 @@ class StepByStep(_Base):
     def __init__(self, compiled: Any, numba: bool = False):
         super().__init__(compiled, numba)
 
-    def advance(
-        self, state: State, k: int, goal: int, max_steps: int | None = None
-    ) -> tuple[int, Any, bool]:
+    def advance(self, state: State, k: int, goal: int, max_steps: int | None = None) -> tuple[int, Any, bool]:
         clock = self.clock
         stop = goal if max_steps is None else min(goal, k + max_steps)
         while k < stop:
@@ -176,7 +174,9 @@ class Fused(_Base):
 
     def __init__(self, compiled: Any):
         super().__init__(compiled, numba=True)
-        self.times = np.array([compiled.clock.time(i) for i in range(compiled.clock.steps + 1)])
+        clock = compiled.clock
+        self.times = np.array([clock.time(i) for i in range(clock.steps + 1)])
+        self.dts = np.array([clock.step_size(i) for i in range(clock.steps)])
         self.fused: Any = None
 
     def prepare(self, state: State, notice: Callable[[str], None] | None) -> float:
@@ -197,14 +197,12 @@ class Fused(_Base):
         if self.fused is not None:
             self.fused.reset()
 
-    def advance(
-        self, state: State, k: int, goal: int, max_steps: int | None = None
-    ) -> tuple[int, Any, bool]:
+    def advance(self, state: State, k: int, goal: int, max_steps: int | None = None) -> tuple[int, Any, bool]:
         stop = goal if max_steps is None else min(goal, k + max_steps)
         failed = False
         while k < stop and not failed:
             end = min(stop, k + self.fused.max_steps_per_call)
-            taken, evals, failed = self.fused.advance(state, self.times[k : end + 1])
+            taken, evals, failed = self.fused.advance(state, self.times[k:end], self.dts[k:end])
             self.compiled.dynamics.evaluations += evals
             k += taken
             state.step = k
@@ -289,9 +287,7 @@ class StepDoubling(_Base):
         for _ in range(halves):
             self._one(trial, h / halves, trial.time + h / halves)
 
-    def advance(
-        self, state: State, k: int, goal: int, max_steps: int | None = None
-    ) -> tuple[int, Any, bool]:
+    def advance(self, state: State, k: int, goal: int, max_steps: int | None = None) -> tuple[int, Any, bool]:
         from animsim.analysis.stability import particle_name
         from animsim.engine import Failure
 

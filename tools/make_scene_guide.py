@@ -42,7 +42,7 @@ def _num(x: float | int) -> str:
     return str(x) if isinstance(x, int) else f"{x:g}"
 
 
-_PLAIN = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+_PLAIN = re.compile(r"^[A-Za-z_][A-Za-z0-9_./-]*$")
 
 
 def flow(value: Any) -> str:
@@ -387,6 +387,11 @@ def render_indices() -> list[str]:
         "| family | pairs |",
         "| --- | --- |",
         *_offsets_text(spec),
+        "",
+        "### mesh: `<id>[k]`",
+        "",
+        "`k` is the vertex's index in the file, counted from 0 in the order the file",
+        "lists its vertices; `pin` takes these indices (or `{inside: {min, max}}`).",
         "",
     ]
     return out

@@ -49,7 +49,7 @@ def check_scenes(
     limits: Any = None,
 ) -> bool:
     """``limits`` (a preflight.RunLimits) bounds every scene as ``animsim run`` would."""
-    from animsim.cli import prepare_scene
+    from animsim.api import prepare_file as prepare_scene
     from animsim.compile import compile_scene
     from animsim.engine import STATUS_OK, run
 

@@ -19,6 +19,7 @@ from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
+    PrivateAttr,
     StrictBool,
     StrictInt,
     StrictStr,
@@ -36,6 +37,8 @@ IntegratorName = Literal[
     "verlet",
     "implicit_euler",
 ]
+#: the "file" of diagnostics about a scene built in Python (it has no lines)
+PYTHON_SOURCE = "<python>"
 #: the names, in the order of the integrator table
 INTEGRATOR_NAMES: tuple[str, ...] = get_args(IntegratorName)
 DEFAULT_INTEGRATOR = "symplectic_euler"
@@ -466,8 +469,90 @@ class SoftBox(_StructureCommon):
     )
 
 
-Structure = Annotated[Cloth | Strand | SoftBox, Field(discriminator="type")]
-STRUCTURE_TYPES = ("cloth", "strand", "soft_box")
+class AxisAngle(Model):
+    """A right-handed rotation about ``axis`` by ``angle`` degrees."""
+
+    axis: Vec3 = Doc(
+        description="the rotation axis; need not be unit length; must not be zero", example=[0, 1, 0]
+    )
+    angle: FiniteFloat = Doc(description="right-handed about the axis", unit="degrees", example=90)
+
+    @field_validator("axis")
+    @classmethod
+    def _nonzero(cls, v: tuple[float, float, float]) -> tuple[float, float, float]:
+        if v == (0.0, 0.0, 0.0):
+            raise ValueError("the axis must not be zero")
+        return v
+
+
+class PinBox(Model):
+    """An axis-aligned box in world coordinates."""
+
+    min: Vec3 = Doc(description="the corner with the smallest x, y, z", unit="m", example=[-1, 1.9, -1])
+    max: Vec3 = Doc(description="the corner with the largest x, y, z", unit="m", example=[1, 2.1, 1])
+
+    @model_validator(mode="after")
+    def _ordered(self) -> PinBox:
+        if any(a > b for a, b in zip(self.min, self.max, strict=True)):
+            raise ValueError("min must not exceed max in any axis")
+        return self
+
+
+class PinInside(Model):
+    """Pins chosen by place instead of by index."""
+
+    inside: PinBox = Doc(
+        description="pin every vertex inside this box (world coordinates, after scale, rotation and position)",
+        example={"min": [-1, 1.9, -1], "max": [1, 2.1, 1]},
+    )
+
+
+MAX_MESH_VERTICES = 200_000
+
+
+class MeshStructure(Model):
+    """A triangle or polygon mesh from a file, turned into particles and springs."""
+
+    type: Literal["mesh"] = Doc(description="selects this structure")
+    id: StrictStr = Doc(
+        description="particle ids become <id>[k], k = the vertex's index in the file",
+        min_length=1,
+        example="bunny",
+    )
+    file: StrictStr = Doc(
+        description="OBJ or PLY (STL with the 'mesh' extra), relative to the scene file",
+        min_length=1,
+        example="bunny.obj",
+    )
+    mode: Literal["soft_body", "cloth"] = Doc(
+        description="soft_body: a closed surface kept full by interior struts; cloth: a sheet",
+        example="soft_body",
+    )
+    mass: Positive = Doc(description="total mass, spread over the vertices by area", unit="kg", example=1.0)
+    scale: Positive = Doc(1.0, "factor applied to the file's coordinates first", example=0.01)
+    rotation: AxisAngle | None = Doc(
+        None, "applied after scale, before position", example={"axis": [1, 0, 0], "angle": -90}
+    )
+    position: Vec3 = Doc([0.0, 0.0, 0.0], "added after scale and rotation", unit="m", example=[0, 1, 0])
+    velocity: Vec3 = Doc([0.0, 0.0, 0.0], "initial velocity of every vertex", unit="m/s")
+    stretch: SpringFamily | None = Doc(None, "one spring per mesh edge", example={"ks": 500, "kd": 0.5})
+    bend: SpringFamily | None = Doc(
+        None, "across each interior edge, between the two opposite vertices", example={"ks": 50, "kd": 0.05}
+    )
+    volume: SpringFamily | None = Doc(
+        None, "soft_body only: interior struts that keep the volume", example={"ks": 200, "kd": 0.2}
+    )
+    pin: list[Annotated[StrictInt, Field(ge=0)]] | PinInside = Doc(
+        [], "vertex indices, or {inside: {min, max}}", example=[0, 5]
+    )
+
+    # The geometry read from ``file`` (animsim.scene.meshes.MeshGeometry),
+    # attached by the loader once the file has been checked; not a scene key.
+    _geometry: Any = PrivateAttr(None)
+
+
+Structure = Annotated[Cloth | Strand | SoftBox | MeshStructure, Field(discriminator="type")]
+STRUCTURE_TYPES = ("cloth", "strand", "soft_box", "mesh")
 
 
 # --- integrator, record, scene ----------------------------------------------
@@ -527,6 +612,9 @@ class Scene(Model):
         json_schema_extra={"$schema": "https://json-schema.org/draft/2020-12/schema"},
     )
 
+    #: where a loaded scene came from ({"file", "sha256"}), for the metadata; not part of the scene
+    _source: dict[str, str] | None = PrivateAttr(default=None)
+
     name: StrictStr | None = Doc(None, "the scene's name; defaults to the file stem", example="projectile")
     duration: Positive = Doc(description="simulated time", unit="s", example=2.0)
     dt: Positive = Doc(DEFAULT_DT, "step size; at most duration", unit="s", example=0.001)
@@ -569,7 +657,7 @@ class Scene(Model):
     )
     structures: list[Structure] = Doc(
         [],
-        "generators of particles and springs: cloth, strand, soft_box",
+        "generators of particles and springs: cloth, strand, soft_box, mesh",
         example=[
             {
                 "type": "strand",
@@ -582,6 +670,25 @@ class Scene(Model):
             }
         ],
     )
+
+    @model_validator(mode="after")
+    def _cross_checks(self, info: Any) -> Scene:
+        """The rules that span sections (a spring to an unknown id, ...), for scenes built in
+        Python. The loader runs them itself, with line marks (context ``{"marks": True}``)."""
+        if info.context and info.context.get("marks"):
+            return self
+        from animsim.errors import Diagnostic, SceneError
+        from animsim.scene.validate import check_scene
+
+        problems = check_scene(self)
+        if problems:
+            raise SceneError(
+                [
+                    Diagnostic(PYTHON_SOURCE, 0, 0, ".".join(str(p) for p in path), message)
+                    for path, message, _ in problems
+                ]
+            )
+        return self
 
     @property
     def integrator_name(self) -> str:
