@@ -195,11 +195,27 @@ class Attractor(Model):
     )
 
 
+class Vortex(Model):
+    type: Literal["vortex"]
+    center: Vec3 = Field([0.0, 0.0, 0.0], description="a point on the vortex axis, m")
+    axis: Vec3 = Field([0.0, 1.0, 0.0], description="direction of the axis (need not be unit length)")
+    k: FiniteFloat = Field(
+        description="swirl strength, N/m: f = k * (axis x r); negative turns the other way"
+    )
+
+    @field_validator("axis")
+    @classmethod
+    def _axis_not_zero(cls, value: list[float]) -> list[float]:
+        if not any(value):
+            raise ValueError("the axis must not be zero")
+        return value
+
+
 Force = Annotated[
-    Gravity | Drag | QuadraticDrag | Wind | Attractor,
+    Gravity | Drag | QuadraticDrag | Wind | Attractor | Vortex,
     Field(discriminator="type"),
 ]
-FORCE_TYPES = ("gravity", "drag", "quadratic_drag", "wind", "attractor")
+FORCE_TYPES = ("gravity", "drag", "quadratic_drag", "wind", "attractor", "vortex")
 
 
 # --- planes -----------------------------------------------------------------
