@@ -196,11 +196,15 @@ class Attractor(Model):
 
 
 class Vortex(Model):
-    type: Literal["vortex"]
-    center: Vec3 = Field([0.0, 0.0, 0.0], description="a point on the vortex axis, m")
-    axis: Vec3 = Field([0.0, 1.0, 0.0], description="direction of the axis (need not be unit length)")
-    k: FiniteFloat = Field(
-        description="swirl strength, N/m: f = k * (axis x r); negative turns the other way"
+    """A swirl about an axis: f = k * (axis x r), r = position - center."""
+
+    type: Literal["vortex"] = Doc(description="selects this force")
+    center: Vec3 = Doc([0.0, 0.0, 0.0], "a point on the vortex axis", unit="m", example=[0, 0, 0])
+    axis: Vec3 = Doc([0.0, 1.0, 0.0], "direction of the axis (need not be unit length)", example=[0, 1, 0])
+    k: FiniteFloat = Doc(
+        description="swirl strength: f = k * (axis x r); negative turns the other way",
+        unit="N/m",
+        example=2.0,
     )
 
     @field_validator("axis")
@@ -651,7 +655,7 @@ class Scene(Model):
     )
     forces: list[Force] = Doc(
         [],
-        "forces on every particle: gravity, drag, quadratic_drag, wind, attractor",
+        "forces on every particle: gravity, drag, quadratic_drag, wind, attractor, vortex",
         example=[{"type": "gravity"}],
     )
     planes: list[Plane] = Doc(
