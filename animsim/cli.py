@@ -545,6 +545,12 @@ def render(
     dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
     duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
+    integrators: Annotated[
+        str | None,
+        typer.Option(
+            "--integrators", help="Comma-separated methods: the scene once per method, panels side by side."
+        ),
+    ] = None,
     *,
     limits: Any = None,
 ) -> None:
@@ -567,6 +573,11 @@ def render(
         if out is not None:
             check_output_path(out, source)
     from_file = is_trajectory(source)
+    if integrators is not None:
+        _render_side_by_side(
+            source, integrators, gif, mp4, opts, from_file, integrator, dt, duration, quiet, limits
+        )
+        return
     compiled = None
     scene_path = scene if from_file else source
     if scene_path is not None:
@@ -596,6 +607,48 @@ def render(
         raise typer.Exit(EXIT_INTERRUPTED)
 
 
+def _render_side_by_side(
+    source: Path,
+    integrators: str,
+    gif: Path | None,
+    mp4: Path | None,
+    opts: Any,
+    from_file: bool,
+    integrator: str | None,
+    dt: float | None,
+    duration: float | None,
+    quiet: bool,
+    limits: Any,
+) -> None:
+    """`render --integrators`: one panel per method, side by side, in one animation."""
+    from animsim.analysis.compare import parse_integrators
+    from animsim.export.side_by_side import compile_each, render_side_by_side
+    from animsim.scene import models as m
+
+    if from_file:
+        raise UsageError(
+            "--integrators simulates the scene once per method: give the scene, not a trajectory"
+        )
+    if integrator is not None:
+        raise UsageError("give --integrator or --integrators, not both")
+    names = parse_integrators(integrators)
+    loaded, sc, _ = prepare_scene(source, limits, dt=dt, duration=duration)
+    sc = sc.model_copy(update={"record": m.Record(fps=opts.fps)})
+    compiled = compile_each(sc, loaded.name, names)
+    with _graceful_stop() as stop:
+        result = render_side_by_side(compiled, gif, mp4, opts, stop=stop)
+    if result.status == "interrupted":
+        raise typer.Exit(EXIT_INTERRUPTED)
+    if not quiet:
+        outs = " and ".join(str(p) for p in result.outputs)
+        typer.echo(
+            f"wrote {outs}: {len(names)} panels ({', '.join(names)}), {result.frames} frames at {opts.fps:g} fps"
+        )
+    # A method that blows up is what the picture is there to show, not a failure of the command.
+    if result.status == "unstable":
+        _err(f"{source}: a panel is marked: {result.failure.describe()}")
+
+
 @contextmanager
 def _frame_progress(total: int | None, quiet: bool):
     if quiet or total is None or total < 50 or not sys.stderr.isatty():
@@ -606,6 +659,76 @@ def _frame_progress(total: int | None, quiet: bool):
     with Progress(transient=True, console=_stderr_console()) as bar:
         task = bar.add_task("rendering", total=total)
         yield lambda done: bar.update(task, completed=done)
+
+
+# --- view ---------------------------------------------------------------------------------
+
+
+@app.command()
+@limit_options
+def view(
+    source: Annotated[
+        Path,
+        typer.Argument(
+            help="A scene (simulated first) or a trajectory (.csv, .npz).", metavar="SCENE_OR_TRAJECTORY"
+        ),
+    ],
+    output: Annotated[Path, typer.Option("-o", "--output", help="The HTML file to write.")],
+    integrators: Annotated[
+        str | None,
+        typer.Option("--integrators", help="Comma-separated methods: one panel per method, played in step."),
+    ] = None,
+    fps: Annotated[float, typer.Option("--fps", help="Frames per second recorded for playback.")] = 25.0,
+    view: Annotated[str, typer.Option("--view", help="The view it opens with: 3d, xy, xz or yz.")] = "3d",
+    scene: Annotated[
+        Path | None,
+        typer.Option("--scene", help="The scene of a trajectory, for springs, pins, planes and energy."),
+    ] = None,
+    integrator: Annotated[str | None, typer.Option(help="Override the scene's integrator.")] = None,
+    dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
+    duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
+    *,
+    limits: Any = None,
+) -> None:
+    """Write one self-contained HTML page that plays the animation (opens offline, in any current browser).
+
+    Play and pause, a time slider, playback speed, a 3D view to orbit, pan and
+    zoom (and xy, xz, yz views), springs, planes, pinned particles, colour and
+    size over life, and an energy plot whose cursor follows the time. With
+    --integrators the scene runs once per method, the panels side by side.
+    """
+    from animsim.export.viewer import VIEWS
+
+    if view not in VIEWS:
+        raise UsageError(f"--view {view!r}: choose one of {', '.join(VIEWS)}")
+    if not (fps > 0 and fps < float("inf")):
+        raise UsageError(f"--fps {fps}: must be a number > 0")
+    if output.suffix.lower() not in (".html", ".htm"):
+        raise UsageError(f"-o {output}: the file name must end in .html")
+    check_output_path(output, source)
+    from animsim.export.viewer_command import write_view
+
+    summary = write_view(
+        source,
+        output,
+        prepare=lambda path, **kw: prepare_scene(path, limits, **kw),
+        integrators=integrators,
+        fps=fps,
+        view=view,
+        scene=scene,
+        integrator=integrator,
+        dt=dt,
+        duration=duration,
+        stop_context=_graceful_stop,
+    )
+    if summary.interrupted:
+        _err(f"{source}: interrupted; {output} was not written")
+        raise typer.Exit(EXIT_INTERRUPTED)
+    if not quiet:
+        typer.echo(summary.text)
+    for note in summary.notes:
+        _err(f"{source}: {note}")
 
 
 # --- sweep ------------------------------------------------------------------------------
@@ -710,7 +833,9 @@ def sweep(
     if output is not None:
         sw.write_csv(table, output)
     if plot is not None:
-        sw.plot_table(table, plot, x_key, y_col)
+        from animsim.export import sweep_plot
+
+        sweep_plot.plot_table(table, plot, x_key, y_col)
     counts = table.counts()
     if scheduler is not None:
         where = "Dask LocalCluster" if scheduler == "local" else f"Dask at {scheduler}"
@@ -889,6 +1014,7 @@ def _compare_progress(total: int):
 class PlotKind(StrEnum):
     trajectory = "trajectory"
     energy = "energy"
+    phase = "phase"
 
 
 @app.command()
@@ -902,7 +1028,12 @@ def plot(
     ],
     output: Annotated[Path, typer.Option("-o", "--output", help="Picture file: .png, .svg or .pdf.")],
     kind: Annotated[
-        PlotKind, typer.Option("--kind", help="Paths of particles, or energy against time.")
+        PlotKind,
+        typer.Option(
+            "--kind",
+            help="Paths of particles; energy against time (kinetic, gravitational, spring, ...); "
+            "or phase: position against velocity per particle and axis.",
+        ),
     ] = PlotKind.trajectory,
     scene: Annotated[
         Path | None, typer.Option("--scene", help="The scene of a trajectory (needed for --kind energy).")
@@ -913,11 +1044,19 @@ def plot(
     integrator: Annotated[str | None, typer.Option(help="Override the scene's integrator.")] = None,
     dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
     duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
+    integrators: Annotated[
+        str | None,
+        typer.Option("--integrators", help="--kind phase: comma-separated methods, overlaid."),
+    ] = None,
+    particles: Annotated[
+        str | None,
+        typer.Option("--particles", help="--kind phase: comma-separated particle ids; default up to 3."),
+    ] = None,
     *,
     limits: Any = None,
 ) -> None:
-    """Draw particle paths or the energy (kinetic, potential, total, and drift) of a run."""
-    from animsim.export.pictures import figure_format, plot_energy, plot_trajectory
+    """Draw particle paths, the energy of a run split into its parts (and its drift), or phase portraits."""
+    from animsim.export.pictures import figure_format, plot_trajectory
     from animsim.export.trajectory import TrajectoryCollector, is_trajectory, read_trajectory
 
     figure_format(output)
@@ -925,6 +1064,25 @@ def plot(
         raise UsageError(f"--view {view!r}: plot takes xy, xz or yz")
     check_output_path(output, source)
     from_file = is_trajectory(source)
+    if kind is not PlotKind.phase and (integrators is not None or particles is not None):
+        raise UsageError("--integrators and --particles go with --kind phase")
+    if kind is PlotKind.phase:
+        from animsim.export.phase import phase_command
+
+        phase_command(
+            source,
+            output,
+            from_file=from_file,
+            scene=scene,
+            prepare=lambda path, **kw: prepare_scene(path, limits, **kw),
+            integrators=integrators,
+            particles=particles,
+            integrator=integrator,
+            dt=dt,
+            duration=duration,
+        )
+        typer.echo(f"wrote {output}")
+        return
     scene_path = scene if from_file else source
     compiled = None
     if scene_path is not None:
@@ -935,11 +1093,13 @@ def plot(
     if kind is PlotKind.energy:
         if compiled is None:
             raise UsageError("--kind energy needs the scene: give a scene, or --scene with the trajectory")
-        times, kinetic, potential = _energies(compiled, read_trajectory(source) if from_file else None)
-        plot_energy(
+        from animsim.export.phase import energy_parts_of
+        from animsim.export.pictures import plot_energy_parts
+
+        times, parts = energy_parts_of(compiled, read_trajectory(source) if from_file else None)
+        plot_energy_parts(
             times,
-            kinetic,
-            potential,
+            parts,
             output,
             title=f"{compiled.name}: {compiled.integrator_name}, dt {compiled.clock.dt:g} s",
             conservative=compiled.conservative,
@@ -958,44 +1118,6 @@ def plot(
             name = compiled.name
         plot_trajectory(traj, output, view=view, title=name)
     typer.echo(f"wrote {output}")
-
-
-def _energies(compiled: Any, traj: Any) -> tuple[Any, Any, Any]:
-    """Per-frame kinetic and potential energy, from a run or from a trajectory of the scene."""
-    import numpy as np
-
-    dyn = compiled.dynamics
-    times: list[float] = []
-    kinetic: list[float] = []
-    potential: list[float] = []
-    if traj is None:
-        from animsim.engine import run as simulate
-
-        def observe(state: Any) -> None:
-            times.append(state.time)
-            kinetic.append(dyn.kinetic_energy(state.particle_velocity))
-            potential.append(dyn.potential_energy(state.particle_position))
-
-        simulate(compiled, [], observers=[observe])
-    else:
-        if compiled.emitters is not None:
-            raise UsageError("energy from a trajectory needs a scene without emitters; give the scene itself")
-        index_of = {pid: i for i, pid in enumerate(compiled.system.ids)}
-        try:
-            rows = np.array([index_of[pid] for pid in traj.ids], dtype=np.int64)
-        except KeyError as exc:
-            raise UsageError(
-                f"the trajectory has particle {exc.args[0]!r}, which the scene does not"
-            ) from None
-        x = compiled.initial.particle_position.copy()
-        v = compiled.initial.particle_velocity.copy()
-        for frame in traj.frames():
-            x[rows[frame.index]] = frame.position
-            v[rows[frame.index]] = frame.velocity
-            times.append(frame.time)
-            kinetic.append(dyn.kinetic_energy(v))
-            potential.append(dyn.potential_energy(x))
-    return np.array(times), np.array(kinetic), np.array(potential)
 
 
 # --- entry point ----------------------------------------------------------------------------

@@ -58,6 +58,24 @@ class Clock:
         return self.duration - (self.steps - 1) * self.dt
 
 
+def landing_steps(clock: Clock, times: Sequence[float]) -> list[int | None]:
+    """For each time, the step index whose clock time is that time (to rounding), or None."""
+    out: list[int | None] = []
+    for t in times:
+        i = min(max(round(t / clock.dt), 0), clock.steps)
+        candidates = [j for j in (i - 1, i, i + 1) if 0 <= j <= clock.steps]
+        hit = next(
+            (
+                j
+                for j in candidates
+                if math.isclose(clock.time(j), t, rel_tol=1e-12, abs_tol=1e-12 * clock.duration)
+            ),
+            None,
+        )
+        out.append(hit)
+    return out
+
+
 def record_steps(clock: Clock, every: int | None = None, fps: float | None = None) -> np.ndarray:
     """Sorted step indices (0..steps) whose states are recorded.
 
