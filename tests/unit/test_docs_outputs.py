@@ -21,7 +21,6 @@ INTERNAL = [
     r"\bspec\b",
     r"\bspecs\b",
     r"scene-language\.md",
-    r"python-api\.md",
     r"\bhelper\b",
     r"\bthe lead\b",
     r"\bTODO\b",
