@@ -2,6 +2,7 @@
 
     python tools/make_docs_outputs.py            # rewrite README.md and docs/*.md in place
     python tools/make_docs_outputs.py --check    # exit 1 if a quoted output is stale
+    python tools/make_docs_outputs.py --force    # rewrite even blocks whose only change is a timing
 
 A quoted output is marked by an HTML comment (invisible on GitHub) followed
 by a fenced block holding what the command printed:
@@ -139,12 +140,18 @@ def stale_blocks(paths: list[Path] | None = None) -> list[tuple[Block, str]]:
     return stale
 
 
-def rewrite(path: Path) -> bool:
-    """Rerun every quoted command of ``path`` and write what they print; True if it changed."""
+def rewrite(path: Path, force: bool = False) -> bool:
+    """Rerun every quoted command of ``path`` and write what they print; True if it changed.
+
+    A block whose output differs only in timings (and layout) is left as it is,
+    so regenerating does not churn the docs; ``force`` rewrites every block.
+    """
     text = path.read_text(encoding="utf-8")
     pieces, last = [], 0
     for block in find_blocks(path):
-        pieces += [text[last : block.start], run_command(block.command, block.stdout_only)]
+        now = run_command(block.command, block.stdout_only)
+        keep = not force and normalise(now) == normalise(block.body)
+        pieces += [text[last : block.start], block.body if keep else now]
         last = block.end
     new = "".join(pieces) + text[last:]
     if new != text:
@@ -155,6 +162,7 @@ def rewrite(path: Path) -> bool:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--check", action="store_true", help="exit 1 if a quoted output is stale")
+    parser.add_argument("--force", action="store_true", help="rewrite blocks that differ only in timings too")
     parser.add_argument("files", nargs="*", type=Path, help="markdown files (default: README.md, docs/*.md)")
     args = parser.parse_args(argv)
     paths = [p.resolve() for p in args.files] or DOCS
@@ -164,7 +172,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{block.file.relative_to(ROOT)}: stale output of `{block.command}`", file=sys.stderr)
         return 1 if stale else 0
     for path in paths:
-        if rewrite(path):
+        if rewrite(path, force=args.force):
             print(f"rewrote {path.relative_to(ROOT)}")
     return 0
 
