@@ -123,3 +123,18 @@ def test_normalise_hides_the_cost_estimate():
     b = a.replace("about 2.3 s", "about 1.4 min")
     assert mdo.normalise(a) == mdo.normalise(b)
     assert mdo.normalise(a) != mdo.normalise(a.replace("9,000", "9,001"))
+
+
+def test_scenes_quoted_from_files_say_what_the_files_say():
+    """A YAML block introduced as `scenes/NAME.yaml` holds that file's keys and values."""
+    import yaml
+
+    quoted = 0
+    for path in DOCS:
+        text = path.read_text(encoding="utf-8")
+        for name, block in re.findall(r"`(scenes/[\w/]+\.yaml)`:\n\n```yaml\n(.*?)```", text, flags=re.S):
+            assert yaml.safe_load(block) == yaml.safe_load((ROOT / name).read_text(encoding="utf-8")), (
+                f"{path.name} quotes {name} out of date"
+            )
+            quoted += 1
+    assert quoted >= 1
