@@ -74,6 +74,15 @@ BackendOpt = Annotated[
     ),
 ]
 
+DriftWarnOpt = Annotated[
+    float,
+    typer.Option(
+        "--drift-warn",
+        metavar="PERCENT",
+        help="Warn when a conservative scene's energy drifts by more than PERCENT of its start.",
+    ),
+]
+
 _LIMITS_PANEL = "Limits (spec: Errors and limits)"
 
 # The limit options, shared by every command that loads a scene (see
@@ -301,6 +310,7 @@ def run(
     ] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
     backend: BackendOpt = "numpy",
+    drift_warn: DriftWarnOpt = 10.0,
     *,
     limits: Any = None,
 ) -> None:
@@ -311,8 +321,10 @@ def run(
     folder gives <folder>/frames_0000.ply, ...); USD ASCII (-o anim.usda).
     The output folder must exist.
     """
+    from animsim.analysis.drift import META_THRESHOLD_KEY, check_threshold
     from animsim.preflight import check_disk
 
+    drift_warn = check_threshold(drift_warn)
     to_stdout = output is not None and str(output) == "-"
     fmt = output_format(output, format)
     out = output if output is not None else Path(f"{scene.stem}.{fmt.value}")
@@ -347,7 +359,7 @@ def run(
         extra_columns=extra_columns,
         expected_frames=len(compiled.record_steps),
     )
-    extra = {"scene_sha256": loaded.sha256, "scene_file": str(scene)}
+    extra = {"scene_sha256": loaded.sha256, "scene_file": str(scene), META_THRESHOLD_KEY: drift_warn}
     with _graceful_stop() as stop, _progress(compiled.clock.steps, quiet) as progress:
         result = simulate(compiled, [sink], stop=stop, progress=progress, meta_extra=extra)
     if fmt is Format.ply and sink.written:
@@ -356,6 +368,7 @@ def run(
         wrote = f"{len(sink.written)} PLY frames {span}, {sink.ids_path} and {out}.meta.json"
     if not quiet:
         _summary(compiled, result, None if to_stdout else wrote)
+    _drift_warning(scene, compiled, result)
     if result.status == STATUS_UNSTABLE:
         assert result.failure is not None
         _err(f"{scene}: {result.failure.describe()}")
@@ -407,11 +420,36 @@ def _summary(compiled: Any, result: Any, wrote: str | None) -> None:
         f"{compiled.name}: {compiled.system.particle_count} particles, {compiled.system.spring_count} springs, "
         f"{result.steps_taken}/{compiled.clock.steps} steps of {compiled.clock.dt:g} s with {compiled.integrator_name}",
         f"  wall time {result.wall_time:.3f} s, {result.frames} frames, {result.force_evals} force evaluations",
-        f"  energy {result.energy_start:.6g} J -> {result.energy_end:.6g} J, status {result.status}",
+        f"  energy {result.energy_start:.6g} J -> {result.energy_end:.6g} J, status {result.status}, "
+        + _drift_of(compiled, result).text(),
     ]
+    lines.extend(_summary_notes(compiled, result))
     if wrote is not None:
         lines.append(f"  wrote {wrote}")
     typer.echo("\n".join(lines), err=stream_err)
+
+
+def _drift_of(compiled: Any, result: Any) -> Any:
+    """The run's energy-drift verdict (animsim.analysis.drift), with the run's own threshold."""
+    from animsim.analysis.drift import DEFAULT_DRIFT_WARN_PERCENT, META_THRESHOLD_KEY, drift
+
+    threshold = result.meta.get(META_THRESHOLD_KEY, DEFAULT_DRIFT_WARN_PERCENT)
+    return drift(compiled, result.energy_start, result.energy_end, threshold)
+
+
+def _drift_warning(scene: Path, compiled: Any, result: Any) -> None:
+    """A drift beyond --drift-warn is a warning on stderr, also with --quiet (the run still succeeds)."""
+    verdict = _drift_of(compiled, result)
+    if verdict.warning and result.status != "unstable":  # an unstable run has its own report
+        _err(f"{scene}: warning: {verdict.warning_text()}")
+
+
+def _summary_notes(compiled: Any, result: Any) -> list[str]:
+    """Summary lines about what the numbers mean: the method really run."""
+    from animsim.analysis.effective import fallback_note
+
+    note = fallback_note(compiled)
+    return [] if note is None else [f"  note: {note}"]
 
 
 # --- explain ------------------------------------------------------------------------
@@ -439,7 +477,12 @@ def explain(
     )
     typer.echo(f"  {c.clock.steps} steps of {c.clock.dt:g} s to t = {c.clock.duration:g} s, seed {c.seed}")
     typer.echo("each step runs:")
+    from animsim.analysis.effective import fallback_note
+
+    note = fallback_note(c)
     for stage in c.stages:
+        if note is not None and stage.startswith("integrator:"):
+            stage = f"integrator: {note}"  # what the step really computes
         typer.echo(f"  + {stage}")
     typer.echo("left out (the scene does not need them):")
     for item in c.left_out:
@@ -495,13 +538,26 @@ def init(
 def check(
     scenes: Annotated[list[Path], typer.Argument(help="Scene files.", show_default=False)],
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Only problems.")] = False,
+    drift_warn: DriftWarnOpt = 10.0,
     *,
     limits: Any = None,
 ) -> None:
-    """Validate, analyse and run each scene; exit 0 only if every one is valid and stable."""
-    from animsim.analysis.check import check_scenes
+    """Validate, analyse and run each scene; exit 0 only if every one is valid and stable.
 
-    ok = check_scenes(scenes, quiet=quiet, echo=typer.echo, echo_err=_err, limits=limits)
+    A conservative scene whose energy drifts by more than --drift-warn gets a
+    warning; it still counts as stable.
+    """
+    from animsim.analysis.check import check_scenes
+    from animsim.analysis.drift import check_threshold
+
+    ok = check_scenes(
+        scenes,
+        quiet=quiet,
+        echo=typer.echo,
+        echo_err=_err,
+        limits=limits,
+        drift_warn=check_threshold(drift_warn),
+    )
     if not ok:
         raise typer.Exit(EXIT_FAILED)
 
