@@ -214,6 +214,8 @@ def run(
         checked = 0
         with np.errstate(over="ignore", invalid="ignore"):
             while k < steps:
+                while next_rec < len(record) and record[next_rec] <= k:  # never aim behind us
+                    next_rec += 1
                 goal = min(int(record[next_rec]) if next_rec < len(record) else steps, checked + stride)
                 k, failure, nonfinite = stepper.advance(state, k, goal, max_steps=one)
                 if failure is not None:  # the stepper itself gave up (adaptive: below dt_min)

@@ -92,6 +92,8 @@ def record_steps(clock: Clock, every: int | None = None, fps: float | None = Non
             idx = np.append(idx, n)
         return idx
     period = 1.0 / fps
+    if not math.isfinite(period):  # a rate so low (5e-324 fps) that one frame never ends
+        return np.array([0], dtype=np.int64)
     count = math.floor(clock.duration / period * (1 + STEP_COUNT_RTOL)) + 1
     targets = np.arange(count, dtype=np.float64) * period
     if clock.divides:
