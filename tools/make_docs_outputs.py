@@ -21,7 +21,7 @@ are thrown away; ``animsim`` means this checkout's ``python -m animsim``.
 
 What changes from run to run is normalised before comparing (never in the
 written file): wall-clock times (the ``wall_time`` and ``seconds`` columns,
-``wall time 0.52 s``, ``steps, 0.94 s;``, ``about 12 s`` estimates), absolute paths, table rules and
+``wall time 0.52 s``, ``steps, 0.94 s``, ``about 12 s`` estimates), absolute paths, table rules and
 column padding (a wider time can widen a column and move a wrap). Everything
 else, every number of the physics included, must match exactly.
 ``tests/unit/test_docs_outputs.py`` runs :func:`stale_blocks`.
@@ -49,7 +49,7 @@ MARKER = re.compile(r"<!-- (output|stdout): (?P<cmd>.+?) -->\n(?P<fence>```[a-z]
 TIMING_COLUMNS = {"wall_time", "seconds"}
 TIMING_TEXT = [
     (re.compile(r"wall time \d+(?:\.\d+)? s"), "wall time <time> s"),
-    (re.compile(r"steps, \d+(?:\.\d+)? s;"), "steps, <time> s;"),
+    (re.compile(r"steps, \d+(?:\.\d+)? s\b"), "steps, <time> s"),
     (re.compile(r"\d+(?:\.\d+)? s wall"), "<time> s wall"),
     (re.compile(r"about \d+(?:\.\d+)? (?:s|min)\b"), "about <time>"),  # compare's cost estimate
 ]
@@ -105,28 +105,52 @@ def run_command(command: str, stdout_only: bool) -> str:
     return out + "\n" if out else ""
 
 
+def _is_rule(line: str) -> bool:
+    """A table's rule line: only box-drawing characters, dashes and spaces."""
+    return bool(line.strip()) and not BOX.sub("", line).replace("-", "").strip()
+
+
+def _timing_spans(header: str) -> list[tuple[int, int]]:
+    """Character spans of the timing columns named in a table's header line."""
+    return [(m.start(), m.end()) for m in re.finditer(r"[^\s│┃]+", header) if m.group(0) in TIMING_COLUMNS]
+
+
+def _blank_timing_cells(line: str, spans: list[tuple[int, int]]) -> str:
+    """Replace every word of ``line`` that overlaps a timing column's span (cells are
+    right- or left-aligned under their header, so a cell always overlaps it)."""
+
+    def cell(m: re.Match[str]) -> str:
+        overlaps = any(m.start() < hi and lo < m.end() for lo, hi in spans)
+        return "<time>" if overlaps else m.group(0)
+
+    return re.sub(r"[^\s│┃]+", cell, line)
+
+
 def normalise(text: str) -> list[str]:
-    """The words of ``text`` with run-to-run noise (timings, paths, table layout) removed."""
+    """The words of ``text`` with run-to-run noise (timings, paths, table layout) removed.
+
+    Tables are found by their header (a line naming a timing column, followed by
+    a rule), whatever their style (boxes or plain columns, groups of rows apart
+    by blank lines); they end at the first line that starts at the left margin.
+    """
     text = text.replace(str(ROOT), "<repo>")
     text = re.sub(r"/tmp/animsim-docs-[^/\s]+", ".", text)
-    lines = []
-    timing_cells: set[int] = set()
-    for line in text.splitlines():
+    lines = text.splitlines()
+    out = []
+    spans: list[tuple[int, int]] = []
+    for k, line in enumerate(lines):
         for pattern, repl in TIMING_TEXT:
             line = pattern.sub(repl, line)
-        if "┃" in line:
-            heads = [h.strip() for h in line.split("┃")]
-            timing_cells = {i for i, h in enumerate(heads) if h in TIMING_COLUMNS}
-        elif "│" in line and timing_cells:
-            cells = line.split("│")
-            for i in timing_cells:
-                if i < len(cells):
-                    cells[i] = " <time> " if cells[i].strip() else cells[i]
-            line = "│".join(cells)
-        elif not BOX.search(line):  # a line outside any table ends the current one
-            timing_cells = set()
-        lines.append(line)
-    return BOX.sub(" ", "\n".join(lines)).split()
+        following = lines[k + 1] if k + 1 < len(lines) else ""
+        header_spans = _timing_spans(line)
+        if header_spans and _is_rule(following):
+            spans = header_spans
+        elif spans and (not line.strip() or line[0] in " │┃" or _is_rule(line)):
+            line = _blank_timing_cells(line, spans)
+        else:
+            spans = []
+        out.append(line)
+    return BOX.sub(" ", "\n".join(out)).split()
 
 
 def stale_blocks(paths: list[Path] | None = None) -> list[tuple[Block, str]]:

@@ -98,6 +98,7 @@ def test_normalise_hides_timings_and_layout_but_not_physics():
     assert mdo.normalise(a) != mdo.normalise(a.replace("51 frames", "50 frames"))
     # a step size is not a wall time
     assert mdo.normalise("steps of 0.001 s") != mdo.normalise("steps of 0.002 s")
+    assert mdo.normalise("ok (verlet, 2500 steps, 0.23 s)") == mdo.normalise("ok (verlet, 2500 steps, 1.5 s)")
 
 
 def test_a_stale_block_is_found(tmp_path):
@@ -138,3 +139,22 @@ def test_scenes_quoted_from_files_say_what_the_files_say():
             )
             quoted += 1
     assert quoted >= 1
+
+
+def test_normalise_hides_timings_in_plain_tables_too():
+    """Tables without boxes (columns aligned by spaces) get the same treatment."""
+    a = (
+        " integrator       dt   steps    seconds   force_evals      error   status\n"
+        " ────────────────────────────────────────────────────────────────────────\n"
+        " euler          0.02     100   0.000299           100      0.592   ok\n"
+        "                0.01     200   0.000314           200      0.241   ok\n"
+        "\n"
+        " rk4            0.02     100    0.00447           400   1.16e-05   ok\n"
+        "reference: analytic\n"
+    )
+    b = a.replace("0.000299", "  0.0123").replace("0.000314", "    1.25").replace("0.00447", " 0.0291")
+    assert mdo.normalise(a) == mdo.normalise(b)
+    assert mdo.normalise(a) != mdo.normalise(a.replace("0.592", "0.593"))
+    assert mdo.normalise(a) != mdo.normalise(a.replace("   200", "   201"))
+    # the table ends at the first line at the left margin: its words are kept
+    assert "analytic" in mdo.normalise(a)
