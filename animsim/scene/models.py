@@ -645,7 +645,7 @@ class Scene(Model):
         0, "seeds every random draw (emitters, turbulence): same seed, same result", example=7
     )
     record: Record = Doc(
-        Record(), "which steps are written: every step, {every: n} or {fps: f}", example={"fps": 25}
+        Record(), "which steps are written as frames: {every: n} or {fps: f}", example={"fps": 25}
     )
     particles: list[Particle] = Doc(
         [], "point masses, each with an id", example=[{"id": "ball", "mass": 1.0, "position": [0, 0, 0]}]
