@@ -506,6 +506,30 @@ def schema() -> None:
     sys.stdout.write(schema_text())
 
 
+# --- init -------------------------------------------------------------------------------
+
+
+def _template_help() -> str:
+    from animsim.templates import TEMPLATES
+
+    return "Starter scene: " + "; ".join(f"{k} ({t.summary})" for k, t in TEMPLATES.items()) + "."
+
+
+@app.command()
+def init(
+    path: Annotated[
+        Path, typer.Argument(help="The scene file to write, e.g. my_scene.yaml.", show_default=False)
+    ],
+    template: Annotated[str, typer.Option("--template", "-t", help=_template_help())] = "projectile",
+    force: Annotated[bool, typer.Option("--force", help="Replace an existing file.")] = False,
+) -> None:
+    """Write a commented starter scene, and scene.schema.json beside it for editors."""
+    from animsim.templates import write_starter
+
+    for line in write_starter(path, template, force=force):
+        typer.echo(line)
+
+
 # --- check ------------------------------------------------------------------------------
 
 
