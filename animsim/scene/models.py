@@ -85,11 +85,55 @@ HexColor = Annotated[
 ]
 
 
+# --- keyframes, tearing (shared by particles, structures and colliders) --------
+
+
+def _keyframe(v: list[Any]) -> tuple[float, tuple[float, float, float]]:
+    if not isinstance(v[0], float | int) or isinstance(v[0], bool) or not isinstance(v[1], tuple):
+        raise ValueError("a keyframe is [t, [x, y, z]]")
+    return (float(v[0]), v[1])
+
+
+def _increasing(v: list[tuple[float, Any]]) -> list[tuple[float, Any]]:
+    for k in range(1, len(v)):
+        if v[k][0] <= v[k - 1][0]:
+            raise ValueError(
+                f"keyframe times must increase: key {k} at t = {v[k][0]!r} does not come after "
+                f"key {k - 1} at t = {v[k - 1][0]!r}"
+            )
+    return v
+
+
+Keyframe = Annotated[
+    list[FiniteFloat | Vec3],
+    Field(min_length=2, max_length=2, description="[t, [x, y, z]]: time in s, position in m"),
+    AfterValidator(_keyframe),
+]
+Keyframes = Annotated[list[Keyframe], Field(min_length=1), AfterValidator(_increasing)]
+Interpolation = Literal["linear", "smooth"]
+MaxStrain = Annotated[
+    float | None,
+    Field(
+        gt=0,
+        allow_inf_nan=False,
+        description="the spring breaks for good once |L| / rest - 1 exceeds this (tearing)",
+    ),
+]
+
+
+class Motion(Model):
+    """A keyframed path (colliders, a structure's pins)."""
+
+    keyframes: Keyframes
+    interpolation: Interpolation = "linear"
+
+
 class SpringFamily(Model):
     """Stiffness and damping of one family of generated springs."""
 
     ks: NonNegative = Field(description="stiffness, N/m")
     kd: NonNegative = Field(0.0, description="damping along the spring, N*s/m")
+    max_strain: MaxStrain = None
 
 
 class Particle(Model):
@@ -100,6 +144,20 @@ class Particle(Model):
     pinned: StrictBool = Field(
         False, description="forces never move it; it keeps its velocity (a moving anchor)"
     )
+    keyframes: Keyframes | None = Field(
+        None, description="pinned only: [[t, [x, y, z]], ...], times increasing; the particle follows them"
+    )
+    interpolation: Interpolation | None = Field(
+        None, description="with keyframes: linear (default) or smooth (C1 cubic through the keys)"
+    )
+    radius: NonNegative | None = Field(None, description="m, for particle contacts, colliders and rendering")
+    color: HexColor | None = Field(None, description="for rendering, #rrggbb or #rrggbbaa")
+
+    @model_validator(mode="after")
+    def _interpolation_needs_keys(self) -> Particle:
+        if self.interpolation is not None and self.keyframes is None:
+            raise ValueError("interpolation applies only with keyframes")
+        return self
 
 
 class Spring(Model):
@@ -109,6 +167,7 @@ class Spring(Model):
     rest: Literal["auto"] | NonNegative = Field(
         "auto", description="rest length in m, or auto = initial distance"
     )
+    max_strain: MaxStrain = None
 
 
 # --- forces -----------------------------------------------------------------
@@ -185,6 +244,78 @@ class Plane(Model):
         if self.response == "impulse" and (self.stiffness is not None or self.damping is not None):
             raise ValueError("stiffness and damping apply only to response: penalty")
         return self
+
+
+# --- colliders and particle contacts ------------------------------------------
+
+Restitution = Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)]
+
+
+def _unit_quaternion(v: list[float]) -> tuple[float, float, float, float]:
+    norm = sum(c * c for c in v) ** 0.5
+    if abs(norm - 1.0) > 1e-6:
+        raise ValueError(f"a unit quaternion [w, x, y, z] is needed; this one has length {norm:.9g}")
+    return tuple(c / norm for c in v)  # type: ignore[return-value]
+
+
+Quaternion = Annotated[
+    list[FiniteFloat],
+    Field(min_length=4, max_length=4, description="unit quaternion [w, x, y, z]"),
+    AfterValidator(_unit_quaternion),
+]
+
+
+class AxisAngle(Model):
+    axis: Vec3
+    angle: FiniteFloat = Field(description="degrees, right-handed about the axis")
+
+    @field_validator("axis")
+    @classmethod
+    def _nonzero(cls, v: tuple[float, float, float]) -> tuple[float, float, float]:
+        if v == (0.0, 0.0, 0.0):
+            raise ValueError("the axis must not be zero")
+        return v
+
+
+class _ColliderCommon(Model):
+    restitution: Restitution = 0.5
+    friction: NonNegative = Field(0.0, description="Coulomb coefficient")
+    motion: Motion | None = Field(
+        None,
+        description="keyframed path of the centre (a capsule's: the midpoint of a-b); the shape translates",
+    )
+
+
+class SphereCollider(_ColliderCommon):
+    type: Literal["sphere"]
+    center: Vec3
+    radius: Positive
+
+
+class BoxCollider(_ColliderCommon):
+    type: Literal["box"]
+    center: Vec3
+    size: Annotated[list[Positive], Field(min_length=3, max_length=3, description="full edge lengths, m")]
+    orientation: Quaternion | AxisAngle = Field(
+        [1.0, 0.0, 0.0, 0.0], description="[w, x, y, z], or {axis, angle} in degrees"
+    )
+
+
+class CapsuleCollider(_ColliderCommon):
+    type: Literal["capsule"]
+    a: Vec3
+    b: Vec3
+    radius: Positive
+
+
+Collider = Annotated[SphereCollider | BoxCollider | CapsuleCollider, Field(discriminator="type")]
+COLLIDER_TYPES = ("sphere", "box", "capsule")
+
+
+class ParticleCollisions(Model):
+    radius: Positive = Field(description="m, every particle's unless it has its own")
+    restitution: Restitution = 0.5
+    friction: NonNegative = Field(0.0, description="Coulomb coefficient")
 
 
 # --- emitters (particle systems) --------------------------------------------
@@ -292,6 +423,12 @@ class _StructureCommon(Model):
     mass: Positive = Field(description="per particle, kg")
     velocity: Vec3 = Field([0.0, 0.0, 0.0], description="initial velocity of every particle, m/s")
     pin: list[Id] = Field([], description="ids of particles held in place")
+    pin_motion: Motion | None = Field(
+        None,
+        description="keyframed offsets [[t, [dx, dy, dz]], ...] added to every pinned particle's "
+        "initial position: the pins move together",
+    )
+    radius: NonNegative | None = Field(None, description="m, each particle's, for contacts and colliders")
 
 
 class Cloth(_StructureCommon):
@@ -385,6 +522,8 @@ class Scene(Model):
     planes: list[Plane] = []
     emitters: list[Emitter] = []
     structures: list[Structure] = []
+    colliders: list[Collider] = []
+    particle_collisions: ParticleCollisions | None = None
 
     @property
     def integrator_name(self) -> str:
