@@ -35,6 +35,7 @@ class SpringGroup:
     index: np.ndarray  # (m, 2) int64, local indices
     ks: float
     kd: float
+    max_strain: float = float("inf")  # tearing limit; inf: never breaks
 
 
 @dataclass(frozen=True)
@@ -200,7 +201,13 @@ def expand(s: Structure) -> Expanded:
         if li is not None:
             pinned[li] = True
     groups = [
-        SpringGroup(f"{s.type} {s.id}: {name}", pairs, fam.ks, fam.kd)
+        SpringGroup(
+            f"{s.type} {s.id}: {name}",
+            pairs,
+            fam.ks,
+            fam.kd,
+            float("inf") if fam.max_strain is None else fam.max_strain,
+        )
         for name, pairs, fam in _families(s, shape)
     ]
     return Expanded(
