@@ -205,7 +205,9 @@ class Colliders:
     def reset(self, state) -> None:  # noqa: ANN001
         """Nothing to reset: colliders keep no state between steps."""
 
-    def apply(self, state, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float) -> bool:  # noqa: ANN001
+    def apply(  # noqa: ANN001
+        self, state, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, project_only: bool = False
+    ) -> bool:
         dt = t1 - t0
         if dt <= 0:
             return False
@@ -217,12 +219,17 @@ class Colliders:
         if self._kernel is not None:
             return bool(
                 self._kernel(
-                    self.params, self.friction, off0, off1, x_old, v_old, x, v, dt, self.radius, movable
+                    self.params, self.friction, off0, off1, x_old, v_old, x, v, dt, self.radius, movable,
+                    project_only,
                 )
             )
         return resolve_numpy(
-            self.params, self.friction, off0, off1, x_old, v_old, x, v, dt, self.radius, movable
+            self.params, self.friction, off0, off1, x_old, v_old, x, v, dt, self.radius, movable, project_only
         )
+
+    def project(self, state, t0: float, t1: float) -> bool:  # noqa: ANN001
+        """Push out of every collider whatever another stage (particle contacts) pushed in."""
+        return self.apply(state, state.particle_position, state.particle_velocity, t0, t1, project_only=True)
 
 
 def _shape_of(params: np.ndarray, friction: float) -> Shape:
@@ -250,13 +257,22 @@ def resolve_numpy(
     dt: float,
     radius: np.ndarray,
     movable: np.ndarray,
+    project_only: bool = False,
 ) -> bool:
-    """Resolve the step x_old -> x against every collider, in place (NumPy kernel)."""
+    """Resolve the step x_old -> x against every collider, in place (NumPy kernel).
+
+    ``project_only``: no time of impact, only push out whatever is inside
+    (after particle contacts moved particles).
+    """
     changed = False
     for c in range(params.shape[0]):  # colliders, not particles
         shape = _shape_of(params[c], float(friction[c]))
         center = shape.center + off1[c]
         u = (off1[c] - off0[c]) / dt  # the collider's velocity over the step
+        if project_only:
+            if _project(shape, center, u, x, v, np.flatnonzero(movable), radius):
+                changed = True
+            continue
         shift = off1[c] - off0[c]
         # Cheap filter: the relative segment lies in the ball around its midpoint
         # of radius half its length; if that ball misses the shape, so does the segment.
@@ -447,7 +463,7 @@ def numba_kernel():  # noqa: ANN201 - a numba dispatcher
             vt[a] *= keep
 
     @numba.njit(cache=True)
-    def resolve(params, friction, off0, off1, x_old, v_old, x, v, dt, radius, movable):  # pragma: no cover
+    def resolve(params, friction, off0, off1, x_old, v_old, x, v, dt, radius, movable, project_only):  # pragma: no cover
         changed = False
         n = np.zeros(3)
         vt = np.zeros(3)
@@ -463,16 +479,23 @@ def numba_kernel():  # noqa: ANN201 - a numba dispatcher
                 if not movable[i]:
                     continue
                 r = radius[i]
-                p0x, p0y, p0z = x_old[i, 0] + shx, x_old[i, 1] + shy, x_old[i, 2] + shz
-                sgx, sgy, sgz = x[i, 0] - p0x, x[i, 1] - p0y, x[i, 2] - p0z
-                length = np.sqrt(sgx * sgx + sgy * sgy + sgz * sgz)
-                dm = sdf1(pr, p0x + 0.5 * sgx - cx, p0y + 0.5 * sgy - cy, p0z + 0.5 * sgz - cz, n) - r
+                if project_only:
+                    hit = False
+                    sgx = sgy = sgz = 0.0
+                    p0x, p0y, p0z = x[i, 0], x[i, 1], x[i, 2]
+                    length = 0.0
+                    dm = -1.0
+                else:
+                    p0x, p0y, p0z = x_old[i, 0] + shx, x_old[i, 1] + shy, x_old[i, 2] + shz
+                    sgx, sgy, sgz = x[i, 0] - p0x, x[i, 1] - p0y, x[i, 2] - p0z
+                    length = np.sqrt(sgx * sgx + sgy * sgy + sgz * sgz)
+                    dm = sdf1(pr, p0x + 0.5 * sgx - cx, p0y + 0.5 * sgy - cy, p0z + 0.5 * sgz - cz, n) - r
                 if not (dm <= 0.5 * length * (1 + 1e-12) + 1e-12):
                     continue
                 tol = 1e-9 * (1.0 + length)
                 s = 0.0
                 hit = False
-                for _ in range(48):
+                for _ in range(0 if project_only else 48):
                     d = sdf1(pr, p0x + s * sgx - cx, p0y + s * sgy - cy, p0z + s * sgz - cz, n) - r
                     if d <= tol:
                         hit = True
