@@ -336,8 +336,8 @@ def run(
         check_disk(out, est, fmt.value, sc, limits)
     # Imported only now: a refused scene never pays for NumPy and the stepper.
     from animsim.compile import compile_scene
-    from animsim.simulate import STATUS_INTERRUPTED, STATUS_UNSTABLE
-    from animsim.simulate import run as simulate
+    from animsim.engine import STATUS_INTERRUPTED, STATUS_UNSTABLE
+    from animsim.engine import run as simulate
 
     compiled = compile_scene(sc, loaded.name, backend=_backend(backend))
     from animsim.analysis import stability
@@ -965,7 +965,7 @@ def plot(
             traj = read_trajectory(source)
             name = source.stem
         else:
-            from animsim.simulate import run as simulate
+            from animsim.engine import run as simulate
 
             assert compiled is not None
             collector = TrajectoryCollector()
@@ -985,7 +985,7 @@ def _energies(compiled: Any, traj: Any) -> tuple[Any, Any, Any]:
     kinetic: list[float] = []
     potential: list[float] = []
     if traj is None:
-        from animsim.simulate import run as simulate
+        from animsim.engine import run as simulate
 
         def observe(state: Any) -> None:
             times.append(state.time)

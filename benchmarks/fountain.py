@@ -27,7 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from animsim.compile import compile_scene, with_overrides
 from animsim.scene.loader import load_scene_text
-from animsim.simulate import run
+from animsim.engine import run
 
 PARTICLES = 100_000
 RATE = 50_000  # births/s; with 2 s lifetimes the pool is full in steady state

@@ -46,7 +46,7 @@ def simulate_text(text: str, **overrides):
     from animsim.compile import compile_scene, with_overrides
     from animsim.record import MemorySink
     from animsim.scene.loader import load_scene_text
-    from animsim.simulate import run
+    from animsim.engine import run
 
     loaded = load_scene_text(text)
     scene = with_overrides(loaded.scene, **overrides)

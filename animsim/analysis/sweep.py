@@ -393,7 +393,7 @@ def _landing_steps(clock: Any, times: np.ndarray) -> np.ndarray:
 def fine_reference(compiled: Any, times: np.ndarray) -> Trajectory:
     """RK4 at the case's dt / :data:`FINE_DT_DIVISOR` on the case's own scene, at ``times``."""
     from animsim.compile import compile_scene
-    from animsim.simulate import STATUS_OK, run
+    from animsim.engine import STATUS_OK, run
 
     fine_dt = compiled.clock.dt / FINE_DT_DIVISOR
     scene = compiled.scene.model_copy(update={"integrator": FINE_INTEGRATOR, "dt": fine_dt})
@@ -522,7 +522,7 @@ def run_case(case: Case) -> Row:
     """
     from animsim.analysis.check import energy_drift
     from animsim.compile import compile_scene
-    from animsim.simulate import STATUS_OK, STATUS_UNSTABLE, run
+    from animsim.engine import STATUS_OK, STATUS_UNSTABLE, run
 
     row = Row(case.index, dict(case.overrides), _integrator_of(case), case.seed, STATUS_INVALID)
     try:

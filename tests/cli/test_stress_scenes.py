@@ -12,7 +12,7 @@ import pytest
 
 from animsim.forces.springs import Springs
 from animsim.integrators import FIXED_STEP
-from animsim.simulate import STATUS_OK, STATUS_UNSTABLE
+from animsim.engine import STATUS_OK, STATUS_UNSTABLE
 from tests.conftest import SCENES, simulate_text
 
 STRESS = SCENES / "stress"

@@ -19,7 +19,7 @@ from animsim.forces.springs import Springs
 from animsim.forces.wind import Wind
 from animsim.integrators import REGISTRY
 from animsim.integrators.implicit import ImplicitEuler
-from animsim.simulate import STATUS_OK, STATUS_UNSTABLE
+from animsim.engine import STATUS_OK, STATUS_UNSTABLE
 from tests.conftest import simulate_text
 
 OSCILLATOR = """

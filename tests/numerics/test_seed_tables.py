@@ -24,7 +24,7 @@ def _run(path):
     from animsim.compile import compile_scene
     from animsim.record import MemorySink
     from animsim.scene.loader import load_scene
-    from animsim.simulate import run
+    from animsim.engine import run
 
     loaded = load_scene(path)
     sink = MemorySink()

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from animsim.compile import compile_scene, with_overrides
 from animsim.scene.loader import load_scene
-from animsim.simulate import run
+from animsim.engine import run
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
 

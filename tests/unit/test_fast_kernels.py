@@ -16,7 +16,7 @@ from animsim.forces.grid_springs import GridSprings, find_blocks
 from animsim.forces.springs import Springs
 from animsim.record import MemorySink
 from animsim.scene.loader import load_scene_text
-from animsim.simulate import run
+from animsim.engine import run
 
 RTOL = 1e-12
 
