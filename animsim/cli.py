@@ -449,6 +449,12 @@ def _summary(compiled: Any, result: Any, wrote: str | None) -> None:
         f"  wall time {result.wall_time:.3f} s, {result.frames} frames, {result.force_evals} force evaluations",
         f"  energy {result.energy_start:.6g} J -> {result.energy_end:.6g} J, status {result.status}",
     ]
+    if "springs_broken" in result.meta:
+        first = result.meta.get("first_break_time")
+        lines.append(
+            f"  springs broken: {result.meta['springs_broken']}"
+            + (f" (first at t = {first:.6g} s)" if first is not None else "")
+        )
     if wrote is not None:
         lines.append(f"  wrote {wrote}")
     typer.echo("\n".join(lines), err=stream_err)

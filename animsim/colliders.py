@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from animsim.collisions import RESTING_STEPS, _apply_friction
+from animsim.elements import StepStage
 
 SPHERE, BOX, CAPSULE = 0, 1, 2
 KIND_NAMES = {SPHERE: "sphere", BOX: "box", CAPSULE: "capsule"}
@@ -55,7 +56,9 @@ class Shape:
     radius: float = 0.0  # sphere, capsule
     half: np.ndarray = field(default_factory=lambda: np.zeros(3))  # box half sizes
     rotation: np.ndarray = field(default_factory=lambda: np.eye(3))  # box: body frame -> world
-    segment: np.ndarray = field(default_factory=lambda: np.zeros(3))  # capsule: b - center (a = center - segment)
+    segment: np.ndarray = field(
+        default_factory=lambda: np.zeros(3)
+    )  # capsule: b - center (a = center - segment)
     restitution: float = 0.5
     friction: float = 0.0
 
@@ -70,7 +73,9 @@ class Shape:
         p[20] = self.restitution
         return p
 
-    def signed_distance(self, x: np.ndarray, offset: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def signed_distance(
+        self, x: np.ndarray, offset: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Signed distance (M,) and unit outward normal (M, 3) at points ``x`` (M, 3).
 
         ``offset``: where the shape is, as a displacement from its reference
@@ -119,7 +124,11 @@ def sdf(
         ok = length > 0
         n[ok] = w[ok] / length[ok, None]
         if not ok.all():  # on the axis: any direction perpendicular to it
-            perp = np.cross(segment, (1.0, 0.0, 0.0)) if abs(segment[0]) < 0.9 * np.sqrt(ss) else np.cross(segment, (0.0, 1.0, 0.0))
+            perp = (
+                np.cross(segment, (1.0, 0.0, 0.0))
+                if abs(segment[0]) < 0.9 * np.sqrt(ss)
+                else np.cross(segment, (0.0, 1.0, 0.0))
+            )
             nrm = np.linalg.norm(perp)
             n[~ok] = perp / nrm if nrm > 0 else (0.0, 1.0, 0.0)
         return length - radius, n
@@ -148,7 +157,7 @@ class StepMotion:
     at1: np.ndarray  # (C, 3)
 
 
-class Colliders:
+class Colliders(StepStage):
     """All solid colliders of a scene: a step stage after each integrator step.
 
     shapes: the colliders; ``motion``: a :class:`animsim.keyframes.PathEvaluator`
@@ -164,7 +173,7 @@ class Colliders:
         inv_mass: np.ndarray,
         radius: np.ndarray | None = None,
         active: np.ndarray | None = None,
-        motion=None,  # noqa: ANN001 - PathEvaluator | None
+        motion=None,
         moving: np.ndarray | None = None,
         backend: str = "numpy",
     ):
@@ -180,6 +189,7 @@ class Colliders:
         self.params[:, 20] = [s.restitution for s in shapes]
         self.friction = np.array([s.friction for s in shapes], dtype=np.float64)
         self._kernel = numba_kernel() if backend == "numba" else None
+        self.no_closed_form = "solid colliders"
         self.injects = bool((self.moving >= 0).any())
         self.dissipative = any(s.restitution < 1 or s.friction > 0 for s in shapes)
         counts: dict[str, int] = {}
@@ -202,13 +212,43 @@ class Colliders:
             off[m] = pos[self.moving[m]] - self.params[m, 1:4]
         return off
 
-    def reset(self, state) -> None:  # noqa: ANN001
+    def reset(self, state) -> None:
         """Nothing to reset: colliders keep no state between steps."""
 
-    def apply(  # noqa: ANN001
-        self, state, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, project_only: bool = False
+    def surface_points(self, t: float, per_shape: int = 600) -> np.ndarray:
+        """About ``per_shape`` points on each collider's surface at time ``t`` (for drawing)."""
+        if not hasattr(self, "_surface"):
+            # a Fibonacci sphere of directions, pushed onto each surface along its own
+            # distance function: points spread evenly enough to show the shape
+            k = np.arange(per_shape) + 0.5
+            phi = np.arccos(1 - 2 * k / per_shape)
+            theta = np.pi * (1 + 5**0.5) * k
+            dirs = np.stack([np.cos(theta) * np.sin(phi), np.cos(phi), np.sin(theta) * np.sin(phi)], axis=1)
+            pts = []
+            for s in self.shapes:
+                reach = s.radius + float(np.linalg.norm(s.half)) + float(np.linalg.norm(s.segment))
+                p = s.center + dirs * reach * 1.5
+                for _ in range(60):  # march inward onto the surface (sphere tracing)
+                    d, n = s.signed_distance(p)
+                    p = p - d[:, None] * n
+                pts.append(p - s.center)
+            self._surface = pts
+        off = self.offsets(t)
+        return np.concatenate(
+            [s.center + off[c] + p for c, (s, p) in enumerate(zip(self.shapes, self._surface, strict=True))]
+        )
+
+    def apply(
+        self,
+        state,
+        x_old: np.ndarray,
+        v_old: np.ndarray,
+        t0: float,
+        t1: float,
+        dt: float | None = None,
+        project_only: bool = False,
     ) -> bool:
-        dt = t1 - t0
+        dt = t1 - t0 if dt is None else dt
         if dt <= 0:
             return False
         off0, off1 = self.offsets(t0), self.offsets(t1)
@@ -219,7 +259,17 @@ class Colliders:
         if self._kernel is not None:
             return bool(
                 self._kernel(
-                    self.params, self.friction, off0, off1, x_old, v_old, x, v, dt, self.radius, movable,
+                    self.params,
+                    self.friction,
+                    off0,
+                    off1,
+                    x_old,
+                    v_old,
+                    x,
+                    v,
+                    dt,
+                    self.radius,
+                    movable,
                     project_only,
                 )
             )
@@ -227,9 +277,10 @@ class Colliders:
             self.params, self.friction, off0, off1, x_old, v_old, x, v, dt, self.radius, movable, project_only
         )
 
-    def project(self, state, t0: float, t1: float) -> bool:  # noqa: ANN001
+    def project(self, state, t0: float, t1: float) -> bool:
         """Push out of every collider whatever another stage (particle contacts) pushed in."""
-        return self.apply(state, state.particle_position, state.particle_velocity, t0, t1, project_only=True)
+        x, v = state.particle_position, state.particle_velocity
+        return self.apply(state, x, v, t0, t1, t1 - t0, project_only=True)
 
 
 def _shape_of(params: np.ndarray, friction: float) -> Shape:
@@ -297,7 +348,14 @@ def resolve_numpy(
             idx = np.flatnonzero(alive)
             if idx.size == 0:
                 break
-            d, _ = sdf(shape.kind, p0[idx] + s[idx, None] * sg[idx] - center, shape.radius, shape.half, shape.rotation, shape.segment)
+            d, _ = sdf(
+                shape.kind,
+                p0[idx] + s[idx, None] * sg[idx] - center,
+                shape.radius,
+                shape.half,
+                shape.rotation,
+                shape.segment,
+            )
             d = d - r[idx]
             touched = d <= tol[idx]
             hit[idx[touched]] = True
@@ -332,7 +390,15 @@ def resolve_numpy(
     return changed
 
 
-def _project(shape: Shape, center: np.ndarray, u: np.ndarray, x: np.ndarray, v: np.ndarray, idx: np.ndarray, radius: np.ndarray) -> bool:
+def _project(
+    shape: Shape,
+    center: np.ndarray,
+    u: np.ndarray,
+    x: np.ndarray,
+    v: np.ndarray,
+    idx: np.ndarray,
+    radius: np.ndarray,
+) -> bool:
     """Put any of ``idx`` still inside the shape on its surface; stop its inward relative motion."""
     d, n = sdf(shape.kind, x[idx] - center, shape.radius, shape.half, shape.rotation, shape.segment)
     d = d - radius[idx]
@@ -365,7 +431,7 @@ def _project(shape: Shape, center: np.ndarray, u: np.ndarray, x: np.ndarray, v: 
 _NUMBA_KERNEL = None
 
 
-def numba_kernel():  # noqa: ANN201 - a numba dispatcher
+def numba_kernel():
     """The numba kernel: the same algorithm as :func:`resolve_numpy`, one particle at a time."""
     global _NUMBA_KERNEL
     if _NUMBA_KERNEL is not None:
@@ -463,7 +529,9 @@ def numba_kernel():  # noqa: ANN201 - a numba dispatcher
             vt[a] *= keep
 
     @numba.njit(cache=True)
-    def resolve(params, friction, off0, off1, x_old, v_old, x, v, dt, radius, movable, project_only):  # pragma: no cover
+    def resolve(
+        params, friction, off0, off1, x_old, v_old, x, v, dt, radius, movable, project_only
+    ):  # pragma: no cover
         changed = False
         n = np.zeros(3)
         vt = np.zeros(3)

@@ -29,6 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from animsim.elements import StepStage
+
 LINEAR = 0
 SMOOTH = 1
 INTERPOLATIONS = {"linear": LINEAR, "smooth": SMOOTH}
@@ -134,7 +136,7 @@ def evaluate_numpy(paths: Paths, t: float) -> tuple[np.ndarray, np.ndarray]:
 _NUMBA_EVAL = None
 
 
-def numba_evaluate():  # noqa: ANN201 - returns a numba dispatcher
+def numba_evaluate():
     """The numba twin of :func:`evaluate_numpy` (compiled on first use)."""
     global _NUMBA_EVAL
     if _NUMBA_EVAL is not None:
@@ -208,7 +210,7 @@ class PathEvaluator:
         return self._pos, self._vel
 
 
-class KeyframeDrive:
+class KeyframeDrive(StepStage):
     """Pinned particles that follow keyframed paths.
 
     Row ``rows[i]`` sits at ``base[i] + path[which[i]](t)`` with velocity
@@ -223,6 +225,7 @@ class KeyframeDrive:
 
     injects = True  # the path pushes whatever is attached to it: energy comes in
     dissipative = False
+    no_closed_form = "keyframed particles"
 
     def __init__(self, rows: np.ndarray, which: np.ndarray, base: np.ndarray, paths: Paths, backend: str):
         self.rows = np.asarray(rows, dtype=np.int64)
@@ -241,9 +244,11 @@ class KeyframeDrive:
         x[self.rows] = self.base + pos[self.which]
         v[self.rows] = vel[self.which]
 
-    def reset(self, state) -> None:  # noqa: ANN001 - animsim.system.State
+    def reset(self, state) -> None:
         self.drive(state.time, state.particle_position, state.particle_velocity)
 
-    def apply(self, state, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float) -> bool:  # noqa: ANN001
+    def apply(
+        self, state, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, dt: float | None = None
+    ) -> bool:
         self.drive(t1, state.particle_position, state.particle_velocity)
         return True

@@ -42,6 +42,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from animsim.elements import StepStage
+
 #: velocity and position passes per step
 ITERATIONS = 6
 RESTING_STEPS = 2.0
@@ -59,7 +61,9 @@ def spring_exclusions(index: np.ndarray, rest: np.ndarray, radius: np.ndarray, n
     return np.unique(a[near] * n + b[near])
 
 
-def find_pairs_numpy(x: np.ndarray, radius: np.ndarray, active: np.ndarray, exclude: np.ndarray) -> np.ndarray:
+def find_pairs_numpy(
+    x: np.ndarray, radius: np.ndarray, active: np.ndarray, exclude: np.ndarray
+) -> np.ndarray:
     """Overlapping pairs (P, 2), i < j, among ``active`` rows (cKDTree)."""
     from scipy.spatial import cKDTree
 
@@ -148,13 +152,15 @@ def resolve_pairs_numpy(
         d = x[j] - x[i]
         dist = np.sqrt(np.einsum("ij,ij->i", d, d))
         over = np.maximum(reach - dist, 0.0)
-        nn = np.where(dist[:, None] > 0, d / np.where(dist > 0, dist, 1.0)[:, None], np.array([0.0, 1.0, 0.0]))
+        nn = np.where(
+            dist[:, None] > 0, d / np.where(dist > 0, dist, 1.0)[:, None], np.array([0.0, 1.0, 0.0])
+        )
         corr = (over / w * relax)[:, None] * nn  # a "mass-weighted" displacement
         x += scatter(corr) * inv_mass[:, None]
     return True
 
 
-class ParticleContacts:
+class ParticleContacts(StepStage):
     """Particle-particle contacts as a step stage.
 
     radius: (N,) per-row radii.  active: (N,) rows that take part (not bodies).
@@ -162,6 +168,7 @@ class ParticleContacts:
     """
 
     injects = False
+    no_closed_form = "particle contacts"
 
     def __init__(
         self,
@@ -197,17 +204,19 @@ class ParticleContacts:
             else "particle contacts: no particle takes part"
         )
 
-    def reset(self, state) -> None:  # noqa: ANN001
+    def reset(self, state) -> None:
         """Contacts keep no state between steps."""
 
-    def apply(self, state, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float) -> bool:  # noqa: ANN001
+    def apply(
+        self, state, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, dt: float | None = None
+    ) -> bool:
         changed = self._apply(state, x_old, v_old, t0, t1)
         if changed and self.colliders is not None:
             # the overlap removal may push a particle into a collider: never leave it there
             self.colliders.project(state, t0, t1)
         return changed
 
-    def _apply(self, state, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float) -> bool:  # noqa: ANN001
+    def _apply(self, state, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float) -> bool:
         dt = t1 - t0
         if dt <= 0:
             return False
@@ -224,8 +233,18 @@ class ParticleContacts:
                 return False
             return bool(
                 resolve(
-                    pairs, x, v, x_old, v_old, self.inv_mass, self.radius,
-                    self.restitution, self.friction, dt, self.iterations, RELAX,
+                    pairs,
+                    x,
+                    v,
+                    x_old,
+                    v_old,
+                    self.inv_mass,
+                    self.radius,
+                    self.restitution,
+                    self.friction,
+                    dt,
+                    self.iterations,
+                    RELAX,
                 )
             )
         pairs = find_pairs_numpy(x, self.radius, active, self.exclude)
@@ -233,7 +252,16 @@ class ParticleContacts:
         if len(pairs) == 0:
             return False
         return resolve_pairs_numpy(
-            pairs, x, v, x_old, v_old, self.inv_mass, self.radius, self.restitution, self.friction, dt,
+            pairs,
+            x,
+            v,
+            x_old,
+            v_old,
+            self.inv_mass,
+            self.radius,
+            self.restitution,
+            self.friction,
+            dt,
             self.iterations,
         )
 
@@ -241,7 +269,7 @@ class ParticleContacts:
 _KERNELS = None
 
 
-def numba_kernels():  # noqa: ANN201 - (find_pairs, resolve) numba dispatchers
+def numba_kernels():
     """The numba twins: a uniform-grid hash for the pairs, and the same Jacobi passes."""
     global _KERNELS
     if _KERNELS is not None:
@@ -337,7 +365,9 @@ def numba_kernels():  # noqa: ANN201 - (find_pairs, resolve) numba dispatchers
         return out
 
     @numba.njit(cache=True)
-    def resolve(pairs, x, v, x_old, v_old, inv_mass, radius, e, mu, dt, iterations, relax_factor):  # pragma: no cover
+    def resolve(
+        pairs, x, v, x_old, v_old, inv_mass, radius, e, mu, dt, iterations, relax_factor
+    ):  # pragma: no cover
         p = pairs.shape[0]
         n_rows = x.shape[0]
         count = np.zeros(n_rows, dtype=np.int64)

@@ -122,6 +122,7 @@ class Frame:
     age: np.ndarray | None = None  # (n,) s, emitted particles only (NaN for others)
     size: np.ndarray | None = None  # (n,) m, for rendering
     color: np.ndarray | None = None  # (n, 4) RGBA in [0, 1]
+    spring_intact: np.ndarray | None = None  # (S,) bool: False for springs torn by now (None: none can tear)
 
 
 class FrameSink(Protocol):

@@ -47,12 +47,16 @@ class _BoundsSink:
     def __init__(self) -> None:
         self.lo = np.full(3, np.inf)
         self.hi = np.full(3, -np.inf)
+        self.surface: Callable[[float], np.ndarray] | None = None
 
     def begin(self, header: TrajectoryHeader) -> None:
-        pass
+        # solid colliders stay in view too (where they are at each frame)
+        self.surface = header.extra.get("collider_surface")
 
     def write(self, frame: Frame) -> None:
         p = frame.position
+        if self.surface is not None:
+            p = np.concatenate([p, self.surface(frame.time)])
         if len(p):
             finite = p[np.isfinite(p).all(axis=1)]
             if len(finite):

@@ -12,18 +12,27 @@ from __future__ import annotations
 
 import numpy as np
 
+from animsim.elements import StepStage
+
 
 def strain(x: np.ndarray, a: np.ndarray, b: np.ndarray, rest: np.ndarray) -> np.ndarray:
     """|L| / rest - 1 of springs (a, b); +inf for a stretched zero-rest spring, 0 for a slack one."""
     d = x[a] - x[b]
     length = np.sqrt(np.einsum("ij,ij->i", d, d))
     with np.errstate(divide="ignore", invalid="ignore"):
-        s = np.where(rest > 0, length / np.where(rest > 0, rest, 1.0) - 1.0, np.where(length > 0, np.inf, 0.0))
+        s = np.where(
+            rest > 0, length / np.where(rest > 0, rest, 1.0) - 1.0, np.where(length > 0, np.inf, 0.0)
+        )
     return s
 
 
 def tear_numpy(
-    x: np.ndarray, which: np.ndarray, a: np.ndarray, b: np.ndarray, rest: np.ndarray, limit: np.ndarray,
+    x: np.ndarray,
+    which: np.ndarray,
+    a: np.ndarray,
+    b: np.ndarray,
+    rest: np.ndarray,
+    limit: np.ndarray,
     intact: np.ndarray,
 ) -> int:
     """Break every intact spring of ``which`` past its limit; the number broken now."""
@@ -38,7 +47,7 @@ def tear_numpy(
 _KERNEL = None
 
 
-def numba_kernel():  # noqa: ANN201 - a numba dispatcher
+def numba_kernel():
     global _KERNEL
     if _KERNEL is not None:
         return _KERNEL
@@ -69,11 +78,12 @@ def numba_kernel():  # noqa: ANN201 - a numba dispatcher
     return tear
 
 
-class Tearing:
+class Tearing(StepStage):
     """The tearing stage: runs after contacts, before emitters."""
 
     injects = False
     dissipative = True  # a breaking spring takes its stored energy with it
+    no_closed_form = "tearing springs"
 
     def __init__(self, index: np.ndarray, rest: np.ndarray, max_strain: np.ndarray, backend: str = "numpy"):
         self.a = np.ascontiguousarray(index[:, 0], dtype=np.int64)
@@ -85,20 +95,31 @@ class Tearing:
         self._kernel = numba_kernel() if backend == "numba" else None
         self.broken = 0
         self.first_break: float | None = None
+        #: the spring element (animsim.forces.springs.Springs) whose broken springs are switched off
+        self.springs = None
         self.label = (
             f"tearing: {self.which.size} spring(s) break for good past their max_strain "
             f"({', '.join(f'{v:g}' for v in np.unique(self.limit[self.which])[:6])})"
         )
 
-    def reset(self, state) -> None:  # noqa: ANN001
+    def reset(self, state) -> None:
+        """At a run's start (or a replay's): the springs broken in ``state`` are the broken ones."""
         self.broken = 0 if state.spring_intact is None else int((~state.spring_intact).sum())
         self.first_break = None
+        if self.springs is not None and state.spring_intact is not None:
+            self.springs.set_intact(state.spring_intact)
 
-    def apply(self, state, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float) -> bool:  # noqa: ANN001
+    def apply(
+        self, state, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, dt: float | None = None
+    ) -> bool:
         intact = state.spring_intact
         if intact is None:
             return False
         x = state.particle_position
+        if self.springs is not None and self.broken != intact.size - int(np.count_nonzero(intact)):
+            # the state was replaced (a replay, an adaptive trial): follow its springs
+            self.broken = intact.size - int(np.count_nonzero(intact))
+            self.springs.set_intact(intact)
         if self._kernel is not None:
             now = int(self._kernel(x, self.which, self.a, self.b, self.rest, self.limit, intact))
         else:
@@ -107,7 +128,9 @@ class Tearing:
             self.broken += now
             if self.first_break is None:
                 self.first_break = t1
+            if self.springs is not None:
+                self.springs.set_intact(intact)
         return now > 0
 
-    def summary(self) -> dict[str, float | int | None]:
+    def run_summary(self) -> dict[str, float | int | None]:
         return {"springs_broken": self.broken, "first_break_time": self.first_break}

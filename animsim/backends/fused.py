@@ -40,6 +40,7 @@ from animsim.integrators.base import (
 from animsim.integrators.base import (
     FUSED_VERLET as VERLET,
 )
+
 #: largest (particles + springs) x steps one call may do, so Ctrl-C and the
 #: progress bar are served about every few tenths of a second
 MAX_WORK_PER_CALL = 20_000_000
@@ -228,6 +229,8 @@ class NumbaForces:
     def acceleration(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> np.ndarray:
         d = self.dynamics
         d.evaluations += 1
+        for drive in d.drivers:  # keyframed rows on their path (animsim.keyframes)
+            drive.drive(t, x, v)
         mass = _live(d.mass, self._copies)
         if not self.others:
             inv_mass = _live(d.inv_mass, self._copies)

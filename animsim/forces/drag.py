@@ -6,8 +6,6 @@ law is the aerodynamic drag of the CSE 3541 notes ("Opposing forces").
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 import scipy.sparse as sp
 

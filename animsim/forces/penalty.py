@@ -11,8 +11,6 @@ stiffness counts in the stability analysis like any spring's.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 import scipy.sparse as sp
 

@@ -8,8 +8,6 @@ scene asks for it.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 import scipy.sparse as sp
 

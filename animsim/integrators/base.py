@@ -20,7 +20,6 @@ from typing import Any, ClassVar
 from animsim.dynamics import Dynamics
 from animsim.system import State
 
-
 #: method families of the numba backend's fused kernel (animsim.backends.fused)
 FUSED_SYMPLECTIC_EULER = 0
 FUSED_EULER_AVERAGE = 1

@@ -31,8 +31,12 @@ def _shapes() -> list[Shape]:
     rot = quaternion_matrix(axis_angle_quaternion([1, 1, 0], 35))
     return [
         Shape(SPHERE, np.array([0.0, 0.0, 0.0]), radius=0.5, restitution=0.3, friction=0.2),
-        Shape(BOX, np.array([2.0, 0.0, 0.0]), half=np.array([0.3, 0.005, 0.4]), rotation=rot, restitution=0.7),
-        Shape(CAPSULE, np.array([-2.0, 0.0, 0.0]), radius=0.2, segment=np.array([0.1, 0.5, 0.0]), friction=0.5),
+        Shape(
+            BOX, np.array([2.0, 0.0, 0.0]), half=np.array([0.3, 0.005, 0.4]), rotation=rot, restitution=0.7
+        ),
+        Shape(
+            CAPSULE, np.array([-2.0, 0.0, 0.0]), radius=0.2, segment=np.array([0.1, 0.5, 0.0]), friction=0.5
+        ),
     ]
 
 
@@ -73,7 +77,10 @@ def test_signed_distances_match_closed_forms() -> None:
         np.testing.assert_allclose(np.linalg.norm(nn, axis=1), 1.0, atol=1e-12)
         h = 1e-6
         grad = np.stack(
-            [(shape.signed_distance(pts + h * e)[0] - shape.signed_distance(pts - h * e)[0]) / (2 * h) for e in np.eye(3)],
+            [
+                (shape.signed_distance(pts + h * e)[0] - shape.signed_distance(pts - h * e)[0]) / (2 * h)
+                for e in np.eye(3)
+            ],
             axis=1,
         )
         smooth = np.linalg.norm(grad, axis=1) > 0.999  # skip points on a box's medial planes
@@ -116,7 +123,9 @@ def test_numpy_and_numba_agree() -> None:
     out = []
     for backend in ("numpy", "numba"):
         xs, vs = x.copy(), v.copy()
-        cols = Colliders(shapes, np.ones(n), radius=radius, motion=path, moving=np.array([0, -1, -1]), backend=backend)
+        cols = Colliders(
+            shapes, np.ones(n), radius=radius, motion=path, moving=np.array([0, -1, -1]), backend=backend
+        )
         cols.apply(_state(xs, vs), x_old, v_old, 0.3, 0.35)
         out.append((xs, vs))
     np.testing.assert_allclose(out[0][0], out[1][0], rtol=1e-12, atol=1e-12)

@@ -110,7 +110,9 @@ def test_numba_and_numpy_agree() -> None:
 
 def test_drive_puts_rows_on_base_plus_path() -> None:
     paths = make_paths([[(0.0, (0.0, 0.0, 0.0)), (1.0, (1.0, 0.0, 0.0))]], [False])
-    drive = KeyframeDrive(np.array([2, 0]), np.array([0, 0]), np.array([[0, 1, 0], [5, 5, 5]]), paths, "numpy")
+    drive = KeyframeDrive(
+        np.array([2, 0]), np.array([0, 0]), np.array([[0, 1, 0], [5, 5, 5]]), paths, "numpy"
+    )
     x = np.zeros((3, 3))
     v = np.zeros((3, 3))
     drive.drive(0.25, x, v)

@@ -12,11 +12,10 @@ import pytest
 
 from animsim.backends import BACKEND_AUTO
 from animsim.compile import compile_scene
+from animsim.engine import run
 from animsim.integrators import FIXED_STEP
 from animsim.record import MemorySink
 from animsim.scene.loader import load_scene_text
-from animsim.engine import run
-from tests.conftest import ROOT
 
 pytest.importorskip("numba")
 

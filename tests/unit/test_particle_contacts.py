@@ -23,7 +23,9 @@ def _state(x: np.ndarray, v: np.ndarray, alive: np.ndarray | None = None) -> Sim
     return SimpleNamespace(particle_position=x, particle_velocity=v, particle_alive=alive)
 
 
-def _contacts(n: int, r: float, e: float, mu: float, backend: str, mass: np.ndarray | None = None, exclude=None):
+def _contacts(
+    n: int, r: float, e: float, mu: float, backend: str, mass: np.ndarray | None = None, exclude=None
+):
     inv = np.ones(n) if mass is None else np.where(mass > 0, 1.0 / np.where(mass > 0, mass, 1.0), 0.0)
     ex = np.zeros(0, dtype=np.int64) if exclude is None else exclude
     return ParticleContacts(np.full(n, r), e, mu, inv, np.ones(n, dtype=bool), ex, backend)
@@ -146,12 +148,16 @@ def test_a_pile_of_500_settles_without_overlaps(backend: str) -> None:
         Shape(BOX, np.array([0.0, 0.5, side / 2 + 0.5]), half=np.array([1.0, 1.0, 0.5]), restitution=0.0),
     ]
     # a loose lattice above the box with a little jitter
-    g3 = np.stack(np.meshgrid(np.arange(12), np.arange(4), np.arange(12), indexing="ij"), -1).reshape(-1, 3)[:n]
+    g3 = np.stack(np.meshgrid(np.arange(12), np.arange(4), np.arange(12), indexing="ij"), -1).reshape(-1, 3)[
+        :n
+    ]
     x = (g3 - [5.5, 0, 5.5]) * 2.3 * r + np.array([0.0, 0.1, 0.0]) + rng.uniform(-0.002, 0.002, (n, 3))
     v = np.zeros((n, 3))
     radius = np.full(n, r)
     walls_stage = Colliders(walls, np.ones(n), radius=radius, backend=backend)
-    contacts = ParticleContacts(radius, 0.1, 0.3, np.ones(n), np.ones(n, dtype=bool), np.zeros(0, np.int64), backend)
+    contacts = ParticleContacts(
+        radius, 0.1, 0.3, np.ones(n), np.ones(n, dtype=bool), np.zeros(0, np.int64), backend
+    )
     contacts.colliders = walls_stage
     g = np.array([0.0, -9.81, 0.0])
     dt = 0.002

@@ -42,7 +42,7 @@ def test_breaks_past_the_limit_and_stays_broken(backend: str) -> None:
     x[1, 0] = 1.3
     assert tear.apply(state, x, x, 0.2, 0.3)
     assert state.spring_intact.tolist() == [False, True, False]
-    assert tear.summary() == {"springs_broken": 2, "first_break_time": 0.2}
+    assert tear.run_summary() == {"springs_broken": 2, "first_break_time": 0.2}
 
 
 def test_deterministic_and_backends_agree() -> None:
