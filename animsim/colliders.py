@@ -253,7 +253,9 @@ class Colliders(StepStage):
             return False
         off0, off1 = self.offsets(t0), self.offsets(t1)
         x, v = state.particle_position, state.particle_velocity
-        movable = self.active & (self.inv_mass > 0)
+        # the state's live masses: emitter pools switch theirs on at birth
+        inv_mass = getattr(state, "particle_inv_mass", self.inv_mass)
+        movable = self.active & (inv_mass > 0)
         if state.particle_alive is not None:
             movable = movable & state.particle_alive
         if self._kernel is not None:

@@ -221,6 +221,12 @@ class ParticleContacts(StepStage):
         if dt <= 0:
             return False
         x, v = state.particle_position, state.particle_velocity
+        # the state's live masses: emitter pools switch theirs on at birth
+        inv_mass = getattr(state, "particle_inv_mass", self.inv_mass)
+        if not inv_mass.flags.writeable:  # the model's own (fixed) masses: one writable copy
+            if getattr(self, "_inv_copy", None) is None:
+                self._inv_copy = np.array(inv_mass)
+            inv_mass = self._inv_copy
         active = self.active if state.particle_alive is None else self.active & state.particle_alive
         if self._kernel is not None:
             find, resolve = self._kernel
@@ -238,7 +244,7 @@ class ParticleContacts(StepStage):
                     v,
                     x_old,
                     v_old,
-                    self.inv_mass,
+                    inv_mass,
                     self.radius,
                     self.restitution,
                     self.friction,
@@ -257,7 +263,7 @@ class ParticleContacts(StepStage):
             v,
             x_old,
             v_old,
-            self.inv_mass,
+            inv_mass,
             self.radius,
             self.restitution,
             self.friction,
