@@ -267,6 +267,8 @@ def compile_scene(
 
     solids = contact_stages.build(scene, system, chosen, springs_term, particle_position)
     post_step = [*solids.front, *post_step, *solids.back]
+    if solids.contacts is not None:  # contacts push out of planes too, after the colliders
+        solids.contacts.planes = next((st for st in post_step if hasattr(st, "_project")), None)
     left_out.extend(solids.left_out)
     dynamics = Dynamics(system, terms)
     dynamics.drivers = tuple(solids.drivers)

@@ -3,7 +3,11 @@
 The compiler calls :func:`build` once; it is the only code here that reads the
 scene's models. It returns the stages in the order they run after each step:
 
-    keyframes -> (planes) -> colliders -> particle contacts -> tearing -> (emitters)
+    keyframes -> colliders -> (planes) -> particle contacts -> tearing -> (emitters)
+
+Planes come after the colliders: a particle squeezed between a moving
+collider and a plane ends on the plane's side (planes keep their promise that
+nothing ends a step behind them).
 
 and the lines ``explain`` prints for what the scene leaves out.
 
@@ -30,8 +34,9 @@ from animsim.scene import models as m
 
 @dataclass
 class Built:
-    front: list[Any] = field(default_factory=list)  # before planes: keyframes
-    back: list[Any] = field(default_factory=list)  # after planes: colliders, contacts, tearing
+    front: list[Any] = field(default_factory=list)  # before planes: keyframes, colliders
+    back: list[Any] = field(default_factory=list)  # after planes: contacts, tearing
+    contacts: Any = None
     drivers: list[Any] = field(default_factory=list)  # keyframe drives (forces see the path)
     left_out: list[str] = field(default_factory=list)
     tearing: Any = None
@@ -47,7 +52,7 @@ def spring_max_strain(scene: m.Scene) -> np.ndarray:
 
     parts = [np.array([np.inf if sp.max_strain is None else sp.max_strain for sp in scene.springs])]
     for s in scene.structures:
-        families = [getattr(s, name, None) for name in s.model_fields]
+        families = [getattr(s, name, None) for name in type(s).model_fields]
         if any(isinstance(f, m.SpringFamily) and f.max_strain is not None for f in families):
             for group in expand(s).springs:
                 parts.append(np.full(len(group.index), group.max_strain))
@@ -189,7 +194,7 @@ def build(scene: m.Scene, system: Any, backend: str, springs: Any | None, positi
             moving=np.array(moving, dtype=np.int64),
             backend=numba,
         )
-        out.back.append(colliders)
+        out.front.append(colliders)
         out.collider_surface = colliders.surface_points
     else:
         out.left_out.append("colliders: no spheres, boxes or capsules")
@@ -208,6 +213,7 @@ def build(scene: m.Scene, system: Any, backend: str, springs: Any | None, positi
         )
         contacts.colliders = colliders
         out.back.append(contacts)
+        out.contacts = contacts
     else:
         out.left_out.append("particle contacts: no particle_collisions")
 

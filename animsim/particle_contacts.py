@@ -192,8 +192,10 @@ class ParticleContacts(StepStage):
         self.dissipative = restitution < 1 or friction > 0
         self._kernel = numba_kernels() if backend == "numba" else None
         self.pairs_last = 0
-        #: colliders (animsim.colliders.Colliders) to push out of after the contacts moved particles
+        #: colliders (animsim.colliders.Colliders) and impulse planes (animsim.collisions) to push
+        #: out of after the contacts moved particles
         self.colliders = None
+        self.planes = None
         finder = "uniform grid hash" if backend == "numba" else "k-d tree (scipy cKDTree)"
         self.label = (
             f"particle contacts: {int(self.active.sum())} particle(s) as spheres "
@@ -214,6 +216,8 @@ class ParticleContacts(StepStage):
         if changed and self.colliders is not None:
             # the overlap removal may push a particle into a collider: never leave it there
             self.colliders.project(state, t0, t1)
+        if changed and self.planes is not None:
+            self.planes._project(state.particle_position, state.particle_velocity, np.flatnonzero(self.active))
         return changed
 
     def _apply(self, state, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float) -> bool:

@@ -168,6 +168,7 @@ class MemorySink:
                 age=None if frame.age is None else frame.age.copy(),
                 size=None if frame.size is None else frame.size.copy(),
                 color=None if frame.color is None else frame.color.copy(),
+                spring_intact=None if frame.spring_intact is None else frame.spring_intact.copy(),
             )
         )
 
