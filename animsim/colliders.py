@@ -195,12 +195,18 @@ class Colliders(StepStage):
         counts: dict[str, int] = {}
         for s in shapes:
             counts[KIND_NAMES[s.kind]] = counts.get(KIND_NAMES[s.kind], 0) + 1
-        what = ", ".join(f"{v} {k}{'s' if v > 1 else ''}" for k, v in counts.items())
+        what = ", ".join(f"{v} {k}{('es' if k == 'box' else 's') if v > 1 else ''}" for k, v in counts.items())
         n_moving = int((self.moving >= 0).sum())
         self.label = (
             f"colliders: {what}"
             + (f" ({n_moving} keyframed)" if n_moving else " (static)")
             + ", time of impact inside the step, restitution and Coulomb friction"
+        )
+
+    def stability_note(self, dt: float) -> str:
+        return (
+            "colliders: impulses at the time of impact inside each step, no stiffness and no limit on dt"
+            + ("; moving ones put energy in (the watchdog's energy test is off)" if self.injects else "")
         )
 
     def offsets(self, t: float) -> np.ndarray:

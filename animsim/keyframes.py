@@ -239,6 +239,9 @@ class KeyframeDrive(StepStage):
             f"({', '.join(kinds)}), position and velocity set from the path"
         )
 
+    def stability_note(self, dt: float) -> str:
+        return "keyframes: driven particles follow their paths and put energy in (the watchdog's energy test is off)"
+
     def drive(self, t: float, x: np.ndarray, v: np.ndarray) -> None:
         pos, vel = self.evaluator(t)
         x[self.rows] = self.base + pos[self.which]

@@ -206,6 +206,14 @@ class ParticleContacts(StepStage):
             else "particle contacts: no particle takes part"
         )
 
+    def stability_note(self, dt: float) -> str:
+        r = float(self.radius[self.active].min()) if self.active.any() else 0.0
+        return (
+            f"particle contacts: impulses at the end of each step, no stiffness; found only at step "
+            f"ends, so two particles closing faster than 2 r / dt = {2 * r / dt:.3g} m/s can pass "
+            f"through each other"
+        )
+
     def reset(self, state) -> None:
         """Contacts keep no state between steps."""
 
