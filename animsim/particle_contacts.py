@@ -102,61 +102,68 @@ def resolve_pairs_numpy(
     dt: float,
     iterations: int = ITERATIONS,
 ) -> bool:
-    """Impulses and overlap removal for ``pairs`` (NumPy kernel), in place."""
+    """Impulses and overlap removal for ``pairs`` (NumPy kernel), in place.
+
+    The pair-particle incidence D (N x P: +1 at j, -1 at i) is one sparse matrix
+    per step: ``D.T @ v`` gathers every pair's relative velocity and ``D @ f``
+    scatters equal and opposite pair quantities back to the particles, each in
+    one sparse product instead of fancy-index gathers and bincounts.
+    """
+    import scipy.sparse as sp
+
     i, j = pairs[:, 0], pairs[:, 1]
     wi, wj = inv_mass[i], inv_mass[j]
     w = wi + wj
     ok = w > 0
-    i, j, wi, wj, w = i[ok], j[ok], wi[ok], wj[ok], w[ok]
+    i, j, w = i[ok], j[ok], w[ok]
     if i.size == 0:
         return False
     n_rows = len(x)
-    ends = np.concatenate([i, j])
-    count = np.bincount(ends, minlength=n_rows)
+    npair = i.size
+    cols = np.arange(npair)
+    dmat = sp.csr_matrix(
+        (np.concatenate([-np.ones(npair), np.ones(npair)]), (np.concatenate([i, j]), np.concatenate([cols, cols]))),
+        shape=(n_rows, npair),
+    )
+    dmat_t = dmat.T.tocsr()
+    count = np.bincount(np.concatenate([i, j]), minlength=n_rows)
     relax = np.minimum(RELAX / np.maximum(count[i], count[j]), 1.0)
-    d = x[j] - x[i]
-    dist = np.sqrt(np.einsum("ij,ij->i", d, d))
-    n = np.where(dist[:, None] > 0, d / np.where(dist > 0, dist, 1.0)[:, None], np.array([0.0, 1.0, 0.0]))
+    scale = relax / w  # per pair: an impulse (N s) per unit of relative velocity
+
+    def unit(d: np.ndarray) -> np.ndarray:
+        dist = np.sqrt(np.einsum("ij,ij->i", d, d))
+        safe = np.where(dist > 0, dist, 1.0)
+        out = d / safe[:, None]
+        out[dist == 0] = (0.0, 1.0, 0.0)
+        return out, dist
+
+    n, _ = unit(dmat_t @ x)
     # restitution target from the approach before any pass
-    vn0 = np.einsum("ij,ij->i", v[j] - v[i], n)
-    arel = np.einsum("ij,ij->i", (v[j] - v_old[j]) - (v[i] - v_old[i]), n) / dt
+    vn0 = np.einsum("ij,ij->i", dmat_t @ v, n)
+    arel = np.einsum("ij,ij->i", dmat_t @ (v - v_old), n) / dt
     resting = -vn0 <= RESTING_STEPS * np.maximum(-arel, 0.0) * dt
     target = np.where((vn0 < 0) & ~resting, -restitution * vn0, 0.0)
-    lam = np.zeros(i.size)
-
-    def scatter(vec: np.ndarray) -> np.ndarray:
-        """Per-row sum of +vec on j and -vec on i: equal and opposite, so momentum is kept."""
-        out = np.empty((n_rows, 3))
-        for a in range(3):
-            out[:, a] = np.bincount(ends, weights=np.concatenate([-vec[:, a], vec[:, a]]), minlength=n_rows)
-        return out
-
+    lam = np.zeros(npair)
+    inv = inv_mass[:, None]
     for _ in range(iterations):
-        vn = np.einsum("ij,ij->i", v[j] - v[i], n)
-        dl = (target - vn) / w * relax
-        new = np.maximum(lam + dl, 0.0)
+        vn = np.einsum("ij,ij->i", dmat_t @ v, n)
+        new = np.maximum(lam + (target - vn) * scale, 0.0)
         dl = new - lam
         lam = new
-        imp = dl[:, None] * n  # impulse on j per unit... (mass-weighted below)
-        v += scatter(imp) * inv_mass[:, None]
+        v += (dmat @ (dl[:, None] * n)) * inv  # +J n on j, -J n on i: momentum kept
     if friction > 0:
-        dv = v[j] - v[i]
+        dv = dmat_t @ v
         vt = dv - np.einsum("ij,ij->i", dv, n)[:, None] * n
         speed = np.sqrt(np.einsum("ij,ij->i", vt, vt))
-        jt = np.minimum(speed / w * relax, friction * lam)
+        jt = np.minimum(speed * scale, friction * lam)
         with np.errstate(divide="ignore", invalid="ignore"):
-            t_dir = np.where(speed[:, None] > 0, vt / np.where(speed > 0, speed, 1.0)[:, None], 0.0)
-        v += scatter(-jt[:, None] * t_dir) * inv_mass[:, None]
+            k = np.where(speed > 0, jt / np.where(speed > 0, speed, 1.0), 0.0)
+        v -= (dmat @ (k[:, None] * vt)) * inv
     reach = radius[i] + radius[j]
     for _ in range(iterations):
-        d = x[j] - x[i]
-        dist = np.sqrt(np.einsum("ij,ij->i", d, d))
+        nn, dist = unit(dmat_t @ x)
         over = np.maximum(reach - dist, 0.0)
-        nn = np.where(
-            dist[:, None] > 0, d / np.where(dist > 0, dist, 1.0)[:, None], np.array([0.0, 1.0, 0.0])
-        )
-        corr = (over / w * relax)[:, None] * nn  # a "mass-weighted" displacement
-        x += scatter(corr) * inv_mass[:, None]
+        x += (dmat @ ((over * scale)[:, None] * nn)) * inv  # the pair's centre of mass stays
     return True
 
 
@@ -313,6 +320,109 @@ def numba_kernels():
 
     @numba.njit(cache=True)
     def find_pairs(x, radius, active, exclude, cell):  # pragma: no cover - compiled
+        # a dense grid over the particles' bounding box when it is not much larger than
+        # the particle count (the common case: grains in a box), else the spatial hash
+        n = x.shape[0]
+        lo = np.full(3, np.inf)
+        hi = np.full(3, -np.inf)
+        m = 0
+        for i in range(n):
+            if active[i]:
+                m += 1
+                for a in range(3):
+                    lo[a] = min(lo[a], x[i, a])
+                    hi[a] = max(hi[a], x[i, a])
+        if m < 2:
+            return np.empty((0, 2), dtype=np.int64)
+        dims = np.empty(3, dtype=np.int64)
+        total = 1.0
+        for a in range(3):
+            span = (hi[a] - lo[a]) / cell
+            if not np.isfinite(span):
+                return find_pairs_hashed(x, radius, active, exclude, cell)
+            dims[a] = np.int64(span) + 1
+            total *= dims[a]
+        if total > 8.0 * m + 4096:
+            return find_pairs_hashed(x, radius, active, exclude, cell)
+        return find_pairs_dense(x, radius, active, exclude, cell, lo, dims, m)
+
+    @numba.njit(cache=True)
+    def find_pairs_dense(x, radius, active, exclude, cell, lo, dims, m):  # pragma: no cover - compiled
+        n = x.shape[0]
+        ny, nz = dims[1], dims[2]
+        ncell = dims[0] * ny * nz
+        inv = 1.0 / cell
+        key = np.empty(n, dtype=np.int64)
+        start = np.zeros(ncell + 1, dtype=np.int64)
+        for i in range(n):
+            if active[i]:
+                cx = min(np.int64((x[i, 0] - lo[0]) * inv), dims[0] - 1)
+                cy = min(np.int64((x[i, 1] - lo[1]) * inv), ny - 1)
+                cz = min(np.int64((x[i, 2] - lo[2]) * inv), nz - 1)
+                key[i] = (cx * ny + cy) * nz + cz
+                start[key[i] + 1] += 1
+        for k in range(ncell):
+            start[k + 1] += start[k]
+        fill = start[:-1].copy()
+        order = np.empty(m, dtype=np.int64)
+        xs = np.empty((m, 3))
+        rs = np.empty(m)
+        for i in range(n):  # ascending rows within a cell: a deterministic order
+            if active[i]:
+                k = fill[key[i]]
+                order[k] = i
+                for a in range(3):
+                    xs[k, a] = x[i, a]
+                rs[k] = radius[i]
+                fill[key[i]] += 1
+        out = np.empty((max(16, 4 * m), 2), dtype=np.int64)
+        npairs = 0
+        for c in range(ncell):
+            c0 = start[c]
+            c1 = start[c + 1]
+            if c0 == c1:
+                continue
+            cz = c % nz
+            cy = (c // nz) % ny
+            cx = c // (ny * nz)
+            # the cell itself and its 13 "forward" neighbours: each pair of cells once
+            for nb in range(14):
+                if nb == 0:
+                    dx, dy, dz = 0, 0, 0
+                else:
+                    q = nb + 13  # offsets 14..26 of the 3x3x3 block, i.e. after the centre
+                    dx, dy, dz = q // 9 - 1, (q // 3) % 3 - 1, q % 3 - 1
+                gx, gy, gz = cx + dx, cy + dy, cz + dz
+                if gx < 0 or gy < 0 or gz < 0 or gx >= dims[0] or gy >= ny or gz >= nz:
+                    continue
+                g = (gx * ny + gy) * nz + gz
+                for ka in range(c0, c1):
+                    kb0 = ka + 1 if nb == 0 else start[g]
+                    for kb in range(kb0, start[g + 1]):
+                        r = rs[ka] + rs[kb]
+                        d2 = 0.0
+                        for a in range(3):
+                            t = xs[kb, a] - xs[ka, a]
+                            d2 += t * t
+                        if d2 >= r * r:
+                            continue
+                        i = order[ka]
+                        j = order[kb]
+                        if i > j:
+                            i, j = j, i
+                        if exclude.shape[0] and excluded(exclude, i * n + j):
+                            continue
+                        if npairs == out.shape[0]:
+                            grown = np.empty((2 * out.shape[0], 2), dtype=np.int64)
+                            grown[:npairs] = out
+                            out = grown
+                        out[npairs, 0] = i
+                        out[npairs, 1] = j
+                        npairs += 1
+        return out[:npairs].copy()
+
+    @numba.njit(cache=True)
+    def find_pairs_hashed(x, radius, active, exclude, cell):  # pragma: no cover - compiled
         n = x.shape[0]
         size = 1
         while size < 2 * n:

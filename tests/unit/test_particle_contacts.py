@@ -97,10 +97,13 @@ def test_numpy_and_numba_agree() -> None:
 
 
 @pytest.mark.parametrize("backend", _backends())
-def test_pairs_are_found_without_all_pairs_and_match_brute_force(backend: str) -> None:
+@pytest.mark.parametrize("spread", ["dense", "sparse"])
+def test_pairs_are_found_without_all_pairs_and_match_brute_force(backend: str, spread: str) -> None:
     rng = np.random.default_rng(9)
     n = 800
     x = rng.uniform(-1, 1, (n, 3))
+    if spread == "sparse":  # two clusters far apart: numba hashes cells instead of a dense grid
+        x[: n // 2] += 1000.0
     radius = rng.uniform(0.01, 0.06, n)
     d = np.linalg.norm(x[:, None] - x[None], axis=2)
     i, j = np.nonzero(np.triu(d < radius[:, None] + radius[None], 1))
