@@ -205,7 +205,9 @@ class Colliders(StepStage):
         counts: dict[str, int] = {}
         for s in shapes:
             counts[KIND_NAMES[s.kind]] = counts.get(KIND_NAMES[s.kind], 0) + 1
-        what = ", ".join(f"{v} {k}{('es' if k == 'box' else 's') if v > 1 else ''}" for k, v in counts.items())
+        what = ", ".join(
+            f"{v} {k}{('es' if k == 'box' else 's') if v > 1 else ''}" for k, v in counts.items()
+        )
         n_moving = int((self.moving >= 0).sum())
         self.label = (
             f"colliders: {what}"

@@ -122,7 +122,10 @@ def resolve_pairs_numpy(
     npair = i.size
     cols = np.arange(npair)
     dmat = sp.csr_matrix(
-        (np.concatenate([-np.ones(npair), np.ones(npair)]), (np.concatenate([i, j]), np.concatenate([cols, cols]))),
+        (
+            np.concatenate([-np.ones(npair), np.ones(npair)]),
+            (np.concatenate([i, j]), np.concatenate([cols, cols])),
+        ),
         shape=(n_rows, npair),
     )
     dmat_t = dmat.T.tocsr()
@@ -232,7 +235,9 @@ class ParticleContacts(StepStage):
             # the overlap removal may push a particle into a collider: never leave it there
             self.colliders.project(state, t0, t1)
         if changed and self.planes is not None:
-            self.planes._project(state.particle_position, state.particle_velocity, np.flatnonzero(self.active))
+            self.planes._project(
+                state.particle_position, state.particle_velocity, np.flatnonzero(self.active)
+            )
         return changed
 
     def _apply(self, state, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float) -> bool:

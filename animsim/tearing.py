@@ -105,7 +105,7 @@ class Tearing(StepStage):
     def stability_note(self, dt: float) -> str:
         return "tearing: the bound above counts every spring; torn springs only lower it"
 
-    def reset(self, state) -> None:  # noqa: ANN001
+    def reset(self, state) -> None:
         """At a run's start (or a replay's): the springs broken in ``state`` are the broken ones."""
         self.broken = 0 if state.spring_intact is None else int((~state.spring_intact).sum())
         self.first_break = None

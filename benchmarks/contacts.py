@@ -21,9 +21,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from animsim.compile import compile_scene, with_overrides  # noqa: E402
-from animsim.engine import run  # noqa: E402
-from animsim.scene.loader import load_scene_text  # noqa: E402
+from animsim.compile import compile_scene, with_overrides
+from animsim.engine import run
+from animsim.scene.loader import load_scene_text
 
 N_SIDE = 47
 SPACING = 0.05

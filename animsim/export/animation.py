@@ -250,7 +250,9 @@ class FrameRenderer:
             pts = self.collider_surface(time)
             sp = self.camera.project(pts)
             keep = np.flatnonzero(sp.visible)
-            canvas.draw_dots(sp.pixel[keep], np.full(len(keep), 1.2), np.array(COLLIDER_RGBA, dtype=np.float32))
+            canvas.draw_dots(
+                sp.pixel[keep], np.full(len(keep), 1.2), np.array(COLLIDER_RGBA, dtype=np.float32)
+            )
         if len(self.spring_index):
             self._draw_springs(proj.pixel, proj.visible, index, n, spring_intact)
 

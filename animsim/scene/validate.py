@@ -129,7 +129,9 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
 
     for i, s in enumerate(scene.structures):
         if s is not None and s.pin_motion is not None and not s.pin:
-            out.append((("structures", i, "pin_motion"), "pin_motion moves the pins, but there are none", True))
+            out.append(
+                (("structures", i, "pin_motion"), "pin_motion moves the pins, but there are none", True)
+            )
 
     # Particles: unique ids (after 1 -> "1"), masses.
     first_seen: dict[str, int] = {}

@@ -38,7 +38,9 @@ def _rain(n: int = 80, seed: int = 1) -> str:
         x, z = rng.uniform(-1.6, 1.6), rng.uniform(-0.4, 0.4)
         y = rng.uniform(1.5, 3.0)
         vx, vy = rng.normal(0, 2), rng.uniform(-30, -5)
-        lines.append(f"  - {{id: p{i}, mass: 0.01, position: [{x:.4f}, {y:.4f}, {z:.4f}], velocity: [{vx:.3f}, {vy:.3f}, 0]}}")
+        lines.append(
+            f"  - {{id: p{i}, mass: 0.01, position: [{x:.4f}, {y:.4f}, {z:.4f}], velocity: [{vx:.3f}, {vy:.3f}, 0]}}"
+        )
     particles = "\n".join(lines)
     return f"""
 duration: 0.6
@@ -61,7 +63,9 @@ colliders:
 
 
 @pytest.mark.parametrize("backend", _backends())
-@pytest.mark.parametrize("integrator", ["euler", "symplectic_euler", "midpoint", "rk4", "verlet", "implicit_euler"])
+@pytest.mark.parametrize(
+    "integrator", ["euler", "symplectic_euler", "midpoint", "rk4", "verlet", "implicit_euler"]
+)
 def test_no_particle_inside_a_collider_at_any_frame(backend: str, integrator: str) -> None:
     compiled, result, sink = _run(_rain(), backend, integrator)
     assert result.status == "ok"
@@ -242,8 +246,10 @@ def test_contacts_in_a_run_conserve_momentum(backend: str) -> None:
             f"  - {{id: p{i}, mass: {rng.uniform(0.5, 2):.3f}, position: [{x[0]:.4f}, {x[1]:.4f}, {x[2]:.4f}], "
             f"velocity: [{v[0]:.3f}, {v[1]:.3f}, {v[2]:.3f}]}}"
         )
-    text = "duration: 0.5\ndt: 0.005\nparticles:\n" + "\n".join(lines) + (
-        "\nparticle_collisions: {radius: 0.04, restitution: 0.5, friction: 0.3}\n"
+    text = (
+        "duration: 0.5\ndt: 0.005\nparticles:\n"
+        + "\n".join(lines)
+        + ("\nparticle_collisions: {radius: 0.04, restitution: 0.5, friction: 0.3}\n")
     )
     compiled, result, sink = _run(text, backend)
     m = compiled.system.particle_mass
@@ -261,7 +267,9 @@ def test_the_watchdog_and_explain_account_for_the_stages() -> None:
     assert watch.disabled is not None and "colliders" in watch.disabled  # the moving ball injects
     text = "\n".join(compiled.stages)
     assert "colliders: 3 spheres" not in text and "colliders:" in text
-    plain = compile_scene(load_scene_text("duration: 1\nparticles: [{id: a, mass: 1, position: [0, 0]}]").scene)
+    plain = compile_scene(
+        load_scene_text("duration: 1\nparticles: [{id: a, mass: 1, position: [0, 0]}]").scene
+    )
     left = "\n".join(plain.left_out)
     for what in ("keyframes:", "colliders:", "particle contacts:", "tearing:"):
         assert what in left
