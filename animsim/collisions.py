@@ -25,6 +25,7 @@ import numpy as np
 
 from animsim.elements import BuildContext, StepStage, numba_helper, register
 from animsim.scene import models as m
+from animsim.vec import dot3
 
 #: penalty stiffness when a penalty plane names none, N/m
 DEFAULT_PENALTY_STIFFNESS = 1e4
@@ -52,7 +53,7 @@ def _apply_friction(vt: np.ndarray, dvn: np.ndarray, mu: float) -> np.ndarray:
     """Reduce tangential velocities (k, 3) by at most mu * dvn (k,), never reversing them."""
     if mu == 0.0:
         return vt
-    speed = np.sqrt(np.einsum("ij,ij->i", vt, vt))
+    speed = np.sqrt(dot3(vt, vt))
     with np.errstate(divide="ignore", invalid="ignore"):
         keep = np.where(speed > 0, np.maximum(speed - mu * dvn, 0.0) / speed, 0.0)
     return vt * keep[:, None]
@@ -92,8 +93,7 @@ class PlaneColliders(StepStage):
 
     def numba_stage_params(self) -> tuple[np.ndarray, np.ndarray]:
         fp = np.concatenate(
-            [[len(self.planes)]]
-            + [[*p.normal, p.offset, p.restitution, p.friction] for p in self.planes]
+            [[len(self.planes)]] + [[*p.normal, p.offset, p.restitution, p.friction] for p in self.planes]
         )
         return fp.astype(np.float64), np.zeros(0, dtype=np.int64)
 
@@ -117,7 +117,7 @@ class PlaneColliders(StepStage):
         for pl in self.planes:
             n = pl.normal
             # Signed distance as x.n - p.n: no (N, 3) temporary.
-            d_new = x @ n - pl.offset
+            d_new = dot3(x, n) - pl.offset
             cand = np.flatnonzero(d_new <= 0)
             if cand.size == 0:
                 continue
@@ -125,14 +125,14 @@ class PlaneColliders(StepStage):
             # that would cross next step: Lander's "colliding contact"); never
             # pinned particles or dead pool slots.
             d1 = d_new[cand]
-            keep = ((d1 < 0) | (v[cand] @ n < 0)) & (self.inv_mass[cand] > 0)
+            keep = ((d1 < 0) | (dot3(v[cand], n) < 0)) & (self.inv_mass[cand] > 0)
             hit = cand[keep]
             if hit.size == 0:
                 continue
             touched.append(hit)
             d1 = d1[keep]
             xo, vo, xh, vh = x_old[hit], v_old[hit], x[hit], v[hit]
-            d0 = np.maximum(xo @ n - pl.offset, 0.0)
+            d0 = np.maximum(dot3(xo, n) - pl.offset, 0.0)
             gap = d0 - d1
             # fraction of the step at impact; a particle ending exactly on the plane touched it at the end
             s = np.divide(d0, gap, out=np.ones_like(d0), where=gap > 0)[:, None]
@@ -144,9 +144,9 @@ class PlaneColliders(StepStage):
             # An approach slower than what the pressing acceleration adds in
             # RESTING_STEPS steps is a resting contact: it stops instead of
             # bouncing, so a particle at rest does not jitter.
-            vn = vc @ n
+            vn = dot3(vc, n)
             approaching = vn < 0
-            pressing = np.maximum(-(mean_acc @ n), 0.0)
+            pressing = np.maximum(-dot3(mean_acc, n), 0.0)
             resting = approaching & (-vn <= RESTING_STEPS * pressing * np.ravel(dt_hit))
             e = np.where(resting, 0.0, pl.restitution)
             vn_new = np.where(approaching, -e * vn, vn)
@@ -168,7 +168,7 @@ class PlaneColliders(StepStage):
         """Put any of ``idx`` still behind a plane onto it and stop its inward motion."""
         for pl in self.planes:
             n = pl.normal
-            d = x[idx] @ n - pl.offset
+            d = dot3(x[idx], n) - pl.offset
             sel = d < 0
             if not sel.any():
                 continue
@@ -176,14 +176,14 @@ class PlaneColliders(StepStage):
             xb = x[behind] - d[sel, None] * n
             # Rounding can leave the projected point 1 ulp behind; nudge until it is not.
             for _ in range(4):
-                db = xb @ n - pl.offset
+                db = dot3(xb, n) - pl.offset
                 still = db < 0
                 if not still.any():
                     break
                 xb[still] -= (2.0 * db[still])[:, None] * n + np.spacing(np.abs(xb[still])) * np.sign(n)
             x[behind] = xb
             vb = v[behind]
-            vn = vb @ n
+            vn = dot3(vb, n)
             inward = np.minimum(vn, 0.0)
             vt = vb - vn[:, None] * n
             vt = _apply_friction(vt, -inward, pl.friction)
@@ -214,7 +214,14 @@ def _stage_kernel(x_old, v_old, x, v, dt, inv_mass, fp, ip):
         touched = False
         for k in range(count):
             base = 1 + 6 * k
-            n0, n1, n2, off, e0, mu = fp[base], fp[base + 1], fp[base + 2], fp[base + 3], fp[base + 4], fp[base + 5]
+            n0, n1, n2, off, e0, mu = (
+                fp[base],
+                fp[base + 1],
+                fp[base + 2],
+                fp[base + 3],
+                fp[base + 4],
+                fp[base + 5],
+            )
             d1 = x[i, 0] * n0 + x[i, 1] * n1 + x[i, 2] * n2 - off
             if not d1 <= 0:  # NaN too, as the NumPy kernel's comparison
                 continue

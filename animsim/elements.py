@@ -91,6 +91,8 @@ class ForceElement:
     numba_source: Callable[..., None] | None = None
     #: compile the kernel with numba's parallel loops (``prange``)
     numba_parallel: bool = False
+    #: which part of the energy plots its potential belongs to (gravitational, spring, other)
+    energy_part: str = "other"
     #: stiffness (N/m) of a contact that may act on any particle (penalty planes), for the stability notes
     contact_stiffness: float = 0.0
     #: body-aware forces (springs to points of rigid bodies) set this
@@ -171,11 +173,25 @@ def register(model: type) -> Callable[[Builder], Builder]:
     return wrap
 
 
+#: packages whose every module may hold elements (found, not listed: a new force family
+#: is a new module in animsim/forces and nothing else here)
+ELEMENT_PACKAGES = ("animsim.forces",)
+#: single modules that hold elements
+ELEMENT_MODULES = ("animsim.collisions",)
+
+
+@functools.cache
 def _load_element_modules() -> None:
-    # Importing a module registers its builders; the list is the one place that
-    # names them, like an entry-point table.
-    from animsim import collisions  # noqa: F401
-    from animsim.forces import attractor, drag, gravity, penalty, wind  # noqa: F401
+    # Importing a module registers its builders.
+    import importlib
+    import pkgutil
+
+    for package in ELEMENT_PACKAGES:
+        pkg = importlib.import_module(package)
+        for info in pkgutil.iter_modules(pkg.__path__):
+            importlib.import_module(f"{package}.{info.name}")
+    for module in ELEMENT_MODULES:
+        importlib.import_module(module)
 
 
 def build_elements(specs: Iterable[Any], ctx: BuildContext) -> list[Any]:

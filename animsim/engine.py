@@ -18,8 +18,8 @@ from typing import Any
 import numpy as np
 
 from animsim import __version__
-from animsim.analysis.watchdog import BLOWUP_FACTOR
 from animsim.compile import Compiled
+from animsim.export.meta import run_facts
 from animsim.record import Frame, FrameSink
 from animsim.system import State
 
@@ -105,7 +105,7 @@ class Guard:
             return None
         with np.errstate(over="ignore", invalid="ignore"):
             h, b, growth = self.watch.growth(state)
-        if growth <= BLOWUP_FACTOR:  # False for NaN too: an overflowed energy is a blow-up
+        if growth <= self.watch.allowance:  # False for NaN too: an overflowed energy is a blow-up
             return None
         particle, spring = self.watch.blame(state)
         reason = f"the mechanical energy {h:.3g} J is {growth:.3g} times what the forces put in ({b:.3g} J)"
@@ -269,6 +269,9 @@ def run(
             meta["compile_time"] = compile_seconds
         meta.update(stepper.summary())
         meta.update(meta_extra or {})
+        from animsim.analysis.drift import annotate
+
+        annotate(meta, compiled)  # energy drift as a verdict of its own, in the metadata
         if compiled.emitters is not None:
             meta["emitters"] = compiled.emitters.summary()
         for stage in compiled.post_step:  # tearing: how many springs broke, and when first
@@ -438,4 +441,5 @@ def _meta(
     }
     if failure is not None:
         meta["failure"] = failure.as_dict()
+    meta.update(run_facts(compiled, state))
     return meta

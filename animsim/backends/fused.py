@@ -29,8 +29,6 @@ from numba import njit
 from numba.core.errors import NumbaExperimentalFeatureWarning
 from numba.typed import List
 
-warnings.filterwarnings("ignore", category=NumbaExperimentalFeatureWarning)
-
 from animsim.integrators.base import (
     FUSED_EULER_AVERAGE as EULER_AVERAGE,
 )
@@ -40,6 +38,8 @@ from animsim.integrators.base import (
 from animsim.integrators.base import (
     FUSED_VERLET as VERLET,
 )
+
+warnings.filterwarnings("ignore", category=NumbaExperimentalFeatureWarning)
 
 #: largest (particles + springs) x steps one call may do, so Ctrl-C and the
 #: progress bar are served about every few tenths of a second
@@ -92,6 +92,7 @@ def fused_chunk(
     x,
     v,
     times,
+    dts,
     method,
     tab_c,
     tab_a,
@@ -115,17 +116,19 @@ def fused_chunk(
     vo,
     a0_valid,
 ):
-    """Advance len(times) - 1 steps from times[0]; stop after the first non-finite step.
+    """Advance len(dts) steps of dts from times[0]; stop after the first non-finite step.
+
+    ``times`` are the clock's step start times (the loop's clock, not a running sum).
 
     Returns (steps taken, force evaluations, steps a collision changed, Verlet's
     cache still valid, the last step was not finite).
     """
     evals = 0
     changed_steps = 0
-    steps = times.shape[0] - 1
+    steps = dts.shape[0]
     for step in range(steps):
         t = times[step]
-        dt = times[step + 1] - t
+        dt = dts[step]
         xo[:] = x
         vo[:] = v
         if method == SYMPLECTIC_EULER:
@@ -229,7 +232,7 @@ class NumbaForces:
     def acceleration(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> np.ndarray:
         d = self.dynamics
         d.evaluations += 1
-        for drive in d.drivers:  # keyframed rows on their path (animsim.keyframes)
+        for drive in getattr(d, "drivers", ()):  # keyframed rows on their path (animsim.keyframes)
             drive.drive(t, x, v)
         mass = _live(d.mass, self._copies)
         if not self.others:
@@ -296,12 +299,12 @@ class FusedStepper:
     def warm_up(self, state: Any) -> float:
         """Compile (or load from the disk cache) every kernel with a zero-step call; its seconds."""
         t0 = time.perf_counter()
-        self.advance(state, np.array([state.time]))
+        self.advance(state, np.array([state.time]), np.zeros(0))
         self.compile_seconds = time.perf_counter() - t0
         return self.compile_seconds
 
-    def advance(self, state: Any, times: np.ndarray) -> tuple[int, int, bool]:
-        """Steps from times[0] to times[-1]; (steps taken, force evaluations, failed)."""
+    def advance(self, state: Any, times: np.ndarray, dts: np.ndarray) -> tuple[int, int, bool]:
+        """len(dts) steps from times[0]; (steps taken, force evaluations, failed)."""
         d = self.compiled.dynamics
         c, a, b = self.tab
         xs, vs, a0, a1, xo, vo = self.work
@@ -309,6 +312,7 @@ class FusedStepper:
             state.particle_position,
             state.particle_velocity,
             times,
+            dts,
             self.method,
             c,
             a,

@@ -12,6 +12,7 @@ import numpy as np
 
 from animsim.elements import RELEASING, BuildContext, ForceElement, register
 from animsim.scene import models as m
+from animsim.vec import dot3
 
 
 def _kernel(x, v, t, out, mass, fp, ip):
@@ -30,6 +31,7 @@ def _kernel(x, v, t, out, mass, fp, ip):
 
 class Attractor(ForceElement):
     watch_role = RELEASING
+    energy_part = "gravitational"
 
     def __init__(self, position: np.ndarray, gm: float, softening: float, particle_mass: np.ndarray):
         self.center = np.asarray(position, dtype=np.float64)
@@ -44,7 +46,7 @@ class Attractor(ForceElement):
 
     def accumulate(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None:
         r = x - self.center
-        d2 = np.einsum("ij,ij->i", r, r) + self.eps2
+        d2 = dot3(r, r) + self.eps2
         with np.errstate(divide="ignore", invalid="ignore"):
             s = np.where(d2 > 0, -self.gm * self.mass / (d2 * np.sqrt(d2)), 0.0)
         out += s[:, None] * r
@@ -73,6 +75,4 @@ class Attractor(ForceElement):
 
 @register(m.Attractor)
 def build(entries: list[tuple[int, m.Attractor]], ctx: BuildContext) -> list[ForceElement]:
-    return [
-        Attractor(np.array(f.position), f.gm, f.softening, ctx.system.particle_mass) for _, f in entries
-    ]
+    return [Attractor(np.array(f.position), f.gm, f.softening, ctx.system.particle_mass) for _, f in entries]

@@ -12,6 +12,7 @@ import scipy.sparse as sp
 from animsim.elements import DISSIPATIVE, BuildContext, ForceElement, register
 from animsim.forces.jacobian import diagonal_blocks, scaled_identity
 from animsim.scene import models as m
+from animsim.vec import dot3
 
 
 def _drag_kernel(x, v, t, out, mass, fp, ip):
@@ -67,7 +68,7 @@ class QuadraticDrag(ForceElement):
         self.label = f"quadratic drag 1/2 rho cd A = {self.c} kg/m"
 
     def accumulate(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None:
-        speed = np.sqrt(np.einsum("ij,ij->i", v, v))
+        speed = np.sqrt(dot3(v, v))
         out -= (self.c * speed)[:, None] * v
 
     def jacobians(self, x: np.ndarray, v: np.ndarray) -> tuple[None, sp.csr_matrix]:

@@ -16,6 +16,7 @@ import scipy.sparse as sp
 
 from animsim.elements import ELASTIC, ForceElement
 from animsim.forces.jacobian import diagonal_blocks
+from animsim.vec import dot3
 
 
 def _kernel(x, v, t, out, mass, fp, ip):
@@ -59,10 +60,10 @@ class PenaltyPlane(ForceElement):
         return np.concatenate([self.p, self.n, [self.k, self.c]]), np.zeros(0, dtype=np.int64)
 
     def accumulate(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None:
-        d = (x - self.p) @ self.n
+        d = dot3(x - self.p, self.n)
         push = np.where(d < 0, -self.k * d, 0.0)
         if self.c > 0:
-            vn = v @ self.n
+            vn = dot3(v, self.n)
             push -= np.where((d < 0) & (vn < 0), self.c * vn, 0.0)
         out += push[:, None] * self.n
 

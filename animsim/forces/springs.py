@@ -21,6 +21,7 @@ import scipy.sparse as sp
 
 from animsim.elements import ELASTIC, ForceElement
 from animsim.forces.jacobian import block_pattern
+from animsim.vec import dot3
 
 prange = range  # numba's prange once the kernel is compiled (see animsim.elements.jit_kernel)
 
@@ -125,6 +126,7 @@ class Springs(ForceElement):
             self._fp[2 * ns : 3 * ns] = self.kd
 
     watch_role = ELASTIC
+    energy_part = "spring"
     #: springs take part in closed forms through the system's spring arrays (no uniform part)
     closed_form: dict[str, Any] = {}  # noqa: RUF012 - read-only allow-list entry
 
@@ -152,7 +154,7 @@ class Springs(ForceElement):
 
     def _geometry(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         d = x[self.a] - x[self.b]
-        length = np.sqrt(np.einsum("ij,ij->i", d, d))
+        length = np.sqrt(dot3(d, d))
         with np.errstate(divide="ignore", invalid="ignore"):
             inv = np.where(length > 0, 1.0 / length, 0.0)
         return d, length, inv
@@ -162,7 +164,7 @@ class Springs(ForceElement):
         magnitude = self.ks * (length - self.rest)
         if self.has_damping:
             dv = v[self.a] - v[self.b]
-            magnitude += self.kd * np.einsum("ij,ij->i", dv, d) * inv
+            magnitude += self.kd * dot3(dv, d) * inv
         # force on a = -magnitude * unit; on b the opposite
         scale = -magnitude * inv
         s = len(self.a)

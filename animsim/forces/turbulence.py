@@ -58,7 +58,12 @@ def _kernel(x, v, t, out, mass, fp, ip):
             f1 = 0.0
             f2 = 0.0
             for j in range(modes):
-                c = np.cos(x[i, 0] * kt[j] + x[i, 1] * kt[modes + j] + x[i, 2] * kt[2 * modes + j] + (omega[j] * t + phi[j]))
+                c = np.cos(
+                    x[i, 0] * kt[j]
+                    + x[i, 1] * kt[modes + j]
+                    + x[i, 2] * kt[2 * modes + j]
+                    + (omega[j] * t + phi[j])
+                )
                 f0 += c * direction[3 * j]
                 f1 += c * direction[3 * j + 1]
                 f2 += c * direction[3 * j + 2]
@@ -144,5 +149,3 @@ class Turbulence(ForceElement):
             return
         idx = np.flatnonzero(movable)
         out[idx] += self.field(x[idx], t)  # idx has no repeats, so fancy += is exact
-
-
