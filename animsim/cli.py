@@ -424,6 +424,12 @@ def _summary(compiled: Any, result: Any, wrote: str | None) -> None:
         + _drift_of(compiled, result).text(),
     ]
     lines.extend(_summary_notes(compiled, result))
+    if "springs_broken" in result.meta:
+        first = result.meta.get("first_break_time")
+        lines.append(
+            f"  springs broken: {result.meta['springs_broken']}"
+            + (f" (first at t = {first:.6g} s)" if first is not None else "")
+        )
     if wrote is not None:
         lines.append(f"  wrote {wrote}")
     typer.echo("\n".join(lines), err=stream_err)

@@ -163,6 +163,7 @@ class Frame:
     age: np.ndarray | None = None  # (n,) s, emitted particles only (NaN for others)
     size: np.ndarray | None = None  # (n,) m, for rendering
     color: np.ndarray | None = None  # (n, 4) RGBA in [0, 1]
+    spring_intact: np.ndarray | None = None  # (S,) bool: False for springs torn by now (None: none can tear)
 
 
 class FrameSink(Protocol):
@@ -208,6 +209,7 @@ class MemorySink:
                 age=None if frame.age is None else frame.age.copy(),
                 size=None if frame.size is None else frame.size.copy(),
                 color=None if frame.color is None else frame.color.copy(),
+                spring_intact=None if frame.spring_intact is None else frame.spring_intact.copy(),
             )
         )
 

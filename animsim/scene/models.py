@@ -111,11 +111,60 @@ def Doc(
     return Field(default, description=text, json_schema_extra=extra or None, **kw)
 
 
+# --- keyframes, tearing (shared by particles, structures and colliders) --------
+
+
+def _keyframe(v: list[Any]) -> tuple[float, tuple[float, float, float]]:
+    if not isinstance(v[0], float | int) or isinstance(v[0], bool) or not isinstance(v[1], tuple):
+        raise ValueError("a keyframe is [t, [x, y, z]]")
+    return (float(v[0]), v[1])
+
+
+def _increasing(v: list[tuple[float, Any]]) -> list[tuple[float, Any]]:
+    for k in range(1, len(v)):
+        if v[k][0] <= v[k - 1][0]:
+            raise ValueError(
+                f"keyframe times must increase: key {k} at t = {v[k][0]!r} does not come after "
+                f"key {k - 1} at t = {v[k - 1][0]!r}"
+            )
+    return v
+
+
+Keyframe = Annotated[
+    list[FiniteFloat | Vec3],
+    Field(min_length=2, max_length=2, description="[t, [x, y, z]]: time in s, position in m"),
+    AfterValidator(_keyframe),
+]
+Keyframes = Annotated[list[Keyframe], Field(min_length=1), AfterValidator(_increasing)]
+Interpolation = Literal["linear", "smooth"]
+MaxStrain = Annotated[
+    float | None,
+    Field(
+        gt=0,
+        allow_inf_nan=False,
+        description="the spring breaks for good once |L| / rest - 1 exceeds this (tearing)",
+    ),
+]
+
+
+class Motion(Model):
+    """A keyframed path (colliders, a structure's pins)."""
+
+    keyframes: Keyframes = Doc(
+        description="[[t, [x, y, z]], ...]: times in s (increasing), positions in m",
+        example=[[0, [0, 0.5, 0]], [2, [1, 0.5, 0]]],
+    )
+    interpolation: Interpolation = Doc(
+        "linear", "linear, or smooth (C1 cubic through the keys, easing in and out)", example="smooth"
+    )
+
+
 class SpringFamily(Model):
     """Stiffness and damping of one family of generated springs."""
 
     ks: NonNegative = Doc(description="stiffness", unit="N/m", example=500)
     kd: NonNegative = Doc(0.0, "damping along the spring", unit="N*s/m", example=0.5)
+    max_strain: MaxStrain = None
 
 
 class Particle(Model):
@@ -130,6 +179,20 @@ class Particle(Model):
     pinned: StrictBool = Doc(
         False, "forces never move it; it keeps its velocity (a moving anchor)", example=True
     )
+    keyframes: Keyframes | None = Field(
+        None, description="pinned only: [[t, [x, y, z]], ...], times increasing; the particle follows them"
+    )
+    interpolation: Interpolation | None = Field(
+        None, description="with keyframes: linear (default) or smooth (C1 cubic through the keys)"
+    )
+    radius: NonNegative | None = Field(None, description="m, for particle contacts, colliders and rendering")
+    color: HexColor | None = Field(None, description="for rendering, #rrggbb or #rrggbbaa")
+
+    @model_validator(mode="after")
+    def _interpolation_needs_keys(self) -> Particle:
+        if self.interpolation is not None and self.keyframes is None:
+            raise ValueError("interpolation applies only with keyframes")
+        return self
 
 
 class Spring(Model):
@@ -143,6 +206,7 @@ class Spring(Model):
     rest: Literal["auto"] | NonNegative = Doc(
         "auto", "rest length, or auto = the initial distance", unit="m", example=0.6
     )
+    max_strain: MaxStrain = None
 
 
 # --- forces -----------------------------------------------------------------
@@ -258,6 +322,69 @@ class Plane(Model):
         if self.response == "impulse" and (self.stiffness is not None or self.damping is not None):
             raise ValueError("stiffness and damping apply only to response: penalty")
         return self
+
+
+# --- colliders and particle contacts ------------------------------------------
+
+Restitution = Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)]
+
+
+def _unit_quaternion(v: list[float]) -> tuple[float, float, float, float]:
+    norm = sum(c * c for c in v) ** 0.5
+    if abs(norm - 1.0) > 1e-6:
+        raise ValueError(f"a unit quaternion [w, x, y, z] is needed; this one has length {norm:.9g}")
+    return tuple(c / norm for c in v)  # type: ignore[return-value]
+
+
+Quaternion = Annotated[
+    list[FiniteFloat],
+    Field(min_length=4, max_length=4, description="unit quaternion [w, x, y, z]"),
+    AfterValidator(_unit_quaternion),
+]
+
+
+# AxisAngle ({axis, angle} in degrees) is defined with the mesh structures below.
+
+
+class _ColliderCommon(Model):
+    restitution: Restitution = Doc(0.5, "0 = sticks, 1 = perfectly elastic", example=0.0)
+    friction: NonNegative = Field(0.0, description="Coulomb coefficient")
+    motion: Motion | None = Field(
+        None,
+        description="keyframed path of the centre (a capsule's: the midpoint of a-b); the shape translates",
+    )
+
+
+class SphereCollider(_ColliderCommon):
+    type: Literal["sphere"] = Doc(description="selects this shape")
+    center: Vec3
+    radius: Positive = Doc(description="radius", unit="m", example=0.5)
+
+
+class BoxCollider(_ColliderCommon):
+    type: Literal["box"] = Doc(description="selects this shape")
+    center: Vec3
+    size: Annotated[list[Positive], Field(min_length=3, max_length=3, description="full edge lengths, m")]
+    orientation: Quaternion | AxisAngle = Field(
+        [1.0, 0.0, 0.0, 0.0], description="[w, x, y, z], or {axis, angle} in degrees"
+    )
+
+
+class CapsuleCollider(_ColliderCommon):
+    type: Literal["capsule"] = Doc(description="selects this shape")
+    a: Vec3
+    b: Vec3
+    radius: Positive = Doc(description="radius", unit="m", example=0.5)
+
+
+Collider = Annotated[SphereCollider | BoxCollider | CapsuleCollider, Field(discriminator="type")]
+COLLIDER_TYPES = ("sphere", "box", "capsule")
+
+
+class ParticleCollisions(Model):
+    radius: Positive = Field(description="m, every particle's unless it has its own")
+    restitution: Restitution = Doc(0.5, "0 = sticks, 1 = perfectly elastic", example=0.3)
+    friction: NonNegative = Field(0.0, description="Coulomb coefficient")
 
 
 # --- emitters (particle systems) --------------------------------------------
@@ -408,6 +535,15 @@ class _StructureCommon(Model):
     mass: Positive = Doc(description="mass of each particle", unit="kg", example=0.01)
     velocity: Vec3 = Doc([0.0, 0.0, 0.0], "initial velocity of every particle", unit="m/s")
     pin: list[Id] = Doc([], "ids of particles held in place", example=["sheet[0,0]", "sheet[19,0]"])
+    pin_motion: Motion | None = Doc(
+        None,
+        "keyframed offsets [[t, [dx, dy, dz]], ...] added to every pinned particle's "
+        "initial position: the pins move together",
+        example={"keyframes": [[0, [0, 0, 0]], [1, [0.5, 0, 0]]], "interpolation": "smooth"},
+    )
+    radius: NonNegative | None = Doc(
+        None, "each particle's radius, for contacts and colliders", unit="m", example=0.01
+    )
 
 
 class Cloth(_StructureCommon):
@@ -689,6 +825,16 @@ class Scene(Model):
                 "stretch": {"ks": 500},
             }
         ],
+    )
+    colliders: list[Collider] = Doc(
+        [],
+        "solid shapes particles cannot enter: sphere, box, capsule, fixed or keyframed",
+        example=[{"type": "sphere", "center": [0, 0.5, 0], "radius": 0.5}],
+    )
+    particle_collisions: ParticleCollisions | None = Doc(
+        None,
+        "particles collide with each other as spheres",
+        example={"radius": 0.02, "restitution": 0.3, "friction": 0.1},
     )
 
     @model_validator(mode="after")
