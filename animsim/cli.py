@@ -196,10 +196,6 @@ class Format(StrEnum):
     usda = "usda"  # one USD ASCII file of animated points
 
 
-# Output suffix -> format, for `run -o` without --format (an existing folder means PLY).
-SUFFIX_FORMATS = {".npz": Format.npz, ".ply": Format.ply, ".usda": Format.usda}
-
-
 def _backend(name: str) -> str:
     """Check a --backend value (the library also accepts the internal 'reference')."""
     from animsim.backends import BACKENDS
@@ -251,13 +247,9 @@ def check_output_path(output: Path, scene_path: Path) -> None:
 
 def output_format(output: Path | None, requested: Format | None) -> Format:
     """The trajectory format: as asked, else from the suffix, else PLY for an existing folder, else CSV."""
-    if requested is not None:
-        return requested
-    if output is None or str(output) == "-":
-        return Format.csv
-    if output.suffix.lower() in SUFFIX_FORMATS:
-        return SUFFIX_FORMATS[output.suffix.lower()]
-    return Format.ply if output.is_dir() else Format.csv
+    from animsim.export.sinks import format_for
+
+    return Format(format_for(output, None if requested is None else requested.value))
 
 
 def check_ply_output(output: Path, scene_path: Path) -> None:
@@ -336,8 +328,8 @@ def run(
         check_disk(out, est, fmt.value, sc, limits)
     # Imported only now: a refused scene never pays for NumPy and the stepper.
     from animsim.compile import compile_scene
-    from animsim.simulate import STATUS_INTERRUPTED, STATUS_UNSTABLE
-    from animsim.simulate import run as simulate
+    from animsim.engine import STATUS_INTERRUPTED, STATUS_UNSTABLE
+    from animsim.engine import run as simulate
 
     compiled = compile_scene(sc, loaded.name, backend=_backend(backend))
     from animsim.analysis import stability
@@ -346,24 +338,15 @@ def run(
     if report.dt_exceeds_limit:  # warn before the first step; the watchdog judges the run
         _err(f"{scene}: warning: {report.verdict()}")
     wrote = f"{out} and {out}.meta.json"
-    if fmt is Format.npz:
-        from animsim.export.npz import NpzSink
+    from animsim.export.sinks import open_sink
 
-        sink: Any = NpzSink(out)
-    elif fmt is Format.ply:
-        from animsim.export.ply import PlySequenceSink
-
-        sink = PlySequenceSink(out, expected_frames=len(compiled.record_steps))
-    elif fmt is Format.usda:
-        from animsim.export.usda import USD_DEFAULT_TIME_CODES_PER_SECOND, UsdaSink
-
-        # Uneven frames are placed at time * rate: the scene's own frame rate when it has one.
-        fps = sc.record.fps
-        sink = UsdaSink(out, uneven_rate=fps if fps is not None else USD_DEFAULT_TIME_CODES_PER_SECOND)
-    else:
-        from animsim.export.csv import CsvSink
-
-        sink = CsvSink("-" if to_stdout else out, extra_columns=extra_columns)
+    sink: Any = open_sink(
+        Path("-") if to_stdout else out,
+        fmt.value,
+        meta_rate=sc.record.fps,
+        extra_columns=extra_columns,
+        expected_frames=len(compiled.record_steps),
+    )
     extra = {"scene_sha256": loaded.sha256, "scene_file": str(scene)}
     with _graceful_stop() as stop, _progress(compiled.clock.steps, quiet) as progress:
         result = simulate(compiled, [sink], stop=stop, progress=progress, meta_extra=extra)
@@ -385,34 +368,11 @@ def run(
         raise typer.Exit(EXIT_INTERRUPTED)
 
 
-def prepare_scene(
-    scene: Path,
-    limits: Any,
-    *,
-    fmt: str = "csv",
-    integrator: str | None = None,
-    dt: float | None = None,
-    duration: float | None = None,
-    seed: int | None = None,
-) -> tuple[Any, Any, Any]:
-    """Load SCENE, apply overrides and check the step and memory limits.
+def prepare_scene(scene: Path, limits: Any, **kw: Any) -> tuple[Any, Any, Any]:
+    """:func:`animsim.api.prepare_file`, imported late: a refused scene never pays for NumPy."""
+    from animsim.api import prepare_file
 
-    Every command that compiles a scene goes through here, so none of them
-    allocates before the pre-flight has said the scene fits. Returns
-    (LoadedScene, Scene with overrides, preflight.Estimate).
-    """
-    from animsim.preflight import RunLimits, check_limits
-    from animsim.scene.loader import load_scene
-
-    limits = limits or RunLimits()
-    loaded = load_scene(scene, limits.loader)
-    sc = loaded.scene
-    if any(v is not None for v in (integrator, dt, duration, seed)):
-        from animsim.compile import with_overrides  # imports every force and integrator: only when needed
-
-        sc = with_overrides(sc, integrator=integrator, dt=dt, duration=duration, seed=seed)
-    est = check_limits(loaded, sc, limits, fmt=fmt, overridden=dt is not None or duration is not None)
-    return loaded, sc, est
+    return prepare_file(scene, limits, **kw)
 
 
 @contextmanager
@@ -965,7 +925,7 @@ def plot(
             traj = read_trajectory(source)
             name = source.stem
         else:
-            from animsim.simulate import run as simulate
+            from animsim.engine import run as simulate
 
             assert compiled is not None
             collector = TrajectoryCollector()
@@ -985,7 +945,7 @@ def _energies(compiled: Any, traj: Any) -> tuple[Any, Any, Any]:
     kinetic: list[float] = []
     potential: list[float] = []
     if traj is None:
-        from animsim.simulate import run as simulate
+        from animsim.engine import run as simulate
 
         def observe(state: Any) -> None:
             times.append(state.time)

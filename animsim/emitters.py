@@ -93,10 +93,10 @@ from typing import Any
 
 import numpy as np
 
-from animsim.collisions import PlaneColliders
+from animsim.elements import StepStage
 from animsim.record import Frame
 from animsim.scene import models as m
-from animsim.system import State, System
+from animsim.system import State
 
 #: The rate noise (``rate_spread``) is held for this span of simulated time, s.
 RATE_NOISE_WINDOW = 0.1
@@ -379,15 +379,16 @@ class Pool:
         self.peak_alive = 0
         self.kinetic_energy_born = 0.0
 
-    def bind(self, system: System, state: State) -> None:
+    def bind(self, state: State) -> None:
         """Point at this run's arrays and empty the pool."""
         sl = slice(self.first, self.first + self.capacity)
         self.x = state.particle_position[sl]
         self.v = state.particle_velocity[sl]
         assert state.particle_alive is not None
         self.alive = state.particle_alive[sl]
-        self.m = system.particle_mass[sl]
-        self.inv_m = system.particle_inv_mass[sl]
+        # the state's own live masses: births and deaths switch slots on and off
+        self.m = state.particle_mass[sl]
+        self.inv_m = state.particle_inv_mass[sl]
         self.alive[:] = False
         self.m[:] = 0.0
         self.inv_m[:] = 0.0
@@ -491,15 +492,22 @@ class Pool:
         }
 
 
-class Emitters:
+class Emitters(StepStage):
     """All pools of a scene and the hooks the simulation loop calls.
 
     ``reset`` before a run, ``advance`` after each step's integration and
     collisions, ``frame`` to record, ``summary`` for the metadata.
     """
 
+    #: births bring kinetic energy in (the watchdog books it separately)
+    injects = True
+    random = True
+    no_closed_form = "it has emitters (particles are born and die at random)"
+
     def __init__(self, pools: list[Pool], first_index: int):
         self.pools = pools
+        self.dynamics: Any = None
+        self.colliders: list[Any] = []
         self.first_index = first_index
         self.capacity = sum(p.capacity for p in pools)
         self.names = [p.name for p in pools]
@@ -525,13 +533,25 @@ class Emitters:
             + (f"; kill box of {', '.join(repr(k) for k in kill)}" if kill else "; no kill box"),
         ]
 
-    def reset(self, system: System, state: State) -> None:
+    def reset(self, state: State) -> None:
         for p in self.pools:
-            p.bind(system, state)
+            p.bind(state)
         self._accel = np.zeros_like(state.particle_position)
         self._next_table = self.first_index
 
-    def advance(self, compiled: Any, state: State, t0: float, t1: float) -> None:
+    def attach(self, dynamics: Any, colliders: list[Any]) -> None:
+        """The force sum newborns fly on with, and the stages they collide with (compile time)."""
+        self.dynamics = dynamics
+        self.colliders = colliders
+
+    def apply(
+        self, state: State, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, dt: float
+    ) -> bool:
+        """The step stage: births in [t0, t1), deaths at t1 (bumps the state's revision itself)."""
+        self.advance(state, t0, t1)
+        return False  # advance bumps the revision itself when a birth or death changed the state
+
+    def advance(self, state: State, t0: float, t1: float) -> None:
         """Births in [t0, t1), moved on to t1; then deaths at t1."""
         born: list[np.ndarray] = []
         times: list[np.ndarray] = []
@@ -542,28 +562,25 @@ class Emitters:
         newborn = np.concatenate(born)
         changed = bool(len(newborn))
         if len(newborn):
-            self._move_newborns(compiled, state, newborn, t1 - np.concatenate(times), 0.5 * (t0 + t1))
+            self._move_newborns(state, newborn, t1 - np.concatenate(times), 0.5 * (t0 + t1))
         for p, idx in zip(self.pools, born, strict=True):
             changed |= p.deaths(t1, idx)
         if changed:
             state.revision += 1  # integrators that cache a force must recompute it
 
-    def _move_newborns(
-        self, compiled: Any, state: State, idx: np.ndarray, rest: np.ndarray, t_mid: float
-    ) -> None:
+    def _move_newborns(self, state: State, idx: np.ndarray, rest: np.ndarray, t_mid: float) -> None:
         """x += r v0 + r^2/2 a0, v += r a0 for the rest r of the birth step; then planes."""
         x, v = state.particle_position, state.particle_velocity
         assert self._accel is not None
         # One evaluation over every slot: force terms hold per-particle arrays
         # (mass) of the full system, so they cannot be evaluated on a subset.
-        a = compiled.dynamics.acceleration(x, v, t_mid, self._accel)[idx]
+        a = self.dynamics.acceleration(x, v, t_mid, self._accel)[idx]
         x0, v0 = x[idx], v[idx]
         r = rest[:, None]
         x1 = x0 + r * v0 + (0.5 * r * r) * a
         v1 = v0 + r * a
-        if compiled.colliders is not None:
-            sub = PlaneColliders(compiled.colliders.planes, np.ones(len(idx)))
-            sub.apply(x0, v0, x1, v1, rest)
+        for stage in self.colliders:
+            stage.collide_subset(x0, v0, x1, v1, rest)
         x[idx] = x1
         v[idx] = v1
 

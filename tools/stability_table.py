@@ -28,7 +28,7 @@ from animsim.analysis.stability import METHOD_ORDER, largest_stable_dt  # noqa: 
 from animsim.analysis.watchdog import BLOWUP_FACTOR  # noqa: E402
 from animsim.compile import compile_scene  # noqa: E402
 from animsim.scene.loader import load_scene_text  # noqa: E402
-from animsim.simulate import STATUS_OK, run  # noqa: E402
+from animsim.engine import STATUS_OK, run  # noqa: E402
 
 HORIZONS = (100, 10_000)  # steps
 THETA_LO, THETA_HI = 1e-3, 1e3  # omega*dt bracket searched

@@ -49,9 +49,9 @@ def check_scenes(
     limits: Any = None,
 ) -> bool:
     """``limits`` (a preflight.RunLimits) bounds every scene as ``animsim run`` would."""
-    from animsim.cli import prepare_scene
+    from animsim.api import prepare_file as prepare_scene
     from animsim.compile import compile_scene
-    from animsim.simulate import STATUS_OK, run
+    from animsim.engine import STATUS_OK, run
 
     all_ok = True
     for path in paths:

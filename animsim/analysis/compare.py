@@ -457,7 +457,7 @@ def compare(
 
 def _measure(scene: m.Scene, name: str, integ: str, dt: float, times: np.ndarray, repeat: int) -> _Run:
     """One accuracy run into memory (also the warm-up), then ``repeat`` timed runs without sinks."""
-    from animsim.simulate import run
+    from animsim.engine import run
 
     compiled = record_at(scene, name, integ, dt, times)
     traj, _ = run_trajectory(compiled)

@@ -272,26 +272,10 @@ def _row_bounds(compiled: Any) -> tuple[np.ndarray, np.ndarray, float, list[str]
     k_rows = np.zeros(n)
     c_rows = np.zeros(n)
     notes: list[str] = []
-    if system.spring_count:
-        a, b = system.spring_index[:, 0], system.spring_index[:, 1]
-        ia, ib = inv[a], inv[b]
-        cross = np.sqrt(ia * ib)
-        for coef, rows in ((system.spring_ks, k_rows), (system.spring_kd, c_rows)):
-            rows += np.bincount(a, weights=coef * (ia + cross), minlength=n)
-            rows += np.bincount(b, weights=coef * (ib + cross), minlength=n)
-    penalty_k = 0.0
-    from animsim.forces.drag import Drag
-    from animsim.forces.penalty import PenaltyPlane
-    from animsim.forces.wind import Wind
-
+    # Each element adds its own rows (animsim.elements: stiffness_rows).
     for term in compiled.dynamics.terms:
-        if isinstance(term, PenaltyPlane):
-            # Any particle may touch the plane: its stiffness and damping count on every row.
-            k_rows += term.k * inv
-            c_rows += term.c * inv
-            penalty_k = max(penalty_k, term.k)
-        elif isinstance(term, Drag | Wind):
-            c_rows += term.k * inv
+        term.stiffness_rows(inv, k_rows, c_rows)
+    penalty_k = max((term.contact_stiffness for term in compiled.dynamics.terms), default=0.0)
     if compiled.emitters is not None and penalty_k > 0:
         notes.append("emitted particles touching penalty planes are not counted")
     return k_rows, c_rows, penalty_k, notes

@@ -233,18 +233,18 @@ def validate_case_data(data: dict[str, Any], file: str) -> Any:
     """The Scene for ``data`` by the file's rules; raises :class:`CaseInvalid`."""
     from pydantic import ValidationError
 
-    from animsim.scene.loader import Marks, _diagnostics
+    from animsim.scene.loader import Marks, _diagnostics, mesh_problems
     from animsim.scene.models import Scene
     from animsim.scene.validate import check_scene
 
     try:
-        scene = Scene.model_validate(data)
+        scene = Scene.model_validate(data, context={"marks": True})
     except ValidationError as exc:
         # The loader's own wording (did-you-mean and all); marks are irrelevant
         # here since the values came from the command line.
         diags = _diagnostics(exc, data, Marks(), file)
         raise CaseInvalid([(d.path, d.message) for d in diags]) from None
-    problems = check_scene(scene)
+    problems = mesh_problems(scene, file) + check_scene(scene)  # mesh files read like the loader's
     if problems:
         raise CaseInvalid([(".".join(map(str, p)), msg) for p, msg, _ in problems])
     return scene
@@ -393,7 +393,7 @@ def _landing_steps(clock: Any, times: np.ndarray) -> np.ndarray:
 def fine_reference(compiled: Any, times: np.ndarray) -> Trajectory:
     """RK4 at the case's dt / :data:`FINE_DT_DIVISOR` on the case's own scene, at ``times``."""
     from animsim.compile import compile_scene
-    from animsim.simulate import STATUS_OK, run
+    from animsim.engine import STATUS_OK, run
 
     fine_dt = compiled.clock.dt / FINE_DT_DIVISOR
     scene = compiled.scene.model_copy(update={"integrator": FINE_INTEGRATOR, "dt": fine_dt})
@@ -522,7 +522,7 @@ def run_case(case: Case) -> Row:
     """
     from animsim.analysis.check import energy_drift
     from animsim.compile import compile_scene
-    from animsim.simulate import STATUS_OK, STATUS_UNSTABLE, run
+    from animsim.engine import STATUS_OK, STATUS_UNSTABLE, run
 
     row = Row(case.index, dict(case.overrides), _integrator_of(case), case.seed, STATUS_INVALID)
     try:
