@@ -119,6 +119,15 @@ def with_overrides(
     return new
 
 
+def _particle_springs(scene: m.Scene) -> list[Any]:
+    """Springs between two particles (springs to points of bodies are the bodies' element)."""
+    if not scene.bodies:
+        return list(scene.springs)
+    from animsim.bodies.build import particle_springs
+
+    return particle_springs(scene)
+
+
 def compile_scene(
     scene: m.Scene, name: str = "scene", backend: str = "numpy", threads: int | None = None
 ) -> Compiled:
@@ -154,16 +163,31 @@ def compile_scene(
         pinned.append(e.pinned)
         expanded.append((s, e, base))
 
-    if scene.springs:
-        pairs = np.array(
-            [[index_of[a], index_of[b]] for a, b in (sp.between for sp in scene.springs)], dtype=np.int64
-        )
+    # --- rigid bodies: each centre of mass is a particle row, after the structures ------
+    bodies = None
+    if scene.bodies:
+        from animsim.bodies.build import body_rows, check_integrator
+
+        check_integrator(scene)
+        bodies = body_rows(scene)
+        body_first = len(ids)
+        for k, bid in enumerate(bodies.ids):
+            index_of[bid] = body_first + k
+        ids.extend(bodies.ids)
+        pos.append(bodies.position)
+        vel.append(bodies.velocity)
+        mass.append(bodies.mass)
+        pinned.append(bodies.pinned)
+
+    listed = _particle_springs(scene)
+    if listed:
+        pairs = np.array([[index_of[a], index_of[b]] for a, b in (sp.between for sp in listed)], dtype=np.int64)
         spring_pairs.append(pairs)
-        spring_ks.append(np.array([sp.ks for sp in scene.springs]))
-        spring_kd.append(np.array([sp.kd for sp in scene.springs]))
-        spring_rest.append(np.array([np.nan if sp.rest == "auto" else sp.rest for sp in scene.springs]))
-        families.append(("listed springs", 0, len(scene.springs)))
-        spring_total += len(scene.springs)
+        spring_ks.append(np.array([sp.ks for sp in listed]))
+        spring_kd.append(np.array([sp.kd for sp in listed]))
+        spring_rest.append(np.array([np.nan if sp.rest == "auto" else sp.rest for sp in listed]))
+        families.append(("listed springs", 0, len(listed)))
+        spring_total += len(listed)
     for _, e, base in expanded:
         grids.append((base, e.grid_shape, len(families), len(families) + len(e.springs)))
         for group in e.springs:
@@ -226,6 +250,13 @@ def compile_scene(
         spring_families=families,
         structure_grids=grids,
     )
+    if bodies is not None:
+        system.body_first = body_first
+        system.body_count = len(bodies.ids)
+        system.body_ids = list(bodies.ids)
+        system.body_inertia = bodies.inertia
+        system.body_inv_inertia = bodies.inv_inertia
+        system.body_shape = bodies.shapes
 
     system.freeze()
     chosen, backend_note = choose_backend(backend)
@@ -261,6 +292,17 @@ def compile_scene(
         left_out.append("penalty contact: no penalty planes")
 
     dynamics = Dynamics(system, terms)
+    if bodies is not None:
+        from animsim.bodies.build import build_body_elements
+
+        dynamics.bodies, body_stages, body_labels, body_left_out = build_body_elements(
+            scene, system, index_of, particle_position, bodies.orientation, chosen
+        )
+        post_step.extend(body_stages)
+        stages.extend(body_labels)
+        left_out.extend(body_left_out)
+    else:
+        left_out.append("rigid bodies: none in the scene")
     if emitters is not None:
         emitters.attach(dynamics, [st for st in post_step if st.collides_newborns])
         post_step.append(emitters)  # births run after the step and its collisions
@@ -299,7 +341,12 @@ def compile_scene(
         extra={
             "planes": [
                 (np.array(p.point), np.array(p.normal) / np.linalg.norm(p.normal)) for p in scene.planes
-            ]
+            ],
+            **(
+                {}
+                if bodies is None
+                else {"bodies": {"first": system.body_first, "ids": system.body_ids, "shapes": system.body_shape}}
+            ),
         },
         connectivity=connectivity([(s.id, e, base) for s, e, base in expanded]),
     )
@@ -314,6 +361,8 @@ def compile_scene(
         time=0.0,
         step=0,
         particle_alive=particle_alive,
+        body_orientation=None if bodies is None else bodies.orientation.copy(),
+        body_angular_velocity=None if bodies is None else bodies.angular_velocity.copy(),
     )
     compiled = Compiled(
         name=name,

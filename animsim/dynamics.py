@@ -26,6 +26,8 @@ class Dynamics:
         # Pinned particles are driven, never pushed: an infinite force on one
         # times its zero inverse mass would be NaN and poison a moving anchor.
         self._pinned = np.flatnonzero(system.particle_pinned)
+        #: the rotational half when the scene has rigid bodies (animsim.bodies.dynamics)
+        self.bodies: Any = None
 
     def bind(self, state: Any) -> None:
         """Use ``state``'s live masses, and hand it to every element that reads state arrays."""
@@ -64,8 +66,14 @@ class Dynamics:
         m = np.where(self.inv_mass > 0, self.mass, 0.0)
         return float(0.5 * np.dot(m, np.einsum("ij,ij->i", v, v)))
 
-    def energy(self, x: np.ndarray, v: np.ndarray) -> float:
-        return self.kinetic_energy(v) + self.potential_energy(x)
+    def energy(
+        self, x: np.ndarray, v: np.ndarray, q: np.ndarray | None = None, w: np.ndarray | None = None
+    ) -> float:
+        """Kinetic + potential energy; with bodies (q, w given) also rotational and body-spring energy."""
+        total = self.kinetic_energy(v) + self.potential_energy(x)
+        if self.bodies is not None and q is not None and w is not None:
+            total += self.bodies.rotational_energy(q, w) + self.bodies.potential(x, q)
+        return total
 
     @property
     def has_damping(self) -> bool:

@@ -196,7 +196,12 @@ def run(
             next_rec = 1
         # Overflow on the way to a blow-up is the watchdog's to report, not numpy's.
         with np.errstate(over="ignore", invalid="ignore"):
-            energy_start = dyn.energy(state.particle_position, state.particle_velocity)
+            energy_start = dyn.energy(
+                state.particle_position,
+                state.particle_velocity,
+                state.body_orientation,
+                state.body_angular_velocity,
+            )
             guard.start(state)
         failure: Failure | None = None
         status = STATUS_OK
@@ -263,7 +268,12 @@ def run(
                     break
         wall = _time.perf_counter() - t_start
         with np.errstate(over="ignore", invalid="ignore"):
-            energy_end = dyn.energy(state.particle_position, state.particle_velocity)
+            energy_end = dyn.energy(
+                state.particle_position,
+                state.particle_velocity,
+                state.body_orientation,
+                state.body_angular_velocity,
+            )
         meta = _meta(compiled, status, state, wall, energy_start, energy_end, frames, failure)
         meta["backend"] = compiled.backend
         if compile_seconds:
@@ -328,12 +338,16 @@ def _first_failure(
 
 def _frame_copy(compiled: Compiled, state: State) -> Frame:
     """A frame that owns its arrays (fixed population: no emitters)."""
-    return Frame(
-        step=state.step,
-        time=state.time,
-        index=_all_index(compiled),
-        position=state.particle_position.copy(),
-        velocity=state.particle_velocity.copy(),
+    return _with_bodies(
+        Frame(
+            step=state.step,
+            time=state.time,
+            index=_all_index(compiled),
+            position=state.particle_position.copy(),
+            velocity=state.particle_velocity.copy(),
+        ),
+        state,
+        copy=True,
     )
 
 
@@ -386,8 +400,21 @@ def _emit(
         )
     else:
         frame = compiled.emitters.frame(compiled, state)
+    frame = _with_bodies(frame, state, copy=False)
     for sink in sinks:
         sink.write(frame)
+
+
+def _with_bodies(frame: Frame, state: State, copy: bool) -> Frame:
+    """The frame with the bodies' orientations and angular velocities (unchanged without bodies)."""
+    if state.body_orientation is None:
+        return frame
+    import dataclasses
+
+    q, w = state.body_orientation, state.body_angular_velocity
+    return dataclasses.replace(
+        frame, orientation=q.copy() if copy else q, angular_velocity=w.copy() if copy else w
+    )
 
 
 def _all_index(compiled: Compiled) -> np.ndarray:

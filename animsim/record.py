@@ -143,6 +143,10 @@ class Frame:
     age: np.ndarray | None = None  # (n,) s, emitted particles only (NaN for others)
     size: np.ndarray | None = None  # (n,) m, for rendering
     color: np.ndarray | None = None  # (n, 4) RGBA in [0, 1]
+    #: rigid bodies (header.extra["bodies"]): (B, 4) orientation quaternions [w, x, y, z] and
+    #: (B, 3) world angular velocities, rad/s, of the rows body_first .. body_first + B - 1
+    orientation: np.ndarray | None = None
+    angular_velocity: np.ndarray | None = None
 
 
 class FrameSink(Protocol):
@@ -188,6 +192,8 @@ class MemorySink:
                 age=None if frame.age is None else frame.age.copy(),
                 size=None if frame.size is None else frame.size.copy(),
                 color=None if frame.color is None else frame.color.copy(),
+                orientation=None if frame.orientation is None else frame.orientation.copy(),
+                angular_velocity=None if frame.angular_velocity is None else frame.angular_velocity.copy(),
             )
         )
 

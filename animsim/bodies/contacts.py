@@ -41,6 +41,7 @@ import numpy as np
 
 from animsim.bodies import quaternion as quat
 from animsim.bodies.shapes import BodyShape, Box, Capsule, Sphere, contact_table
+from animsim.elements import StepStage
 
 #: sequential-impulse sweeps over the contacts per step
 ITERATIONS = 10
@@ -661,11 +662,12 @@ def _plane_solver_loop(
 # --- the step stage -------------------------------------------------------------------
 
 
-class BodyContacts:
+class BodyContacts(StepStage):
     """Step stage: bodies against planes, colliders (signed-distance callbacks) and each other."""
 
     injects = False
     dissipative = True
+    no_closed_form = "its bodies touch planes or each other (contacts have no closed form here)"
 
     def __init__(
         self,
@@ -725,7 +727,9 @@ class BodyContacts:
     def reset(self, state: Any) -> None:
         return None
 
-    def apply(self, state: Any, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float) -> bool:
+    def apply(
+        self, state: Any, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, dt: float = 0.0
+    ) -> bool:
         rows = slice(self.first, self.first + self.count)
         x = state.particle_position[rows]
         v = state.particle_velocity[rows]

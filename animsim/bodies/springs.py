@@ -17,9 +17,10 @@ from __future__ import annotations
 import numpy as np
 
 from animsim.bodies import quaternion as quat
+from animsim.elements import ELASTIC, ForceElement
 
 
-class BodySprings:
+class BodySprings(ForceElement):
     """Damped springs of which at least one end is a point of a body.
 
     rows_a, rows_b: (S,) particle rows of the ends (for a body end: the body's centre-of-mass row).
@@ -27,11 +28,9 @@ class BodySprings:
     at_a, at_b: (S,3) points in the body frames (0 for particle ends).
     """
 
-    dissipative = False
-    injects = False
-    closed_form = False
+    watch_role = ELASTIC
     acts_on_bodies = True
-    numba_kernel = None
+    no_closed_form = "springs to bodies have no closed form here"
 
     def __init__(
         self,
@@ -57,7 +56,7 @@ class BodySprings:
         self.ks = np.asarray(ks, dtype=np.float64)
         self.kd = np.asarray(kd, dtype=np.float64)
         self.body_count = body_count
-        self.dissipative = bool(np.any(self.kd > 0))
+        self.has_damping = bool(np.any(self.kd > 0))
         self.names = names or []
         n = len(self.ks)
         self.label = (
