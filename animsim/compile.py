@@ -119,6 +119,18 @@ def with_overrides(
     return new
 
 
+def _body_header(system: System, dynamics: Dynamics) -> dict[str, Any]:
+    """What sinks and renderers learn about bodies: rows, ids, shapes, springs to bodies."""
+    from animsim.bodies.export import header_springs
+
+    return {
+        "first": system.body_first,
+        "ids": system.body_ids,
+        "shapes": system.body_shape,
+        "springs": header_springs(dynamics.bodies),
+    }
+
+
 def _particle_springs(scene: m.Scene) -> list[Any]:
     """Springs between two particles (springs to points of bodies are the bodies' element)."""
     if not scene.bodies:
@@ -345,7 +357,7 @@ def compile_scene(
             **(
                 {}
                 if bodies is None
-                else {"bodies": {"first": system.body_first, "ids": system.body_ids, "shapes": system.body_shape}}
+                else {"bodies": _body_header(system, dynamics)}
             ),
         },
         connectivity=connectivity([(s.id, e, base) for s, e, base in expanded]),

@@ -102,6 +102,10 @@ class Guard:
                 return self._failure(
                     state, i, self._stiffest_spring_at(i), None, "a position or velocity is not finite"
                 )
+        if state.body_orientation is not None:
+            found = self._body_not_finite(state)
+            if found is not None:
+                return found
         if self.watch.disabled is not None:
             return None
         with np.errstate(over="ignore", invalid="ignore"):
@@ -111,6 +115,19 @@ class Guard:
         particle, spring = self.watch.blame(state)
         reason = f"the mechanical energy {h:.3g} J is {growth:.3g} times what the forces put in ({b:.3g} J)"
         return self._failure(state, particle, spring, growth, reason)
+
+    def _body_not_finite(self, state: State) -> Failure | None:
+        """A rigid body whose orientation or angular velocity is not finite, named by its id."""
+        q, w = state.body_orientation, state.body_angular_velocity
+        if np.isfinite(q.sum()) and np.isfinite(w.sum()):
+            return None
+        bad = ~(np.isfinite(q).all(axis=1) & np.isfinite(w).all(axis=1))
+        if not bad.any():
+            return None
+        i = self.compiled.system.body_first + int(np.flatnonzero(bad)[0])
+        return self._failure(
+            state, i, None, None, "a rigid body's orientation or angular velocity is not finite"
+        )
 
     def _stiffest_spring_at(self, i: int) -> int | None:
         sysm = self.compiled.system

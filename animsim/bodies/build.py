@@ -119,7 +119,9 @@ def build_body_elements(
     if planes or system.body_count > 1:
         table = PlaneTable(
             np.array([p.point for p in planes], dtype=np.float64).reshape(-1, 3),
-            np.array([np.array(p.normal) / np.linalg.norm(p.normal) for p in planes], dtype=np.float64).reshape(-1, 3),
+            np.array(
+                [np.array(p.normal) / np.linalg.norm(p.normal) for p in planes], dtype=np.float64
+            ).reshape(-1, 3),
             np.array([p.restitution for p in planes], dtype=np.float64),
             np.array([p.friction for p in planes], dtype=np.float64),
         )

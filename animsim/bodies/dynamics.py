@@ -61,7 +61,12 @@ class BodyDynamics:
             a_out += f * dynamics.inv_mass[:, None]
         if self._numba:
             quat.numba_angular_acceleration()(
-                np.ascontiguousarray(q), np.ascontiguousarray(w), self.inertia, self.inv_inertia, torque, alpha_out
+                np.ascontiguousarray(q),
+                np.ascontiguousarray(w),
+                self.inertia,
+                self.inv_inertia,
+                torque,
+                alpha_out,
             )
         else:
             alpha_out[:] = quat.angular_acceleration(q, w, self.inertia, self.inv_inertia, torque)
@@ -78,7 +83,9 @@ class BodyDynamics:
         """Stored energy of the forces at points of bodies (springs)."""
         return float(sum(t.potential_bodies(x, q) for t in self.terms))
 
-    def angular_momentum(self, x: np.ndarray, v: np.ndarray, q: np.ndarray, w: np.ndarray, mass: np.ndarray) -> np.ndarray:
+    def angular_momentum(
+        self, x: np.ndarray, v: np.ndarray, q: np.ndarray, w: np.ndarray, mass: np.ndarray
+    ) -> np.ndarray:
         """Total angular momentum about the origin: sum of x_b x m_b v_b + I_w omega_b over bodies
         (plus particles' x x m v, so springs between bodies and particles conserve it)."""
         spin = quat.angular_momentum(q, w, self.inertia)

@@ -174,6 +174,7 @@ class FrameRenderer:
         paint_planes(self.canvas, camera, planes)
         self.canvas.keep_as_background()
         self.spring_index = np.zeros((0, 2), dtype=np.int64)
+        self.bodies: dict[str, Any] | None = None  # header.extra["bodies"] of a scene with bodies
         self.time_stamp = time_stamp
         self.time_decimals = time_decimals
         self.text_scale = max(1, round(min(camera.width, camera.height) / TEXT_PIXELS_PER_SCALE))
@@ -185,6 +186,10 @@ class FrameRenderer:
             raise ValueError("spring indices must be >= 0")
         self.spring_index = springs
 
+    def set_bodies(self, info: dict[str, Any] | None) -> None:
+        """Rigid bodies to draw as shapes (their centre rows are then not drawn as dots)."""
+        self.bodies = info
+
     def render(
         self,
         position: np.ndarray,
@@ -193,6 +198,7 @@ class FrameRenderer:
         size: np.ndarray | None = None,
         color: np.ndarray | None = None,
         time: float | None = None,
+        orientation: np.ndarray | None = None,
     ) -> Canvas:
         """Draw one frame and return the canvas (valid until the next call).
 
@@ -208,6 +214,8 @@ class FrameRenderer:
         proj = self.camera.project(position)
         if len(self.spring_index):
             self._draw_springs(proj.pixel, proj.visible, index, n)
+        if self.bodies is not None and orientation is not None:
+            proj = self._draw_bodies(position, index, orientation, proj)
 
         radius = np.full(n, self.dot_radius)
         if size is not None:
@@ -230,6 +238,30 @@ class FrameRenderer:
             margin = TEXT_MARGIN_GLYPH_PX * self.text_scale
             canvas.draw_text(margin, margin, self.time_label(time), scale=self.text_scale)
         return canvas
+
+    def _draw_bodies(self, position: np.ndarray, index: np.ndarray | None, orientation: np.ndarray, proj: Any) -> Any:
+        """Draw the bodies as shapes; returns the projection with their centre rows hidden."""
+        from dataclasses import replace
+
+        from animsim.bodies.draw import draw_bodies, draw_body_springs
+
+        info = self.bodies
+        assert info is not None
+        first, count = int(info["first"]), len(info["ids"])
+        idx = np.arange(len(position)) if index is None else np.asarray(index)
+        rows = np.flatnonzero((idx >= first) & (idx < first + count))
+        body = idx[rows] - first
+        if info.get("springs") is not None:
+            row_of = {int(k): r for r, k in enumerate(idx.tolist())}
+
+            def at_rows(ids: np.ndarray) -> np.ndarray:
+                return np.array([position[row_of[int(k)]] if int(k) in row_of else [np.nan] * 3 for k in ids])
+
+            draw_body_springs(self.canvas, self.camera, info["springs"], at_rows, lambda b: orientation[b])
+        draw_bodies(self.canvas, self.camera, info, body, position[rows], orientation[body])
+        visible = proj.visible.copy()
+        visible[rows] = False
+        return replace(proj, visible=visible)
 
     def time_label(self, time: float) -> str:
         return f"t = {time:.{self.time_decimals}f} s"
@@ -404,6 +436,9 @@ class AnimationSink:
         if self._state != "new":
             raise RuntimeError(f"begin() called on a sink that is {self._state}")
         self.renderer.set_springs(header.spring_index)
+        from animsim.bodies.export import body_info
+
+        self.renderer.set_bodies(body_info(header))
         try:
             self._file = AtomicFile(self.path, "wb")
         except OSError as exc:
@@ -432,7 +467,12 @@ class AnimationSink:
         if self._state != "open":
             raise RuntimeError(f"write() called on a sink that is {self._state}")
         canvas = self.renderer.render(
-            frame.position, frame.index, size=frame.size, color=frame.color, time=frame.time
+            frame.position,
+            frame.index,
+            size=frame.size,
+            color=frame.color,
+            time=frame.time,
+            orientation=frame.orientation,
         )
         if self._gif is not None:
             self._gif.add(quantise(canvas), gif_delay_cs(self.fps, self.frames_written))
@@ -485,7 +525,12 @@ class AnimationSink:
     def render_frame(self, frame: Frame) -> np.ndarray:
         """(H, W) palette indices of ``frame`` without writing it."""
         canvas = self.renderer.render(
-            frame.position, frame.index, size=frame.size, color=frame.color, time=frame.time
+            frame.position,
+            frame.index,
+            size=frame.size,
+            color=frame.color,
+            time=frame.time,
+            orientation=frame.orientation,
         )
         return quantise(canvas)
 

@@ -11,7 +11,14 @@ import numpy as np
 import pytest
 
 from animsim.bodies import quaternion as quat
-from animsim.bodies.contacts import SHAPE_BOX, SHAPE_CAPSULE, SHAPE_SPHERE, batches, candidate_pairs, local_sdf
+from animsim.bodies.contacts import (
+    SHAPE_BOX,
+    SHAPE_CAPSULE,
+    SHAPE_SPHERE,
+    batches,
+    candidate_pairs,
+    local_sdf,
+)
 from animsim.bodies.shapes import Box, Capsule, Sphere, contact_table, mesh, outline
 
 RNG = np.random.default_rng(1234)
@@ -82,7 +89,9 @@ def test_numba_angular_acceleration_agrees_with_numpy() -> None:
     inertia = RNG.uniform(0.5, 3.0, size=(64, 3))
     out = np.empty((64, 3))
     quat.numba_angular_acceleration()(q, omega, inertia, 1 / inertia, torque, out)
-    np.testing.assert_allclose(out, quat.angular_acceleration(q, omega, inertia, 1 / inertia, torque), rtol=1e-13, atol=1e-14)
+    np.testing.assert_allclose(
+        out, quat.angular_acceleration(q, omega, inertia, 1 / inertia, torque), rtol=1e-13, atol=1e-14
+    )
 
 
 def test_momentum_and_energy_helpers() -> None:
