@@ -193,7 +193,9 @@ def compile_scene(
 
     listed = _particle_springs(scene)
     if listed:
-        pairs = np.array([[index_of[a], index_of[b]] for a, b in (sp.between for sp in listed)], dtype=np.int64)
+        pairs = np.array(
+            [[index_of[a], index_of[b]] for a, b in (sp.between for sp in listed)], dtype=np.int64
+        )
         spring_pairs.append(pairs)
         spring_ks.append(np.array([sp.ks for sp in listed]))
         spring_kd.append(np.array([sp.kd for sp in listed]))
@@ -354,11 +356,7 @@ def compile_scene(
             "planes": [
                 (np.array(p.point), np.array(p.normal) / np.linalg.norm(p.normal)) for p in scene.planes
             ],
-            **(
-                {}
-                if bodies is None
-                else {"bodies": _body_header(system, dynamics)}
-            ),
+            **({} if bodies is None else {"bodies": _body_header(system, dynamics)}),
         },
         connectivity=connectivity([(s.id, e, base) for s, e, base in expanded]),
     )

@@ -239,7 +239,9 @@ class FrameRenderer:
             canvas.draw_text(margin, margin, self.time_label(time), scale=self.text_scale)
         return canvas
 
-    def _draw_bodies(self, position: np.ndarray, index: np.ndarray | None, orientation: np.ndarray, proj: Any) -> Any:
+    def _draw_bodies(
+        self, position: np.ndarray, index: np.ndarray | None, orientation: np.ndarray, proj: Any
+    ) -> Any:
         """Draw the bodies as shapes; returns the projection with their centre rows hidden."""
         from dataclasses import replace
 

@@ -81,7 +81,9 @@ class CsvSink:
         with writing(self.path):
             self._out.write("".join(lines))
 
-    def _body_lines(self, frame: Frame, t: str, ids: list[str], rows: list[Any], index: list[int]) -> list[str]:
+    def _body_lines(
+        self, frame: Frame, t: str, ids: list[str], rows: list[Any], index: list[int]
+    ) -> list[str]:
         """Rows of a scene with bodies: q and omega for body rows, seven empty cells for particles."""
         from animsim.bodies.export import row_columns
 

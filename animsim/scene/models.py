@@ -472,18 +472,6 @@ Quaternion = Annotated[
 ]
 
 
-class AxisAngle(Model):
-    axis: Vec3 = Field(description="rotation axis (need not be unit length; not zero)")
-    angle: FiniteFloat = Field(description="degrees, right-handed about the axis")
-
-    @field_validator("axis")
-    @classmethod
-    def _nonzero(cls, v: tuple[float, float, float]) -> tuple[float, float, float]:
-        if v == (0.0, 0.0, 0.0):
-            raise ValueError("the axis must not be zero")
-        return v
-
-
 class Body(Model):
     """A rigid body: a centre of mass that moves like a particle, plus an orientation."""
 

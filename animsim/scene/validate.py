@@ -258,15 +258,14 @@ def _check_body_ends(
     if not ends:
         return False
     for k, end in enumerate((a, b)):
-        if isinstance(end, BodyPoint):
-            if ids_complete and end.body not in body_ids:
-                out.append(
-                    (
-                        ("springs", i, "between", k, "body"),
-                        f"no body with id {end.body!r}{_suggest(end.body, list(body_ids))}",
-                        False,
-                    )
+        if isinstance(end, BodyPoint) and ids_complete and end.body not in body_ids:
+            out.append(
+                (
+                    ("springs", i, "between", k, "body"),
+                    f"no body with id {end.body!r}{_suggest(end.body, list(body_ids))}",
+                    False,
                 )
+            )
     if len(ends) == 2 and a.body == b.body:
         out.append(
             (
