@@ -32,6 +32,7 @@ found) and a capsule against a capsule is end-sphere-against-shape only.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cache
@@ -49,6 +50,8 @@ ITERATIONS = 10
 RESTING_FACTOR = 2.0
 #: and below this absolute approach speed, m/s (rounding of a body already at rest)
 RESTING_FLOOR = 1e-6
+#: candidate pairs are kept while no body moved more than half of SKIN * the largest bound
+SKIN = 0.5
 
 SHAPE_BOX, SHAPE_SPHERE, SHAPE_CAPSULE = 0, 1, 2
 
@@ -218,28 +221,57 @@ def shape_arrays(shapes: tuple[BodyShape, ...]) -> tuple[np.ndarray, np.ndarray,
     return kind, dims, bound
 
 
-def candidate_pairs(
-    x: np.ndarray, bound: np.ndarray, only: np.ndarray | None = None
-) -> tuple[np.ndarray, np.ndarray]:
-    """Pairs (i < j) whose bounding spheres overlap: sweep and prune along x, vectorised."""
-    lo = x[:, 0] - bound
-    hi = x[:, 0] + bound
-    order = np.argsort(lo, kind="stable")
-    lo_s, hi_s = lo[order], hi[order]
-    # for sorted body s, candidates are the next ones whose lo <= hi_s
-    end = np.searchsorted(lo_s, hi_s, side="right")
-    counts = end - np.arange(len(order)) - 1
-    counts = np.maximum(counts, 0)
-    if counts.sum() == 0:
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    first = np.repeat(np.arange(len(order)), counts)
-    offsets = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-    second = first + 1 + offsets
-    i, j = order[first], order[second]
-    close = np.linalg.norm(x[i] - x[j], axis=1) <= bound[i] + bound[j]
+#: the 13 neighbour cells "ahead" of a cell (the other 13 see it as ahead of them), plus itself
+_HALF_SHELL = [
+    (dx, dy, dz) for dx in (-1, 0, 1) for dy in (-1, 0, 1) for dz in (-1, 0, 1) if (dx, dy, dz) > (0, 0, 0)
+]
+
+
+def candidate_pairs(x: np.ndarray, bound: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs (i < j) whose bounding spheres overlap, sorted: a uniform grid of cells twice the
+    largest bounding radius, each body tested against its own cell and the 13 neighbour cells
+    ahead of it (every overlapping pair shares a cell or sits in neighbouring ones). Vectorised."""
+    b = x.shape[0]
+    empty = np.zeros(0, dtype=np.int64)
+    if b < 2 or not np.isfinite(x).all():
+        return empty, empty
+    cell = 2.0 * float(bound.max())
+    ijk = np.floor((x - x.min(axis=0)) / cell).astype(np.int64) + 1
+    dims = ijk.max(axis=0) + 2
+    lin = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
+    order = np.argsort(lin, kind="stable")
+    cells, start, count = np.unique(lin[order], return_index=True, return_counts=True)
+    parts_i, parts_j = [], []
+    # same cell: every pair within it
+    rank = np.empty(b, dtype=np.int64)
+    rank[order] = np.arange(b)
+    slot = np.searchsorted(cells, lin)
+    pos = rank  # position of each body in the sorted order
+    n_after = start[slot] + count[slot] - pos - 1
+    if n_after.sum():
+        src = np.repeat(np.arange(b), n_after)
+        offs = np.arange(n_after.sum()) - np.repeat(np.cumsum(n_after) - n_after, n_after)
+        parts_i.append(src)
+        parts_j.append(order[np.repeat(pos + 1, n_after) + offs])
+    for dx, dy, dz in _HALF_SHELL:
+        target = lin + (dx * dims[1] + dy) * dims[2] + dz
+        k = np.searchsorted(cells, target)
+        k = np.minimum(k, cells.size - 1)
+        hit = cells[k] == target
+        n = np.where(hit, count[k], 0)
+        if not n.sum():
+            continue
+        src = np.repeat(np.arange(b), n)
+        offs = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)
+        parts_i.append(src)
+        parts_j.append(order[np.repeat(start[k], n) + offs])
+    if not parts_i:
+        return empty, empty
+    i = np.concatenate(parts_i)
+    j = np.concatenate(parts_j)
+    close = np.einsum("ij,ij->i", x[i] - x[j], x[i] - x[j]) <= (bound[i] + bound[j]) ** 2
     i, j = i[close], j[close]
-    swap = i > j
-    i, j = np.where(swap, j, i), np.where(swap, i, j)
+    i, j = np.minimum(i, j), np.maximum(i, j)
     keep = np.lexsort((j, i))
     return i[keep], j[keep]
 
@@ -255,10 +287,12 @@ def pair_contacts(
     bound: np.ndarray,
     restitution: np.ndarray,
     friction: np.ndarray,
+    candidates: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Contacts:
     """Contacts between bodies: the contact spheres of a round body (sphere, capsule) against the
-    other's shape; for two boxes, each one's corners against the other."""
-    i, j = candidate_pairs(x, bound)
+    other's shape; for two boxes, each one's corners against the other. ``candidates``: pairs
+    (i, j) that may touch (default: all pairs whose bounding spheres overlap)."""
+    i, j = candidate_pairs(x, bound) if candidates is None else candidates
     if i.size == 0:
         return _empty_contacts()
     round_i, round_j = kind[i] != SHAPE_BOX, kind[j] != SHAPE_BOX
@@ -339,6 +373,8 @@ def solve(
     inv_inertia: np.ndarray,
     resting_speed: np.ndarray,
     iterations: int = ITERATIONS,
+    dv: np.ndarray | None = None,
+    dx: np.ndarray | None = None,
 ) -> np.ndarray:
     """Sequential impulses on v (B,3), w (B,3) in place; returns the restitution applied per contact."""
     c = contacts
@@ -373,6 +409,8 @@ def solve(
     bounce = vn0 < -(rest_a + rest_b + RESTING_FLOOR)
     e_used = np.where(bounce, c.restitution, 0.0)
     target = np.where(bounce, -c.restitution * vn0, 0.0)
+    if dv is not None and dx is not None and bounce.any():
+        target = np.where(bounce, _impact_target(c, vn0, dv, dx, has_b, bb), target)
     jn = np.zeros(c.count)
     jt = np.zeros((c.count, 3))
     batch = batches(a, b)
@@ -423,6 +461,31 @@ def solve(
             jt[idx] = want
             apply(idx, djt)
     return e_used
+
+
+def _impact_target(
+    c: Contacts, vn0: np.ndarray, dv: np.ndarray, dx: np.ndarray, has_b: np.ndarray, bb: np.ndarray
+) -> np.ndarray:
+    """Bounce targets corrected for the time of impact inside the step.
+
+    The step ended with the contact d = depth inside; the centres approached by
+    dx_n = n . (x - x_old) and the forces changed the normal speed by dv_n =
+    n . (v - v_old). The impact happened at the fraction s = d0 / (d0 + d) of the
+    step (d0 the distance at its start, d0 = -dx_n - d), with approach speed
+    vn_imp = vn - (1 - s) dv_n; reflected there and carried on for the rest of the
+    step, the normal speed ends at -e vn_imp + (1 - s) dv_n. (Without this the
+    forces of the part of the step after the impact would be reflected too: a
+    ball would gain height at every bounce.)
+    """
+    rel_dv = dv[c.a] - np.where(has_b[:, None], dv[bb], 0.0)
+    rel_dx = dx[c.a] - np.where(has_b[:, None], dx[bb], 0.0)
+    dvn = np.einsum("ci,ci->c", rel_dv, c.n)
+    dxn = np.einsum("ci,ci->c", rel_dx, c.n)
+    d0 = -dxn - c.depth
+    span = d0 + c.depth
+    s = np.clip(np.divide(d0, span, out=np.zeros_like(d0), where=span > 0), 0.0, 1.0)
+    vn_imp = vn0 - (1.0 - s) * dvn
+    return np.maximum(-c.restitution * vn_imp + (1.0 - s) * dvn, 0.0)
 
 
 def eff_mass_sub(
@@ -499,6 +562,8 @@ def _plane_solver_loop(
     plane_mu: np.ndarray,
     resting_speed: np.ndarray,
     iterations: int,
+    dv: np.ndarray,
+    dx: np.ndarray,
 ) -> int:
     """Each body on its own (bodies touching only planes are independent): its contacts in order
     plane, sphere; sequential impulses; then the push out of each plane. Returns the contact count."""
@@ -583,7 +648,15 @@ def _plane_solver_loop(
             vn0 = vx * nx + vy * ny + vz * nz
             if vn0 < -(resting_speed[bi] + 0.0 + 1e-6):
                 eu[i] = ee[i]
-                tgt[i] = -ee[i] * vn0
+                # time of impact inside the step (as _impact_target)
+                dvn = dv[bi, 0] * nx + dv[bi, 1] * ny + dv[bi, 2] * nz
+                dxn = dx[bi, 0] * nx + dx[bi, 1] * ny + dx[bi, 2] * nz
+                d0 = -dxn - dep[i]
+                span = d0 + dep[i]
+                s = d0 / span if span > 0 else 0.0
+                s = min(max(s, 0.0), 1.0)
+                vn_imp = vn0 - (1.0 - s) * dvn
+                tgt[i] = max(-ee[i] * vn_imp + (1.0 - s) * dvn, 0.0)
             else:
                 eu[i] = 0.0
                 tgt[i] = 0.0
@@ -619,16 +692,16 @@ def _plane_solver_loop(
                 tx_, ty_, tz_ = vx - vn * nx, vy - vn * ny, vz - vn * nz
                 speed = np.sqrt(tx_ * tx_ + ty_ * ty_ + tz_ * tz_)
                 if speed > 0.0:
-                    dx, dy, dz = tx_ / speed, ty_ / speed, tz_ / speed
-                    cxd, cyd, czd = ay * dz - az * dy, az * dx - ax * dz, ax * dy - ay * dx
+                    ex, ey, ez = tx_ / speed, ty_ / speed, tz_ / speed
+                    cxd, cyd, czd = ay * ez - az * ey, az * ex - ax * ez, ax * ey - ay * ex
                     ux = m00 * cxd + m01 * cyd + m02 * czd
                     uy = m01 * cxd + m11 * cyd + m12 * czd
                     uz = m02 * cxd + m12 * cyd + m22 * czd
-                    kt = im + ((uy * az - uz * ay) * dx + (uz * ax - ux * az) * dy + (ux * ay - uy * ax) * dz)
+                    kt = im + ((uy * az - uz * ay) * ex + (uz * ax - ux * az) * ey + (ux * ay - uy * ax) * ez)
                     inv_kt = 1.0 / kt if kt > 0.0 else 0.0
-                    wx_ = jt[i, 0] - (speed * inv_kt) * dx
-                    wy_ = jt[i, 1] - (speed * inv_kt) * dy
-                    wz_ = jt[i, 2] - (speed * inv_kt) * dz
+                    wx_ = jt[i, 0] - (speed * inv_kt) * ex
+                    wy_ = jt[i, 1] - (speed * inv_kt) * ey
+                    wz_ = jt[i, 2] - (speed * inv_kt) * ez
                 else:
                     wx_, wy_, wz_ = jt[i, 0], jt[i, 1], jt[i, 2]
                 capj = mu[i] * jn[i]
@@ -697,9 +770,14 @@ class BodyContacts(StepStage):
         self.colliders = colliders
         self.iterations = iterations
         self.between_bodies = self.count > 1
-        # the numba kernel covers bodies that can touch only planes; anything else runs the NumPy
-        # path on both backends, so the two agree
-        self.use_numba = backend == "numba" and not self.between_bodies and not colliders
+        # Verlet list of candidate pairs: bounding spheres grown by SKIN * the largest bound,
+        # rebuilt once some body has moved half of that since the last build
+        self._skin = SKIN * float(self.bound.max()) if self.count else 0.0
+        self._built_at: np.ndarray | None = None
+        self._candidates: tuple[np.ndarray, np.ndarray] | None = None
+        # the numba kernel covers steps in which bodies touch only planes; a step with contacts
+        # between bodies (or colliders) runs the NumPy path on both backends, so the two agree
+        self.use_numba = backend == "numba" and not colliders
         kinds = sorted({s.kind for s in shapes})
         parts = []
         if planes.count:
@@ -725,7 +803,8 @@ class BodyContacts(StepStage):
         return out
 
     def reset(self, state: Any) -> None:
-        return None
+        self._built_at = None
+        self._candidates = None
 
     def apply(
         self, state: Any, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, dt: float = 0.0
@@ -735,8 +814,11 @@ class BodyContacts(StepStage):
         v = state.particle_velocity[rows]
         q = state.body_orientation
         w = state.body_angular_velocity
-        resting = RESTING_FACTOR * np.linalg.norm(v - v_old[rows], axis=1)
-        if self.use_numba:
+        dv = v - v_old[rows]
+        dx = x - x_old[rows]
+        resting = RESTING_FACTOR * np.linalg.norm(dv, axis=1)
+        pairs = self.find_pairs(x, q)
+        if self.use_numba and pairs.count == 0:
             kernel = numba_plane_solver()
             xc, vc = np.ascontiguousarray(x), np.ascontiguousarray(v)
             n = kernel(
@@ -755,40 +837,52 @@ class BodyContacts(StepStage):
                 self.planes.friction,
                 resting,
                 self.iterations,
+                np.ascontiguousarray(dv),
+                np.ascontiguousarray(dx),
             )
             if n:
                 state.particle_position[rows] = xc
                 state.particle_velocity[rows] = vc
             return bool(n)
-        contacts = self.find(x, q)
+        contacts = self.find(x, q, pairs)
         if contacts.count == 0:
             return False
-        e_used = solve(contacts, v, w, q, self.inv_mass, self.inv_inertia, resting, self.iterations)
+        e_used = solve(contacts, v, w, q, self.inv_mass, self.inv_inertia, resting, self.iterations, dv, dx)
         project(contacts, e_used, x, self.inv_mass)
         state.particle_position[rows] = x
         state.particle_velocity[rows] = v
         return True
 
-    def find(self, x: np.ndarray, q: np.ndarray) -> Contacts:
+    def find(self, x: np.ndarray, q: np.ndarray, pairs: Contacts | None = None) -> Contacts:
         """Every contact of the bodies at x, q: planes, then colliders, then pairs."""
         parts = []
         if self.planes.count:
             parts.append(plane_contacts(x, q, self.points, self.radii, self.valid, self.planes))
         for sdf, e, mu in self.colliders:
             parts.append(sdf_contacts(x, q, self.points, self.radii, self.valid, sdf, e, mu))
-        if self.between_bodies:
-            parts.append(
-                pair_contacts(
-                    x,
-                    q,
-                    self.points,
-                    self.radii,
-                    self.counts,
-                    self.kind,
-                    self.dims,
-                    self.bound,
-                    self.restitution,
-                    self.friction,
-                )
-            )
+        parts.append(self.find_pairs(x, q) if pairs is None else pairs)
         return _concat(parts)
+
+    def find_pairs(self, x: np.ndarray, q: np.ndarray) -> Contacts:
+        """Contacts between bodies (none when the scene has one body)."""
+        if not self.between_bodies:
+            return _empty_contacts()
+        moved = np.inf if self._built_at is None else float(np.abs(x - self._built_at).max(initial=0.0))
+        if not moved <= 0.5 * self._skin / math.sqrt(3.0):  # a NaN position rebuilds too
+            self._candidates = candidate_pairs(x, self.bound + 0.5 * self._skin)
+            self._built_at = x.copy()
+        if self._candidates[0].size == 0:
+            return _empty_contacts()
+        return pair_contacts(
+            x,
+            q,
+            self.points,
+            self.radii,
+            self.counts,
+            self.kind,
+            self.dims,
+            self.bound,
+            self.restitution,
+            self.friction,
+            self._candidates,
+        )
