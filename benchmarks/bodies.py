@@ -1,8 +1,8 @@
 """Time 1 000 free rigid bodies with gravity and a floor: steps per second, NumPy and numba.
 
-A 40 x 25 grid of boxes, spheres and capsules (a third each), tilted and
-spinning, dropped from heights of 0.15 m to 1.05 m onto a floor with friction
-(free bodies: they land apart and never touch each other), run with
+A 40 x 25 grid (0.5 m apart) of boxes, spheres and capsules (a third each),
+tilted and spinning, dropped from heights of 0.15 m to 1.05 m onto a floor
+with friction (free bodies: they land apart and do not touch each other), run with
 symplectic Euler at dt = 1 ms. The first 0.5 s (a warm-up, and numba's compile)
 is not timed; the timed stretch has bodies falling, landing and resting, the
 body contacts busy every step. Nothing is written (no sinks). Best of
@@ -49,11 +49,11 @@ def scene_text() -> str:
     k = 0
     for i in range(GRID[0]):
         for m in range(GRID[1]):
-            x, y, z = 0.3 * i, 0.15 + 0.1 * ((3 * i + 7 * m) % 10), 0.3 * m
+            x, y, z = 0.5 * i, 0.15 + 0.1 * ((3 * i + 7 * m) % 10), 0.5 * m
             lines.append(
                 f"  - {{id: b{k}, shape: {SHAPES[k % 3]}, density: 800, position: [{x:.2f}, {y:.2f}, {z:.2f}],"
                 f" orientation: {{axis: [{1 + i % 3}, 1, {m % 2}], angle: {7 * k % 90}}},"
-                f" angular_velocity: [{(k % 5) - 2}, {(k % 3) - 1}, {(k % 7) - 3}]}}"
+                f" angular_velocity: [{0.2 * ((k % 5) - 2):.1f}, {(k % 3) - 1}, {0.2 * ((k % 7) - 3):.1f}]}}"
             )
             k += 1
     return "\n".join(lines) + "\n"

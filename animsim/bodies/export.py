@@ -92,3 +92,31 @@ def header_springs(body_dynamics: Any) -> dict[str, np.ndarray] | None:
             ("at_b", "at_b"),
         )
     }
+
+
+def body_mesh_rows(
+    frame: Any, info: dict[str, Any], n: int, detail: int = 12
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Every body's shape mesh placed in the frame: vertex positions (V,3), velocities (V,3)
+    (v + omega x r), the body's row id per vertex (V,), triangles (F,3) numbered from row n."""
+    found = body_frame(frame, info)
+    if found is None or not len(found[0]):
+        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, dtype=np.int64), np.zeros((0, 3), dtype=np.int64)
+    body, x, q = found
+    first = int(info["first"])
+    idx = np.asarray(frame.index, dtype=np.int64)
+    rows = np.flatnonzero((idx >= first) & (idx < first + len(info["ids"])))
+    v_com = np.asarray(frame.velocity)[rows]
+    omega = frame.angular_velocity[body]
+    pos, vel, ids, tris = [], [], [], []
+    base = n
+    for k, b in enumerate(body.tolist()):
+        verts, faces = mesh(info["shapes"][b], detail)
+        qk = np.broadcast_to(q[k], (len(verts), 4))
+        r = quat.rotate(qk, verts)
+        pos.append(x[k] + r)
+        vel.append(v_com[k] + np.cross(omega[k], r))
+        ids.append(np.full(len(verts), first + b, dtype=np.int64))
+        tris.append(faces + base)
+        base += len(verts)
+    return np.concatenate(pos), np.concatenate(vel), np.concatenate(ids), np.concatenate(tris)
