@@ -436,6 +436,7 @@ def explain(
     typer.echo(
         f"  {s.particle_count} particles ({int(s.particle_pinned.sum())} pinned), {s.spring_count} springs, "
         f"{len(sc.planes)} planes, {len(sc.emitters)} emitters"
+        + (f", {s.body_count} rigid bodies (their centres counted as particles)" if s.body_count else "")
     )
     typer.echo(f"  {c.clock.steps} steps of {c.clock.dt:g} s to t = {c.clock.duration:g} s, seed {c.seed}")
     typer.echo("each step runs:")
@@ -951,6 +952,14 @@ def _energies(compiled: Any, traj: Any) -> tuple[Any, Any, Any]:
             times.append(state.time)
             kinetic.append(dyn.kinetic_energy(state.particle_velocity))
             potential.append(dyn.potential_energy(state.particle_position))
+            _add_body_energy(
+                dyn,
+                state.particle_position,
+                state.body_orientation,
+                state.body_angular_velocity,
+                kinetic,
+                potential,
+            )
 
         simulate(compiled, [], observers=[observe])
     else:
@@ -971,7 +980,16 @@ def _energies(compiled: Any, traj: Any) -> tuple[Any, Any, Any]:
             times.append(frame.time)
             kinetic.append(dyn.kinetic_energy(v))
             potential.append(dyn.potential_energy(x))
+            _add_body_energy(dyn, x, frame.orientation, frame.angular_velocity, kinetic, potential)
     return np.array(times), np.array(kinetic), np.array(potential)
+
+
+def _add_body_energy(dyn: Any, x: Any, q: Any, w: Any, kinetic: list[float], potential: list[float]) -> None:
+    """Rigid bodies: their spin energy is kinetic, springs to them store potential energy."""
+    if dyn.bodies is None or q is None or w is None or len(q) != dyn.bodies.count:
+        return
+    kinetic[-1] += dyn.bodies.rotational_energy(q, w)
+    potential[-1] += dyn.bodies.potential(x, q)
 
 
 # --- entry point ----------------------------------------------------------------------------

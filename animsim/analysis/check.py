@@ -40,6 +40,27 @@ def _energy_report(compiled: Any, result: Any) -> str:
     return f"{text}, drift {drift:+.2%} ({kind})"
 
 
+def _momentum_report(compiled: Any, result: Any) -> str:
+    """Angular momentum about the origin at the start and the end (scenes with rigid bodies)."""
+    import numpy as np
+
+    dyn = compiled.dynamics
+    ends = []
+    for state in (compiled.initial, result.final_state):
+        mass = np.where(state.particle_inv_mass > 0, state.particle_mass, 0.0)
+        ends.append(
+            dyn.bodies.angular_momentum(
+                state.particle_position,
+                state.particle_velocity,
+                state.body_orientation,
+                state.body_angular_velocity,
+                mass,
+            )
+        )
+    l0, l1 = (float(np.linalg.norm(v)) for v in ends)
+    return f"angular momentum |L| {l0:.6g} -> {l1:.6g} kg m^2/s (about the origin, particles and bodies)"
+
+
 def check_scenes(
     paths: Sequence[Path],
     *,
@@ -76,6 +97,8 @@ def check_scenes(
             f"{path}: {result.status} ({compiled.integrator_name}, dt {compiled.clock.dt:g}, "
             f"{result.steps_taken} steps, {result.wall_time:.2f} s; {_energy_report(compiled, result)})"
         )
+        if compiled.system.body_count:
+            notes.append(_momentum_report(compiled, result))
         if result.status != STATUS_OK:
             all_ok = False
             echo_err(head)

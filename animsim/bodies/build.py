@@ -175,6 +175,7 @@ def _body_springs(
         np.array([sp.kd for sp in specs]),
         system.body_count,
     )
+    springs.inv_inertia = system.body_inv_inertia
     return springs
 
 

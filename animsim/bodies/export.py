@@ -101,7 +101,12 @@ def body_mesh_rows(
     (v + omega x r), the body's row id per vertex (V,), triangles (F,3) numbered from row n."""
     found = body_frame(frame, info)
     if found is None or not len(found[0]):
-        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, dtype=np.int64), np.zeros((0, 3), dtype=np.int64)
+        return (
+            np.zeros((0, 3)),
+            np.zeros((0, 3)),
+            np.zeros(0, dtype=np.int64),
+            np.zeros((0, 3), dtype=np.int64),
+        )
     body, x, q = found
     first = int(info["first"])
     idx = np.asarray(frame.index, dtype=np.int64)

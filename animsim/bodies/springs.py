@@ -56,6 +56,8 @@ class BodySprings(ForceElement):
         self.ks = np.asarray(ks, dtype=np.float64)
         self.kd = np.asarray(kd, dtype=np.float64)
         self.body_count = body_count
+        #: (B, 3) inverse principal moments, for the stability bounds (set by the builder)
+        self.inv_inertia: np.ndarray | None = None
         self.has_damping = bool(np.any(self.kd > 0))
         self.names = names or []
         n = len(self.ks)
@@ -130,16 +132,35 @@ class BodySprings(ForceElement):
         stretch = np.linalg.norm(pb - pa, axis=1) - self.rest
         return float(0.5 * np.sum(self.ks * stretch * stretch))
 
-    def stiffness_rows(self) -> list[tuple[int, int, float, float]]:
-        """(row_a, row_b, ks, kd) per spring, the body's centre-of-mass row standing for a body end.
+    def stiffness_rows(self, inv_mass: np.ndarray, k_rows: np.ndarray, c_rows: np.ndarray) -> None:
+        """Gershgorin rows of M^-1/2 K M^-1/2 as for particle springs, a body end standing as its
+        centre-of-mass row with the mobility of the attachment point in place of 1/m.
 
-        The stability analysis then uses the body's mass: exact for the translation of the body.
-        The rotation a spring at lever arm |at| excites has the effective mass I / |at|^2 (I the
-        moment about the axis it turns around), which for a corner of a uniform box is about
-        m / 3 to m / 2: the translational estimate is then optimistic by a factor up to sqrt(3)
-        in the stable step (the documented approximation).
+        A point at lever arm r of a body moves under a force f by f/m (translation) plus up to
+        |r|^2 |f| / I_min (rotation about the softest axis), so 1/m + |r|^2 / I_min bounds its
+        inverse effective mass: exact for the translation, an upper bound for the rotation
+        (the stable step it suggests is on the safe side).
         """
-        return [
-            (int(a), int(b), float(k), float(c))
-            for a, b, k, c in zip(self.rows_a, self.rows_b, self.ks, self.kd, strict=True)
+        inv_eff = [
+            self._mobility(inv_mass, rows, body, at)
+            for rows, body, at in (
+                (self.rows_a, self.body_a, self.at_a),
+                (self.rows_b, self.body_b, self.at_b),
+            )
         ]
+        ia, ib = inv_eff
+        cross = np.sqrt(ia * ib)
+        n = len(k_rows)
+        for coef, rows in ((self.ks, k_rows), (self.kd, c_rows)):
+            rows += np.bincount(self.rows_a, weights=coef * (ia + cross), minlength=n)
+            rows += np.bincount(self.rows_b, weights=coef * (ib + cross), minlength=n)
+
+    def _mobility(
+        self, inv_mass: np.ndarray, rows: np.ndarray, body: np.ndarray, at: np.ndarray
+    ) -> np.ndarray:
+        out = inv_mass[rows].astype(np.float64)
+        has = body >= 0
+        if has.any() and self.inv_inertia is not None:
+            lever2 = np.einsum("si,si->s", at[has], at[has])
+            out[has] += lever2 * self.inv_inertia[body[has]].max(axis=1)
+        return out
