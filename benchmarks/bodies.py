@@ -53,7 +53,7 @@ def scene_text() -> str:
             lines.append(
                 f"  - {{id: b{k}, shape: {SHAPES[k % 3]}, density: 800, position: [{x:.2f}, {y:.2f}, {z:.2f}],"
                 f" orientation: {{axis: [{1 + i % 3}, 1, {m % 2}], angle: {7 * k % 90}}},"
-                f" angular_velocity: [{0.2 * ((k % 5) - 2):.1f}, {(k % 3) - 1}, {0.2 * ((k % 7) - 3):.1f}]}}"
+                f" angular_velocity: [{0.2 * ((k % 5) - 2):.1f}, {0.5 * ((k % 3) - 1):.1f}, {0.2 * ((k % 7) - 3):.1f}]}}"
             )
             k += 1
     return "\n".join(lines) + "\n"

@@ -94,6 +94,12 @@ def _empty_contacts() -> Contacts:
     return Contacts(zi, zi, z3, z3, z3, np.zeros(0), np.zeros(0), np.zeros(0))
 
 
+def _select(c: Contacts, bodies: np.ndarray) -> Contacts:
+    """The contacts whose first body is flagged in ``bodies`` (B,) bool."""
+    keep = bodies[c.a]
+    return Contacts(*(getattr(c, f)[keep] for f in Contacts.__dataclass_fields__))
+
+
 def _concat(parts: list[Contacts]) -> Contacts:
     parts = [p for p in parts if p.count]
     if not parts:
@@ -564,6 +570,7 @@ def _plane_solver_loop(
     iterations: int,
     dv: np.ndarray,
     dx: np.ndarray,
+    skip: np.ndarray,
 ) -> int:
     """Each body on its own (bodies touching only planes are independent): its contacts in order
     plane, sphere; sequential impulses; then the push out of each plane. Returns the contact count."""
@@ -583,6 +590,8 @@ def _plane_solver_loop(
     tgt = np.empty(cap)
     eu = np.empty(cap)
     for bi in range(x.shape[0]):
+        if skip[bi]:  # touching another body this step: solved with it on the NumPy path
+            continue
         qw, qx, qy, qz = q[bi, 0], q[bi, 1], q[bi, 2], q[bi, 3]
         # world inverse inertia R diag(I^-1) R^T
         r00 = 1 - 2 * (qy * qy + qz * qz)
@@ -818,7 +827,12 @@ class BodyContacts(StepStage):
         dx = x - x_old[rows]
         resting = RESTING_FACTOR * np.linalg.norm(dv, axis=1)
         pairs = self.find_pairs(x, q)
-        if self.use_numba and pairs.count == 0:
+        if self.use_numba:
+            # bodies touching each other are solved together on the NumPy path (as on the NumPy
+            # backend); every other body on its own in the numba kernel
+            skip = np.zeros(self.count, dtype=bool)
+            skip[pairs.a] = True
+            skip[pairs.b] = True
             kernel = numba_plane_solver()
             xc, vc = np.ascontiguousarray(x), np.ascontiguousarray(v)
             n = kernel(
@@ -839,20 +853,26 @@ class BodyContacts(StepStage):
                 self.iterations,
                 np.ascontiguousarray(dv),
                 np.ascontiguousarray(dx),
+                skip,
             )
             if n:
                 state.particle_position[rows] = xc
                 state.particle_velocity[rows] = vc
-            return bool(n)
-        contacts = self.find(x, q, pairs)
+            if pairs.count == 0:
+                return bool(n)
+            x, v = state.particle_position[rows], state.particle_velocity[rows]
+            contacts = _select(self.find(x, q, pairs), skip)
+            changed = bool(n)
+        else:
+            contacts = self.find(x, q, pairs)
+            changed = False
         if contacts.count == 0:
-            return False
+            return changed
         e_used = solve(contacts, v, w, q, self.inv_mass, self.inv_inertia, resting, self.iterations, dv, dx)
         project(contacts, e_used, x, self.inv_mass)
         state.particle_position[rows] = x
         state.particle_velocity[rows] = v
         return True
-
     def find(self, x: np.ndarray, q: np.ndarray, pairs: Contacts | None = None) -> Contacts:
         """Every contact of the bodies at x, q: planes, then colliders, then pairs."""
         parts = []
