@@ -335,6 +335,7 @@ def compile_scene(
         and not moving_anchor
         and not any(st.injects or st.dissipative for st in post_step)
         and not penalty
+        and not (dynamics.bodies is not None and any(t.has_damping for t in dynamics.bodies.terms))
     )
 
     stages[:0] = [t.label for t in terms]
