@@ -111,7 +111,7 @@ def test_ply_frames_hold_each_body_as_a_closed_mesh(scene_file, tmp_path) -> Non
     assert proc.returncode == 0, proc.stderr
     files = sorted(out.parent.glob("frame_*.ply"))
     data = plyfile.PlyData.read(str(files[-1]))
-    ids = (out.parent / "frame.ids.txt").read_text(encoding="utf-8").split("\n")
+    ids = (out.parent / "frame_ids.txt").read_text(encoding="utf-8").split("\n")
     vid = np.asarray(data["vertex"]["id"])
     faces = np.stack(data["face"]["vertex_indices"])
     traj = animsim.simulate(animsim.load(scene_file))
