@@ -873,6 +873,7 @@ class BodyContacts(StepStage):
         state.particle_position[rows] = x
         state.particle_velocity[rows] = v
         return True
+
     def find(self, x: np.ndarray, q: np.ndarray, pairs: Contacts | None = None) -> Contacts:
         """Every contact of the bodies at x, q: planes, then colliders, then pairs."""
         parts = []
