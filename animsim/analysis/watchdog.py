@@ -167,7 +167,9 @@ class EnergyWatch:
         bodies = self.dynamics.bodies
         if bodies is not None and state.body_orientation is not None:
             e = e.copy()
-            e[bodies.rows] += bodies.rotational_energy_per_body(state.body_orientation, state.body_angular_velocity)
+            e[bodies.rows] += bodies.rotational_energy_per_body(
+                state.body_orientation, state.body_angular_velocity
+            )
         spring = None
         if self.springs is not None and len(self.springs.a):
             per = self.springs.per_spring_energy(x)
