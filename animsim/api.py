@@ -265,9 +265,29 @@ def simulate(
     traj.failure = result.failure
     traj.meta = result.meta
     traj.header = compiled.header
+    _fill_bodies(traj, compiled)
     traj.result = result
     traj.compiled = compiled
     return traj
+
+
+def _fill_bodies(traj: Trajectory, compiled: Any) -> None:
+    """body_ids and the (F, B, ...) body arrays of a run with rigid bodies (kept in memory)."""
+    system = compiled.system
+    long = traj.frames_long
+    if not system.body_count or long is None or long.orientation is None:
+        return
+    rows = slice(system.body_first, system.body_first + system.body_count)
+    traj.body_ids = list(system.body_ids)
+    traj.body_positions = traj.positions[:, rows]
+    f, n = long.frame_count, len(long.ids)
+    q = np.full((f, n, 4), np.nan)
+    w = np.full((f, n, 3), np.nan)
+    frame_of_row = np.repeat(np.arange(f), np.diff(long.frame_start))
+    q[frame_of_row, long.particle] = long.orientation
+    w[frame_of_row, long.particle] = long.angular_velocity
+    traj.body_orientations = q[:, rows]
+    traj.body_angular_velocities = w[:, rows]
 
 
 def compare(

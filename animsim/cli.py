@@ -480,6 +480,7 @@ def explain(
     typer.echo(
         f"  {s.particle_count} particles ({int(s.particle_pinned.sum())} pinned), {s.spring_count} springs, "
         f"{len(sc.planes)} planes, {len(sc.emitters)} emitters"
+        + (f", {s.body_count} rigid bodies (their centres counted as particles)" if s.body_count else "")
     )
     typer.echo(f"  {c.clock.steps} steps of {c.clock.dt:g} s to t = {c.clock.duration:g} s, seed {c.seed}")
     typer.echo("each step runs:")

@@ -72,6 +72,9 @@ class PlaneColliders(StepStage):
     collides_newborns = True
     no_closed_form = "it has planes (collisions have no closed form here)"
 
+    #: (N,) bool rows this stage may touch, or None for all (bodies have their own contacts)
+    point_rows: np.ndarray | None = None
+
     def reset(self, state: Any) -> None:
         self.inv_mass = state.particle_inv_mass
 
@@ -85,6 +88,10 @@ class PlaneColliders(StepStage):
         self, state: Any, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, dt: float
     ) -> bool:
         x, v = state.particle_position, state.particle_velocity
+        if self.point_rows is not None:
+            # body centres are not particles: no mass here, so no plane moves them (bodies have
+            # their own contacts); recomputed per step because births change the live masses
+            self.inv_mass = np.where(self.point_rows, state.particle_inv_mass, 0.0)
         if self.numba:
             fp, ip = self.numba_stage_params()
             inv_mass = self.inv_mass if self.inv_mass.flags.writeable else self.inv_mass.copy()
@@ -312,5 +319,8 @@ def build(entries: list[tuple[int, m.Plane]], ctx: BuildContext) -> list[Any]:
         else:
             impulse.append(ImpulsePlane(np.array(p.point), normal, p.restitution, p.friction))
     if impulse:
-        out.append(PlaneColliders(impulse, ctx.system.particle_inv_mass, numba=ctx.backend == "numba"))
+        stage = PlaneColliders(impulse, ctx.system.particle_inv_mass, numba=ctx.backend == "numba")
+        if ctx.system.body_count:
+            stage.point_rows = ctx.system.point_rows
+        out.append(stage)
     return out

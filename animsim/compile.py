@@ -119,6 +119,27 @@ def with_overrides(
     return new
 
 
+def _body_header(system: System, dynamics: Dynamics) -> dict[str, Any]:
+    """What sinks and renderers learn about bodies: rows, ids, shapes, springs to bodies."""
+    from animsim.bodies.export import header_springs
+
+    return {
+        "first": system.body_first,
+        "ids": system.body_ids,
+        "shapes": system.body_shape,
+        "springs": header_springs(dynamics.bodies),
+    }
+
+
+def _particle_springs(scene: m.Scene) -> list[Any]:
+    """Springs between two particles (springs to points of bodies are the bodies' element)."""
+    if not scene.bodies:
+        return list(scene.springs)
+    from animsim.bodies.build import particle_springs
+
+    return particle_springs(scene)
+
+
 def compile_scene(
     scene: m.Scene,
     name: str = "scene",
@@ -164,16 +185,33 @@ def compile_scene(
         pinned.append(e.pinned)
         expanded.append((s, e, base))
 
-    if scene.springs:
+    # --- rigid bodies: each centre of mass is a particle row, after the structures ------
+    bodies = None
+    if scene.bodies:
+        from animsim.bodies.build import body_rows, check_integrator
+
+        check_integrator(scene)
+        bodies = body_rows(scene)
+        body_first = len(ids)
+        for k, bid in enumerate(bodies.ids):
+            index_of[bid] = body_first + k
+        ids.extend(bodies.ids)
+        pos.append(bodies.position)
+        vel.append(bodies.velocity)
+        mass.append(bodies.mass)
+        pinned.append(bodies.pinned)
+
+    listed = _particle_springs(scene)
+    if listed:
         pairs = np.array(
-            [[index_of[a], index_of[b]] for a, b in (sp.between for sp in scene.springs)], dtype=np.int64
+            [[index_of[a], index_of[b]] for a, b in (sp.between for sp in listed)], dtype=np.int64
         )
         spring_pairs.append(pairs)
-        spring_ks.append(np.array([sp.ks for sp in scene.springs]))
-        spring_kd.append(np.array([sp.kd for sp in scene.springs]))
-        spring_rest.append(np.array([np.nan if sp.rest == "auto" else sp.rest for sp in scene.springs]))
-        families.append(("listed springs", 0, len(scene.springs)))
-        spring_total += len(scene.springs)
+        spring_ks.append(np.array([sp.ks for sp in listed]))
+        spring_kd.append(np.array([sp.kd for sp in listed]))
+        spring_rest.append(np.array([np.nan if sp.rest == "auto" else sp.rest for sp in listed]))
+        families.append(("listed springs", 0, len(listed)))
+        spring_total += len(listed)
     for _, e, base in expanded:
         grids.append((base, e.grid_shape, len(families), len(families) + len(e.springs)))
         for group in e.springs:
@@ -236,6 +274,13 @@ def compile_scene(
         spring_families=families,
         structure_grids=grids,
     )
+    if bodies is not None:
+        system.body_first = body_first
+        system.body_count = len(bodies.ids)
+        system.body_ids = list(bodies.ids)
+        system.body_inertia = bodies.inertia
+        system.body_inv_inertia = bodies.inv_inertia
+        system.body_shape = bodies.shapes
 
     system.freeze()
     chosen, backend_note = choose_backend(backend)
@@ -282,6 +327,17 @@ def compile_scene(
     left_out.extend(solids.left_out)
     dynamics = Dynamics(system, terms)
     dynamics.drivers = tuple(solids.drivers)
+    if bodies is not None:
+        from animsim.bodies.build import build_body_elements
+
+        dynamics.bodies, body_stages, body_labels, body_left_out = build_body_elements(
+            scene, system, index_of, particle_position, bodies.orientation, chosen
+        )
+        post_step.extend(body_stages)
+        stages.extend(body_labels)
+        left_out.extend(body_left_out)
+    else:
+        left_out.append("rigid bodies: none in the scene")
     if emitters is not None:
         emitters.attach(dynamics, [st for st in post_step if st.collides_newborns])
         post_step.append(emitters)  # births run after the step and its collisions
@@ -306,6 +362,7 @@ def compile_scene(
         and not moving_anchor
         and not any(st.injects or st.dissipative for st in post_step)
         and not penalty
+        and not (dynamics.bodies is not None and any(t.has_damping for t in dynamics.bodies.terms))
     )
 
     stages[:0] = [t.label for t in terms]
@@ -332,6 +389,7 @@ def compile_scene(
             "particle_color": [p.color for p in scene.particles],
             "particle_pinned": system.particle_pinned,
             "collider_surface": solids.collider_surface,
+            **({} if bodies is None else {"bodies": _body_header(system, dynamics)}),
         },
         connectivity=connectivity([(s.id, e, base) for s, e, base in expanded]),
     )
@@ -347,6 +405,8 @@ def compile_scene(
         step=0,
         particle_alive=particle_alive,
         spring_intact=np.ones(system.spring_count, dtype=bool) if can_tear else None,
+        body_orientation=None if bodies is None else bodies.orientation.copy(),
+        body_angular_velocity=None if bodies is None else bodies.angular_velocity.copy(),
     )
     compiled = Compiled(
         name=name,

@@ -111,7 +111,7 @@ def build(scene: m.Scene, system: Any, backend: str, springs: Any | None, positi
         from animsim.scene.structures import local_index
 
         for s, (first, _shape, _f0, _f1) in zip(scene.structures, system.structure_grids, strict=True):
-            if s.pin_motion is None:
+            if getattr(s, "pin_motion", None) is None:
                 continue
             path = len(keys)
             keys.append(list(s.pin_motion.keyframes))

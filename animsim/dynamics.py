@@ -29,6 +29,8 @@ class Dynamics:
         #: keyframe drives (animsim.keyframes.KeyframeDrive): driven rows are put on their
         #: path before every force evaluation, so springs to them see the path inside a step
         self.drivers: tuple[Any, ...] = ()
+        #: the rotational half when the scene has rigid bodies (animsim.bodies.dynamics)
+        self.bodies: Any = None
 
     def bind(self, state: Any) -> None:
         """Use ``state``'s live masses, and hand it to every element that reads state arrays."""
@@ -69,8 +71,14 @@ class Dynamics:
         m = np.where(self.inv_mass > 0, self.mass, 0.0)
         return float(0.5 * np.dot(m, np.einsum("ij,ij->i", v, v)))
 
-    def energy(self, x: np.ndarray, v: np.ndarray) -> float:
-        return self.kinetic_energy(v) + self.potential_energy(x)
+    def energy(
+        self, x: np.ndarray, v: np.ndarray, q: np.ndarray | None = None, w: np.ndarray | None = None
+    ) -> float:
+        """Kinetic + potential energy; with bodies (q, w given) also rotational and body-spring energy."""
+        total = self.kinetic_energy(v) + self.potential_energy(x)
+        if self.bodies is not None and q is not None and w is not None:
+            total += self.bodies.rotational_energy(q, w) + self.bodies.potential(x, q)
+        return total
 
     @property
     def has_damping(self) -> bool:

@@ -101,6 +101,10 @@ class Guard:
                 return self._failure(
                     state, i, self._stiffest_spring_at(i), None, "a position or velocity is not finite"
                 )
+        if state.body_orientation is not None:
+            found = self._body_not_finite(state)
+            if found is not None:
+                return found
         if self.watch.disabled is not None:
             return None
         with np.errstate(over="ignore", invalid="ignore"):
@@ -110,6 +114,19 @@ class Guard:
         particle, spring = self.watch.blame(state)
         reason = f"the mechanical energy {h:.3g} J is {growth:.3g} times what the forces put in ({b:.3g} J)"
         return self._failure(state, particle, spring, growth, reason)
+
+    def _body_not_finite(self, state: State) -> Failure | None:
+        """A rigid body whose orientation or angular velocity is not finite, named by its id."""
+        q, w = state.body_orientation, state.body_angular_velocity
+        if np.isfinite(q.sum()) and np.isfinite(w.sum()):
+            return None
+        bad = ~(np.isfinite(q).all(axis=1) & np.isfinite(w).all(axis=1))
+        if not bad.any():
+            return None
+        i = self.compiled.system.body_first + int(np.flatnonzero(bad)[0])
+        return self._failure(
+            state, i, None, None, "a rigid body's orientation or angular velocity is not finite"
+        )
 
     def _stiffest_spring_at(self, i: int) -> int | None:
         sysm = self.compiled.system
@@ -195,7 +212,12 @@ def run(
             next_rec = 1
         # Overflow on the way to a blow-up is the watchdog's to report, not numpy's.
         with np.errstate(over="ignore", invalid="ignore"):
-            energy_start = dyn.energy(state.particle_position, state.particle_velocity)
+            energy_start = dyn.energy(
+                state.particle_position,
+                state.particle_velocity,
+                state.body_orientation,
+                state.body_angular_velocity,
+            )
             guard.start(state)
         failure: Failure | None = None
         status = STATUS_OK
@@ -264,7 +286,12 @@ def run(
                     break
         wall = _time.perf_counter() - t_start
         with np.errstate(over="ignore", invalid="ignore"):
-            energy_end = dyn.energy(state.particle_position, state.particle_velocity)
+            energy_end = dyn.energy(
+                state.particle_position,
+                state.particle_velocity,
+                state.body_orientation,
+                state.body_angular_velocity,
+            )
         meta = _meta(compiled, status, state, wall, energy_start, energy_end, frames, failure)
         meta["backend"] = compiled.backend
         if compile_seconds:
@@ -336,13 +363,17 @@ def _first_failure(
 
 def _frame_copy(compiled: Compiled, state: State) -> Frame:
     """A frame that owns its arrays (fixed population: no emitters)."""
-    return Frame(
-        step=state.step,
-        time=state.time,
-        index=_all_index(compiled),
-        position=state.particle_position.copy(),
-        velocity=state.particle_velocity.copy(),
-        spring_intact=None if state.spring_intact is None else state.spring_intact.copy(),
+    return _with_bodies(
+        Frame(
+            step=state.step,
+            time=state.time,
+            index=_all_index(compiled),
+            position=state.particle_position.copy(),
+            velocity=state.particle_velocity.copy(),
+            spring_intact=None if state.spring_intact is None else state.spring_intact.copy(),
+        ),
+        state,
+        copy=True,
     )
 
 
@@ -400,8 +431,21 @@ def _emit(
             import dataclasses
 
             frame = dataclasses.replace(frame, spring_intact=state.spring_intact)
+    frame = _with_bodies(frame, state, copy=False)
     for sink in sinks:
         sink.write(frame)
+
+
+def _with_bodies(frame: Frame, state: State, copy: bool) -> Frame:
+    """The frame with the bodies' orientations and angular velocities (unchanged without bodies)."""
+    if state.body_orientation is None:
+        return frame
+    import dataclasses
+
+    q, w = state.body_orientation, state.body_angular_velocity
+    return dataclasses.replace(
+        frame, orientation=q.copy() if copy else q, angular_velocity=w.copy() if copy else w
+    )
 
 
 def _all_index(compiled: Compiled) -> np.ndarray:

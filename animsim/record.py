@@ -164,6 +164,10 @@ class Frame:
     size: np.ndarray | None = None  # (n,) m, for rendering
     color: np.ndarray | None = None  # (n, 4) RGBA in [0, 1]
     spring_intact: np.ndarray | None = None  # (S,) bool: False for springs torn by now (None: none can tear)
+    #: rigid bodies (header.extra["bodies"]): (B, 4) orientation quaternions [w, x, y, z] and
+    #: (B, 3) world angular velocities, rad/s, of the rows body_first .. body_first + B - 1
+    orientation: np.ndarray | None = None
+    angular_velocity: np.ndarray | None = None
 
 
 class FrameSink(Protocol):
@@ -210,6 +214,8 @@ class MemorySink:
                 size=None if frame.size is None else frame.size.copy(),
                 color=None if frame.color is None else frame.color.copy(),
                 spring_intact=None if frame.spring_intact is None else frame.spring_intact.copy(),
+                orientation=None if frame.orientation is None else frame.orientation.copy(),
+                angular_velocity=None if frame.angular_velocity is None else frame.angular_velocity.copy(),
             )
         )
 

@@ -41,6 +41,27 @@ class System:
     # (first particle, grid shape, first family, end family) of each generated
     # structure, so spring kernels can work on the grid by slices.
     structure_grids: list[tuple[int, tuple[int, ...], int, int]] = field(default_factory=list)
+    # Rigid bodies (animsim.bodies): body b's centre of mass is particle row body_first + b,
+    # with particle_mass = the body's mass (inverse 0 when pinned).
+    body_first: int = 0
+    body_count: int = 0
+    body_ids: list[str] = field(default_factory=list)
+    #: (B, 3) principal moments in the body frame, kg m^2; inverse 0 for pinned bodies
+    body_inertia: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    body_inv_inertia: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    #: one plain frozen shape per body (animsim.bodies.shapes)
+    body_shape: tuple = ()
+
+    @property
+    def body_rows(self) -> slice:
+        return slice(self.body_first, self.body_first + self.body_count)
+
+    @property
+    def point_rows(self) -> np.ndarray:
+        """(N,) bool: True for rows that are not bodies (particle-only machinery uses these)."""
+        rows = np.ones(self.particle_count, dtype=bool)
+        rows[self.body_rows] = False
+        return rows
 
     @property
     def particle_count(self) -> int:
@@ -81,6 +102,10 @@ class State:
     revision: int = 0
     #: (S,) bool, False for a spring that tore; None unless some spring can tear
     spring_intact: np.ndarray | None = None
+    #: (B, 4) unit quaternions [w, x, y, z], body to world; None without bodies
+    body_orientation: np.ndarray | None = None
+    #: (B, 3) angular velocities, world frame, rad/s; None without bodies
+    body_angular_velocity: np.ndarray | None = None
 
     def copy(self) -> State:
         owns = self.particle_alive is not None  # only pools change masses
@@ -94,6 +119,8 @@ class State:
             None if self.particle_alive is None else self.particle_alive.copy(),
             self.revision,
             None if self.spring_intact is None else self.spring_intact.copy(),
+            None if self.body_orientation is None else self.body_orientation.copy(),
+            None if self.body_angular_velocity is None else self.body_angular_velocity.copy(),
         )
 
     def assign(self, src: State) -> None:
@@ -106,4 +133,7 @@ class State:
             np.copyto(self.particle_inv_mass, src.particle_inv_mass)
         if self.spring_intact is not None and src.spring_intact is not None:
             np.copyto(self.spring_intact, src.spring_intact)
+        if self.body_orientation is not None and src.body_orientation is not None:
+            np.copyto(self.body_orientation, src.body_orientation)
+            np.copyto(self.body_angular_velocity, src.body_angular_velocity)
         self.time, self.step, self.revision = src.time, src.step, src.revision

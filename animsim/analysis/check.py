@@ -32,6 +32,27 @@ def _energy_report(compiled: Any, result: Any, drift_warn: float) -> str:
     return f"{text}, {verdict.text()}: integration error, the scene being conservative"
 
 
+def _momentum_report(compiled: Any, result: Any) -> str:
+    """Angular momentum about the origin at the start and the end (scenes with rigid bodies)."""
+    import numpy as np
+
+    dyn = compiled.dynamics
+    ends = []
+    for state in (compiled.initial, result.final_state):
+        mass = np.where(state.particle_inv_mass > 0, state.particle_mass, 0.0)
+        ends.append(
+            dyn.bodies.angular_momentum(
+                state.particle_position,
+                state.particle_velocity,
+                state.body_orientation,
+                state.body_angular_velocity,
+                mass,
+            )
+        )
+    l0, l1 = (float(np.linalg.norm(v)) for v in ends)
+    return f"angular momentum |L| {l0:.6g} -> {l1:.6g} kg m^2/s (about the origin, particles and bodies)"
+
+
 def check_scenes(
     paths: Sequence[Path],
     *,
@@ -80,6 +101,8 @@ def check_scenes(
         verdict = drift(compiled, result.energy_start, result.energy_end, warn)
         if verdict.warning and result.status == STATUS_OK:
             echo_err(f"{path}: warning: {verdict.warning_text()}")
+        if compiled.system.body_count:
+            notes.append(_momentum_report(compiled, result))
         if result.status != STATUS_OK:
             all_ok = False
             echo_err(head)

@@ -279,6 +279,9 @@ def closed_form(compiled: Compiled) -> ClosedForm:
     # closed_form); one that does not, or any post-step stage, means no closed form.
     for stage in compiled.post_step:
         raise NoClosedForm(stage.no_closed_form or f"it has {stage.label.split(':')[0]}")
+    bodies = getattr(compiled.dynamics, "bodies", None)
+    for term in bodies.terms if bodies is not None else ():
+        raise NoClosedForm(term.no_closed_form or "springs to bodies have no closed form here")
     g = np.zeros(3)
     drag = 0.0  # total linear coefficient, N*s/m (drag k plus wind k)
     push = np.zeros(3)  # sum of wind k*w, N

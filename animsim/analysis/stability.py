@@ -410,6 +410,9 @@ def _row_bounds(compiled: Any) -> tuple[np.ndarray, np.ndarray, float, list[str]
     # Each element adds its own rows (animsim.elements: stiffness_rows).
     for term in compiled.dynamics.terms:
         term.stiffness_rows(inv, k_rows, c_rows)
+    if getattr(compiled.dynamics, "bodies", None) is not None:  # springs to points of bodies
+        for term in compiled.dynamics.bodies.terms:
+            term.stiffness_rows(inv, k_rows, c_rows)
     penalty_k = max((term.contact_stiffness for term in compiled.dynamics.terms), default=0.0)
     if compiled.emitters is not None and penalty_k > 0:
         notes.append("emitted particles touching penalty planes are not counted")

@@ -124,6 +124,11 @@ class EnergyWatch:
         h = self.kinetic(state.particle_velocity)
         for t in self.elastic:
             h += self._spring_energy(t, x) if t is self.springs else t.potential(x)
+        bodies = self.dynamics.bodies
+        if bodies is not None and state.body_orientation is not None:
+            # rigid bodies: spin energy and the energy of springs to points of bodies
+            h += bodies.rotational_energy(state.body_orientation, state.body_angular_velocity)
+            h += bodies.potential(x, state.body_orientation)
         return h
 
     @staticmethod
@@ -169,6 +174,12 @@ class EnergyWatch:
         """The particle holding the most watched energy and the spring holding the most."""
         x, v = state.particle_position, state.particle_velocity
         e = 0.5 * self.mass * np.einsum("ij,ij->i", v, v)
+        bodies = self.dynamics.bodies
+        if bodies is not None and state.body_orientation is not None:
+            e = e.copy()
+            e[bodies.rows] += bodies.rotational_energy_per_body(
+                state.body_orientation, state.body_angular_velocity
+            )
         spring = None
         if self.springs is not None and len(self.springs.a):
             per = self.springs.per_spring_energy(x)

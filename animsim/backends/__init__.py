@@ -57,6 +57,8 @@ def fused_unsupported(compiled: Any) -> list[str]:
     why: list[str] = []
     if compiled.adaptive is not None:
         why.append("adaptive step size")
+    if compiled.system.body_count:
+        why.append("rigid bodies")
     if compiled.integrator.numba_chunk_kind() is None:
         why.append(f"integrator {compiled.integrator.name!r}")
     for term in compiled.dynamics.terms:

@@ -184,6 +184,7 @@ class FrameRenderer:
         self.row_rgba: np.ndarray | None = None
         self.row_pinned: np.ndarray | None = None
         self.collider_surface: Callable[[float], np.ndarray] | None = None
+        self.bodies: dict[str, Any] | None = None  # header.extra["bodies"] of a scene with bodies
         self.time_stamp = time_stamp
         self.time_decimals = time_decimals
         self.text_scale = max(1, round(min(camera.width, camera.height) / TEXT_PIXELS_PER_SCALE))
@@ -224,6 +225,10 @@ class FrameRenderer:
         out[inside] = table[idx[inside]]
         return out
 
+    def set_bodies(self, info: dict[str, Any] | None) -> None:
+        """Rigid bodies to draw as shapes (their centre rows are then not drawn as dots)."""
+        self.bodies = info
+
     def render(
         self,
         position: np.ndarray,
@@ -233,6 +238,7 @@ class FrameRenderer:
         color: np.ndarray | None = None,
         time: float | None = None,
         spring_intact: np.ndarray | None = None,
+        orientation: np.ndarray | None = None,
     ) -> Canvas:
         """Draw one frame and return the canvas (valid until the next call).
 
@@ -255,6 +261,8 @@ class FrameRenderer:
             )
         if len(self.spring_index):
             self._draw_springs(proj.pixel, proj.visible, index, n, spring_intact)
+        if self.bodies is not None and orientation is not None:
+            proj = self._draw_bodies(position, index, orientation, proj)
 
         radius = np.full(n, self.dot_radius)
         if self.row_radius is not None:
@@ -289,6 +297,32 @@ class FrameRenderer:
             margin = TEXT_MARGIN_GLYPH_PX * self.text_scale
             canvas.draw_text(margin, margin, self.time_label(time), scale=self.text_scale)
         return canvas
+
+    def _draw_bodies(
+        self, position: np.ndarray, index: np.ndarray | None, orientation: np.ndarray, proj: Any
+    ) -> Any:
+        """Draw the bodies as shapes; returns the projection with their centre rows hidden."""
+        from dataclasses import replace
+
+        from animsim.bodies.draw import draw_bodies, draw_body_springs
+
+        info = self.bodies
+        assert info is not None
+        first, count = int(info["first"]), len(info["ids"])
+        idx = np.arange(len(position)) if index is None else np.asarray(index)
+        rows = np.flatnonzero((idx >= first) & (idx < first + count))
+        body = idx[rows] - first
+        if info.get("springs") is not None:
+            row_of = {int(k): r for r, k in enumerate(idx.tolist())}
+
+            def at_rows(ids: np.ndarray) -> np.ndarray:
+                return np.array([position[row_of[int(k)]] if int(k) in row_of else [np.nan] * 3 for k in ids])
+
+            draw_body_springs(self.canvas, self.camera, info["springs"], at_rows, lambda b: orientation[b])
+        draw_bodies(self.canvas, self.camera, info, body, position[rows], orientation[body])
+        visible = proj.visible.copy()
+        visible[rows] = False
+        return replace(proj, visible=visible)
 
     def time_label(self, time: float) -> str:
         return f"t = {time:.{self.time_decimals}f} s"
@@ -475,6 +509,9 @@ class AnimationSink:
             raise RuntimeError(f"begin() called on a sink that is {self._state}")
         self.renderer.set_springs(header.spring_index)
         self.renderer.set_particles(header.extra)
+        from animsim.bodies.export import body_info
+
+        self.renderer.set_bodies(body_info(header))
         try:
             self._file = AtomicFile(self.path, "wb")
         except OSError as exc:
@@ -509,6 +546,7 @@ class AnimationSink:
             color=frame.color,
             time=frame.time,
             spring_intact=frame.spring_intact,
+            orientation=frame.orientation,
         )
         if self._gif is not None:
             self._gif.add(quantise(canvas), gif_delay_cs(self.fps, self.frames_written))
@@ -567,6 +605,7 @@ class AnimationSink:
             color=frame.color,
             time=frame.time,
             spring_intact=frame.spring_intact,
+            orientation=frame.orientation,
         )
         return quantise(canvas)
 

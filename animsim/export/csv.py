@@ -50,7 +50,10 @@ class CsvSink:
             self._file = AtomicFile(self.path, "w", newline="")
             self._out = self._file.handle
         self._ids = [quote_id(i) for i in header.ids]
-        cols = HEADER + (EXTRA_HEADER if self.extra else ())
+        from animsim.bodies.export import CSV_COLUMNS, body_info
+
+        self._bodies = body_info(header)
+        cols = HEADER + (EXTRA_HEADER if self.extra else ()) + (CSV_COLUMNS if self._bodies else ())
         with writing(self.path):
             self._out.write(",".join(cols) + "\n")
 
@@ -61,7 +64,9 @@ class CsvSink:
         ids = self._ids
         rows = np.concatenate([frame.position, frame.velocity], axis=1).tolist()
         index = frame.index.tolist()
-        if not self.extra:
+        if self._bodies is not None:
+            lines = self._body_lines(frame, t, ids, rows, index)
+        elif not self.extra:
             lines = [
                 f"{t},{ids[k]},{a!r},{b!r},{c!r},{d!r},{e!r},{f!r}\n"
                 for k, (a, b, c, d, e, f) in zip(index, rows, strict=True)
@@ -75,6 +80,25 @@ class CsvSink:
         # A full disk shows here (or only at close): a clear error, never a traceback.
         with writing(self.path):
             self._out.write("".join(lines))
+
+    def _body_lines(
+        self, frame: Frame, t: str, ids: list[str], rows: list[Any], index: list[int]
+    ) -> list[str]:
+        """Rows of a scene with bodies: q and omega for body rows, seven empty cells for particles."""
+        from animsim.bodies.export import row_columns
+
+        assert self._bodies is not None
+        q, w = row_columns(frame, int(self._bodies["first"]))
+        tail = [
+            ",,,,,," if np.isnan(qq[0]) else ",".join(repr(c) for c in (*qq, *ww))
+            for qq, ww in zip(q.tolist(), w.tolist(), strict=True)
+        ]
+        extra = self._extra_cells(frame) if self.extra else None
+        out = []
+        for j, (k, (a, b, c, d, e, f)) in enumerate(zip(index, rows, strict=True)):
+            mid = f",{extra[j]}" if extra is not None else ""
+            out.append(f"{t},{ids[k]},{a!r},{b!r},{c!r},{d!r},{e!r},{f!r}{mid},{tail[j]}\n")
+        return out
 
     @staticmethod
     def _extra_cells(frame: Frame) -> list[str]:

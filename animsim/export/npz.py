@@ -5,6 +5,8 @@ Arrays: ``t`` (R,), ``particle`` (R,) int64 index into ``ids`` (P,) str,
 ``frame_start`` (F+1,) row offsets, so frame k is rows
 ``frame_start[k]:frame_start[k+1]``. Scenes with emitters add ``age`` (R,),
 ``size`` (R,) and ``color`` (R, 4) (NaN for particles that have none).
+Scenes with rigid bodies add ``orientation`` (R, 4) quaternions [w, x, y, z]
+and ``angular_velocity`` (R, 3) rad/s in the world frame (NaN for particle rows).
 
 Unlike the CSV, the NPZ keeps frames in which no particle is alive (a
 particle system before its first birth), so it round-trips a run exactly.
@@ -36,6 +38,8 @@ _COLUMNS = {
     "velocity": ((3,), np.float64),
 }
 _EXTRA = {"age": ((), np.float64), "size": ((), np.float64), "color": ((4,), np.float64)}
+#: scenes with rigid bodies: per row, NaN for particle rows
+_BODY = {"orientation": ((4,), np.float64), "angular_velocity": ((3,), np.float64)}
 
 
 class NpzSink:
@@ -53,6 +57,11 @@ class NpzSink:
     def begin(self, header: TrajectoryHeader) -> None:
         if header.has_emitters:
             self._columns.update(_EXTRA)
+        from animsim.bodies.export import body_info
+
+        self._bodies = body_info(header)
+        if self._bodies is not None:
+            self._columns.update(_BODY)
         with writing(self.path):
             self._tmpdir = tempfile.TemporaryDirectory(prefix=".animsim-npz-", dir=self.path.parent)
             for name in self._columns:
@@ -73,9 +82,19 @@ class NpzSink:
                     value = getattr(frame, name)
                     arr = np.full(shape, np.nan) if value is None else np.asarray(value, dtype=np.float64)
                     self._raw[name].write(np.ascontiguousarray(arr).tobytes())
+            if "orientation" in self._raw:
+                self._write_bodies(frame)
         self._rows += n
         self._frame_time.append(frame.time)
         self._frame_start.append(self._rows)
+
+    def _write_bodies(self, frame: Frame) -> None:
+        from animsim.bodies.export import row_columns
+
+        assert self._bodies is not None
+        q, w = row_columns(frame, int(self._bodies["first"]))
+        self._raw["orientation"].write(np.ascontiguousarray(q).tobytes())
+        self._raw["angular_velocity"].write(np.ascontiguousarray(w).tobytes())
 
     def close(self, meta: dict[str, Any]) -> None:
         assert self._tmpdir is not None

@@ -360,6 +360,7 @@ class PlySequenceSink:
         self._ids: list[str] = []
         self._scene = ""
         self._conn: tuple[Connectivity, ...] = ()
+        self._bodies: dict[str, Any] | None = None
         self._created_dirs: list[Path] = []
         self._pending: AtomicFile | None = None
         self._sidecars_pending: list[AtomicFile] = []
@@ -382,6 +383,7 @@ class PlySequenceSink:
         self._ids = list(header.ids)
         self._scene = header.scene_name
         self._conn = tuple(header.connectivity)
+        self._bodies = (header.extra or {}).get("bodies")
         missing = []
         d = self.directory
         while not d.exists() and d != d.parent:
@@ -401,6 +403,8 @@ class PlySequenceSink:
         self._ids.extend(frame.new_ids)
         k = len(self.written)
         faces, face_count, edges = self.shapes(frame, n)
+        if self._bodies is not None and frame.orientation is not None:
+            frame, n, faces, face_count = _with_body_meshes(frame, n, faces, face_count, self._bodies)
         if n == 0:
             frame = _placeholder(frame)
         data = self.encode(frame, max(n, 1))
@@ -791,3 +795,34 @@ def read_ply(path: str | os.PathLike[str], element: str = VERTEX_ELEMENT) -> Ply
         element=element,
         trailing=trailing,
     )
+
+
+def _with_body_meshes(
+    frame: Frame, n: int, faces: bytes, face_count: int, info: dict[str, Any]
+) -> tuple[Frame, int, bytes, int]:
+    """The frame with each rigid body's shape appended: its mesh vertices (id = the body's row,
+    velocity = v + omega x r of that point) and triangles (wound counter-clockwise seen from
+    outside) after the frame's own rows and faces."""
+    from animsim.bodies.export import body_mesh_rows
+
+    pos, vel, idx, tris = body_mesh_rows(frame, info, n)
+    if not len(idx):
+        return frame, n, faces, face_count
+    m = len(idx)
+    rows = np.empty(len(tris), dtype=np.dtype([("n", "u1"), ("v", "<i4", (3,))]))
+    rows["n"] = 3
+    rows["v"] = tris
+    size = None if frame.size is None else np.concatenate([np.asarray(frame.size), np.zeros(m)])
+    color = None
+    if frame.color is not None:
+        color = np.concatenate([np.asarray(frame.color), np.tile(DEFAULT_RGBA, (m, 1))])
+    grown = Frame(
+        step=frame.step,
+        time=frame.time,
+        index=np.concatenate([np.asarray(frame.index, dtype=np.int64), idx]),
+        position=np.concatenate([np.asarray(frame.position), pos]),
+        velocity=np.concatenate([np.asarray(frame.velocity), vel]),
+        size=size,
+        color=color,
+    )
+    return grown, n + m, faces + rows.tobytes(), face_count + len(rows)

@@ -39,6 +39,9 @@ class Trajectory:
     age: np.ndarray | None = None
     size: np.ndarray | None = None
     color: np.ndarray | None = None  # (R, 4)
+    #: rigid bodies: per row, NaN for particle rows
+    orientation: np.ndarray | None = None  # (R, 4)
+    angular_velocity: np.ndarray | None = None  # (R, 3)
 
     @property
     def frame_count(self) -> int:
@@ -68,7 +71,16 @@ class Trajectory:
                 age=None if self.age is None else self.age[a:b],
                 size=None if self.size is None else self.size[a:b],
                 color=None if self.color is None else self.color[a:b],
+                **self._body_fields(a, b),
             )
+
+    def _body_fields(self, a: int, b: int) -> dict[str, Any]:
+        if self.orientation is None:
+            return {}
+        from animsim.bodies.export import bodies_from_rows
+
+        q, w = bodies_from_rows(self.orientation[a:b], self.angular_velocity[a:b])
+        return {"orientation": q, "angular_velocity": w}
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         if not len(self.position):
@@ -105,6 +117,8 @@ def _read_npz(p: Path) -> Trajectory:
         )
         if "color" in z.files:
             traj.age, traj.size, traj.color = z["age"], z["size"], z["color"]
+        if "orientation" in z.files:
+            traj.orientation, traj.angular_velocity = z["orientation"], z["angular_velocity"]
         return traj
 
 
@@ -131,6 +145,14 @@ def _read_csv(p: Path) -> Trajectory:
     frame_start = np.concatenate([[0], starts, [len(t)]]).astype(np.int64) if len(t) else np.array([0])
     traj = Trajectory(ids, t, particle, num[:, 1:4], num[:, 4:7], frame_start)
     names = header[8:]
+    if {"qw", "wz"} <= set(names):
+        from animsim.bodies.export import CSV_COLUMNS
+
+        at = [header.index(c) for c in CSV_COLUMNS]
+        body = np.array(
+            [[float(row[j]) if row[j] != "" else np.nan for j in at] for row in rows], dtype=np.float64
+        ).reshape(-1, 7)
+        traj.orientation, traj.angular_velocity = body[:, :4], body[:, 4:]
     if {"age", "size", "r", "g", "b", "a"} <= set(names):
         extra = np.array(
             [[float(c) if c != "" else np.nan for c in row[8:]] for row in rows], dtype=np.float64
@@ -152,9 +174,14 @@ class TrajectoryCollector:
         }
         self._starts = [0]
         self._has_extra = False
+        self._bodies: dict[str, Any] | None = None
+        self._body_parts: list[tuple[np.ndarray, np.ndarray]] = []
 
     def begin(self, header: Any) -> None:
+        from animsim.bodies.export import body_info
+
         self.ids = list(header.ids)
+        self._bodies = body_info(header)
 
     def write(self, frame: Frame) -> None:
         self.ids.extend(frame.new_ids)
@@ -169,6 +196,10 @@ class TrajectoryCollector:
             p["age"].append(np.array(frame.age if frame.age is not None else np.full(n, np.nan)))
             p["size"].append(np.array(frame.size))
             p["color"].append(np.array(frame.color))
+        if self._bodies is not None:
+            from animsim.bodies.export import row_columns
+
+            self._body_parts.append(row_columns(frame, int(self._bodies["first"])))
         self._starts.append(self._starts[-1] + n)
 
     def close(self, meta: dict[str, Any]) -> None:
@@ -193,4 +224,7 @@ class TrajectoryCollector:
         )
         if self._has_extra and len(p["color"]) == len(p["t"]):
             traj.age, traj.size, traj.color = cat("age", (0,)), cat("size", (0,)), cat("color", (0, 4))
+        if self._body_parts:
+            traj.orientation = np.concatenate([q for q, _ in self._body_parts])
+            traj.angular_velocity = np.concatenate([w for _, w in self._body_parts])
         return traj

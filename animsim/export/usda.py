@@ -301,6 +301,7 @@ class UsdaSink:
         self._tmp: dict[str, tuple[Path, IO[str]]] = {}
         self._prims: list[_Prim] = []
         self._has_emitters = False
+        self._bodies: _BodyPrims | None = None
         self._pending: list[AtomicFile] = []  # the .usda, then the metadata
         self._committed: list[Path] = []  # of those, renamed into place by a close in progress
         self._state = "new"
@@ -313,6 +314,7 @@ class UsdaSink:
         self._ids = list(header.ids)
         self._scene = header.scene_name
         self._has_emitters = header.has_emitters
+        self._bodies = _body_plan(header)
         self._prims = self._plan(header)
         self._state = "open"
         folder = self.path.parent
@@ -341,6 +343,8 @@ class UsdaSink:
                 fh.flush()  # a full disk shows up now, not at close
         except OSError as exc:
             raise SimulationError(f"could not write {self.path}: {exc}") from exc
+        if self._bodies is not None:
+            self._bodies.add(frame)
         self._times.append(float(frame.time))
         self._steps.append(int(frame.step))
 
@@ -433,6 +437,8 @@ class UsdaSink:
             usd_type = "Mesh" if conn.kind == "mesh" else "BasisCurves"
             shapes.append(_Prim(usd_type, name, SHAPE_ATTRIBUTES, conn))
             covered += conn.count
+        if self._bodies is not None:
+            covered += len(self._bodies.ids)  # bodies are Xforms of their own, not points
         attrs = ATTRIBUTES[:3] + ((AGE_ATTRIBUTE,) if header.has_emitters else ()) + ATTRIBUTES[3:]
         points = _Prim("Points", POINTS_PRIM, attrs, None)
         if not shapes or header.has_emitters or len(header.ids) > covered:
@@ -442,6 +448,8 @@ class UsdaSink:
     def _frame_texts(self, frame: Frame, n: int) -> Iterator[tuple[str, str]]:
         """(temporary-file key, sample text) of every time-sampled attribute for ``frame``."""
         free = np.ones(n, dtype=bool)
+        if self._bodies is not None:
+            free &= ~self._bodies.rows_mask(frame)
         for prim in self._prims:
             if prim.conn is None:
                 continue
@@ -519,6 +527,8 @@ class UsdaSink:
             for attr in prim.attributes:
                 self._copy_samples(w, attr, codes_text, prim.key(attr))
             w(f"{INDENT}}}\n")
+        if self._bodies is not None:
+            self._bodies.write(w, codes_text, bool(self._prims))
         w("}\n")
 
     def _write_topology(self, w: Callable[[str], Any], prim: _Prim) -> None:
@@ -577,3 +587,92 @@ def _structure_rows(frame: Frame, c: Connectivity, n: int) -> slice:
     if r0 + c.count > n or not np.array_equal(index[rows], np.arange(c.first, c.first + c.count)):
         raise ValueError(f"frame at step {frame.step}: the particles of {c.name!r} are not all in it")
     return rows
+
+
+# --- rigid bodies ---------------------------------------------------------------------
+# Each body is an Xform (UsdGeomXformable: ``xformOp:translate`` double3 and
+# ``xformOp:orient`` quatf, time-sampled, in that xformOpOrder) holding its shape
+# as a UsdGeom gprim: ``Cube`` (size 1, scaled by the edge lengths), ``Sphere``
+# (radius) or ``Capsule`` (axis Y, height = the segment length, radius).
+
+
+class _BodyPrims:
+    """Translate and orient samples of every body, kept per frame (B * 7 numbers a frame)."""
+
+    def __init__(self, info: dict[str, Any]) -> None:
+        self.first = int(info["first"])
+        self.ids = list(info["ids"])
+        self.shapes = tuple(info["shapes"])
+        self.translate: list[np.ndarray] = []
+        self.orient: list[np.ndarray] = []
+
+    def rows_mask(self, frame: Frame) -> np.ndarray:
+        index = np.asarray(frame.index)
+        return (index >= self.first) & (index < self.first + len(self.ids))
+
+    def add(self, frame: Frame) -> None:
+        index = np.asarray(frame.index)
+        rows = np.flatnonzero(self.rows_mask(frame))
+        x = np.full((len(self.ids), 3), np.nan)
+        x[index[rows] - self.first] = np.asarray(frame.position)[rows]
+        self.translate.append(x)
+        q = frame.orientation if frame.orientation is not None else np.full((len(self.ids), 4), np.nan)
+        self.orient.append(np.asarray(q, dtype=np.float64).copy())
+
+    def write(self, w: Callable[[str], Any], codes: list[str], after_prim: bool) -> None:
+        taken: set[str] = set()
+        for b, (bid, shape) in enumerate(zip(self.ids, self.shapes, strict=True)):
+            name = prim_name(bid)
+            base, k = name, 1
+            while name in taken:
+                k += 1
+                name = f"{base}_{k}"
+            taken.add(name)
+            if after_prim or b:
+                w("\n")
+            pad = INDENT * 2
+            w(f"{INDENT}def Xform {usd_string(name)}\n{INDENT}{{\n")
+            w(f"{pad}custom uniform string animsim:id = {usd_string(bid)}\n")
+            w(f"{pad}double3 xformOp:translate.timeSamples = {{\n")
+            for code, x in zip(codes, self.translate, strict=True):
+                w(f"{pad}{INDENT}{code}: {format_tuples(x[b : b + 1], 3)[1:-1]},\n")
+            w(f"{pad}}}\n{pad}quatf xformOp:orient.timeSamples = {{\n")
+            for code, q in zip(codes, self.orient, strict=True):
+                w(f"{pad}{INDENT}{code}: {format_tuples(q[b : b + 1], 4)[1:-1]},\n")
+            w(f'{pad}}}\n{pad}uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:orient"]\n\n')
+            _write_body_shape(w, shape, pad)
+            w(f"{INDENT}}}\n")
+
+
+def _body_plan(header: TrajectoryHeader) -> _BodyPrims | None:
+    info = (header.extra or {}).get("bodies")
+    return None if info is None else _BodyPrims(info)
+
+
+def _write_body_shape(w: Callable[[str], Any], shape: Any, pad: str) -> None:
+    """The body's shape as a UsdGeom gprim named "shape", in the body frame."""
+    inner = pad + INDENT
+    kind = shape.kind
+    if kind == "box":
+        sx, sy, sz = shape.size
+        w(f'{pad}def Cube "shape"\n{pad}{{\n')
+        half = [0.5 * sx, 0.5 * sy, 0.5 * sz]
+        w(f"{inner}float3[] extent = [(-0.5, -0.5, -0.5), (0.5, 0.5, 0.5)]\n")
+        w(f"{inner}double size = 1\n")
+        w(f"{inner}float3 xformOp:scale = ({float(sx)!r}, {float(sy)!r}, {float(sz)!r})\n")
+        w(f'{inner}uniform token[] xformOpOrder = ["xformOp:scale"]\n')
+        w(f"{inner}custom float3 animsim:halfExtents = ({half[0]!r}, {half[1]!r}, {half[2]!r})\n")
+    elif kind == "sphere":
+        r = float(shape.radius)
+        w(f'{pad}def Sphere "shape"\n{pad}{{\n')
+        w(f"{inner}float3[] extent = [({-r!r}, {-r!r}, {-r!r}), ({r!r}, {r!r}, {r!r})]\n")
+        w(f"{inner}double radius = {r!r}\n")
+    else:
+        r, h = float(shape.radius), float(shape.length)
+        top = 0.5 * h + r
+        w(f'{pad}def Capsule "shape"\n{pad}{{\n')
+        w(f'{inner}uniform token axis = "Y"\n')
+        w(f"{inner}float3[] extent = [({-r!r}, {-top!r}, {-r!r}), ({r!r}, {top!r}, {r!r})]\n")
+        w(f"{inner}double height = {h!r}\n")
+        w(f"{inner}double radius = {r!r}\n")
+    w(f"{pad}}}\n")

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from animsim.bodies.integrate import step as body_step
 from animsim.dynamics import Dynamics
 from animsim.integrators.base import FUSED_RUNGE_KUTTA, Integrator
 from animsim.system import State
@@ -56,6 +57,8 @@ class RungeKutta(Integrator):
         return FUSED_RUNGE_KUTTA, self.tableau
 
     def step(self, state: State, dt: float) -> None:
+        if state.body_orientation is not None:  # rigid bodies: (q, omega) advance too
+            return body_step(self, state, dt)
         tab = self.tableau
         x, v = state.particle_position, state.particle_velocity
         kx, kv = self._kx, self._kv

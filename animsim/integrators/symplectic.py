@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from animsim.bodies.integrate import step as body_step
 from animsim.dynamics import Dynamics
 from animsim.integrators.base import (
     FUSED_EULER_AVERAGE,
@@ -42,6 +43,8 @@ class SymplecticEuler(Integrator):
         return FUSED_SYMPLECTIC_EULER, None
 
     def step(self, state: State, dt: float) -> None:
+        if state.body_orientation is not None:  # rigid bodies: (q, omega) advance too
+            return body_step(self, state, dt)
         x, v = state.particle_position, state.particle_velocity
         a = self.dynamics.acceleration(x, v, state.time, self._a)
         # In place through our own buffer: the same products as v += dt*a;
@@ -68,6 +71,8 @@ class EulerAverage(Integrator):
         return FUSED_EULER_AVERAGE, None
 
     def step(self, state: State, dt: float) -> None:
+        if state.body_orientation is not None:  # rigid bodies: (q, omega) advance too
+            return body_step(self, state, dt)
         x, v = state.particle_position, state.particle_velocity
         a = self.dynamics.acceleration(x, v, state.time, self._a)
         v1 = self._v1
@@ -98,6 +103,8 @@ class Verlet(Integrator):
         return FUSED_VERLET, None
 
     def step(self, state: State, dt: float) -> None:
+        if state.body_orientation is not None:  # rigid bodies: (q, omega) advance too
+            return body_step(self, state, dt)
         x, v = state.particle_position, state.particle_velocity
         # The loop sets state.time from the clock (duration * i / steps), which can
         # differ from the cached time + dt in the last bit; compare with a tolerance

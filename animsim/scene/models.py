@@ -195,11 +195,25 @@ class Particle(Model):
         return self
 
 
-class Spring(Model):
-    """A damped Hooke spring between two particles."""
+class BodyPoint(Model):
+    """A spring end fixed in a rigid body: ``at`` is in the body frame, m."""
 
-    between: Annotated[list[Id], Field(min_length=2, max_length=2)] = Doc(
-        description="the ids of the two particles it joins", example=["anchor", "bob"]
+    body: Id = Field(description="the id of a body")
+    at: Vec3 = Field([0.0, 0.0, 0.0], description="the point in the body frame, m")
+
+
+SpringEnd = Annotated[
+    Id | BodyPoint,
+    Field(description="a particle id, or {body: ID, at: [x, y, z]} for a point fixed in a body"),
+]
+
+
+class Spring(Model):
+    """A damped Hooke spring between two particles (an end may be a point fixed in a rigid body)."""
+
+    between: Annotated[list[SpringEnd], Field(min_length=2, max_length=2)] = Doc(
+        description="the two ends it joins: particle ids, or {body: ID, at: [x, y, z]}",
+        example=["anchor", "bob"],
     )
     ks: NonNegative = Doc(description="stiffness", unit="N/m", example=100)
     kd: NonNegative = Doc(0.0, "damping along the spring", unit="N*s/m", example=0.5)
@@ -691,6 +705,9 @@ class MeshStructure(Model):
     )
     position: Vec3 = Doc([0.0, 0.0, 0.0], "added after scale and rotation", unit="m", example=[0, 1, 0])
     velocity: Vec3 = Doc([0.0, 0.0, 0.0], "initial velocity of every vertex", unit="m/s")
+    radius: NonNegative | None = Doc(
+        None, "each vertex's radius, for contacts and colliders", unit="m", example=0.01
+    )
     stretch: SpringFamily | None = Doc(None, "one spring per mesh edge", example={"ks": 500, "kd": 0.5})
     bend: SpringFamily | None = Doc(
         None, "across each interior edge, between the two opposite vertices", example={"ks": 50, "kd": 0.05}
@@ -709,6 +726,85 @@ class MeshStructure(Model):
 
 Structure = Annotated[Cloth | Strand | SoftBox | MeshStructure, Field(discriminator="type")]
 STRUCTURE_TYPES = ("cloth", "strand", "soft_box", "mesh")
+
+
+# --- rigid bodies ------------------------------------------------------------
+
+#: how far from unit length a written quaternion may be and still be normalised
+QUATERNION_TOLERANCE = 1e-6
+
+
+class BodyBox(Model):
+    type: Literal["box"]
+    size: Annotated[list[Positive], Field(min_length=3, max_length=3)] = Field(
+        description="full edge lengths along the body's x, y, z, m"
+    )
+
+
+class BodySphere(Model):
+    type: Literal["sphere"]
+    radius: Positive = Field(description="m")
+
+
+class BodyCapsule(Model):
+    type: Literal["capsule"]
+    radius: Positive = Field(description="m")
+    length: NonNegative = Field(
+        description="distance between the centres of the two end spheres, along the body's y axis, m"
+    )
+
+
+BodyShape = Annotated[BodyBox | BodySphere | BodyCapsule, Field(discriminator="type")]
+BODY_SHAPE_TYPES = ("box", "sphere", "capsule")
+
+
+def _normalise_close(q: list[float]) -> tuple[float, float, float, float]:
+    """Normalise a quaternion written within QUATERNION_TOLERANCE of unit length.
+
+    Others are kept as written: the scene check reports them with their line.
+    """
+    n = sum(c * c for c in q) ** 0.5
+    if n > 0 and abs(n - 1.0) <= QUATERNION_TOLERANCE:
+        return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
+    return (q[0], q[1], q[2], q[3])
+
+
+Quaternion = Annotated[
+    list[FiniteFloat],
+    Field(min_length=4, max_length=4, description="unit quaternion [w, x, y, z]"),
+    AfterValidator(_normalise_close),
+]
+
+
+class Body(Model):
+    """A rigid body: a centre of mass that moves like a particle, plus an orientation."""
+
+    id: Id
+    shape: BodyShape
+    mass: Positive | None = Field(None, description="kg; give mass or density, not both")
+    density: Positive | None = Field(None, description="kg/m^3; the mass is density * volume")
+    inertia: Annotated[list[Positive], Field(min_length=3, max_length=3)] | None = Field(
+        None, description="principal moments in the body frame, kg m^2 (default: from the shape)"
+    )
+    position: Vec3 = Field(description="centre of mass, m")
+    orientation: Quaternion | AxisAngle = Field(
+        [1.0, 0.0, 0.0, 0.0], description="unit quaternion [w, x, y, z], or {axis, angle} in degrees"
+    )
+    velocity: Vec3 = [0.0, 0.0, 0.0]
+    angular_velocity: Vec3 = Field([0.0, 0.0, 0.0], description="world frame, rad/s")
+    pinned: StrictBool = Field(False, description="kinematic: keeps its given velocity and angular velocity")
+    restitution: Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)] = Field(
+        0.5, description="against other bodies (the mean of the two); planes use their own"
+    )
+    friction: NonNegative = Field(
+        0.5, description="Coulomb coefficient against other bodies (geometric mean of the two)"
+    )
+
+    @model_validator(mode="after")
+    def _mass_or_density(self) -> Body:
+        if (self.mass is None) == (self.density is None):
+            raise ValueError("give exactly one of mass and density")
+        return self
 
 
 # --- integrator, record, scene ----------------------------------------------
@@ -835,6 +931,11 @@ class Scene(Model):
         None,
         "particles collide with each other as spheres",
         example={"radius": 0.02, "restitution": 0.3, "friction": 0.1},
+    )
+    bodies: list[Body] = Doc(
+        [],
+        "rigid bodies: boxes, spheres and capsules with an orientation",
+        example=[{"id": "die", "shape": {"type": "box", "size": [0.1, 0.1, 0.1]}, "mass": 0.2}],
     )
 
     @model_validator(mode="after")

@@ -19,7 +19,7 @@ from typing import Any, get_args
 
 from pydantic import TypeAdapter, ValidationError
 
-from animsim.scene.models import Id, MeshStructure, Particle, Scene
+from animsim.scene.models import QUATERNION_TOLERANCE, Body, BodyPoint, Id, MeshStructure, Particle, Scene
 from animsim.scene.structures import local_index, parse_structure_id
 
 Problem = tuple[tuple[str | int, ...], str, bool]
@@ -38,7 +38,7 @@ class Unvalidated:
     id: str
 
 
-_PARTIAL_LISTS = ("particles", "springs", "emitters", "structures")
+_PARTIAL_LISTS = ("particles", "springs", "emitters", "structures", "bodies")
 
 
 def partial_scene(body: dict[str, Any]) -> tuple[Scene, bool]:
@@ -56,7 +56,7 @@ def partial_scene(body: dict[str, Any]) -> tuple[Scene, bool]:
         raw = body.get(name, [])
         if not isinstance(raw, list):
             fields[name] = []
-            ids_complete = ids_complete and name not in ("particles", "structures")
+            ids_complete = ids_complete and name not in ("particles", "structures", "bodies")
             continue
         item_type = get_args(Scene.model_fields[name].annotation)[0]
         adapter: TypeAdapter[Any] = TypeAdapter(item_type)
@@ -65,8 +65,8 @@ def partial_scene(body: dict[str, Any]) -> tuple[Scene, bool]:
             try:
                 items.append(adapter.validate_python(raw_item, strict=True))
             except ValidationError:
-                item = _salvage_particle(raw_item) if name == "particles" else None
-                if item is None and name in ("particles", "structures"):
+                item = _salvage_particle(raw_item) if name in ("particles", "bodies") else None
+                if item is None and name in ("particles", "structures", "bodies"):
                     ids_complete = False
                 items.append(item)
         fields[name] = items
@@ -102,8 +102,11 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
         out.append((("dt",), f"dt = {scene.dt!r} is longer than the duration {scene.duration!r}", False))
     # With other errors present an empty scene is most likely a typo'd or
     # broken section already reported, so this rule speaks only on its own.
-    if not partial and not scene.particles and not scene.emitters and not scene.structures:
-        out.append(((), "the scene has no particles, structures or emitters: nothing to simulate", False))
+    bodies = scene.bodies or []
+    if not partial and not scene.particles and not scene.emitters and not scene.structures and not bodies:
+        out.append(
+            ((), "the scene has no particles, structures, emitters or bodies: nothing to simulate", False)
+        )
 
     # Structure ids and the ids they generate.
     structures = {}
@@ -132,7 +135,7 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
         return s if local_index(s, pid) is not None else None
 
     for i, s in enumerate(scene.structures):
-        if s is not None and s.pin_motion is not None and not s.pin:
+        if s is not None and getattr(s, "pin_motion", None) is not None and not s.pin:
             out.append(
                 (("structures", i, "pin_motion"), "pin_motion moves the pins, but there are none", True)
             )
@@ -174,13 +177,25 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
                 )
             )
 
+    body_ids = _check_bodies(bodies, first_seen, structure_of, out)
     known = list(first_seen)
     for i, sp in enumerate(scene.springs):
         if sp is None:
             continue
         a, b = sp.between
+        _check_body_ends(i, a, b, body_ids, ids_complete, out)
         for k, pid in enumerate((a, b)):
-            if ids_complete and pid not in first_seen and structure_of(pid) is None:
+            if isinstance(pid, BodyPoint):
+                continue
+            if pid in body_ids:
+                out.append(
+                    (
+                        ("springs", i, "between", k),
+                        f"{pid!r} is a body: write {{body: {pid}, at: [x, y, z]}}",
+                        False,
+                    )
+                )
+            elif ids_complete and pid not in first_seen and structure_of(pid) is None:
                 out.append(
                     (
                         ("springs", i, "between", k),
@@ -188,7 +203,7 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
                         False,
                     )
                 )
-        if a == b:
+        if a == b and not isinstance(a, BodyPoint):
             out.append(
                 (
                     ("springs", i, "between"),
@@ -213,3 +228,64 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
         ):
             out.append((("emitters", i, "kill_box"), "kill_box min must not exceed max in any axis", False))
     return out
+
+
+def _check_bodies(
+    bodies: list[Any], particle_ids: dict[str, int], structure_of: Any, out: list[Problem]
+) -> dict[str, int]:
+    """Body ids (unique, not a particle's) and orientations; returns {body id: index}."""
+    seen: dict[str, int] = {}
+    for i, b in enumerate(bodies):
+        if b is None:
+            continue
+        if b.id == "":
+            out.append((("bodies", i, "id"), "an id must not be empty", False))
+        if b.id in seen:
+            out.append(
+                (("bodies", i, "id"), f"duplicate body id {b.id!r} (also bodies.{seen[b.id]}.id)", False)
+            )
+        else:
+            seen[b.id] = i
+        if b.id in particle_ids or structure_of(b.id) is not None:
+            out.append((("bodies", i, "id"), f"id {b.id!r} is also a particle's; ids must be unique", False))
+        if isinstance(b, Body) and isinstance(b.orientation, tuple):
+            norm = math.sqrt(sum(c * c for c in b.orientation))
+            if norm == 0.0:
+                out.append((("bodies", i, "orientation"), "a zero quaternion is not a rotation", False))
+            elif abs(norm - 1.0) > QUATERNION_TOLERANCE:
+                out.append(
+                    (
+                        ("bodies", i, "orientation"),
+                        f"not a unit quaternion (length {norm:.6g}); write [w, x, y, z] of length 1, "
+                        "or {axis: [x, y, z], angle: DEGREES}",
+                        False,
+                    )
+                )
+    return seen
+
+
+def _check_body_ends(
+    i: int, a: Any, b: Any, body_ids: dict[str, int], ids_complete: bool, out: list[Problem]
+) -> bool:
+    """Rules for the body ends of spring ``i``; True when it has one."""
+    ends = [e for e in (a, b) if isinstance(e, BodyPoint)]
+    if not ends:
+        return False
+    for k, end in enumerate((a, b)):
+        if isinstance(end, BodyPoint) and ids_complete and end.body not in body_ids:
+            out.append(
+                (
+                    ("springs", i, "between", k, "body"),
+                    f"no body with id {end.body!r}{_suggest(end.body, list(body_ids))}",
+                    False,
+                )
+            )
+    if len(ends) == 2 and a.body == b.body:
+        out.append(
+            (
+                ("springs", i, "between"),
+                f"a spring must join two different bodies, not body {a.body!r} to itself",
+                False,
+            )
+        )
+    return True

@@ -1,0 +1,186 @@
+"""Compile-time glue: scene bodies -> particle rows, body arrays and the body elements.
+
+This is the only module of the package that reads the pydantic scene models.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from animsim.bodies import quaternion as quat
+from animsim.bodies import shapes as sh
+from animsim.bodies.contacts import BodyContacts, PlaneTable
+from animsim.bodies.dynamics import BodyDynamics
+from animsim.bodies.springs import BodySprings
+from animsim.errors import UsageError
+from animsim.scene import models as m
+
+#: methods that integrate bodies (the implicit one is linearised for particles only)
+BODY_INTEGRATORS = ("euler", "symplectic_euler", "euler_average", "midpoint", "heun", "rk4", "verlet")
+
+
+def has_body_end(spring: m.Spring) -> bool:
+    return any(isinstance(e, m.BodyPoint) for e in spring.between)
+
+
+def particle_springs(scene: m.Scene) -> list[m.Spring]:
+    """The springs between two particles (the engine's spring element takes these)."""
+    return [sp for sp in scene.springs if not has_body_end(sp)]
+
+
+@dataclass(frozen=True)
+class BodyRows:
+    """The bodies as particle rows plus their rotational state, in scene order."""
+
+    ids: list[str]
+    position: np.ndarray  # (B, 3)
+    velocity: np.ndarray  # (B, 3)
+    mass: np.ndarray  # (B,)
+    pinned: np.ndarray  # (B,) bool
+    orientation: np.ndarray  # (B, 4)
+    angular_velocity: np.ndarray  # (B, 3)
+    inertia: np.ndarray  # (B, 3)
+    inv_inertia: np.ndarray  # (B, 3), 0 for pinned
+    shapes: tuple[sh.BodyShape, ...]
+
+
+def orientation_of(body: m.Body) -> np.ndarray:
+    o = body.orientation
+    if isinstance(o, m.AxisAngle):
+        return quat.from_axis_angle(np.array(o.axis), math.radians(o.angle))
+    q = np.array(o, dtype=np.float64)
+    return q / np.linalg.norm(q)
+
+
+def body_rows(scene: m.Scene) -> BodyRows:
+    bodies = scene.bodies
+    shapes = tuple(sh.from_model(b.shape) for b in bodies)
+    mass = np.array(
+        [b.mass if b.mass is not None else b.density * s.volume for b, s in zip(bodies, shapes, strict=True)],
+        dtype=np.float64,
+    ).reshape(-1)
+    inertia = np.array(
+        [
+            b.inertia if b.inertia is not None else s.inertia(mm)
+            for b, s, mm in zip(bodies, shapes, mass, strict=True)
+        ],
+        dtype=np.float64,
+    ).reshape(-1, 3)
+    pinned = np.array([b.pinned for b in bodies], dtype=bool)
+    inv_inertia = np.where(pinned[:, None], 0.0, 1.0 / np.where(inertia > 0, inertia, 1.0))
+    return BodyRows(
+        ids=[b.id for b in bodies],
+        position=np.array([b.position for b in bodies], dtype=np.float64).reshape(-1, 3),
+        velocity=np.array([b.velocity for b in bodies], dtype=np.float64).reshape(-1, 3),
+        mass=mass,
+        pinned=pinned,
+        orientation=np.array([orientation_of(b) for b in bodies], dtype=np.float64).reshape(-1, 4),
+        angular_velocity=np.array([b.angular_velocity for b in bodies], dtype=np.float64).reshape(-1, 3),
+        inertia=inertia,
+        inv_inertia=inv_inertia,
+        shapes=shapes,
+    )
+
+
+def check_integrator(scene: m.Scene) -> None:
+    """implicit_euler is linearised over particle positions only: refuse bodies with it, clearly."""
+    if scene.bodies and scene.integrator_name not in BODY_INTEGRATORS:
+        raise UsageError(
+            f"integrator {scene.integrator_name!r} does not integrate rigid bodies (its linearisation "
+            f"covers particle positions only); use one of {', '.join(BODY_INTEGRATORS)}"
+        )
+
+
+def build_body_elements(
+    scene: m.Scene, system: Any, index_of: dict[str, int], x0: np.ndarray, q0: np.ndarray, backend: str
+) -> tuple[BodyDynamics, list[Any], list[str], list[str]]:
+    """(rotational dynamics, post-step stages, labels for explain, left-out notes for explain)."""
+    body_index = {bid: b for b, bid in enumerate(system.body_ids)}
+    labels: list[str] = []
+    left_out: list[str] = []
+    springs = _body_springs(scene, system, index_of, body_index)
+    if springs is not None:
+        auto_rest(springs, scene, x0, q0)
+    terms = [springs] if springs is not None else []
+    if springs is not None:
+        labels.append(springs.label)
+    dyn = BodyDynamics(system, terms, backend)
+    labels.append(
+        f"rigid bodies: {system.body_count} ({', '.join(s.describe() for s in system.body_shape[:4])}"
+        + (", ..." if system.body_count > 4 else "")
+        + "); omega' = I_w^-1 (tau - omega x I_w omega), q' = 1/2 (0, omega) q, q renormalised each step"
+    )
+    stages: list[Any] = []
+    planes = list(scene.planes)
+    if planes or system.body_count > 1:
+        table = PlaneTable(
+            np.array([p.point for p in planes], dtype=np.float64).reshape(-1, 3),
+            np.array(
+                [np.array(p.normal) / np.linalg.norm(p.normal) for p in planes], dtype=np.float64
+            ).reshape(-1, 3),
+            np.array([p.restitution for p in planes], dtype=np.float64),
+            np.array([p.friction for p in planes], dtype=np.float64),
+        )
+        contact = BodyContacts(
+            system.body_first,
+            system.particle_inv_mass[system.body_rows],
+            system.body_inv_inertia,
+            system.body_shape,
+            table,
+            np.array([b.restitution for b in scene.bodies]),
+            np.array([b.friction for b in scene.bodies]),
+            backend=backend,
+        )
+        stages.append(contact)
+        left_out.extend(contact.left_out)
+    else:
+        left_out.append("body contacts: no planes and a single body")
+    left_out.append("bodies against particles: particles pass through bodies")
+    return dyn, stages, labels, left_out
+
+
+def _body_springs(
+    scene: m.Scene, system: Any, index_of: dict[str, int], body_index: dict[str, int]
+) -> BodySprings | None:
+    specs = [sp for sp in scene.springs if has_body_end(sp)]
+    if not specs:
+        return None
+    rows = [[], []]
+    bodies = [[], []]
+    ats = [[], []]
+    for sp in specs:
+        for k, end in enumerate(sp.between):
+            if isinstance(end, m.BodyPoint):
+                b = body_index[end.body]
+                rows[k].append(system.body_first + b)
+                bodies[k].append(b)
+                ats[k].append(end.at)
+            else:
+                rows[k].append(index_of[end])
+                bodies[k].append(-1)
+                ats[k].append((0.0, 0.0, 0.0))
+    springs = BodySprings(
+        np.array(rows[0]),
+        np.array(rows[1]),
+        np.array(bodies[0]),
+        np.array(bodies[1]),
+        np.array(ats[0], dtype=np.float64),
+        np.array(ats[1], dtype=np.float64),
+        np.zeros(len(specs)),
+        np.array([sp.ks for sp in specs]),
+        np.array([sp.kd for sp in specs]),
+        system.body_count,
+    )
+    springs.inv_inertia = system.body_inv_inertia
+    return springs
+
+
+def auto_rest(springs: BodySprings, scene: m.Scene, x0: np.ndarray, q0: np.ndarray) -> None:
+    """Set rest lengths: written ones, or the initial distance for ``auto``."""
+    specs = [sp for sp in scene.springs if has_body_end(sp)]
+    initial = springs.rest_lengths_auto(x0, q0)
+    springs.rest[:] = [initial[i] if sp.rest == "auto" else sp.rest for i, sp in enumerate(specs)]

@@ -1,0 +1,172 @@
+"""Quaternion math and the rotational equations of motion of rigid bodies.
+
+Conventions (as in the scene language): Hamilton quaternions ``[w, x, y, z]``;
+``R(q)`` maps the body frame to the world, so a point ``p`` fixed in the body is
+at ``x + R(q) p``; angular velocity ``omega`` is in the world frame.
+
+Equations (Baraff, "Rigid Body Dynamics", SIGGRAPH 1997 course notes, sections
+on orientation and angular momentum):
+
+* ``q' = 1/2 (0, omega) (x) q``                        (notes, eq. 4-2 in quaternion form)
+* ``I_w = R diag(I) R^T``                               (inertia in the world)
+* ``omega' = I_w^-1 (tau - omega x (I_w omega))``      (Euler's equations in the world)
+
+Every function is vectorised over bodies (leading axis B). The numba twin of
+:func:`angular_acceleration` lives here too, built on first use so importing
+this module never imports numba.
+"""
+
+from __future__ import annotations
+
+from functools import cache
+from typing import Any
+
+import numpy as np
+
+IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
+
+
+def multiply(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Hamilton product p (x) q of (..., 4) arrays."""
+    pw, px, py, pz = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
+    qw, qx, qy, qz = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return np.stack(
+        [
+            pw * qw - px * qx - py * qy - pz * qz,
+            pw * qx + px * qw + py * qz - pz * qy,
+            pw * qy - px * qz + py * qw + pz * qx,
+            pw * qz + px * qy - py * qx + pz * qw,
+        ],
+        axis=-1,
+    )
+
+
+def conjugate(q: np.ndarray) -> np.ndarray:
+    return q * np.array([1.0, -1.0, -1.0, -1.0])
+
+
+def normalise(q: np.ndarray) -> np.ndarray:
+    """q / |q| (unit quaternions stay rotations; integrators drift off the unit sphere)."""
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """R(q) v for unit q, without building matrices: v + 2 w (u x v) + 2 u x (u x v), u = (x, y, z)."""
+    u = q[..., 1:]
+    t = 2.0 * np.cross(u, v)
+    return v + q[..., :1] * t + np.cross(u, t)
+
+
+def rotate_inverse(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """R(q)^T v: a world vector in the body frame."""
+    return rotate(conjugate(q), v)
+
+
+def to_matrix(q: np.ndarray) -> np.ndarray:
+    """R(q), shape (..., 3, 3), of a unit quaternion."""
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
+        ],
+        axis=-2,
+    )
+
+
+def from_axis_angle(axis: np.ndarray, angle: np.ndarray | float) -> np.ndarray:
+    """The unit quaternion of a right-handed rotation by ``angle`` (radians) about ``axis``."""
+    axis = np.asarray(axis, dtype=np.float64)
+    a = axis / np.linalg.norm(axis, axis=-1, keepdims=True)
+    half = 0.5 * np.asarray(angle, dtype=np.float64)[..., None]
+    return np.concatenate([np.cos(half), np.sin(half) * a], axis=-1)
+
+
+def derivative(q: np.ndarray, omega: np.ndarray) -> np.ndarray:
+    """q' = 1/2 (0, omega) (x) q with omega in the world frame (Baraff 1997)."""
+    w0 = np.concatenate([np.zeros((*omega.shape[:-1], 1)), omega], axis=-1)
+    return 0.5 * multiply(w0, q)
+
+
+def world_inertia(q: np.ndarray, inertia: np.ndarray) -> np.ndarray:
+    """I_w = R diag(I) R^T, shape (B, 3, 3)."""
+    r = to_matrix(q)
+    return np.einsum("bij,bj,bkj->bik", r, inertia, r)
+
+
+def angular_momentum(q: np.ndarray, omega: np.ndarray, inertia: np.ndarray) -> np.ndarray:
+    """L = I_w omega about each centre of mass, (B, 3)."""
+    return rotate(q, inertia * rotate_inverse(q, omega))
+
+
+def rotational_energy(q: np.ndarray, omega: np.ndarray, inertia: np.ndarray) -> np.ndarray:
+    """1/2 omega . I_w omega per body, (B,)."""
+    wb = rotate_inverse(q, omega)
+    return 0.5 * np.einsum("bi,bi->b", inertia * wb, wb)
+
+
+def angular_acceleration(
+    q: np.ndarray, omega: np.ndarray, inertia: np.ndarray, inv_inertia: np.ndarray, torque: np.ndarray
+) -> np.ndarray:
+    """omega' = I_w^-1 (tau - omega x (I_w omega)), (B, 3), world frame.
+
+    Evaluated in the body frame, where I_w is diagonal: with w_b = R^T omega and
+    tau_b = R^T tau, R^T (omega x I_w omega) = w_b x (I w_b), so
+    omega' = R (I^-1 (tau_b - w_b x (I w_b))). ``inv_inertia`` is 0 for pinned
+    bodies, whose angular velocity then never changes.
+    """
+    wb = rotate_inverse(q, omega)
+    tb = rotate_inverse(q, torque)
+    ab = inv_inertia * (tb - np.cross(wb, inertia * wb))
+    return rotate(q, ab)
+
+
+def _angular_acceleration_loop(
+    q: np.ndarray,
+    omega: np.ndarray,
+    inertia: np.ndarray,
+    inv_inertia: np.ndarray,
+    torque: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """Loop form of :func:`angular_acceleration`, compiled by numba (same operations, same order)."""
+    for b in range(q.shape[0]):
+        qw, qx, qy, qz = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
+        # body frame: R^T v = v + w t + u x t, t = 2 u x v, with u = -(x, y, z)
+        wx, wy, wz = omega[b, 0], omega[b, 1], omega[b, 2]
+        tx = 2.0 * (-qy * wz + qz * wy)
+        ty = 2.0 * (-qz * wx + qx * wz)
+        tz = 2.0 * (-qx * wy + qy * wx)
+        bx = wx + qw * tx + (-qy * tz + qz * ty)
+        by = wy + qw * ty + (-qz * tx + qx * tz)
+        bz = wz + qw * tz + (-qx * ty + qy * tx)
+        vx, vy, vz = torque[b, 0], torque[b, 1], torque[b, 2]
+        tx = 2.0 * (-qy * vz + qz * vy)
+        ty = 2.0 * (-qz * vx + qx * vz)
+        tz = 2.0 * (-qx * vy + qy * vx)
+        cx = vx + qw * tx + (-qy * tz + qz * ty)
+        cy = vy + qw * ty + (-qz * tx + qx * tz)
+        cz = vz + qw * tz + (-qx * ty + qy * tx)
+        lx, ly, lz = inertia[b, 0] * bx, inertia[b, 1] * by, inertia[b, 2] * bz
+        ax = inv_inertia[b, 0] * (cx - (by * lz - bz * ly))
+        ay = inv_inertia[b, 1] * (cy - (bz * lx - bx * lz))
+        az = inv_inertia[b, 2] * (cz - (bx * ly - by * lx))
+        # back to the world: R v with u = (x, y, z)
+        tx = 2.0 * (qy * az - qz * ay)
+        ty = 2.0 * (qz * ax - qx * az)
+        tz = 2.0 * (qx * ay - qy * ax)
+        out[b, 0] = ax + qw * tx + (qy * tz - qz * ty)
+        out[b, 1] = ay + qw * ty + (qz * tx - qx * tz)
+        out[b, 2] = az + qw * tz + (qx * ty - qy * tx)
+
+
+@cache
+def numba_angular_acceleration() -> Any:
+    """The numba twin of :func:`angular_acceleration`, compiled on first use.
+
+    Signature: (q (B,4), omega (B,3), inertia (B,3), inv_inertia (B,3), torque (B,3), out (B,3)).
+    """
+    from numba import njit
+
+    return njit(cache=True)(_angular_acceleration_loop)
