@@ -70,7 +70,7 @@ BackendOpt = Annotated[
     str,
     typer.Option(
         "--backend",
-        help="numpy (default), numba (compiled; pip install -e '.[fast]') or auto (numba when installed and able).",
+        help="auto (default: numba when installed, else numpy), numpy, or numba (compiled; pip install -e '.[fast]').",
     ),
 ]
 
@@ -300,7 +300,7 @@ def run(
         bool, typer.Option("--extra-columns", help="Add age, size, r, g, b, a columns (particle systems).")
     ] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
-    backend: BackendOpt = "numpy",
+    backend: BackendOpt = "auto",
     *,
     limits: Any = None,
 ) -> None:
@@ -349,7 +349,9 @@ def run(
     )
     extra = {"scene_sha256": loaded.sha256, "scene_file": str(scene)}
     with _graceful_stop() as stop, _progress(compiled.clock.steps, quiet) as progress:
-        result = simulate(compiled, [sink], stop=stop, progress=progress, meta_extra=extra)
+        result = simulate(
+            compiled, [sink], stop=stop, progress=progress, meta_extra=extra, notice=_notice(quiet)
+        )
     if fmt is Format.ply and sink.written:
         first, last = sink.written[0], sink.written[-1]
         span = f"{first}" if first == last else f"{first} .. {last.name}"
@@ -394,6 +396,13 @@ def _progress(total: int, quiet: bool):
         yield update
 
 
+def _notice(quiet: bool):
+    """Where the engine's one-line notices (numba compiling on a first run) go: stderr, on a terminal."""
+    if quiet or not sys.stderr.isatty():
+        return None
+    return _err
+
+
 def _stderr_console():
     from rich.console import Console
 
@@ -422,7 +431,7 @@ def _summary(compiled: Any, result: Any, wrote: str | None) -> None:
 def explain(
     scene: SceneArg,
     integrator: Annotated[str | None, typer.Option(help="Explain with this integrator instead.")] = None,
-    backend: BackendOpt = "numpy",
+    backend: BackendOpt = "auto",
     *,
     limits: Any = None,
 ) -> None:

@@ -26,11 +26,21 @@ class Dynamics:
         # Pinned particles are driven, never pushed: an infinite force on one
         # times its zero inverse mass would be NaN and poison a moving anchor.
         self._pinned = np.flatnonzero(system.particle_pinned)
+        self._has_pinned = bool(len(self._pinned))
+        # Inverse masses repeated on three columns, so a = F/m is one same-shape
+        # multiply (the same products as per column, a fraction of the calls on a
+        # small scene). None while masses can change (pools: births switch them on).
+        self._inv3: np.ndarray | None = self._repeat3(self.inv_mass)
+
+    @staticmethod
+    def _repeat3(inv_mass: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(np.repeat(inv_mass[:, None], 3, axis=1))
 
     def bind(self, state: Any) -> None:
         """Use ``state``'s live masses, and hand it to every element that reads state arrays."""
         self.mass = state.particle_mass
         self.inv_mass = state.particle_inv_mass
+        self._inv3 = self._repeat3(self.inv_mass) if state.particle_alive is None else None
         for term in self.terms:
             term.bind(state)
 
@@ -43,11 +53,17 @@ class Dynamics:
     def acceleration(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> np.ndarray:
         """Write a = F/m into ``out``; pinned particles and dead slots get 0 (inverse mass 0)."""
         self.evaluations += 1
-        self.force(x, v, t, out)
-        inv_mass = self.inv_mass
-        for j in range(out.shape[1]):  # per column: much faster than broadcasting (N, 1)
-            out[:, j] *= inv_mass
-        if len(self._pinned):
+        out.fill(0.0)
+        for term in self.terms:
+            term.accumulate(x, v, t, out)
+        inv3 = self._inv3
+        if inv3 is not None:
+            out *= inv3
+        else:
+            inv_mass = self.inv_mass
+            for j in range(3):  # per column: much faster than broadcasting (N, 1)
+                out[:, j] *= inv_mass
+        if self._has_pinned:
             out[self._pinned] = 0.0
         return out
 

@@ -170,11 +170,11 @@ def _fmt(x: float) -> str:
 # --- animsim contenders --------------------------------------------------------------
 
 
-def _compile(text: str, backend: str = "numpy", threads: int | None = None):
+def _compile(text: str, backend: str = "numpy"):
     from animsim.compile import compile_scene
     from animsim.scene.loader import load_scene_text
 
-    return compile_scene(load_scene_text(text).scene, "bench", backend=backend, threads=threads)
+    return compile_scene(load_scene_text(text).scene, "bench", backend=backend)
 
 
 def cloth_scene(n: int, integrator: str = "symplectic_euler") -> str:
@@ -243,16 +243,24 @@ def numpy_contender(compiled, label: str, note: str = "") -> Contender:
     return Contender(label, call, stride, note)
 
 
-def numba_contender(compiled, threads: int, label: str) -> Contender:
-    from animsim.backends.numba_backend import NumbaStepper
+def numba_contender(compiled, label: str) -> Contender:
+    """The engine's numba stepper (fused chunks where the scene allows, else step by step),
+    advancing STEPS_PER_FRAME steps per call as the loop does between frames."""
+    from animsim.steppers import make_stepper
 
-    stepper = NumbaStepper(compiled, threads=threads)
     state = compiled.fresh_state()
-    clock = compiled.clock
+    compiled.dynamics.bind(state)
+    for stage in compiled.post_step:
+        stage.reset(state)
+    stepper = make_stepper(compiled)
+    stepper.prepare(state, None)
+    end = stepper.end
 
     def call() -> None:
-        stepper.advance(state, STEPS_PER_FRAME, clock.dt, clock)
-        state.step += STEPS_PER_FRAME
+        k = state.step
+        if k + STEPS_PER_FRAME > end:  # start the clock over (the state keeps moving)
+            k = state.step = 0
+        stepper.advance(state, k, k + STEPS_PER_FRAME)
 
     return Contender(label, call, STEPS_PER_FRAME, f"{STEPS_PER_FRAME} steps per call")
 
@@ -267,27 +275,6 @@ def peer_contenders(workload: str, n: int, notes: list[str]) -> list[Contender]:
             continue
         out.append(Contender(f"peer: {peer.LABEL}", st.step, 1))
     return out
-
-
-def thread_counts(notes: list[str]) -> tuple[int, ...]:
-    """Thread counts to measure the numba backend with.
-
-    All cores only when the machine has them to spare: with the load average
-    above the core count every parallel region waits for a descheduled
-    thread (cloth 128: 25 steps/s on 2 threads against 425 on 1 while
-    building this suite), which measures the neighbours, not animsim, and
-    takes minutes per workload.
-    """
-    cores = os.cpu_count() or 1
-    load = os.getloadavg()[0]
-    if cores > 1 and load > cores:
-        if not any(n.startswith("animsim numba on") for n in notes):
-            notes.append(
-                f"animsim numba on {cores} threads skipped: load average {load:.1f} > {cores} cores "
-                "(oversubscribed cores make parallel regions wait for descheduled threads)"
-            )
-        return (1,)
-    return (1, cores) if cores > 1 else (1,)
 
 
 def numba_ok(notes: list[str]) -> bool:
@@ -319,8 +306,7 @@ def bench_cloth(settings: Settings) -> Table:
                 numpy_contender(_compile(cloth_scene(n, "implicit_euler")), "animsim numpy, implicit Euler")
             )
         if use_numba:
-            for threads in thread_counts(table.notes):
-                contenders.append(numba_contender(default, threads, f"animsim numba, {threads} thread(s)"))
+            contenders.append(numba_contender(_compile(cloth_scene(n), "numba"), "animsim numba, 1 thread"))
         sample(contenders, settings)
         add_rows(
             table, f"cloth {n} ({springs:,} springs)", contenders, "peer: plain NumPy (bincount scatter)"
@@ -349,8 +335,10 @@ def bench_particles(settings: Settings) -> Table:
         compiled.initial.particle_velocity[:] = prob.v0
         contenders.append(numpy_contender(compiled, "animsim numpy (default)"))
         if use_numba:
-            for threads in thread_counts(table.notes):
-                contenders.append(numba_contender(compiled, threads, f"animsim numba, {threads} thread(s)"))
+            fast = _compile(particles_scene(n), "numba")
+            fast.initial.particle_position[:] = prob.x0
+            fast.initial.particle_velocity[:] = prob.v0
+            contenders.append(numba_contender(fast, "animsim numba, 1 thread"))
         sample(contenders, settings)
         for c in contenders:
             c.rates = [r * n / 1e6 for r in c.rates]
