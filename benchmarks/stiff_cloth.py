@@ -82,17 +82,20 @@ def sim_rate(
         if result.status != "ok":
             raise RuntimeError(f"{integrator} at dt {dt:g} did not survive {DURATION} s: {result.status}")
         best = max(best, DURATION / result.wall_time)
-        meta = result.meta
+        meta = dict(result.meta)
+        integ = compiled.integrator
+        if hasattr(integ, "factorizations"):
+            meta["solver"] = f", {integ.factorizations} factorisations, {integ.cg_iterations} CG iterations"
     return best, meta
 
 
-def measure(n: int, backend: str = "numpy") -> list[tuple[str, float, float, dict]]:
+def measure(n: int, backend: str = "numpy", repeat: int = 2) -> list[tuple[str, float, float, dict]]:
     out = []
     for integrator in ("symplectic_euler", "implicit_euler"):
         dt = largest_dt(n, integrator)
         # a margin below the bisection's edge, so the timed run is not on the brink
         dt_run = dt if dt == DT_CAP else 0.9 * dt
-        rate, meta = sim_rate(n, integrator, dt_run, backend)
+        rate, meta = sim_rate(n, integrator, dt_run, backend, repeat)
         out.append((integrator, dt_run, rate, meta))
     return out
 

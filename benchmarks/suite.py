@@ -46,7 +46,7 @@ TINY_STEPS = 20_000
 TINY_RECORD_EVERY = 100
 IO_GRID = 64  # 64 x 64 = 4096 rows per frame
 IO_FRAMES = 25
-WORKLOADS = ("cloth", "particles", "fountain", "tiny", "io", "render")
+WORKLOADS = ("cloth", "particles", "fountain", "stiff", "tiny", "io", "render")
 
 
 @dataclass
@@ -359,39 +359,57 @@ class NullSink:
     def abort(self) -> None: ...
 
 
-TINY = f"""
+def tiny_scene(integrator: str = "symplectic_euler", spring: bool = False) -> str:
+    """One particle under gravity; with ``spring``, the two-particle spring pendulum."""
+    text = f"""
 duration: {TINY_STEPS * 1e-4}
 dt: 0.0001
+integrator: {integrator}
 record: {{every: {TINY_RECORD_EVERY}}}
 particles: [{{id: p, mass: 1, position: [0, 0, 0]}}]
 forces: [{{type: gravity}}]
 """
+    if spring:
+        text = text.replace(
+            "position: [0, 0, 0]}]",
+            "position: [0, 0, 0], pinned: true}, {id: q, mass: 1, position: [1.2, 0, 0]}]",
+        )
+        text += "springs: [{between: [p, q], ks: 10, kd: 0.1, rest: 1}]\n"
+    return text
+
+
+TINY = tiny_scene()
 
 
 def bench_tiny(settings: Settings) -> Table:
     from animsim.engine import run
 
     table = Table(
-        f"Tiny scene: 1 particle, gravity, symplectic Euler; whole `run()` of {TINY_STEPS:,} steps, "
-        f"a frame every {TINY_RECORD_EVERY} to a sink that drops it",
+        f"Tiny scenes: whole `run()` of {TINY_STEPS:,} steps, a frame every {TINY_RECORD_EVERY} "
+        "to a sink that drops it",
         "us/step",
         1.0,
     )
-    contenders = []
-    # No "before" row: without springs the reference backend runs the same
-    # code; the loop's before/after is in the optimisation log (CPU time).
-    backends = [("numpy", "animsim numpy (default)")]
+    backends = [("numpy", "numpy")]
     if numba_ok(table.notes):
-        backends.append(("numba", "animsim numba"))
-    for backend, label in backends:
-        compiled = _compile(TINY, backend)
+        backends.append(("numba", "numba"))
+    cases = [
+        ("1 particle, gravity", "symplectic_euler", False),
+        ("1 particle, gravity", "rk4", False),
+        ("spring pendulum (2 particles, 1 spring)", "symplectic_euler", True),
+        ("spring pendulum (2 particles, 1 spring)", "rk4", True),
+    ]
+    for what, integrator, spring in cases:
+        contenders = []
+        for backend, label in backends:
+            compiled = _compile(tiny_scene(integrator, spring), backend)
 
-        def call(compiled=compiled) -> None:
-            run(compiled, [NullSink()])
+            def call(compiled=compiled) -> None:
+                run(compiled, [NullSink()])
 
-        contenders.append(Contender(label, call, TINY_STEPS))
-    sample(contenders, Settings(samples=settings.samples, seconds=settings.seconds))
-    add_rows(table, "tiny", contenders, None)
+            contenders.append(Contender(f"animsim {label}", call, TINY_STEPS))
+        sample(contenders, Settings(samples=settings.samples, seconds=settings.seconds))
+        add_rows(table, f"{what}, {integrator}", contenders, None)
     table.notes.append("per step = wall time of run() / steps, including energy at start and end")
     return table
 
@@ -512,18 +530,53 @@ def bench_fountain(settings: Settings) -> Table:
         1.0,
     )
     steps = 100 if settings is QUICK else 300
+    backends = ["numpy"] + (["numba"] if numba_ok(table.notes) else [])
     for ground, label in ((True, "with a ground plane (restitution, friction)"), (False, "no plane")):
-        runs = [F.steps_per_second(steps, ground) for _ in range(max(2, settings.samples // 2))]
-        rates = [r for r, _ in runs]
-        alive = runs[-1][1]["per_emitter"]["fountain"]["alive"]
-        c = Contender(f"animsim numpy, {label}", lambda: None, 1, f"{alive:,} alive")
-        c.rates = rates
-        add_rows(table, f"fountain {F.PARTICLES:.0e}", [c], None)
+        contenders = []
+        for backend in backends:
+            runs = [F.steps_per_second(steps, ground, backend) for _ in range(max(2, settings.samples // 2))]
+            alive = runs[-1][1]["per_emitter"]["fountain"]["alive"]
+            c = Contender(f"animsim {backend}, {label}", lambda: None, 1, f"{alive:,} alive")
+            c.rates = [r for r, _ in runs]
+            contenders.append(c)
+        add_rows(table, f"fountain {F.PARTICLES:.0e}", contenders, None)
     table.notes.append(
         f"each sample times {steps} steps after {round(F.WARMUP / F.DT)} warm-up steps that fill the pool; "
         "spread over whole runs, not sub-samples"
     )
     print("  fountain done", flush=True)
+    return table
+
+
+def bench_stiff(settings: Settings) -> Table:
+    """Simulated seconds per wall second on a stiff cloth, each method at its largest surviving step."""
+    from benchmarks import stiff_cloth as S
+
+    n = 32
+    table = Table(
+        f"Stiff cloth {n} x {n} (ks = {S.KS:g} N/m on every spring): simulated seconds per wall second "
+        "at the largest step each method survives (capped at one 30 fps frame)",
+        "simulated s per wall s",
+        1.0,
+    )
+    rows = S.measure(n, repeat=max(1, settings.samples // 2))
+    base = rows[0][2]
+    for integrator, dt, rate, meta in rows:
+        extra = meta.get("solver", "")
+        table.rows.append(
+            (
+                f"stiff cloth {n}",
+                f"animsim numpy, {integrator} (dt {dt:.3g} s, {meta.get('steps_taken')} steps{extra})",
+                _fmt(rate),
+                "",
+                f"{rate / base:.2f}x vs symplectic",
+            )
+        )
+    table.notes.append(
+        f"largest step: bisection in log dt on {S.PROBE} s probe runs that must end ok; symplectic Euler is "
+        f"then timed at 0.9 x that step; each timed run covers {S.DURATION} s (best of the repeats)"
+    )
+    print("  stiff done", flush=True)
     return table
 
 
@@ -585,6 +638,7 @@ def main(argv: list[str] | None = None) -> int:
         "io": bench_io,
         "render": bench_render,
         "fountain": bench_fountain,
+        "stiff": bench_stiff,
     }
     tables = []
     for name in WORKLOADS:
