@@ -219,25 +219,27 @@ structures:
 
 
 def numpy_contender(compiled, label: str, note: str = "") -> Contender:
-    """The NumPy loop's work for ``guard.stride`` steps: integrate and collide each
-    step, then one watchdog check, as ``simulate.run`` does."""
+    """The loop's work for one watchdog stride on the NumPy backend: the engine's stepper
+    advances ``check_stride`` steps (integrate, then the post-step stages), then one check,
+    as ``engine.run`` does."""
     from animsim.engine import Guard
+    from animsim.steppers import make_stepper
 
     state = compiled.fresh_state()
-    integ, colliders, guard, dt = compiled.integrator, compiled.colliders, Guard(compiled), compiled.clock.dt
-    integ.reset()
-    x_old = np.empty_like(state.particle_position)
-    v_old = np.empty_like(state.particle_velocity)
-    stride = guard.stride
+    compiled.dynamics.bind(state)
+    for stage in compiled.post_step:
+        stage.reset(state)
+    stepper = make_stepper(compiled)
+    stepper.prepare(state, None)
+    guard = Guard(compiled, dt=stepper.largest_dt)
+    guard.start(state)
+    stride, end = stepper.check_stride, stepper.end
 
     def call() -> None:
-        for _ in range(stride):
-            if colliders is not None:
-                np.copyto(x_old, state.particle_position)
-                np.copyto(v_old, state.particle_velocity)
-            integ.step(state, dt)
-            if colliders is not None:
-                colliders.apply(x_old, v_old, state.particle_position, state.particle_velocity, dt)
+        k = state.step
+        if k + stride > end:  # start the clock over (the state keeps moving)
+            k = state.step = 0
+        stepper.advance(state, k, k + stride)
         guard.check(state)
 
     return Contender(label, call, stride, note)
