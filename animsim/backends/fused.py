@@ -115,6 +115,7 @@ def fused_chunk(
     xo,
     vo,
     a0_valid,
+    has_stage,
 ):
     """Advance len(dts) steps of dts from times[0]; stop after the first non-finite step.
 
@@ -129,8 +130,9 @@ def fused_chunk(
     for step in range(steps):
         t = times[step]
         dt = dts[step]
-        xo[:] = x
-        vo[:] = v
+        if has_stage:  # the step's start, for the collision stage; without one, no copies
+            xo[:] = x
+            vo[:] = v
         if method == SYMPLECTIC_EULER:
             _acc(x, v, t, a0, kernels, fps, ips, mass, inv_mass, pinned)
             evals += 1
@@ -184,7 +186,7 @@ def fused_chunk(
                 if tab_b[j] != 0.0:
                     _axpy(x, dt * tab_b[j], kx[j])
                     _axpy(v, dt * tab_b[j], kv[j])
-        if stage[0](xo, vo, x, v, dt, inv_mass, stage_fp, stage_ip):
+        if has_stage and stage[0](xo, vo, x, v, dt, inv_mass, stage_fp, stage_ip):
             changed_steps += 1
             a0_valid = False  # the state changed behind the integrator's back
         if not _finite(x, v):
@@ -401,6 +403,7 @@ class FusedStepper:
             xo,
             vo,
             self.a0_valid,
+            self.stage_owner is not None,
         )
         if self._chunk is None:
             result = fused_chunk(*args)  # compiles or loads; then the overload is called directly
