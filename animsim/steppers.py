@@ -133,6 +133,9 @@ def _compile_numba(stepper: Any, state: State, notice: Callable[[str], None] | N
         stepper.forces = NumbaForces(dyn)
     # Integrators evaluate forces only through dynamics.acceleration: point it at the kernels.
     integ.dynamics = _NumbaDynamics(dyn, stepper.forces)
+    emitters = getattr(stepper.compiled, "emitters", None)
+    if emitters is not None:  # newborns fly on with the same force sum (a full evaluation a step)
+        emitters.dynamics = integ.dynamics
     if notice is not None and not _kernels_cached():
         notice("compiling numba kernels (first run only, cached afterwards)...")
     scratch = np.zeros_like(state.particle_position)
