@@ -150,6 +150,9 @@ class Trajectory:
     frames_long: Any = None
     #: the header of the run (springs, planes, ...), for exporters
     header: Any = None
+    #: the engine's account of the run (steps, wall time, energies) and the compiled scene
+    result: Any = None
+    compiled: Any = None
     body_ids: list[str] = field(default_factory=list)
     body_positions: np.ndarray | None = None
     body_orientations: np.ndarray | None = None
@@ -262,8 +265,8 @@ def simulate(
     traj.failure = result.failure
     traj.meta = result.meta
     traj.header = compiled.header
-    traj.result = result  # type: ignore[attr-defined]
-    traj.compiled = compiled  # type: ignore[attr-defined]
+    traj.result = result
+    traj.compiled = compiled
     return traj
 
 

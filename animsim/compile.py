@@ -21,7 +21,7 @@ from animsim.forces.grid_springs import build_spring_term
 from animsim.forces.penalty import PenaltyPlane
 from animsim.integrators import integrator_class
 from animsim.integrators.base import Integrator
-from animsim.record import Clock, TrajectoryHeader, record_steps
+from animsim.record import Clock, TrajectoryHeader, landing_steps, record_steps
 from animsim.scene import models as m
 from animsim.scene.structures import connectivity, expand
 from animsim.system import State, System
@@ -120,9 +120,19 @@ def with_overrides(
 
 
 def compile_scene(
-    scene: m.Scene, name: str = "scene", backend: str = "numpy", threads: int | None = None
+    scene: m.Scene,
+    name: str = "scene",
+    backend: str = "numpy",
+    threads: int | None = None,
+    *,
+    record_times: np.ndarray | None = None,
 ) -> Compiled:
-    """Compile ``scene`` for ``backend`` (see :mod:`animsim.backends`; ``threads``: numba's)."""
+    """Compile ``scene`` for ``backend`` (see :mod:`animsim.backends`; ``threads``: numba's).
+
+    ``record_times``: record exactly the steps that end at these times (references
+    and sweeps compare runs there) instead of the scene's ``record`` schedule;
+    a time no step lands on is a RuntimeError.
+    """
     stages: list[str] = []
     left_out: list[str] = []
 
@@ -271,7 +281,13 @@ def compile_scene(
         raise UsageError(f"integrator {name_!r} is not available in this build") from None
 
     clock = Clock.make(scene.duration, scene.dt)
-    rec = record_steps(clock, every=scene.record.every, fps=scene.record.fps)
+    if record_times is None:
+        rec = record_steps(clock, every=scene.record.every, fps=scene.record.fps)
+    else:
+        landing = landing_steps(clock, record_times)
+        if any(s is None for s in landing):
+            raise RuntimeError(f"dt = {clock.dt!r} does not land on every requested record time")
+        rec = np.unique(np.array(landing, dtype=np.int64))
 
     moving_anchor = bool(np.any(particle_pinned & np.any(particle_velocity != 0, axis=1)))
     conservative = (

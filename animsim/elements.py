@@ -91,6 +91,8 @@ class ForceElement:
     numba_source: Callable[..., None] | None = None
     #: compile the kernel with numba's parallel loops (``prange``)
     numba_parallel: bool = False
+    #: which part of the energy plots its potential belongs to (gravitational, spring, other)
+    energy_part: str = "other"
     #: stiffness (N/m) of a contact that may act on any particle (penalty planes), for the stability notes
     contact_stiffness: float = 0.0
     #: body-aware forces (springs to points of rigid bodies) set this

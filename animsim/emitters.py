@@ -180,40 +180,48 @@ class RateSchedule:
 
 
 class ShapeSampler:
-    """Uniform birth positions in an emitter shape (constrained randomization)."""
+    """Uniform birth positions in an emitter shape (constrained randomization).
+
+    Built from the scene's shape once (compile time); sampling reads plain numbers.
+    """
 
     def __init__(self, shape: m.PointShape | m.SphereShape | m.BoxShape | m.DiscShape):
-        self.shape = shape
-        if isinstance(shape, m.DiscShape):
+        self.kind = shape.type
+        if self.kind == "point":
+            self.center = np.array(shape.position, dtype=np.float64)
+            self.text = f"point {list(shape.position)}"
+        elif self.kind == "box":
+            self.lo = np.array(shape.min, dtype=np.float64)
+            self.hi = np.array(shape.max, dtype=np.float64)
+            self.text = f"box {list(shape.min)}..{list(shape.max)}"
+        elif self.kind == "sphere":
+            self.center, self.radius = np.array(shape.center, dtype=np.float64), float(shape.radius)
+            self.text = f"sphere at {list(shape.center)} r = {shape.radius:g} m (uniform inside, rejection)"
+        else:  # disc
+            self.center, self.radius = np.array(shape.center, dtype=np.float64), float(shape.radius)
             n = np.array(shape.normal) / np.linalg.norm(shape.normal)
             # Any vector not parallel to n gives the in-plane basis (e1, e2).
             helper = np.eye(3)[int(np.argmin(np.abs(n)))]
             e1 = np.cross(n, helper)
             e1 /= np.linalg.norm(e1)
             self.basis = np.stack([e1, np.cross(n, e1)])  # (2, 3)
+            self.text = (
+                f"disc at {list(shape.center)} normal {list(shape.normal)} r = {shape.radius:g} m (rejection)"
+            )
 
     def describe(self) -> str:
-        s = self.shape
-        if isinstance(s, m.PointShape):
-            return f"point {list(s.position)}"
-        if isinstance(s, m.SphereShape):
-            return f"sphere at {list(s.center)} r = {s.radius:g} m (uniform inside, rejection)"
-        if isinstance(s, m.BoxShape):
-            return f"box {list(s.min)}..{list(s.max)}"
-        return f"disc at {list(s.center)} normal {list(s.normal)} r = {s.radius:g} m (rejection)"
+        return self.text
 
     def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
-        s = self.shape
-        if isinstance(s, m.PointShape):
-            return np.tile(np.array(s.position), (n, 1))
-        if isinstance(s, m.BoxShape):
-            lo, hi = np.array(s.min), np.array(s.max)
-            return lo + (hi - lo) * rng.random((n, 3))
-        if isinstance(s, m.SphereShape):
+        if self.kind == "point":
+            return np.tile(self.center, (n, 1))
+        if self.kind == "box":
+            return self.lo + (self.hi - self.lo) * rng.random((n, 3))
+        if self.kind == "sphere":
             unit = _inside_unit_ball(rng, n, 3, BALL_ACCEPTANCE)
-            return np.array(s.center) + s.radius * unit
+            return self.center + self.radius * unit
         unit = _inside_unit_ball(rng, n, 2, DISC_ACCEPTANCE)
-        return np.array(s.center) + s.radius * (unit @ self.basis)
+        return self.center + self.radius * (unit @ self.basis)
 
 
 def _inside_unit_ball(rng: np.random.Generator, n: int, dim: int, acceptance: float) -> np.ndarray:
@@ -292,7 +300,11 @@ class BirthStream:
     """
 
     def __init__(self, spec: m.Emitter, seed: int):
-        self.spec = spec
+        # Plain numbers only: the stream draws while stepping and never reads the scene.
+        self.name = spec.name
+        self.v_spread = float(spec.velocity.spread)
+        self.life_mean = float(spec.lifetime.mean)
+        self.life_spread = float(spec.lifetime.spread)
         self.seed = seed
         self.rate = RateSchedule.from_spec(spec.rate)
         self.spread = float(spec.rate_spread)
@@ -304,7 +316,7 @@ class BirthStream:
         self.reset()
 
     def reset(self) -> None:
-        root = np.random.SeedSequence([self.seed, EMITTER_STREAM_TAG, *_name_words(self.spec.name)])
+        root = np.random.SeedSequence([self.seed, EMITTER_STREAM_TAG, *_name_words(self.name)])
         birth_ss, attr_ss = root.spawn(2)
         self.rng_birth = np.random.default_rng(birth_ss)
         self.rng_attr = np.random.default_rng(attr_ss)
@@ -329,10 +341,9 @@ class BirthStream:
             t = t[u * lam_max < lam]
         k = len(t)
         ra = self.rng_attr
-        spec = self.spec
         position = self.shape.sample(ra, k)
-        velocity = self.v_mean + spec.velocity.spread * ra.standard_normal((k, 3))
-        lifetime = _positive_gaussian(ra, k, spec.lifetime.mean, spec.lifetime.spread)
+        velocity = self.v_mean + self.v_spread * ra.standard_normal((k, 3))
+        lifetime = _positive_gaussian(ra, k, self.life_mean, self.life_spread)
         return Births(t, position, velocity, lifetime)
 
     def take(self, t1: float) -> Births:
@@ -348,7 +359,6 @@ class Pool:
     """One emitter's slots [first, first + capacity) in the global arrays."""
 
     def __init__(self, spec: m.Emitter, order: int, first: int, seed: int):
-        self.spec = spec
         self.name = spec.name
         self.order = order
         self.first = first

@@ -18,7 +18,6 @@ from typing import Any
 import numpy as np
 
 from animsim import __version__
-from animsim.analysis.watchdog import BLOWUP_FACTOR
 from animsim.compile import Compiled
 from animsim.export.meta import run_facts
 from animsim.record import Frame, FrameSink
@@ -106,7 +105,7 @@ class Guard:
             return None
         with np.errstate(over="ignore", invalid="ignore"):
             h, b, growth = self.watch.growth(state)
-        if growth <= BLOWUP_FACTOR:  # False for NaN too: an overflowed energy is a blow-up
+        if growth <= self.watch.allowance:  # False for NaN too: an overflowed energy is a blow-up
             return None
         particle, spring = self.watch.blame(state)
         reason = f"the mechanical energy {h:.3g} J is {growth:.3g} times what the forces put in ({b:.3g} J)"
@@ -215,6 +214,8 @@ def run(
         checked = 0
         with np.errstate(over="ignore", invalid="ignore"):
             while k < steps:
+                while next_rec < len(record) and record[next_rec] <= k:  # never aim behind us
+                    next_rec += 1
                 goal = min(int(record[next_rec]) if next_rec < len(record) else steps, checked + stride)
                 k, failure, nonfinite = stepper.advance(state, k, goal, max_steps=one)
                 if failure is not None:  # the stepper itself gave up (adaptive: below dt_min)
@@ -270,6 +271,9 @@ def run(
             meta["compile_time"] = compile_seconds
         meta.update(stepper.summary())
         meta.update(meta_extra or {})
+        from animsim.analysis.drift import annotate
+
+        annotate(meta, compiled)  # energy drift as a verdict of its own, in the metadata
         if compiled.emitters is not None:
             meta["emitters"] = compiled.emitters.summary()
         return finish(sinks, state, dyn, status, wall, energy_start, energy_end, frames, failure, meta)

@@ -58,6 +58,24 @@ class Clock:
         return self.duration - (self.steps - 1) * self.dt
 
 
+def landing_steps(clock: Clock, times: Sequence[float]) -> list[int | None]:
+    """For each time, the step index whose clock time is that time (to rounding), or None."""
+    out: list[int | None] = []
+    for t in times:
+        i = min(max(round(t / clock.dt), 0), clock.steps)
+        candidates = [j for j in (i - 1, i, i + 1) if 0 <= j <= clock.steps]
+        hit = next(
+            (
+                j
+                for j in candidates
+                if math.isclose(clock.time(j), t, rel_tol=1e-12, abs_tol=1e-12 * clock.duration)
+            ),
+            None,
+        )
+        out.append(hit)
+    return out
+
+
 def record_steps(clock: Clock, every: int | None = None, fps: float | None = None) -> np.ndarray:
     """Sorted step indices (0..steps) whose states are recorded.
 
@@ -74,6 +92,8 @@ def record_steps(clock: Clock, every: int | None = None, fps: float | None = Non
             idx = np.append(idx, n)
         return idx
     period = 1.0 / fps
+    if not math.isfinite(period):  # a rate so low (5e-324 fps) that one frame never ends
+        return np.array([0], dtype=np.int64)
     count = math.floor(clock.duration / period * (1 + STEP_COUNT_RTOL)) + 1
     targets = np.arange(count, dtype=np.float64) * period
     if clock.divides:

@@ -51,6 +51,9 @@ DOUBLING_BASE = 2.0
 #: a step this close (relative) to the distance left lands on the record time, so
 #: rounding in the accumulated time never leaves a sliver of a step behind
 LANDING_SLACK = 1e-6
+#: a rest shorter than dt_min by up to this fraction of dt_min counts as a sliver too, so
+#: rounding in the accumulated time cannot turn a rest of exactly dt_min into a step below it
+SLIVER_SLACK = 1e-3
 #: steps between watchdog checks on the NumPy path (a check costs about a step of a small scene)
 CHECK_STRIDE = 16
 #: steps between checks for scenes below SMALL_SCENE particles + springs, where a check
@@ -60,6 +63,35 @@ SMALL_CHECK_STRIDE = 256
 SMALL_SCENE = 1_000
 #: seconds of compiling after which the person waiting is told why
 COMPILE_NOTICE_SECONDS = 0.5
+
+
+def next_step(h: float, distance: float, dt_min: float, dt_max: float) -> tuple[float, bool]:
+    """The step to try next and whether it lands on the record time ``distance`` ahead.
+
+    ``h`` is the controller's step size, kept within [dt_min, dt_max]. The
+    step is h, except near the record time:
+
+    * the whole distance when it is at most h (within LANDING_SLACK), or
+      when a step of h would leave less than dt_min and the distance is at most
+      dt_max (one step of at most h + dt_min instead of h and a sliver);
+    * half the distance when a step of h would leave less than dt_min but the
+      distance is beyond dt_max: two equal steps, each at most dt_max (the
+      distance is below h + dt_min <= 2 dt_max) and at least dt_min whenever
+      dt_max >= 2 dt_min.
+
+    So every step is within [dt_min, dt_max], except one that lands on a
+    record time closer than dt_min to the previous one (the record clock's own
+    spacing, which no step size can avoid).
+    """
+    h = min(max(h, dt_min), dt_max)
+    sliver = distance - h < dt_min * (1.0 + SLIVER_SLACK)
+    if distance <= h * (1.0 + LANDING_SLACK) and distance <= dt_max:
+        return distance, True
+    if sliver:
+        if distance <= dt_max:
+            return distance, True
+        return 0.5 * distance, False
+    return h, False
 
 
 def make_stepper(compiled: Any) -> Any:
@@ -249,7 +281,10 @@ class StepDoubling(_Base):
       2^(p+1) times the local error, so the doubled step should still pass.
 
     Steps are shortened to land exactly on the record clock's times, without
-    changing the step size the controller carries on with.
+    changing the step size the controller carries on with, and every step stays
+    within [dt_min, dt_max] (:func:`next_step`): a step that would leave less
+    than dt_min before a record time is stretched to land on it, or, where that
+    would pass dt_max, the rest is split in two equal steps.
     """
 
     def __init__(self, compiled: Any, numba: bool = False):
@@ -320,8 +355,7 @@ class StepDoubling(_Base):
         taken = 0
         while k < goal and (max_steps is None or taken < max_steps):
             target = clock.time(goal)
-            landing = target - state.time <= self.h * (1.0 + LANDING_SLACK)
-            h_try = target - state.time if landing else self.h
+            h_try, landing = next_step(self.h, target - state.time, self.dt_min, self.dt_max)
             # The trial steps only see dynamics (no births): emitters run once, on the accepted step.
             self._trial(big, state, h_try, 1)
             self._trial(small, state, h_try, 2)

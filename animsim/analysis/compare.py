@@ -56,7 +56,6 @@ from animsim.analysis.references import (
     Trajectory,
     analytic_reference,
     dop853_reference,
-    landing_steps,
     record_at,
     rk4_reference,
     run_trajectory,
@@ -65,7 +64,7 @@ from animsim.analysis.references import (
 from animsim.compile import Compiled
 from animsim.errors import UsageError
 from animsim.integrators import FIXED_STEP, REGISTRY, integrator_class
-from animsim.record import Clock, record_steps
+from animsim.record import Clock, landing_steps, record_steps
 from animsim.scene import models as m
 
 COLUMNS = (

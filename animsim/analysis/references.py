@@ -34,14 +34,14 @@ the step halved until the change is far below the smallest error measured.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from animsim.compile import Compiled, compile_scene, with_overrides
 from animsim.errors import SimulationError
-from animsim.record import Clock, MemorySink
+from animsim.record import MemorySink
 from animsim.scene import models as m
 
 # --- tolerances (named, so that what counts as "exactly along the spring" is visible)
@@ -563,8 +563,9 @@ def analytic_reference(compiled: Compiled, times: np.ndarray) -> Reference:
 
 
 def smooth(compiled: Compiled) -> bool:
-    """True when the right-hand side is smooth enough for DOP853 (no planes, no emitters)."""
-    return not compiled.scene.planes and not compiled.scene.emitters
+    """True when the right-hand side is smooth enough for DOP853 (no stage after the
+    step: no collisions, no births)."""
+    return not compiled.post_step
 
 
 def dop853_reference(compiled: Compiled, times: np.ndarray) -> Reference:
@@ -623,32 +624,9 @@ def dop853_reference(compiled: Compiled, times: np.ndarray) -> Reference:
     return Reference("fine", desc, Trajectory(np.asarray(times), list(x), list(v)), accuracy)
 
 
-def landing_steps(clock: Clock, times: Sequence[float]) -> list[int | None]:
-    """For each time, the step index whose clock time is that time (to rounding), or None."""
-    out: list[int | None] = []
-    for t in times:
-        i = min(max(round(t / clock.dt), 0), clock.steps)
-        candidates = [j for j in (i - 1, i, i + 1) if 0 <= j <= clock.steps]
-        hit = next(
-            (
-                j
-                for j in candidates
-                if math.isclose(clock.time(j), t, rel_tol=1e-12, abs_tol=1e-12 * clock.duration)
-            ),
-            None,
-        )
-        out.append(hit)
-    return out
-
-
 def record_at(scene: m.Scene, name: str, integrator: str, dt: float, times: np.ndarray) -> Compiled:
     """Compile ``scene`` with ``integrator`` and ``dt``, recording exactly at ``times``."""
-    compiled = compile_scene(with_overrides(scene, integrator=integrator, dt=dt), name)
-    steps = landing_steps(compiled.clock, times)
-    if any(s is None for s in steps):
-        raise RuntimeError(f"dt = {dt!r} does not land on every compared time")
-    compiled.record_steps = np.array(steps, dtype=np.int64)
-    return compiled
+    return compile_scene(with_overrides(scene, integrator=integrator, dt=dt), name, record_times=times)
 
 
 def run_trajectory(compiled: Compiled) -> tuple[Trajectory, str]:

@@ -31,6 +31,7 @@ def _kernel(x, v, t, out, mass, fp, ip):
 
 class Attractor(ForceElement):
     watch_role = RELEASING
+    energy_part = "gravitational"
 
     def __init__(self, position: np.ndarray, gm: float, softening: float, particle_mass: np.ndarray):
         self.center = np.asarray(position, dtype=np.float64)

@@ -22,6 +22,7 @@ def _kernel(x, v, t, out, mass, fp, ip):  # numba: KERNEL_SIGNATURE
 
 class Gravity(ForceElement):
     watch_role = RELEASING
+    energy_part = "gravitational"
 
     def __init__(self, g: np.ndarray, particle_mass: np.ndarray):
         self.g = np.asarray(g, dtype=np.float64)

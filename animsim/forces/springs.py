@@ -113,6 +113,7 @@ class Springs(ForceElement):
         self.numba_parallel = s >= PARALLEL_MIN_SPRINGS
 
     watch_role = ELASTIC
+    energy_part = "spring"
     #: springs take part in closed forms through the system's spring arrays (no uniform part)
     closed_form: dict[str, Any] = {}  # noqa: RUF012 - read-only allow-list entry
 
