@@ -216,7 +216,7 @@ def simulate(
     dt: float | None = None,
     duration: float | None = None,
     seed: int | None = None,
-    backend: str = "numpy",
+    backend: str = "auto",
     *,
     output: str | Path | None = None,
     sinks: Sequence[Any] = (),

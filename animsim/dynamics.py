@@ -31,11 +31,21 @@ class Dynamics:
         self.drivers: tuple[Any, ...] = ()
         #: the rotational half when the scene has rigid bodies (animsim.bodies.dynamics)
         self.bodies: Any = None
+        self._has_pinned = bool(len(self._pinned))
+        # Inverse masses repeated on three columns, so a = F/m is one same-shape
+        # multiply (the same products as per column, a fraction of the calls on a
+        # small scene). None while masses can change (pools: births switch them on).
+        self._inv3: np.ndarray | None = self._repeat3(self.inv_mass)
+
+    @staticmethod
+    def _repeat3(inv_mass: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(np.repeat(inv_mass[:, None], 3, axis=1))
 
     def bind(self, state: Any) -> None:
         """Use ``state``'s live masses, and hand it to every element that reads state arrays."""
         self.mass = state.particle_mass
         self.inv_mass = state.particle_inv_mass
+        self._inv3 = self._repeat3(self.inv_mass) if state.particle_alive is None else None
         for term in self.terms:
             term.bind(state)
 
@@ -51,10 +61,14 @@ class Dynamics:
         for drive in self.drivers:
             drive.drive(t, x, v)
         self.force(x, v, t, out)
-        inv_mass = self.inv_mass
-        for j in range(out.shape[1]):  # per column: much faster than broadcasting (N, 1)
-            out[:, j] *= inv_mass
-        if len(self._pinned):
+        inv3 = self._inv3
+        if inv3 is not None:
+            out *= inv3
+        else:
+            inv_mass = self.inv_mass
+            for j in range(3):  # per column: much faster than broadcasting (N, 1)
+                out[:, j] *= inv_mass
+        if self._has_pinned:
             out[self._pinned] = 0.0
         return out
 

@@ -56,6 +56,11 @@ LANDING_SLACK = 1e-6
 SLIVER_SLACK = 1e-3
 #: steps between watchdog checks on the NumPy path (a check costs about a step of a small scene)
 CHECK_STRIDE = 16
+#: steps between checks for scenes below SMALL_SCENE particles + springs, where a check
+#: (a few dozen NumPy calls) costs as much as several steps; a failure is still traced to
+#: its first step by the replay
+SMALL_CHECK_STRIDE = 256
+SMALL_SCENE = 1_000
 #: seconds of compiling after which the person waiting is told why
 COMPILE_NOTICE_SECONDS = 0.5
 
@@ -113,8 +118,9 @@ class _Base:
         # A stage that draws random numbers (births) makes a replay a different run:
         # such runs are checked at every step instead of replayed.
         self.replayable = not any(st.random for st in compiled.post_step)
-        self.check_stride = CHECK_STRIDE if self.replayable else 1
         n = compiled.system.particle_count
+        small = n + compiled.system.spring_count < SMALL_SCENE
+        self.check_stride = (SMALL_CHECK_STRIDE if small else CHECK_STRIDE) if self.replayable else 1
         self._x_old = np.empty((n, 3))
         self._v_old = np.empty((n, 3))
 
@@ -159,6 +165,9 @@ def _compile_numba(stepper: Any, state: State, notice: Callable[[str], None] | N
         stepper.forces = NumbaForces(dyn)
     # Integrators evaluate forces only through dynamics.acceleration: point it at the kernels.
     integ.dynamics = _NumbaDynamics(dyn, stepper.forces)
+    emitters = getattr(stepper.compiled, "emitters", None)
+    if emitters is not None:  # newborns fly on with the same force sum (a full evaluation a step)
+        emitters.dynamics = integ.dynamics
     if notice is not None and not _kernels_cached():
         notice("compiling numba kernels (first run only, cached afterwards)...")
     scratch = np.zeros_like(state.particle_position)
@@ -194,10 +203,22 @@ class StepByStep(_Base):
     def advance(self, state: State, k: int, goal: int, max_steps: int | None = None) -> tuple[int, Any, bool]:
         clock = self.clock
         stop = goal if max_steps is None else min(goal, k + max_steps)
+        if self.stages or not clock.divides:
+            while k < stop:
+                self._one(state, clock.step_size(k), clock.time(k + 1))
+                k += 1
+                state.step = k
+            return k, None, False
+        # The fast path of a tiny scene, where Python's per-call costs are the
+        # step: no stages, every step dt, and the clock's times
+        # (duration * i / steps, exactly as Clock.time) computed inline.
+        step = self.compiled.integrator.step
+        dt, duration, steps = clock.dt, clock.duration, clock.steps
         while k < stop:
-            self._one(state, clock.step_size(k), clock.time(k + 1))
+            step(state, dt)
             k += 1
-            state.step = k
+            state.time = duration * k / steps if k < steps else duration
+        state.step = k
         return k, None, False
 
 

@@ -59,12 +59,12 @@ GROUND = """planes:
 """
 
 
-def steps_per_second(steps: int, ground: bool) -> tuple[float, dict]:
-    """Steady-state steps/s of the fountain, and the run's emitter summary."""
+def steps_per_second(steps: int, ground: bool, backend: str = "numpy") -> tuple[float, dict]:
+    """Steady-state steps/s of the fountain on ``backend``, and the run's emitter summary."""
     warm_steps = round(WARMUP / DT)
     loaded = load_scene_text(SCENE.replace("PLANES_HERE", GROUND if ground else ""))
     scene = with_overrides(loaded.scene, duration=(warm_steps + steps) * DT)
-    compiled = compile_scene(scene, loaded.name)
+    compiled = compile_scene(scene, loaded.name, backend=backend)
     marks: dict[int, float] = {}
 
     def progress(step: int, _total: int) -> None:

@@ -46,7 +46,7 @@ TINY_STEPS = 20_000
 TINY_RECORD_EVERY = 100
 IO_GRID = 64  # 64 x 64 = 4096 rows per frame
 IO_FRAMES = 25
-WORKLOADS = ("cloth", "particles", "fountain", "tiny", "io", "render")
+WORKLOADS = ("cloth", "particles", "fountain", "stiff", "tiny", "io", "render")
 
 
 @dataclass
@@ -170,11 +170,11 @@ def _fmt(x: float) -> str:
 # --- animsim contenders --------------------------------------------------------------
 
 
-def _compile(text: str, backend: str = "numpy", threads: int | None = None):
+def _compile(text: str, backend: str = "numpy"):
     from animsim.compile import compile_scene
     from animsim.scene.loader import load_scene_text
 
-    return compile_scene(load_scene_text(text).scene, "bench", backend=backend, threads=threads)
+    return compile_scene(load_scene_text(text).scene, "bench", backend=backend)
 
 
 def cloth_scene(n: int, integrator: str = "symplectic_euler") -> str:
@@ -219,40 +219,50 @@ structures:
 
 
 def numpy_contender(compiled, label: str, note: str = "") -> Contender:
-    """The NumPy loop's work for ``guard.stride`` steps: integrate and collide each
-    step, then one watchdog check, as ``simulate.run`` does."""
+    """The loop's work for one watchdog stride on the NumPy backend: the engine's stepper
+    advances ``check_stride`` steps (integrate, then the post-step stages), then one check,
+    as ``engine.run`` does."""
     from animsim.engine import Guard
+    from animsim.steppers import make_stepper
 
     state = compiled.fresh_state()
-    integ, colliders, guard, dt = compiled.integrator, compiled.colliders, Guard(compiled), compiled.clock.dt
-    integ.reset()
-    x_old = np.empty_like(state.particle_position)
-    v_old = np.empty_like(state.particle_velocity)
-    stride = guard.stride
+    compiled.dynamics.bind(state)
+    for stage in compiled.post_step:
+        stage.reset(state)
+    stepper = make_stepper(compiled)
+    stepper.prepare(state, None)
+    guard = Guard(compiled, dt=stepper.largest_dt)
+    guard.start(state)
+    stride, end = stepper.check_stride, stepper.end
 
     def call() -> None:
-        for _ in range(stride):
-            if colliders is not None:
-                np.copyto(x_old, state.particle_position)
-                np.copyto(v_old, state.particle_velocity)
-            integ.step(state, dt)
-            if colliders is not None:
-                colliders.apply(x_old, v_old, state.particle_position, state.particle_velocity, dt)
+        k = state.step
+        if k + stride > end:  # start the clock over (the state keeps moving)
+            k = state.step = 0
+        stepper.advance(state, k, k + stride)
         guard.check(state)
 
     return Contender(label, call, stride, note)
 
 
-def numba_contender(compiled, threads: int, label: str) -> Contender:
-    from animsim.backends.numba_backend import NumbaStepper
+def numba_contender(compiled, label: str) -> Contender:
+    """The engine's numba stepper (fused chunks where the scene allows, else step by step),
+    advancing STEPS_PER_FRAME steps per call as the loop does between frames."""
+    from animsim.steppers import make_stepper
 
-    stepper = NumbaStepper(compiled, threads=threads)
     state = compiled.fresh_state()
-    clock = compiled.clock
+    compiled.dynamics.bind(state)
+    for stage in compiled.post_step:
+        stage.reset(state)
+    stepper = make_stepper(compiled)
+    stepper.prepare(state, None)
+    end = stepper.end
 
     def call() -> None:
-        stepper.advance(state, STEPS_PER_FRAME, clock.dt, clock)
-        state.step += STEPS_PER_FRAME
+        k = state.step
+        if k + STEPS_PER_FRAME > end:  # start the clock over (the state keeps moving)
+            k = state.step = 0
+        stepper.advance(state, k, k + STEPS_PER_FRAME)
 
     return Contender(label, call, STEPS_PER_FRAME, f"{STEPS_PER_FRAME} steps per call")
 
@@ -267,27 +277,6 @@ def peer_contenders(workload: str, n: int, notes: list[str]) -> list[Contender]:
             continue
         out.append(Contender(f"peer: {peer.LABEL}", st.step, 1))
     return out
-
-
-def thread_counts(notes: list[str]) -> tuple[int, ...]:
-    """Thread counts to measure the numba backend with.
-
-    All cores only when the machine has them to spare: with the load average
-    above the core count every parallel region waits for a descheduled
-    thread (cloth 128: 25 steps/s on 2 threads against 425 on 1 while
-    building this suite), which measures the neighbours, not animsim, and
-    takes minutes per workload.
-    """
-    cores = os.cpu_count() or 1
-    load = os.getloadavg()[0]
-    if cores > 1 and load > cores:
-        if not any(n.startswith("animsim numba on") for n in notes):
-            notes.append(
-                f"animsim numba on {cores} threads skipped: load average {load:.1f} > {cores} cores "
-                "(oversubscribed cores make parallel regions wait for descheduled threads)"
-            )
-        return (1,)
-    return (1, cores) if cores > 1 else (1,)
 
 
 def numba_ok(notes: list[str]) -> bool:
@@ -319,8 +308,7 @@ def bench_cloth(settings: Settings) -> Table:
                 numpy_contender(_compile(cloth_scene(n, "implicit_euler")), "animsim numpy, implicit Euler")
             )
         if use_numba:
-            for threads in thread_counts(table.notes):
-                contenders.append(numba_contender(default, threads, f"animsim numba, {threads} thread(s)"))
+            contenders.append(numba_contender(_compile(cloth_scene(n), "numba"), "animsim numba, 1 thread"))
         sample(contenders, settings)
         add_rows(
             table, f"cloth {n} ({springs:,} springs)", contenders, "peer: plain NumPy (bincount scatter)"
@@ -349,8 +337,10 @@ def bench_particles(settings: Settings) -> Table:
         compiled.initial.particle_velocity[:] = prob.v0
         contenders.append(numpy_contender(compiled, "animsim numpy (default)"))
         if use_numba:
-            for threads in thread_counts(table.notes):
-                contenders.append(numba_contender(compiled, threads, f"animsim numba, {threads} thread(s)"))
+            fast = _compile(particles_scene(n), "numba")
+            fast.initial.particle_position[:] = prob.x0
+            fast.initial.particle_velocity[:] = prob.v0
+            contenders.append(numba_contender(fast, "animsim numba, 1 thread"))
         sample(contenders, settings)
         for c in contenders:
             c.rates = [r * n / 1e6 for r in c.rates]
@@ -371,39 +361,57 @@ class NullSink:
     def abort(self) -> None: ...
 
 
-TINY = f"""
+def tiny_scene(integrator: str = "symplectic_euler", spring: bool = False) -> str:
+    """One particle under gravity; with ``spring``, the two-particle spring pendulum."""
+    text = f"""
 duration: {TINY_STEPS * 1e-4}
 dt: 0.0001
+integrator: {integrator}
 record: {{every: {TINY_RECORD_EVERY}}}
 particles: [{{id: p, mass: 1, position: [0, 0, 0]}}]
 forces: [{{type: gravity}}]
 """
+    if spring:
+        text = text.replace(
+            "position: [0, 0, 0]}]",
+            "position: [0, 0, 0], pinned: true}, {id: q, mass: 1, position: [1.2, 0, 0]}]",
+        )
+        text += "springs: [{between: [p, q], ks: 10, kd: 0.1, rest: 1}]\n"
+    return text
+
+
+TINY = tiny_scene()
 
 
 def bench_tiny(settings: Settings) -> Table:
     from animsim.engine import run
 
     table = Table(
-        f"Tiny scene: 1 particle, gravity, symplectic Euler; whole `run()` of {TINY_STEPS:,} steps, "
-        f"a frame every {TINY_RECORD_EVERY} to a sink that drops it",
+        f"Tiny scenes: whole `run()` of {TINY_STEPS:,} steps, a frame every {TINY_RECORD_EVERY} "
+        "to a sink that drops it",
         "us/step",
         1.0,
     )
-    contenders = []
-    # No "before" row: without springs the reference backend runs the same
-    # code; the loop's before/after is in the optimisation log (CPU time).
-    backends = [("numpy", "animsim numpy (default)")]
+    backends = [("numpy", "numpy")]
     if numba_ok(table.notes):
-        backends.append(("numba", "animsim numba"))
-    for backend, label in backends:
-        compiled = _compile(TINY, backend)
+        backends.append(("numba", "numba"))
+    cases = [
+        ("1 particle, gravity", "symplectic_euler", False),
+        ("1 particle, gravity", "rk4", False),
+        ("spring pendulum (2 particles, 1 spring)", "symplectic_euler", True),
+        ("spring pendulum (2 particles, 1 spring)", "rk4", True),
+    ]
+    for what, integrator, spring in cases:
+        contenders = []
+        for backend, label in backends:
+            compiled = _compile(tiny_scene(integrator, spring), backend)
 
-        def call(compiled=compiled) -> None:
-            run(compiled, [NullSink()])
+            def call(compiled=compiled) -> None:
+                run(compiled, [NullSink()])
 
-        contenders.append(Contender(label, call, TINY_STEPS))
-    sample(contenders, Settings(samples=settings.samples, seconds=settings.seconds))
-    add_rows(table, "tiny", contenders, None)
+            contenders.append(Contender(f"animsim {label}", call, TINY_STEPS))
+        sample(contenders, Settings(samples=settings.samples, seconds=settings.seconds))
+        add_rows(table, f"{what}, {integrator}", contenders, None)
     table.notes.append("per step = wall time of run() / steps, including energy at start and end")
     return table
 
@@ -524,18 +532,53 @@ def bench_fountain(settings: Settings) -> Table:
         1.0,
     )
     steps = 100 if settings is QUICK else 300
+    backends = ["numpy"] + (["numba"] if numba_ok(table.notes) else [])
     for ground, label in ((True, "with a ground plane (restitution, friction)"), (False, "no plane")):
-        runs = [F.steps_per_second(steps, ground) for _ in range(max(2, settings.samples // 2))]
-        rates = [r for r, _ in runs]
-        alive = runs[-1][1]["per_emitter"]["fountain"]["alive"]
-        c = Contender(f"animsim numpy, {label}", lambda: None, 1, f"{alive:,} alive")
-        c.rates = rates
-        add_rows(table, f"fountain {F.PARTICLES:.0e}", [c], None)
+        contenders = []
+        for backend in backends:
+            runs = [F.steps_per_second(steps, ground, backend) for _ in range(max(2, settings.samples // 2))]
+            alive = runs[-1][1]["per_emitter"]["fountain"]["alive"]
+            c = Contender(f"animsim {backend}, {label}", lambda: None, 1, f"{alive:,} alive")
+            c.rates = [r for r, _ in runs]
+            contenders.append(c)
+        add_rows(table, f"fountain {F.PARTICLES:.0e}", contenders, None)
     table.notes.append(
         f"each sample times {steps} steps after {round(F.WARMUP / F.DT)} warm-up steps that fill the pool; "
         "spread over whole runs, not sub-samples"
     )
     print("  fountain done", flush=True)
+    return table
+
+
+def bench_stiff(settings: Settings) -> Table:
+    """Simulated seconds per wall second on a stiff cloth, each method at its largest surviving step."""
+    from benchmarks import stiff_cloth as S
+
+    n = 32
+    table = Table(
+        f"Stiff cloth {n} x {n} (ks = {S.KS:g} N/m on every spring): simulated seconds per wall second "
+        "at the largest step each method survives (capped at one 30 fps frame)",
+        "simulated s per wall s",
+        1.0,
+    )
+    rows = S.measure(n, repeat=max(1, settings.samples // 2))
+    base = rows[0][2]
+    for integrator, dt, rate, meta in rows:
+        extra = meta.get("solver", "")
+        table.rows.append(
+            (
+                f"stiff cloth {n}",
+                f"animsim numpy, {integrator} (dt {dt:.3g} s, {meta.get('steps_taken')} steps{extra})",
+                _fmt(rate),
+                "",
+                f"{rate / base:.2f}x vs symplectic",
+            )
+        )
+    table.notes.append(
+        f"largest step: bisection in log dt on {S.PROBE} s probe runs that must end ok; symplectic Euler is "
+        f"then timed at 0.9 x that step; each timed run covers {S.DURATION} s (best of the repeats)"
+    )
+    print("  stiff done", flush=True)
     return table
 
 
@@ -597,6 +640,7 @@ def main(argv: list[str] | None = None) -> int:
         "io": bench_io,
         "render": bench_render,
         "fountain": bench_fountain,
+        "stiff": bench_stiff,
     }
     tables = []
     for name in WORKLOADS:

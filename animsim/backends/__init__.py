@@ -1,6 +1,6 @@
 """Backends: which kernels step a compiled scene.
 
-* ``numpy`` (default): every element's NumPy kernel, grid structures by
+* ``numpy``: every element's NumPy kernel, grid structures by
   array slices (:mod:`animsim.forces.grid_springs`).
 * ``numba``: every element's numba kernel (each element module holds both).
   A scene whose elements all have numba kernels and whose method has a fused
@@ -8,7 +8,8 @@
   scene (emitters, adaptive steps, implicit Euler, an element without a numba
   kernel) runs step by step through the same loop with the numba kernels of the
   elements that have one. Needs the ``fast`` extra.
-* ``auto``: numba when it is importable, else numpy; ``explain`` says which and why.
+* ``auto`` (the default of the command line and ``animsim.simulate``): numba when
+  it is importable, else numpy; ``explain`` says which and why.
 * ``reference`` (not offered on the command line): the generic bincount
   spring path everywhere, kept as the baseline tests and benchmarks compare with.
 

@@ -8,6 +8,7 @@ import numpy as np
 
 from animsim.elements import RELEASING, BuildContext, ForceElement, register
 from animsim.scene import models as m
+from animsim.vec import dot3
 
 
 def _kernel(x, v, t, out, mass, fp, ip):  # numba: KERNEL_SIGNATURE
@@ -49,7 +50,9 @@ class Gravity(ForceElement):
 
     def released(self, x: np.ndarray, x_ref: np.ndarray, u_ref: np.ndarray) -> float:
         """U(x_ref) - U(x) = sum m g.(x - x_ref): differences first, so 1e17 keeps its digits."""
-        return float(np.dot(self.mass, (x - x_ref) @ self.g))
+        # dot3 and a plain sum, not np.dot / @: BLAS calls cost milliseconds when
+        # its threads wait for busy cores, and the watchdog calls this every check
+        return float(np.sum(self.mass * dot3(x - x_ref, self.g)))
 
     numba_source = staticmethod(_kernel)
 

@@ -102,7 +102,11 @@ class Springs(ForceElement):
         self.ends = np.concatenate([self.a, self.b])
         self.has_damping = bool(np.any(kd > 0))
         s = len(self.a)
-        self._weights = np.empty(2 * s)
+        # One bincount for all three axes: bin 3 i + axis. Within a bin the weights
+        # come in the order of the ends, as in one bincount per axis, so the sums
+        # are the same to the bit.
+        self._weights = np.empty((2 * s, 3))
+        self._flat_ends = (3 * self.ends[:, None] + np.arange(3)).ravel()
         # CSR structure of the Jacobians, built on first use (explicit methods never need it).
         self._jac: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.label = label or f"springs: {s} (Hooke + damping, Lander Eq. 2)"
@@ -155,8 +159,9 @@ class Springs(ForceElement):
     def _geometry(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         d = x[self.a] - x[self.b]
         length = np.sqrt(dot3(d, d))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = np.where(length > 0, 1.0 / length, 0.0)
+        # 1/|L|, and 0 for a spring with coincident ends (no direction, no force)
+        inv = np.zeros_like(length)
+        np.divide(1.0, length, out=inv, where=length > 0)
         return d, length, inv
 
     def accumulate(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None:
@@ -169,11 +174,9 @@ class Springs(ForceElement):
         scale = -magnitude * inv
         s = len(self.a)
         w = self._weights
-        for axis in range(3):
-            fa = scale * d[:, axis]
-            w[:s] = fa
-            w[s:] = -fa
-            out[:, axis] += np.bincount(self.ends, weights=w, minlength=self.n)
+        np.multiply(d, scale[:, None], out=w[:s])
+        np.negative(w[:s], out=w[s:])
+        out += np.bincount(self._flat_ends, weights=w.ravel(), minlength=3 * self.n).reshape(self.n, 3)
 
     def potential(self, x: np.ndarray) -> float:
         _, length, _ = self._geometry(x)

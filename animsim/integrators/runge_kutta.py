@@ -47,11 +47,21 @@ class RungeKutta(Integrator):
     def __init__(self, dynamics: Dynamics):
         super().__init__(dynamics)
         n = dynamics.system.particle_count
-        s = len(self.tableau.b)
+        tab = self.tableau
+        s = len(tab.b)
         self._kx = np.zeros((s, n, 3))  # stage velocities V_i (the x-derivative)
         self._kv = np.zeros((s, n, 3))  # stage accelerations K_i
         self._x = np.zeros((n, 3))
         self._v = np.zeros((n, 3))
+        # The tableau read once: per stage its c_i and nonzero (A_ij, j); the
+        # nonzero (b_i, i); the stage arrays as views. A tiny scene's step is
+        # mostly Python calls, and these would otherwise be rebuilt every step.
+        kx, kv = list(self._kx), list(self._kv)
+        self._stages = [
+            (ci, [(aij, kx[j], kv[j]) for j, aij in enumerate(tab.a[i]) if aij != 0.0], kx[i], kv[i])
+            for i, ci in enumerate(tab.c)
+        ]
+        self._weights = [(bi, kx[i], kv[i]) for i, bi in enumerate(tab.b) if bi != 0.0]
 
     def numba_chunk_kind(self) -> tuple[int, Tableau]:
         return FUSED_RUNGE_KUTTA, self.tableau
@@ -59,26 +69,25 @@ class RungeKutta(Integrator):
     def step(self, state: State, dt: float) -> None:
         if state.body_orientation is not None:  # rigid bodies: (q, omega) advance too
             return body_step(self, state, dt)
-        tab = self.tableau
         x, v = state.particle_position, state.particle_velocity
-        kx, kv = self._kx, self._kv
-        for i, ci in enumerate(tab.c):
+        t = state.time
+        acceleration = self.dynamics.acceleration
+        xi, vi = self._x, self._v
+        for i, (ci, row, kxi, kvi) in enumerate(self._stages):
             if i == 0:
-                xi, vi = x, v
-            else:
-                xi, vi = self._x, self._v
-                np.copyto(xi, x)
-                np.copyto(vi, v)
-                for j, aij in enumerate(tab.a[i]):
-                    if aij != 0.0:
-                        xi += (dt * aij) * kx[j]
-                        vi += (dt * aij) * kv[j]
-            np.copyto(kx[i], vi)
-            self.dynamics.acceleration(xi, vi, state.time + ci * dt, kv[i])
-        for i, bi in enumerate(tab.b):
-            if bi != 0.0:
-                x += (dt * bi) * kx[i]
-                v += (dt * bi) * kv[i]
+                np.copyto(kxi, v)
+                acceleration(x, v, t + ci * dt, kvi)
+                continue
+            np.copyto(xi, x)
+            np.copyto(vi, v)
+            for aij, kxj, kvj in row:
+                xi += (dt * aij) * kxj
+                vi += (dt * aij) * kvj
+            np.copyto(kxi, vi)
+            acceleration(xi, vi, t + ci * dt, kvi)
+        for bi, kxi, kvi in self._weights:
+            x += (dt * bi) * kxi
+            v += (dt * bi) * kvi
 
 
 class Euler(RungeKutta):

@@ -207,7 +207,7 @@ record: {every: 10}
 def test_cli_explain_names_the_backend_and_the_slice_path(tmp_path, cli):
     scene = tmp_path / "c.yaml"
     scene.write_text(cloth_text(6, 5, ALL_CLOTH))
-    out = cli("explain", scene)
+    out = cli("explain", scene, "--backend", "numpy")
     assert out.returncode == 0, out.stderr
     assert "backend: numpy" in out.stdout
     assert "as 6 grid slice blocks" in out.stdout

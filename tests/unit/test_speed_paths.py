@@ -1,0 +1,172 @@
+"""The fast paths taken for speed compute what the plain ones do, to the bit.
+
+Each optimisation kept for a benchmark (benchmarks/optimisation_log.md) has its
+twin here: the same numbers by the obvious route, so speed never changes a
+result silently.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+
+import numpy as np
+import pytest
+import scipy.sparse.linalg as spla
+
+from animsim.compile import compile_scene
+from animsim.dynamics import Dynamics
+from animsim.engine import STATUS_OK, run
+from animsim.forces.springs import Springs
+from animsim.integrators import implicit
+from animsim.scene.loader import load_scene_text
+from animsim.system import State
+
+HAS_NUMBA = importlib.util.find_spec("numba") is not None
+
+
+def test_one_bincount_for_three_axes_equals_one_per_axis():
+    rng = np.random.default_rng(7)
+    n, s = 40, 300
+    idx = rng.integers(0, n, size=(s, 2))  # repeated pairs and ends on purpose
+    idx = idx[idx[:, 0] != idx[:, 1]]
+    rest, ks, kd = rng.uniform(0.1, 2, len(idx)), rng.uniform(1, 1e4, len(idx)), rng.uniform(0, 3, len(idx))
+    springs = Springs(idx, rest, ks, kd, n)
+    x, v = rng.normal(size=(n, 3)), rng.normal(size=(n, 3))
+    fast = rng.normal(size=(n, 3))
+    plain = fast.copy()
+    springs.accumulate(x, v, 0.0, fast)
+    # the per-axis scatter the element used before
+    d = x[springs.a] - x[springs.b]
+    length = np.sqrt((d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]) + d[:, 2] * d[:, 2])
+    inv = np.where(length > 0, 1.0 / length, 0.0)
+    mag = ks * (length - rest)
+    dv = v[springs.a] - v[springs.b]
+    mag += kd * ((dv[:, 0] * d[:, 0] + dv[:, 1] * d[:, 1]) + dv[:, 2] * d[:, 2]) * inv
+    scale = -mag * inv
+    for axis in range(3):
+        fa = scale * d[:, axis]
+        plain[:, axis] += np.bincount(springs.ends, weights=np.concatenate([fa, -fa]), minlength=n)
+    assert np.array_equal(fast, plain)
+
+
+def test_same_shape_inverse_mass_equals_per_column():
+    scene = load_scene_text(
+        """
+duration: 0.01
+dt: 0.001
+particles:
+  - {id: a, mass: 0.3, position: [0, 0, 0]}
+  - {id: b, mass: 7.0, position: [1, 0, 0]}
+  - {id: c, pinned: true, position: [0, 1, 0]}
+springs: [{between: [a, b], ks: 100, rest: 0.5}, {between: [b, c], ks: 30, kd: 0.2, rest: 1}]
+forces: [{type: gravity}, {type: drag, k: 0.1}]
+"""
+    ).scene
+    c = compile_scene(scene, "t")
+    dyn: Dynamics = c.dynamics
+    state: State = c.fresh_state()
+    dyn.bind(state)
+    assert dyn._inv3 is not None  # a fixed population takes the same-shape path
+    rng = np.random.default_rng(3)
+    x, v = rng.normal(size=(3, 3)), rng.normal(size=(3, 3))
+    fast = dyn.acceleration(x, v, 0.0, np.empty((3, 3)))
+    plain = dyn.force(x, v, 0.0, np.empty((3, 3)))
+    for j in range(3):
+        plain[:, j] *= dyn.inv_mass
+    plain[c.system.particle_pinned] = 0.0
+    assert np.array_equal(fast, plain)
+
+
+STIFF_CLOTH = """
+duration: {duration}
+dt: {dt}
+integrator: implicit_euler
+record: {{every: 1000}}
+forces: [{{type: gravity}}]
+structures:
+  - type: cloth
+    id: c
+    plane: xz
+    size: [1, 1]
+    resolution: [{n}, {n}]
+    mass: 0.01
+    structural: {{ks: 100000, kd: 1}}
+    shear: {{ks: 100000, kd: 1}}
+    bend: {{ks: 100000, kd: 1}}
+    pin: ["c[0,0]", "c[{last},0]"]
+"""
+
+
+def _stiff(n: int, dt: float, steps: int):
+    text = STIFF_CLOTH.format(duration=dt * steps, dt=dt, n=n, last=n - 1)
+    compiled = compile_scene(load_scene_text(text).scene, "stiff", backend="numpy")
+    return compiled, run(compiled, [])
+
+
+@pytest.mark.parametrize("banded", [True, False])
+def test_stiff_implicit_switches_to_factors_and_agrees_with_conjugate_gradients(monkeypatch, banded):
+    """A stiff cloth at a frame-sized step: the factored solve (banded Cholesky, or SuperLU when
+    the band is too wide) gives the state Jacobi CG run to convergence gives."""
+    if not banded:
+        monkeypatch.setattr(implicit, "BANDED_MAX_WORK", 0.0)
+    compiled, result = _stiff(8, 1 / 30, 6)
+    assert result.status == STATUS_OK
+    assert compiled.integrator.factorizations >= 1
+    if banded:
+        assert compiled.integrator._band[2] is not None
+
+    # The reference: Jacobi CG to convergence on every step, as before the switch.
+    monkeypatch.setattr(implicit, "JACOBI_ITERATIONS", 10**9)
+    monkeypatch.setattr(implicit, "LU_MAX_DOF", 0)
+    ref_c, ref = _stiff(8, 1 / 30, 6)
+    assert ref_c.integrator.factorizations == 0
+    x, x_ref = result.final_state.particle_position, ref.final_state.particle_position
+    assert np.abs(x - x_ref).max() < 1e-7 * np.abs(x_ref).max()
+
+
+def test_banded_cholesky_solves_the_system():
+    rng = np.random.default_rng(1)
+    import scipy.sparse as sp
+
+    n = 60
+    b = sp.random(n, n, density=0.05, random_state=2)
+    a = (b @ b.T + sp.identity(n) * 5).tocsr()
+    integ = implicit.ImplicitEuler.__new__(implicit.ImplicitEuler)
+    perm, slot, width = integ._band_layout(a)
+    rhs = rng.normal(size=n)
+    got = implicit._BandedCholesky(a, perm, slot, width).solve(rhs)
+    assert np.allclose(got, spla.spsolve(a.tocsc(), rhs), rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.skipif(not HAS_NUMBA, reason="numba is not installed")
+def test_fused_stepper_calls_its_compiled_overload_directly_with_the_same_results():
+    from animsim.steppers import Fused, make_stepper
+
+    text = """
+duration: 0.2
+dt: 0.001
+record: {every: 10}
+particles:
+  - {id: a, pinned: true, position: [0, 0, 0]}
+  - {id: b, mass: 1, position: [1.2, 0, 0]}
+springs: [{between: [a, b], ks: 50, kd: 0.1, rest: 1}]
+forces: [{type: gravity}]
+planes: [{point: [0, -0.5, 0], normal: [0, 1, 0], restitution: 0.5}]
+"""
+    c = compile_scene(load_scene_text(text).scene, "t", backend="numba")
+    fast = run(c, [])
+    stepper = make_stepper(c)
+    assert isinstance(stepper, Fused)
+    state = c.fresh_state()
+    stepper.prepare(state, None)
+    stepper.advance(state, 0, 5)
+    assert stepper.fused._chunk.entry is not None  # the fast call is really taken
+    # the dispatcher's own call, on a fresh run
+    c2 = compile_scene(load_scene_text(text).scene, "t", backend="numba")
+    s2 = make_stepper(c2)
+    st2 = c2.fresh_state()
+    s2.prepare(st2, None)
+    s2.fused._chunk.entry = None
+    s2.advance(st2, 0, c2.clock.steps)
+    assert np.array_equal(st2.particle_position, fast.final_state.particle_position)
+    assert np.array_equal(st2.particle_velocity, fast.final_state.particle_velocity)
