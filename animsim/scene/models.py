@@ -143,6 +143,7 @@ MaxStrain = Annotated[
         gt=0,
         allow_inf_nan=False,
         description="the spring breaks for good once |L| / rest - 1 exceeds this (tearing)",
+        examples=[0.5],
     ),
 ]
 
@@ -180,13 +181,21 @@ class Particle(Model):
         False, "forces never move it; it keeps its velocity (a moving anchor)", example=True
     )
     keyframes: Keyframes | None = Field(
-        None, description="pinned only: [[t, [x, y, z]], ...], times increasing; the particle follows them"
+        None,
+        examples=[[[0, [0, 2, 0]], [1, [0.5, 2, 0]]]],
+        description="pinned only: [[t, [x, y, z]], ...], times increasing; the particle follows them",
     )
     interpolation: Interpolation | None = Field(
-        None, description="with keyframes: linear (default) or smooth (C1 cubic through the keys)"
+        None,
+        examples=["smooth"],
+        description="with keyframes: linear (default) or smooth (C1 cubic through the keys)",
     )
-    radius: NonNegative | None = Field(None, description="m, for particle contacts, colliders and rendering")
-    color: HexColor | None = Field(None, description="for rendering, #rrggbb or #rrggbbaa")
+    radius: NonNegative | None = Field(
+        None, examples=[0.02], description="m, for particle contacts, colliders and rendering"
+    )
+    color: HexColor | None = Field(
+        None, examples=["#e04040"], description="for rendering, #rrggbb or #rrggbbaa"
+    )
 
     @model_validator(mode="after")
     def _interpolation_needs_keys(self) -> Particle:
@@ -198,7 +207,7 @@ class Particle(Model):
 class BodyPoint(Model):
     """A spring end fixed in a rigid body: ``at`` is in the body frame, m."""
 
-    body: Id = Field(description="the id of a body")
+    body: Id = Field(examples=["die"], description="the id of a body")
     at: Vec3 = Field([0.0, 0.0, 0.0], description="the point in the body frame, m")
 
 
@@ -365,20 +374,23 @@ class _ColliderCommon(Model):
     friction: NonNegative = Field(0.0, description="Coulomb coefficient")
     motion: Motion | None = Field(
         None,
+        examples=[{"keyframes": [[0, [0, 0.5, 0]], [2, [1, 0.5, 0]]], "interpolation": "smooth"}],
         description="keyframed path of the centre (a capsule's: the midpoint of a-b); the shape translates",
     )
 
 
 class SphereCollider(_ColliderCommon):
     type: Literal["sphere"] = Doc(description="selects this shape")
-    center: Vec3
+    center: Vec3 = Doc(description="centre of the sphere", unit="m", example=[0, 0.5, 0])
     radius: Positive = Doc(description="radius", unit="m", example=0.5)
 
 
 class BoxCollider(_ColliderCommon):
     type: Literal["box"] = Doc(description="selects this shape")
-    center: Vec3
-    size: Annotated[list[Positive], Field(min_length=3, max_length=3, description="full edge lengths, m")]
+    center: Vec3 = Doc(description="centre of the box", unit="m", example=[0, 0, 0])
+    size: Annotated[list[Positive], Field(min_length=3, max_length=3)] = Doc(
+        description="full edge lengths", unit="m", example=[1, 0.2, 1]
+    )
     orientation: Quaternion | AxisAngle = Field(
         [1.0, 0.0, 0.0, 0.0], description="[w, x, y, z], or {axis, angle} in degrees"
     )
@@ -386,8 +398,8 @@ class BoxCollider(_ColliderCommon):
 
 class CapsuleCollider(_ColliderCommon):
     type: Literal["capsule"] = Doc(description="selects this shape")
-    a: Vec3
-    b: Vec3
+    a: Vec3 = Doc(description="one end of the capsule's segment", unit="m", example=[0, 0, 0])
+    b: Vec3 = Doc(description="the other end", unit="m", example=[0, 1, 0])
     radius: Positive = Doc(description="radius", unit="m", example=0.5)
 
 
@@ -396,7 +408,7 @@ COLLIDER_TYPES = ("sphere", "box", "capsule")
 
 
 class ParticleCollisions(Model):
-    radius: Positive = Field(description="m, every particle's unless it has its own")
+    radius: Positive = Field(examples=[0.02], description="m, every particle's unless it has its own")
     restitution: Restitution = Doc(0.5, "0 = sticks, 1 = perfectly elastic", example=0.3)
     friction: NonNegative = Field(0.0, description="Coulomb coefficient")
 
@@ -735,22 +747,24 @@ QUATERNION_TOLERANCE = 1e-6
 
 
 class BodyBox(Model):
-    type: Literal["box"]
-    size: Annotated[list[Positive], Field(min_length=3, max_length=3)] = Field(
-        description="full edge lengths along the body's x, y, z, m"
+    type: Literal["box"] = Doc(description="selects this shape")
+    size: Annotated[list[Positive], Field(min_length=3, max_length=3)] = Doc(
+        description="full edge lengths along the body's x, y, z", unit="m", example=[0.1, 0.1, 0.1]
     )
 
 
 class BodySphere(Model):
-    type: Literal["sphere"]
-    radius: Positive = Field(description="m")
+    type: Literal["sphere"] = Doc(description="selects this shape")
+    radius: Positive = Doc(description="radius", unit="m", example=0.05)
 
 
 class BodyCapsule(Model):
-    type: Literal["capsule"]
-    radius: Positive = Field(description="m")
-    length: NonNegative = Field(
-        description="distance between the centres of the two end spheres, along the body's y axis, m"
+    type: Literal["capsule"] = Doc(description="selects this shape")
+    radius: Positive = Doc(description="radius", unit="m", example=0.05)
+    length: NonNegative = Doc(
+        description="distance between the centres of the two end spheres, along the body's y axis",
+        unit="m",
+        example=0.3,
     )
 
 
@@ -779,14 +793,20 @@ Quaternion = Annotated[
 class Body(Model):
     """A rigid body: a centre of mass that moves like a particle, plus an orientation."""
 
-    id: Id
-    shape: BodyShape
-    mass: Positive | None = Field(None, description="kg; give mass or density, not both")
-    density: Positive | None = Field(None, description="kg/m^3; the mass is density * volume")
-    inertia: Annotated[list[Positive], Field(min_length=3, max_length=3)] | None = Field(
-        None, description="principal moments in the body frame, kg m^2 (default: from the shape)"
+    id: Id = Doc(description="a unique name; integers become strings", example="die")
+    shape: BodyShape = Doc(
+        description="box {size}, sphere {radius} or capsule {radius, length} (along the body's y axis)",
+        example={"type": "box", "size": [0.1, 0.1, 0.1]},
     )
-    position: Vec3 = Field(description="centre of mass, m")
+    mass: Positive | None = Doc(None, "give mass or density, not both", unit="kg", example=0.2)
+    density: Positive | None = Doc(None, "the mass is density * volume", unit="kg/m^3", example=1000)
+    inertia: Annotated[list[Positive], Field(min_length=3, max_length=3)] | None = Doc(
+        None,
+        "principal moments in the body frame (default: from the shape)",
+        unit="kg m^2",
+        example=[1e-3, 2e-3, 3e-3],
+    )
+    position: Vec3 = Doc(description="centre of mass", unit="m", example=[0, 1, 0])
     orientation: Quaternion | AxisAngle = Field(
         [1.0, 0.0, 0.0, 0.0], description="unit quaternion [w, x, y, z], or {axis, angle} in degrees"
     )
