@@ -76,10 +76,9 @@ def with_overrides(
     update: dict[str, Any] = {}
     if integrator is not None:
         if integrator not in m.INTEGRATOR_NAMES:
-            import difflib
+            from animsim.scene.loader import did_you_mean
 
-            close = difflib.get_close_matches(integrator, m.INTEGRATOR_NAMES, n=1)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
+            hint = did_you_mean(integrator, m.INTEGRATOR_NAMES)
             raise UsageError(
                 f"--integrator: unknown method {integrator!r}{hint} (valid: {', '.join(m.INTEGRATOR_NAMES)})"
             )

@@ -39,7 +39,6 @@ idea is SciML DiffEqDevTools' ``WorkPrecisionSet``.
 
 from __future__ import annotations
 
-import difflib
 import math
 import statistics
 from collections.abc import Callable, Sequence
@@ -206,8 +205,9 @@ def parse_integrators(text: str | None) -> list[str]:
         if name not in REGISTRY:
             if name in m.INTEGRATOR_NAMES:
                 raise UsageError(f"--integrators: {name!r} is not available in this build")
-            close = difflib.get_close_matches(name, list(REGISTRY), n=1)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
+            from animsim.scene.loader import did_you_mean
+
+            hint = did_you_mean(name, list(REGISTRY))
             raise UsageError(f"--integrators: unknown method {name!r}{hint} (valid: {', '.join(REGISTRY)})")
     return list(dict.fromkeys(names))
 

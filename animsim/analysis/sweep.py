@@ -165,10 +165,9 @@ def integrators_axis(text: str) -> Axis:
         raise UsageError("--integrators: give at least one name")
     for n in names:
         if n not in INTEGRATOR_NAMES:
-            import difflib
+            from animsim.scene.loader import did_you_mean
 
-            close = difflib.get_close_matches(n, INTEGRATOR_NAMES, n=1)
-            hint = f"; did you mean {close[0]!r}?" if close else ""
+            hint = did_you_mean(n, INTEGRATOR_NAMES)
             raise UsageError(
                 f"--integrators: unknown method {n!r}{hint} (valid: {', '.join(INTEGRATOR_NAMES)})"
             )

@@ -76,10 +76,11 @@ Id = Annotated[
     AfterValidator(_id_to_str),
     Field(description="a unique string or integer; integers become strings"),
 ]
+HEX_COLOR_PATTERN = r"^#([0-9a-fA-F]{6}|[0-9a-fA-F]{8})$"
 HexColor = Annotated[
     str,
     Field(
-        pattern=r"^#([0-9a-fA-F]{6}|[0-9a-fA-F]{8})$",
+        pattern=HEX_COLOR_PATTERN,
         description="#rrggbb or #rrggbbaa",
     ),
 ]
