@@ -38,6 +38,48 @@ class _App(typer.Typer):
         main(kwargs.get("args") if "args" in kwargs else (args[0] if args else None))
 
 
+# How help shows a value's type: words a user knows, not Python's names.
+_TYPE_WORDS = {"str": "text", "float": "number", "int": "integer", "Path": "path", "path": "path"}
+
+
+def _help_type(label: str | None) -> str | None:
+    """``<bool>`` -> nothing (a flag takes no value), ``<list[Path]>`` -> ``<path>...``, ``<str>`` -> ``<text>``."""
+    if not label or not label.startswith("<") or not label.endswith(">"):
+        return label
+    inner = label[1:-1]
+    many = inner.startswith("list[") and inner.endswith("]")
+    if many:
+        inner = inner[5:-1]
+    if inner == "bool":
+        return None
+    word = _TYPE_WORDS.get(inner.removesuffix(" range"), inner.removesuffix(" range"))
+    return f"<{word}>" + ("..." if many else "")
+
+
+def _plain_help_types() -> None:
+    """Make typer's help show :func:`_help_type` words (it prints ``<bool>`` for flags and ``--help``).
+
+    Typer has no option for this, so its one display method is wrapped; the
+    values parsed are unchanged.
+    """
+    from typer.core import TyperArgument, TyperOption
+
+    for cls in (TyperArgument, TyperOption):
+        original = cls.display_type_rich
+        if getattr(original, "_animsim", False):
+            continue
+
+        def display(self: Any, ctx: Any, _original: Any = original) -> str | None:
+            if getattr(self, "is_flag", False):
+                return None
+            return _help_type(_original(self, ctx))
+
+        display._animsim = True  # type: ignore[attr-defined]
+        cls.display_type_rich = display  # type: ignore[method-assign]
+
+
+_plain_help_types()
+
 app = _App(
     name="animsim",
     help="Physically based animation from a text file: particles, springs, cloth, hair, particle systems.",
@@ -70,11 +112,12 @@ BackendOpt = Annotated[
     str,
     typer.Option(
         "--backend",
-        help="numpy (default), numba (compiled; pip install -e '.[fast]') or auto (numba when installed and able).",
+        help='numpy, numba (compiled; needs pip install -e ".\\[fast]") or auto (numba when installed, '
+        "else numpy).",
     ),
 ]
 
-_LIMITS_PANEL = "Limits (spec: Errors and limits)"
+_LIMITS_PANEL = "Limits (what a scene may ask for)"
 
 # The limit options, shared by every command that loads a scene (see
 # limit_options). Sizes take suffixes (50MiB, 4GiB); counts take 1e9.
@@ -756,14 +799,10 @@ def _cases_progress(quiet: bool):
         yield update
 
 
-# Width of the printed table when stdout is not a terminal (a file or a pipe).
-PIPE_TABLE_WIDTH = 200
-
-
 def _stdout_console():
-    from rich.console import Console
+    from animsim.console import stdout_console
 
-    return Console() if sys.stdout.isatty() else Console(width=PIPE_TABLE_WIDTH)
+    return stdout_console()
 
 
 # --- compare ------------------------------------------------------------------------------
@@ -783,7 +822,7 @@ def compare(
         str | None,
         typer.Option(
             "--dt",
-            help="Comma-separated step sizes (s); default the scene's dt halved four times: dt, dt/2, dt/4, dt/8, dt/16.",
+            help="Comma-separated step sizes (s); default the scene's dt halved three times: dt, dt/2, dt/4, dt/8.",
         ),
     ] = None,
     reference: Annotated[
@@ -794,7 +833,13 @@ def compare(
             "(analytic when possible); the one used is printed."
         ),
     ] = ReferenceKind.auto,
-    repeat: Annotated[int, typer.Option(help="Timed runs per row; the median is reported.", min=1)] = 3,
+    repeat: Annotated[
+        int,
+        typer.Option(
+            help="Timed runs per row after its accuracy run; the median is reported. More runs, steadier timings.",
+            min=1,
+        ),
+    ] = 1,
     output: Annotated[Path | None, typer.Option("-o", "--output", help="Write the table as CSV.")] = None,
     plot: Annotated[
         Path | None,
@@ -821,6 +866,14 @@ def compare(
             'needs pip install "animsim\\[dask]". Same caveat on timings as --jobs.',
         ),
     ] = None,
+    backend: Annotated[
+        str,
+        typer.Option(
+            "--backend",
+            help="auto (default: numba when installed and it can run the scene, else numpy), numpy or numba "
+            '(needs pip install -e ".\\[fast]"). Rows are timed on it; the reference always runs on numpy.',
+        ),
+    ] = "auto",
     *,
     limits: Any = None,
 ) -> None:
@@ -832,15 +885,24 @@ def compare(
     integrator's observed order of convergence.
 
     Cost: each row is run 1 + --repeat times (an accuracy run that is also the
-    warm-up, then the timed runs), so the finest dt dominates; pass fewer or
-    larger step sizes with --dt for big scenes.
+    warm-up, then the timed runs), so the finest dt dominates; the estimated
+    total is printed before the runs start. Pass fewer or larger step sizes
+    with --dt for big scenes.
 
     An unstable run is a row with status 'unstable', not a failure of the
     comparison: the exit status is 0 when the comparison itself completed
     (use --fail-on-unstable to exit 1 instead), 2 for a bad scene or option.
     """
     from animsim.analysis.compare import compare as run_compare
-    from animsim.analysis.compare import parse_dts, parse_integrators, summary_lines, table, write_csv
+    from animsim.analysis.compare import (
+        estimate,
+        left_out,
+        parse_dts,
+        parse_integrators,
+        summary_lines,
+        table,
+        write_csv,
+    )
     from animsim.export.plots import plot_format, write_compare_plot
 
     # The scene's own file, step and memory limits; each step size is checked
@@ -853,7 +915,16 @@ def compare(
             check_output_path(path, scene)
     if plot is not None:
         plot_format(plot)
+    backend = _backend(backend)
     console = _stdout_console()
+    if backend != "numpy":
+        from animsim.compile import compile_scene
+        from animsim.console import numba_notice
+
+        # Which backend the rows will really run on (auto falls back to numpy for some scenes).
+        numba_notice(compile_scene(loaded.scene, loaded.name, backend=backend).backend)
+    cost = estimate(loaded.scene, loaded.name, integrators=names, dts=dts, repeat=repeat, backend=backend)
+    _err(f"comparing {len(names)} methods at {len(dts)} step sizes: {cost.describe()}")
     with _compare_progress(len(names) * len(dts)) as progress:
         result = run_compare(
             loaded.scene,
@@ -866,8 +937,16 @@ def compare(
             max_steps=limits.max_steps,
             jobs=jobs,
             scheduler=scheduler,
+            backend=backend,
         )
-    console.print(table(result))
+    console.print(table(result, width=console.width))
+    hidden = left_out(result, console.width)
+    if hidden:
+        console.print(
+            f"(left out at {console.width} columns: {', '.join(hidden)}; a wider window or -o FILE.csv has them)",
+            highlight=False,
+            markup=False,
+        )
     for line in summary_lines(result):
         console.print(line, highlight=False, markup=False)
     if output is not None:

@@ -634,9 +634,11 @@ def landing_steps(clock: Clock, times: Sequence[float]) -> list[int | None]:
     return out
 
 
-def record_at(scene: m.Scene, name: str, integrator: str, dt: float, times: np.ndarray) -> Compiled:
-    """Compile ``scene`` with ``integrator`` and ``dt``, recording exactly at ``times``."""
-    compiled = compile_scene(with_overrides(scene, integrator=integrator, dt=dt), name)
+def record_at(
+    scene: m.Scene, name: str, integrator: str, dt: float, times: np.ndarray, backend: str = "numpy"
+) -> Compiled:
+    """Compile ``scene`` with ``integrator`` and ``dt`` for ``backend``, recording exactly at ``times``."""
+    compiled = compile_scene(with_overrides(scene, integrator=integrator, dt=dt), name, backend=backend)
     steps = landing_steps(compiled.clock, times)
     if any(s is None for s in steps):
         raise RuntimeError(f"dt = {dt!r} does not land on every compared time")

@@ -1,0 +1,97 @@
+"""What the command line prints around the work: table widths, one-off notices, number formats.
+
+Kept apart from :mod:`animsim.cli` so the library's table builders (compare,
+sweep) and the CLI share one idea of how wide the screen is and how a number
+is written, and so tests can render any table at a chosen width.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+from pathlib import Path
+from typing import Any
+
+#: Width of a printed table when stdout is not a terminal and COLUMNS is not set
+#: (a file or a pipe): wide, so a log keeps whole rows.
+PIPE_TABLE_WIDTH = 200
+
+
+def table_width(stream: Any = None) -> int | None:
+    """Columns to lay tables out in: COLUMNS when set, the terminal's width, else PIPE_TABLE_WIDTH.
+
+    None means "let rich measure the terminal". COLUMNS wins over the pipe
+    default so ``COLUMNS=80 animsim compare ... | less`` is laid out for 80.
+    """
+    stream = stream or sys.stdout
+    columns = os.environ.get("COLUMNS", "")
+    if columns.isdigit() and int(columns) > 0:
+        return int(columns)
+    return None if stream.isatty() else PIPE_TABLE_WIDTH
+
+
+def stdout_console(width: int | None = None) -> Any:
+    """A rich Console on stdout at :func:`table_width` (or ``width``)."""
+    from rich.console import Console
+
+    return Console(width=width or table_width(sys.stdout))
+
+
+def sig(value: float | None, digits: int = 3) -> str:
+    """A number in ``digits`` significant digits, short enough for a narrow column: 2.41e-05, 0.125, 1.2e+03.
+
+    None (no value: an unstable run) prints as an em dash.
+    """
+    if value is None:
+        return "—"
+    if not math.isfinite(value):
+        return str(value)
+    return f"{value:.{digits}g}"
+
+
+def percent(fraction: float) -> str:
+    """A signed relative change as a percentage: +0.12%, -3.5%; large ones in powers of ten."""
+    if not math.isfinite(fraction):
+        return "n/a"
+    if abs(fraction) >= 10:  # 1000 % and more: a factor says it better
+        return f"{fraction:+.3g} (x{1 + fraction:.3g})"
+    return f"{fraction:+.2%}"
+
+
+def numba_cache_present() -> bool:
+    """True when numba's compiled kernels of this animsim are already cached on disk.
+
+    numba caches beside the source (``__pycache__``) when it can write there,
+    else under NUMBA_CACHE_DIR or the user's cache folder; any index file of
+    the kernels module in one of those places counts.
+    """
+    from animsim import backends
+
+    here = Path(backends.__file__).parent / "__pycache__"
+    places = [here]
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        places.append(Path(os.environ["NUMBA_CACHE_DIR"]))
+    places.append(Path.home() / ".cache" / "numba")
+    for place in places:
+        try:
+            if place == here:
+                if any(place.glob("numba_kernels.*.nbi")):
+                    return True
+            elif place.is_dir() and any(place.rglob("numba_kernels.*.nbi")):
+                return True
+        except OSError:
+            continue
+    return False
+
+
+def numba_notice(backend: str, stream: Any = None) -> bool:
+    """On a terminal, say that the first numba run compiles (seconds of silence otherwise).
+
+    Returns True when the notice was printed.
+    """
+    stream = stream or sys.stderr
+    if backend != "numba" or not stream.isatty() or numba_cache_present():
+        return False
+    print("compiling numba kernels (first run only)...", file=stream, flush=True)
+    return True
