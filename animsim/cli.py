@@ -82,8 +82,10 @@ _plain_help_types()
 
 app = _App(
     name="animsim",
-    help="Physically based animation from a text file: particles, springs, cloth, hair, particle systems.",
-    add_completion=False,
+    help="Physically based animation from a text file: particles, springs, cloth, hair, particle systems.\n\n"
+    "Tab completion of commands and options: animsim --install-completion (bash, zsh, fish, PowerShell), "
+    "then open a new shell.",
+    add_completion=True,
     no_args_is_help=True,
     pretty_exceptions_enable=False,
     rich_markup_mode="rich",
@@ -485,16 +487,20 @@ def _stderr_console():
 
 def _summary(compiled: Any, result: Any, wrote: str | None) -> None:
     """Print the run summary; ``wrote`` names the files written (None: the trajectory went to stdout)."""
+    from animsim.console import steps_text
+
     stream_err = wrote is None  # trajectory went to stdout: keep stdout clean
     lines = [
         f"{compiled.name}: {compiled.system.particle_count} particles, {compiled.system.spring_count} springs, "
-        f"{result.steps_taken}/{compiled.clock.steps} steps of {compiled.clock.dt:g} s with {compiled.integrator_name}",
+        f"{steps_text(compiled, result)} with {compiled.integrator_name}",
         f"  wall time {result.wall_time:.3f} s, {result.frames} frames, {result.force_evals} force evaluations",
         f"  energy {result.energy_start:.6g} J -> {result.energy_end:.6g} J, status {result.status}",
     ]
     if wrote is not None:
         lines.append(f"  wrote {wrote}")
-    typer.echo("\n".join(lines), err=stream_err)
+    from animsim.analysis.check import wrap
+
+    typer.echo("\n".join(wrap(line) for line in lines), err=stream_err)
 
 
 # --- explain ------------------------------------------------------------------------
@@ -513,20 +519,22 @@ def explain(
     from animsim.compile import compile_scene
 
     loaded, sc, _ = prepare_scene(scene, limits, integrator=integrator)
+    from animsim.analysis.check import wrap
+
     c = compile_scene(sc, loaded.name, backend=_backend(backend))
     s = c.system
-    typer.echo(f"scene {c.name!r} ({scene})")
-    typer.echo(
+    lines = [
+        f"scene {c.name!r} ({scene})",
         f"  {s.particle_count} particles ({int(s.particle_pinned.sum())} pinned), {s.spring_count} springs, "
-        f"{len(sc.planes)} planes, {len(sc.emitters)} emitters"
-    )
-    typer.echo(f"  {c.clock.steps} steps of {c.clock.dt:g} s to t = {c.clock.duration:g} s, seed {c.seed}")
-    typer.echo("each step runs:")
-    for stage in c.stages:
-        typer.echo(f"  + {stage}")
-    typer.echo("left out (the scene does not need them):")
-    for item in c.left_out:
-        typer.echo(f"  - {item}")
+        f"{len(sc.planes)} planes, {len(sc.emitters)} emitters",
+        f"  {c.clock.steps} steps of {c.clock.dt:g} s to t = {c.clock.duration:g} s, seed {c.seed}",
+        "each step runs:",
+        *(f"  + {stage}" for stage in c.stages),
+        "left out (the scene does not need them):",
+        *(f"  - {item}" for item in c.left_out),
+    ]
+    for line in lines:
+        typer.echo(wrap(line))
 
 
 # --- schema ---------------------------------------------------------------------------
@@ -585,9 +593,20 @@ def render(
         float, typer.Option("--fps", help="Frames per second; GIF delays come in 10 ms steps.")
     ] = 25.0,
     view: Annotated[
-        str, typer.Option("--view", help="xy, xz, yz (orthographic) or 3d (perspective).")
-    ] = "xy",
-    size: Annotated[str, typer.Option("--size", help="WIDTHxHEIGHT in pixels.")] = "480x480",
+        str | None,
+        typer.Option(
+            "--view",
+            help="xy, xz, yz (orthographic) or 3d (perspective); default: the two axes along which "
+            "the motion is widest.",
+        ),
+    ] = None,
+    size: Annotated[
+        str | None,
+        typer.Option(
+            "--size",
+            help="WIDTHxHEIGHT in pixels; default 480 on the longer side, shaped like the motion (16:9 at most).",
+        ),
+    ] = None,
     scene: Annotated[
         Path | None,
         typer.Option("--scene", help="The scene of a trajectory, to draw its springs and planes."),
@@ -645,14 +664,18 @@ def render(
         else:
             with _graceful_stop() as stop:
                 result = render_scene(compiled, gif, mp4, opts, progress=progress, stop=stop)
+    outs = " and ".join(str(p) for p in result.outputs)
+    if result.status == "interrupted":
+        if result.outputs:
+            _err(f"{source}: interrupted; {outs} has the {result.frames} frames drawn so far")
+        else:
+            _err(f"{source}: interrupted before the first frame was drawn; nothing written")
+        raise typer.Exit(EXIT_INTERRUPTED)
     if not quiet:
-        outs = " and ".join(str(p) for p in result.outputs)
-        typer.echo(f"wrote {outs}: {result.frames} frames at {fps:g} fps, view {view}, {size}")
+        typer.echo(f"wrote {outs}: {result.frames} frames at {fps:g} fps, view {result.view}, {result.size}")
     if result.status == "unstable":
         _err(f"{source}: {result.failure.describe()}")
         raise typer.Exit(EXIT_FAILED)
-    if result.status == "interrupted":
-        raise typer.Exit(EXIT_INTERRUPTED)
 
 
 @contextmanager

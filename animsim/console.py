@@ -54,9 +54,10 @@ def percent(fraction: float) -> str:
     """A signed relative change as a percentage: +0.12%, -3.5%; large ones in powers of ten."""
     if not math.isfinite(fraction):
         return "n/a"
-    if abs(fraction) >= 10:  # 1000 % and more: a factor says it better
-        return f"{fraction:+.3g} (x{1 + fraction:.3g})"
-    return f"{fraction:+.2%}"
+    pct = 100 * fraction
+    if pct == 0 or 0.01 <= abs(pct) < 1000:
+        return f"{pct:+.3g}%"
+    return f"{pct:+.2e}%"  # 1.23e-09% or 3.5e+04%: never a misleading -0.00%
 
 
 def numba_cache_present() -> bool:
@@ -95,3 +96,36 @@ def numba_notice(backend: str, stream: Any = None) -> bool:
         return False
     print("compiling numba kernels (first run only)...", file=stream, flush=True)
     return True
+
+
+def steps_text(compiled: Any, result: Any) -> str:
+    """How many steps a run took, in words that fit fixed and adaptive runs.
+
+    Fixed: ``2500 steps of 0.002 s`` (``1200 of 2500 steps of 0.002 s`` when it
+    stopped early). Adaptive: the step count is the controller's, so it is
+    never shown as a fraction of the fixed plan (``376/300`` read as 125 %).
+    """
+    adaptive = getattr(compiled.scene, "adaptive", None)
+    taken, planned = result.steps_taken, compiled.clock.steps
+    if adaptive is not None:
+        return (
+            f"{taken} adaptive steps (tolerance {adaptive.tolerance:g}, "
+            f"dt {adaptive.dt_min:g} to {adaptive.dt_max:g} s)"
+        )
+    if taken < planned:
+        return f"{taken} of {planned} steps of {compiled.clock.dt:g} s"
+    return f"{planned} steps of {compiled.clock.dt:g} s"
+
+
+def drift_text(e0: float, e1: float, floor: float = 1e-12) -> str:
+    """An energy change in joules and relative to the size of the starting energy.
+
+    ``drift -0.0128 J (-1.28% of |E0|)``: the sign is that of E1 - E0 (energy
+    lost is negative) whatever the sign of E0, and the percentage is of |E0|
+    so a negative energy (an orbit, a spring with gravity) reads the same way.
+    """
+    change = e1 - e0
+    scale = abs(e0)
+    if scale <= floor:
+        return f"drift {change:+.3g} J"
+    return f"drift {change:+.3g} J ({percent(change / scale)} of |E0|)"

@@ -31,13 +31,14 @@ def _energy_report(compiled: Any, result: Any) -> str:
     text = f"energy {result.energy_start:.4g} -> {result.energy_end:.4g} J"
     if compiled.emitters is not None:
         return text + " (particles bring energy as they are born)"
-    drift = energy_drift(result.energy_start, result.energy_end)
+    from animsim.console import drift_text
+
     kind = (
         "conservative: the drift is integration error"
         if compiled.conservative
         else "forces add or remove energy"
     )
-    return f"{text}, drift {drift:+.2%} ({kind})"
+    return f"{text}, {drift_text(result.energy_start, result.energy_end, ENERGY_FLOOR)}; {kind}"
 
 
 def check_scenes(
@@ -54,6 +55,7 @@ def check_scenes(
     from animsim.simulate import STATUS_OK, run
 
     all_ok = True
+    tally: dict[str, int] = {}
     for path in paths:
         try:
             loaded, scene, _ = prepare_scene(path, limits)
@@ -62,6 +64,7 @@ def check_scenes(
             echo_err(str(exc))
             echo_err(f"{path}: INVALID")
             all_ok = False
+            tally["invalid"] = tally.get("invalid", 0) + 1
             continue
         notes = []
         from animsim.analysis import stability
@@ -72,18 +75,54 @@ def check_scenes(
             if report.dt_exceeds_limit:
                 notes.append("warning: dt exceeds the stable limit for this integrator")
         result = run(compiled)
-        head = (
+        tally[result.status] = tally.get(result.status, 0) + 1
+        head = [
             f"{path}: {result.status} ({compiled.integrator_name}, dt {compiled.clock.dt:g}, "
-            f"{result.steps_taken} steps, {result.wall_time:.2f} s; {_energy_report(compiled, result)})"
-        )
+            f"{result.steps_taken} steps, {result.wall_time:.2f} s)",
+            f"  {_energy_report(compiled, result)}",
+        ]
         if result.status != STATUS_OK:
             all_ok = False
-            echo_err(head)
+            for line in head:
+                echo_err(wrap(line))
             if result.failure is not None:
-                echo_err("  " + result.failure.describe())
+                echo_err(wrap("  " + result.failure.describe()))
         elif not quiet:
-            echo(head)
+            for line in head:
+                echo(wrap(line))
         if not quiet or result.status != STATUS_OK:
             for line in notes:
-                echo(f"  {line}")
+                echo(wrap(f"  {line}"))
+    # Always, also with --quiet: silence after a check reads as "did it run?".
+    echo(tally_line(len(paths), tally))
     return all_ok
+
+
+def wrap(line: str, width: int | None = None) -> str:
+    """``line`` broken at spaces to the screen's width, continuation lines indented under it.
+
+    Numbers never break (no word is split), so a narrow terminal shows them whole.
+    """
+    import shutil
+    import textwrap
+
+    from animsim.console import table_width
+
+    width = width or table_width() or shutil.get_terminal_size().columns
+    if len(line) <= width:
+        return line
+    indent = " " * (len(line) - len(line.lstrip(" ")) + 4)
+    return textwrap.fill(
+        line,
+        width=width,
+        subsequent_indent=indent,
+        break_long_words=False,
+        break_on_hyphens=False,
+    )
+
+
+def tally_line(total: int, tally: dict[str, int]) -> str:
+    """``12 scenes: 11 ok, 1 unstable`` (ok first, then the rest by name)."""
+    order = sorted(tally, key=lambda status: (status != "ok", status))
+    counts = ", ".join(f"{tally[status]} {status}" for status in order)
+    return f"{total} scene{'s' if total != 1 else ''}: {counts}"
