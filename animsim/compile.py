@@ -26,7 +26,7 @@ from animsim.forces.penalty import PenaltyPlane
 from animsim.forces.wind import Wind
 from animsim.integrators import integrator_class
 from animsim.integrators.base import Integrator
-from animsim.record import Clock, TrajectoryHeader, record_steps
+from animsim.record import Clock, TrajectoryHeader, record_steps, recording_rule
 from animsim.scene import models as m
 from animsim.scene.structures import expand
 from animsim.system import State, System
@@ -273,7 +273,8 @@ def compile_scene(
         raise UsageError(f"integrator {name_!r} is not available in this build") from None
 
     clock = Clock.make(scene.duration, scene.dt)
-    rec = record_steps(clock, every=scene.record.every, fps=scene.record.fps)
+    every, fps = recording_rule(scene.record.every, scene.record.fps, clock.dt)
+    rec = record_steps(clock, every=every, fps=fps)
 
     moving_anchor = bool(np.any(particle_pinned & np.any(particle_velocity != 0, axis=1)))
     lossy_planes = any(p.restitution < 1 or p.friction > 0 for p in scene.planes if p.response == "impulse")
@@ -293,8 +294,9 @@ def compile_scene(
         stages.extend(emitters.labels)  # they run after the step and its collisions
     stages.append(
         f"record: {len(rec)} frames of {clock.steps} steps"
-        + (f" (every {scene.record.every})" if scene.record.every else "")
-        + (f" ({scene.record.fps} fps)" if scene.record.fps else "")
+        + (f" (every {every})" if scene.record.every else "")
+        + (f" ({fps} fps)" if scene.record.fps else "")
+        + (f" ({fps:g} fps by default)" if fps is not None and scene.record.fps is None else "")
     )
 
     header = TrajectoryHeader(

@@ -64,7 +64,7 @@ from animsim.analysis.references import (
 from animsim.compile import Compiled
 from animsim.errors import UsageError
 from animsim.integrators import FIXED_STEP, REGISTRY, integrator_class
-from animsim.record import Clock, record_steps
+from animsim.record import Clock, record_steps, recording_rule
 from animsim.scene import models as m
 
 COLUMNS = (
@@ -358,7 +358,8 @@ def common_times(
                 f"--dt {dt:g}: {clock.steps} steps is more than the limit of {max_steps} (raise it with --max-steps)"
             )
     coarse = Clock.make(scene.duration, max(dts))
-    recorded = record_steps(coarse, every=scene.record.every, fps=scene.record.fps)
+    every, fps = recording_rule(scene.record.every, scene.record.fps, coarse.dt)
+    recorded = record_steps(coarse, every=every, fps=fps)
     candidates = [coarse.time(int(s)) for s in recorded]
     keep = np.ones(len(candidates), dtype=bool)
     for clock in clocks:

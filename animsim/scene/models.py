@@ -350,6 +350,8 @@ class IntegratorSpec(Model):
 
 
 class Record(Model):
+    """Which steps become frames; without either key, 60 frames per second (every step when dt >= 1/60 s)."""
+
     every: Annotated[StrictInt, Field(ge=1)] | None = Field(
         None, description="record every n-th step (and always the last)"
     )
