@@ -386,7 +386,9 @@ def run(
 
     compiled = compile_scene(sc, loaded.name, backend=_backend(backend))
     from animsim.analysis import stability
+    from animsim.console import numba_notice
 
+    numba_notice(compiled.backend)
     report = stability.analyse(compiled)
     if report.dt_exceeds_limit:  # warn before the first step; the watchdog judges the run
         _err(f"{scene}: warning: {report.verdict()}")
@@ -402,8 +404,10 @@ def run(
     elif fmt is Format.usda:
         from animsim.export.usda import USD_DEFAULT_TIME_CODES_PER_SECOND, UsdaSink
 
-        # Uneven frames are placed at time * rate: the scene's own frame rate when it has one.
-        fps = sc.record.fps
+        from animsim.record import recording_rule
+
+        # Uneven frames are placed at time * rate: the frame rate recorded at, when there is one.
+        fps = recording_rule(sc.record.every, sc.record.fps, compiled.clock.dt)[1]
         sink = UsdaSink(out, uneven_rate=fps if fps is not None else USD_DEFAULT_TIME_CODES_PER_SECOND)
     else:
         from animsim.export.csv import CsvSink
@@ -845,7 +849,8 @@ def compare(
         str | None,
         typer.Option(
             "--dt",
-            help="Comma-separated step sizes (s); default the scene's dt halved three times: dt, dt/2, dt/4, dt/8.",
+            help="Comma-separated step sizes (s); default 2 dt, dt, dt/2 and dt/4 of the scene's dt "
+            "(dt/8 instead of 2 dt when 2 dt is longer than the duration).",
         ),
     ] = None,
     reference: Annotated[
@@ -859,10 +864,11 @@ def compare(
     repeat: Annotated[
         int,
         typer.Option(
-            help="Timed runs per row after its accuracy run; the median is reported. More runs, steadier timings.",
-            min=1,
+            help="Extra timed runs per row after its accuracy run (the median is reported); default 0: "
+            "the accuracy run's own time, after a warm-up. More runs, steadier timings.",
+            min=0,
         ),
-    ] = 1,
+    ] = 0,
     output: Annotated[Path | None, typer.Option("-o", "--output", help="Write the table as CSV.")] = None,
     plot: Annotated[
         Path | None,
@@ -907,10 +913,10 @@ def compare(
     the median simulation time and force evaluations. Under the table: each
     integrator's observed order of convergence.
 
-    Cost: each row is run 1 + --repeat times (an accuracy run that is also the
-    warm-up, then the timed runs), so the finest dt dominates; the estimated
-    total is printed before the runs start. Pass fewer or larger step sizes
-    with --dt for big scenes.
+    Cost: each row is run 1 + --repeat times (the accuracy run, then any
+    extra timed runs), so the finest dt dominates; the estimated total is
+    printed before the runs start. Pass fewer or larger step sizes with --dt
+    for big scenes.
 
     An unstable run is a row with status 'unstable', not a failure of the
     comparison: the exit status is 0 when the comparison itself completed

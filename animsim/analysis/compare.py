@@ -1,10 +1,14 @@
 """``animsim compare``: error against run time for every integrator (``cli.md``).
 
-For each integrator and each step size the scene is run once into memory
-(which also warms up the code paths), its positions are compared with a
-reference (:mod:`animsim.analysis.references`) at common record times, and
-then it is run ``repeat`` more times without any sink to time the simulation
-loop alone. The result is a table, one row per (integrator, dt), and each
+For each integrator and each step size the scene is run once into memory,
+its positions are compared with a reference
+(:mod:`animsim.analysis.references`) at common record times, and, with
+``repeat`` > 0, it is run that many more times without any sink to time the
+simulation loop alone (the median is reported). With ``repeat`` = 0 (the
+command line's default) the accuracy run's own time is reported: the cost
+probe (:func:`estimate`) has already run each method, so numba's compilation
+and NumPy's first-call costs are not in it, and recording at the compared
+times is a small part of a run. The result is a table, one row per (integrator, dt), and each
 integrator's observed order of convergence.
 
 Common record times. Runs at different dt must be compared at the same
@@ -58,7 +62,6 @@ from animsim.analysis.references import (
     landing_steps,
     record_at,
     rk4_reference,
-    run_trajectory,
     smooth,
 )
 from animsim.compile import Compiled
@@ -80,12 +83,14 @@ COLUMNS = (
     "status",
 )
 REFERENCE_KINDS = ("auto", "analytic", "fine")
-#: the default step sizes are the scene's dt and this many halvings of it
-#: (four step sizes: enough points for an order fit, and the finest run costs
-#: 8 times the scene's own, not 16)
-DEFAULT_HALVINGS = 3
-#: timed runs per row by default; each row's accuracy run also warms it up
-DEFAULT_REPEAT = 1
+#: the default step sizes, as multiples of the scene's dt: four points for the
+#: order fit, nested (each halves the one before, so they share record times),
+#: and the finest only 4 times finer than the scene's, so the rows together
+#: cost 7.5 runs of the scene and the reference (from a quarter of the finest)
+#: stays affordable; a bigger step also shows where a method stops being stable
+DEFAULT_STEP_FACTORS = (2.0, 1.0, 0.5, 0.25)
+#: extra timed runs per row by default: none, the accuracy run is timed (see the module docstring)
+DEFAULT_REPEAT = 0
 #: the probe that estimates the total time runs each method this many steps
 PROBE_STEPS = 200
 #: the most steps one run may take (the spec's limit; --max-steps raises it)
@@ -226,15 +231,19 @@ def parse_integrators(text: str | None) -> list[str]:
     return list(dict.fromkeys(names))
 
 
-def default_dts(dt: float, halvings: int = DEFAULT_HALVINGS) -> list[float]:
-    """The scene's dt and ``halvings`` halvings of it: dt, dt/2, ..., dt/2^halvings."""
-    return [dt / 2**k for k in range(halvings + 1)]
+def default_dts(dt: float, duration: float | None = None) -> list[float]:
+    """2 dt, dt, dt/2, dt/4 (DEFAULT_STEP_FACTORS); when 2 dt is longer than the
+    duration, dt/8 takes its place, so there are always four."""
+    dts = [dt * f for f in DEFAULT_STEP_FACTORS]
+    if duration is not None and dts[0] > duration:
+        dts = [*dts[1:], dt * DEFAULT_STEP_FACTORS[-1] / 2]
+    return dts
 
 
 def parse_dts(text: str | None, scene: m.Scene) -> list[float]:
     """Step sizes from ``--dt``, largest first; default :func:`default_dts` of the scene's dt."""
     if text is None:
-        return default_dts(scene.dt)
+        return default_dts(scene.dt, scene.duration)
     values: list[float] = []
     for part in (s.strip() for s in text.split(",")):
         if not part:
@@ -396,8 +405,8 @@ def compare(
     """
     if reference not in REFERENCE_KINDS:
         raise UsageError(f"--reference: {reference!r} is not one of {', '.join(REFERENCE_KINDS)}")
-    if repeat < 1:
-        raise UsageError(f"--repeat: must be >= 1, not {repeat}")
+    if repeat < 0:
+        raise UsageError(f"--repeat: must be >= 0, not {repeat}")
     notes: list[str] = []
     if scene.adaptive is not None:
         notes.append("the scene's adaptive stepping is ignored: compare runs each method at fixed steps")
@@ -461,7 +470,8 @@ def compare(
 
         if progress is not None:
             progress("reference (RK4, halving dt)")
-        ref = rk4_reference(scene, name, times, dts[-1], smallest, distance)
+        # On the rows' backend: numba's RK4 is the same method, several times faster.
+        ref = rk4_reference(scene, name, times, dts[-1], smallest, distance, backend)
     notes.extend(ref.notes)
 
     conservative = base.conservative
@@ -491,16 +501,25 @@ def _measure(
     repeat: int,
     backend: str = "numpy",
 ) -> _Run:
-    """One accuracy run into memory (also the warm-up), then ``repeat`` timed runs without sinks."""
+    """One accuracy run into memory (also the warm-up), then ``repeat`` timed runs without sinks.
+
+    With ``repeat`` = 0 the accuracy run's own wall time is the row's seconds.
+    """
+    from animsim.record import MemorySink
     from animsim.simulate import run
 
     compiled = record_at(scene, name, integ, dt, times, backend)
-    traj, _ = run_trajectory(compiled)
-    walls = []
+    sink = MemorySink()
     with np.errstate(all="ignore"):
-        for _ in range(repeat):
-            result = run(compiled, [])
-            walls.append(result.wall_time)
+        result = run(compiled, [sink])
+    traj = Trajectory.from_sink(sink, compiled.emitters is None)
+    walls = [result.wall_time]
+    if repeat > 0:
+        walls = []
+        with np.errstate(all="ignore"):
+            for _ in range(repeat):
+                result = run(compiled, [])
+                walls.append(result.wall_time)
     return _Run(
         integ,
         dt,
@@ -739,10 +758,14 @@ def left_out(comparison: Comparison, width: int | None) -> list[str]:
 def summary_lines(comparison: Comparison) -> list[str]:
     """What ``animsim compare`` prints under the table."""
     times = comparison.times
-    runs = "1 timed run" if comparison.repeat == 1 else f"the median of {comparison.repeat} timed runs"
+    if comparison.repeat == 0:
+        timing = "seconds: the accuracy run itself, after a warm-up (--repeat N: N more runs, the median)"
+    else:
+        runs = "1 timed run" if comparison.repeat == 1 else f"the median of {comparison.repeat} timed runs"
+        timing = f"seconds: {runs} of the simulation loop only"
     lines = [
         f"errors at {len(times)} record times from {times[0]:g} to {times[-1]:g} s",
-        f"seconds: {runs} of the simulation loop only",
+        timing,
         "observed order: least-squares slope of log error against log dt, over stable",
         "  points above round-off whose error is below half the distance moved:",
     ]

@@ -76,7 +76,7 @@ FINE_TARGET_RATIO = 1e-3
 #: FINE_MAX_FACTOR times the finest compared run's (a scene with collisions
 #: may never converge at fourth order; compare says so instead of running forever)
 FINE_MAX_STEPS = 2_000_000
-FINE_MAX_FACTOR = 16
+FINE_MAX_FACTOR = 8
 #: Richardson's estimate of RK4's error at h/2 from the change between h and h/2
 RK4_RICHARDSON = 2**4 - 1
 
@@ -670,6 +670,7 @@ def rk4_reference(
     finest_dt: float,
     smallest_error: Callable[[Trajectory], float],
     distance: Callable[[Trajectory, Trajectory], float],
+    backend: str = "numpy",
 ) -> Reference:
     """RK4 with dt halved until the change is far below the smallest error measured.
 
@@ -681,15 +682,16 @@ def rk4_reference(
     compared run's steps, saying so.
     """
     dt = finest_dt / FINE_START_DIVISOR
-    first = record_at(scene, name, "rk4", dt, times)
-    finest_steps = first.clock.steps * FINE_START_DIVISOR
+    first = record_at(scene, name, "rk4", dt, times, backend)
+    # The finest compared run's steps (the first reference run takes FINE_START_DIVISOR times as many).
+    finest_steps = max(1, first.clock.steps // FINE_START_DIVISOR)
     prev, status = run_trajectory(first)
     if status != "ok":
         raise _unstable_reference(dt, status)
     notes: list[str] = []
     while True:
         dt /= 2
-        compiled = record_at(scene, name, "rk4", dt, times)
+        compiled = record_at(scene, name, "rk4", dt, times, backend)
         cur, status = run_trajectory(compiled)
         if status != "ok":
             raise _unstable_reference(dt, status)
