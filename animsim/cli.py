@@ -403,7 +403,6 @@ def run(
         sink = PlySequenceSink(out, expected_frames=len(compiled.record_steps))
     elif fmt is Format.usda:
         from animsim.export.usda import USD_DEFAULT_TIME_CODES_PER_SECOND, UsdaSink
-
         from animsim.record import recording_rule
 
         # Uneven frames are placed at time * rate: the frame rate recorded at, when there is one.

@@ -77,6 +77,8 @@ FINE_TARGET_RATIO = 1e-3
 #: may never converge at fourth order; compare says so instead of running forever)
 FINE_MAX_STEPS = 2_000_000
 FINE_MAX_FACTOR = 8
+#: ... but a short scene may always take this many (they cost little)
+FINE_MIN_STEPS = 20_000
 #: Richardson's estimate of RK4's error at h/2 from the change between h and h/2
 RK4_RICHARDSON = 2**4 - 1
 
@@ -700,7 +702,7 @@ def rk4_reference(
         prev = cur
         if change <= target or change == 0.0:
             break
-        limit = min(FINE_MAX_STEPS, FINE_MAX_FACTOR * finest_steps)
+        limit = min(FINE_MAX_STEPS, max(FINE_MIN_STEPS, FINE_MAX_FACTOR * finest_steps))
         if compiled.clock.steps * 2 > limit:
             notes.append(
                 f"the RK4 reference did not converge within {limit} steps "
