@@ -26,7 +26,7 @@ from animsim.forces.penalty import PenaltyPlane
 from animsim.forces.wind import Wind
 from animsim.integrators import integrator_class
 from animsim.integrators.base import Integrator
-from animsim.record import Clock, TrajectoryHeader, record_steps, recording_rule
+from animsim.record import Clock, TrajectoryHeader, recording_rule, scene_record_steps
 from animsim.scene import models as m
 from animsim.scene.structures import expand
 from animsim.system import State, System
@@ -274,7 +274,7 @@ def compile_scene(
 
     clock = Clock.make(scene.duration, scene.dt)
     every, fps = recording_rule(scene.record.every, scene.record.fps, clock.dt)
-    rec = record_steps(clock, every=every, fps=fps)
+    rec = scene_record_steps(clock, scene.record.every, scene.record.fps)
 
     moving_anchor = bool(np.any(particle_pinned & np.any(particle_velocity != 0, axis=1)))
     lossy_planes = any(p.restitution < 1 or p.friction > 0 for p in scene.planes if p.response == "impulse")

@@ -77,6 +77,19 @@ def recording_rule(every: int | None, fps: float | None, dt: float) -> tuple[int
     return None, DEFAULT_RECORD_FPS
 
 
+def scene_record_steps(clock: Clock, every: int | None, fps: float | None) -> np.ndarray:
+    """The steps a scene records: its own ``record`` rule, else :func:`recording_rule`'s default.
+
+    The default always keeps the last step too, so a run's final state is in
+    its output even when the duration is not a whole number of frames.
+    """
+    rule_every, rule_fps = recording_rule(every, fps, clock.dt)
+    steps = record_steps(clock, every=rule_every, fps=rule_fps)
+    if every is None and fps is None and steps[-1] != clock.steps:
+        steps = np.append(steps, clock.steps)
+    return steps
+
+
 def record_steps(clock: Clock, every: int | None = None, fps: float | None = None) -> np.ndarray:
     """Sorted step indices (0..steps) whose states are recorded.
 

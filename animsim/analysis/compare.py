@@ -67,7 +67,7 @@ from animsim.analysis.references import (
 from animsim.compile import Compiled
 from animsim.errors import UsageError
 from animsim.integrators import FIXED_STEP, REGISTRY, integrator_class
-from animsim.record import Clock, record_steps, recording_rule
+from animsim.record import Clock, scene_record_steps
 from animsim.scene import models as m
 
 COLUMNS = (
@@ -367,8 +367,7 @@ def common_times(
                 f"--dt {dt:g}: {clock.steps} steps is more than the limit of {max_steps} (raise it with --max-steps)"
             )
     coarse = Clock.make(scene.duration, max(dts))
-    every, fps = recording_rule(scene.record.every, scene.record.fps, coarse.dt)
-    recorded = record_steps(coarse, every=every, fps=fps)
+    recorded = scene_record_steps(coarse, scene.record.every, scene.record.fps)
     candidates = [coarse.time(int(s)) for s in recorded]
     keep = np.ones(len(candidates), dtype=bool)
     for clock in clocks:

@@ -15,7 +15,7 @@ import pytest
 
 from animsim.analysis.compare import DEFAULT_REPEAT, OrderFit, default_dts, estimate
 from animsim.console import drift_text, numba_notice, percent, steps_text
-from animsim.record import DEFAULT_RECORD_FPS, Clock, record_steps, recording_rule
+from animsim.record import DEFAULT_RECORD_FPS, Clock, record_steps, recording_rule, scene_record_steps
 from animsim.render import frames_at_rate
 from animsim.scene.loader import load_scene, load_scene_text
 from tests.conftest import ROOT, SCENES, run_cli
@@ -32,6 +32,10 @@ def test_recording_defaults_to_a_frame_rate_unless_the_scene_says() -> None:
     clock = Clock.make(3.0, 0.001)
     every, fps = recording_rule(None, None, clock.dt)
     assert len(record_steps(clock, every=every, fps=fps)) == 181  # 3 s at 60 fps, both ends
+    assert len(scene_record_steps(clock, None, None)) == 181
+    # the default always keeps the final state, even off the frame grid
+    assert scene_record_steps(Clock.make(0.01, 0.001), None, None).tolist() == [0, 10]
+    assert scene_record_steps(Clock.make(0.01, 0.001), None, 60.0).tolist() == [0]  # as the scene asks
 
 
 def test_a_three_second_cloth_writes_a_small_csv_by_default(tmp_path) -> None:
