@@ -119,6 +119,15 @@ BackendOpt = Annotated[
     ),
 ]
 
+DriftWarnOpt = Annotated[
+    float,
+    typer.Option(
+        "--drift-warn",
+        metavar="PERCENT",
+        help="Warn when a conservative scene's energy drifts by more than PERCENT of its start.",
+    ),
+]
+
 _LIMITS_PANEL = "Limits (what a scene may ask for)"
 
 # The limit options, shared by every command that loads a scene (see
@@ -241,10 +250,6 @@ class Format(StrEnum):
     usda = "usda"  # one USD ASCII file of animated points
 
 
-# Output suffix -> format, for `run -o` without --format (an existing folder means PLY).
-SUFFIX_FORMATS = {".npz": Format.npz, ".ply": Format.ply, ".usda": Format.usda}
-
-
 def _backend(name: str) -> str:
     """Check a --backend value (the library also accepts the internal 'reference')."""
     from animsim.backends import BACKENDS
@@ -296,13 +301,9 @@ def check_output_path(output: Path, scene_path: Path) -> None:
 
 def output_format(output: Path | None, requested: Format | None) -> Format:
     """The trajectory format: as asked, else from the suffix, else PLY for an existing folder, else CSV."""
-    if requested is not None:
-        return requested
-    if output is None or str(output) == "-":
-        return Format.csv
-    if output.suffix.lower() in SUFFIX_FORMATS:
-        return SUFFIX_FORMATS[output.suffix.lower()]
-    return Format.ply if output.is_dir() else Format.csv
+    from animsim.export.sinks import format_for
+
+    return Format(format_for(output, None if requested is None else requested.value))
 
 
 def check_ply_output(output: Path, scene_path: Path) -> None:
@@ -354,6 +355,7 @@ def run(
     ] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
     backend: BackendOpt = "numpy",
+    drift_warn: DriftWarnOpt = 10.0,
     *,
     limits: Any = None,
 ) -> None:
@@ -364,8 +366,10 @@ def run(
     folder gives <folder>/frames_0000.ply, ...); USD ASCII (-o anim.usda).
     The output folder must exist.
     """
+    from animsim.analysis.drift import META_THRESHOLD_KEY, check_threshold
     from animsim.preflight import check_disk
 
+    drift_warn = check_threshold(drift_warn)
     to_stdout = output is not None and str(output) == "-"
     fmt = output_format(output, format)
     out = output if output is not None else Path(f"{scene.stem}.{fmt.value}")
@@ -381,8 +385,8 @@ def run(
         check_disk(out, est, fmt.value, sc, limits)
     # Imported only now: a refused scene never pays for NumPy and the stepper.
     from animsim.compile import compile_scene
-    from animsim.simulate import STATUS_INTERRUPTED, STATUS_UNSTABLE
-    from animsim.simulate import run as simulate
+    from animsim.engine import STATUS_INTERRUPTED, STATUS_UNSTABLE
+    from animsim.engine import run as simulate
 
     compiled = compile_scene(sc, loaded.name, backend=_backend(backend))
     from animsim.analysis import stability
@@ -393,26 +397,18 @@ def run(
     if report.dt_exceeds_limit:  # warn before the first step; the watchdog judges the run
         _err(f"{scene}: warning: {report.verdict()}")
     wrote = f"{out} and {out}.meta.json"
-    if fmt is Format.npz:
-        from animsim.export.npz import NpzSink
+    from animsim.export.sinks import open_sink
+    from animsim.record import recording_rule
 
-        sink: Any = NpzSink(out)
-    elif fmt is Format.ply:
-        from animsim.export.ply import PlySequenceSink
-
-        sink = PlySequenceSink(out, expected_frames=len(compiled.record_steps))
-    elif fmt is Format.usda:
-        from animsim.export.usda import USD_DEFAULT_TIME_CODES_PER_SECOND, UsdaSink
-        from animsim.record import recording_rule
-
-        # Uneven frames are placed at time * rate: the frame rate recorded at, when there is one.
-        fps = recording_rule(sc.record.every, sc.record.fps, compiled.clock.dt)[1]
-        sink = UsdaSink(out, uneven_rate=fps if fps is not None else USD_DEFAULT_TIME_CODES_PER_SECOND)
-    else:
-        from animsim.export.csv import CsvSink
-
-        sink = CsvSink("-" if to_stdout else out, extra_columns=extra_columns)
-    extra = {"scene_sha256": loaded.sha256, "scene_file": str(scene)}
+    sink: Any = open_sink(
+        Path("-") if to_stdout else out,
+        fmt.value,
+        # the frame rate recorded at, when there is one (the scene's, or the 60 fps default)
+        meta_rate=recording_rule(sc.record.every, sc.record.fps, compiled.clock.dt)[1],
+        extra_columns=extra_columns,
+        expected_frames=len(compiled.record_steps),
+    )
+    extra = {"scene_sha256": loaded.sha256, "scene_file": str(scene), META_THRESHOLD_KEY: drift_warn}
     with _graceful_stop() as stop, _progress(compiled.clock.steps, quiet) as progress:
         result = simulate(compiled, [sink], stop=stop, progress=progress, meta_extra=extra)
     if fmt is Format.ply and sink.written:
@@ -421,6 +417,7 @@ def run(
         wrote = f"{len(sink.written)} PLY frames {span}, {sink.ids_path} and {out}.meta.json"
     if not quiet:
         _summary(compiled, result, None if to_stdout else wrote)
+    _drift_warning(scene, compiled, result)
     if result.status == STATUS_UNSTABLE:
         assert result.failure is not None
         _err(f"{scene}: {result.failure.describe()}")
@@ -433,34 +430,11 @@ def run(
         raise typer.Exit(EXIT_INTERRUPTED)
 
 
-def prepare_scene(
-    scene: Path,
-    limits: Any,
-    *,
-    fmt: str = "csv",
-    integrator: str | None = None,
-    dt: float | None = None,
-    duration: float | None = None,
-    seed: int | None = None,
-) -> tuple[Any, Any, Any]:
-    """Load SCENE, apply overrides and check the step and memory limits.
+def prepare_scene(scene: Path, limits: Any, **kw: Any) -> tuple[Any, Any, Any]:
+    """:func:`animsim.api.prepare_file`, imported late: a refused scene never pays for NumPy."""
+    from animsim.api import prepare_file
 
-    Every command that compiles a scene goes through here, so none of them
-    allocates before the pre-flight has said the scene fits. Returns
-    (LoadedScene, Scene with overrides, preflight.Estimate).
-    """
-    from animsim.preflight import RunLimits, check_limits
-    from animsim.scene.loader import load_scene
-
-    limits = limits or RunLimits()
-    loaded = load_scene(scene, limits.loader)
-    sc = loaded.scene
-    if any(v is not None for v in (integrator, dt, duration, seed)):
-        from animsim.compile import with_overrides  # imports every force and integrator: only when needed
-
-        sc = with_overrides(sc, integrator=integrator, dt=dt, duration=duration, seed=seed)
-    est = check_limits(loaded, sc, limits, fmt=fmt, overridden=dt is not None or duration is not None)
-    return loaded, sc, est
+    return prepare_file(scene, limits, **kw)
 
 
 @contextmanager
@@ -497,13 +471,38 @@ def _summary(compiled: Any, result: Any, wrote: str | None) -> None:
         f"{compiled.name}: {compiled.system.particle_count} particles, {compiled.system.spring_count} springs, "
         f"{steps_text(compiled, result)} with {compiled.integrator_name}",
         f"  wall time {result.wall_time:.3f} s, {result.frames} frames, {result.force_evals} force evaluations",
-        f"  energy {result.energy_start:.6g} J -> {result.energy_end:.6g} J, status {result.status}",
+        f"  energy {result.energy_start:.6g} J -> {result.energy_end:.6g} J, status {result.status}, "
+        + _drift_of(compiled, result).text(),
     ]
+    lines.extend(_summary_notes(compiled, result))
     if wrote is not None:
         lines.append(f"  wrote {wrote}")
     from animsim.analysis.check import wrap
 
     typer.echo("\n".join(wrap(line) for line in lines), err=stream_err)
+
+
+def _drift_of(compiled: Any, result: Any) -> Any:
+    """The run's energy-drift verdict (animsim.analysis.drift), with the run's own threshold."""
+    from animsim.analysis.drift import DEFAULT_DRIFT_WARN_PERCENT, META_THRESHOLD_KEY, drift
+
+    threshold = result.meta.get(META_THRESHOLD_KEY, DEFAULT_DRIFT_WARN_PERCENT)
+    return drift(compiled, result.energy_start, result.energy_end, threshold)
+
+
+def _drift_warning(scene: Path, compiled: Any, result: Any) -> None:
+    """A drift beyond --drift-warn is a warning on stderr, also with --quiet (the run still succeeds)."""
+    verdict = _drift_of(compiled, result)
+    if verdict.warning and result.status != "unstable":  # an unstable run has its own report
+        _err(f"{scene}: warning: {verdict.warning_text()}")
+
+
+def _summary_notes(compiled: Any, result: Any) -> list[str]:
+    """Summary lines about what the numbers mean: the method really run."""
+    from animsim.analysis.effective import fallback_note
+
+    note = fallback_note(compiled)
+    return [] if note is None else [f"  note: {note}"]
 
 
 # --- explain ------------------------------------------------------------------------
@@ -532,10 +531,16 @@ def explain(
         f"{len(sc.planes)} planes, {len(sc.emitters)} emitters",
         f"  {c.clock.steps} steps of {c.clock.dt:g} s to t = {c.clock.duration:g} s, seed {c.seed}",
         "each step runs:",
-        *(f"  + {stage}" for stage in c.stages),
-        "left out (the scene does not need them):",
-        *(f"  - {item}" for item in c.left_out),
     ]
+    from animsim.analysis.effective import fallback_note
+
+    note = fallback_note(c)
+    for stage in c.stages:
+        if note is not None and stage.startswith("integrator:"):
+            stage = f"integrator: {note}"  # what the step really computes
+        lines.append(f"  + {stage}")
+    lines.append("left out (the scene does not need them):")
+    lines.extend(f"  - {item}" for item in c.left_out)
     for line in lines:
         typer.echo(wrap(line))
 
@@ -565,13 +570,26 @@ def schema() -> None:
 def check(
     scenes: Annotated[list[Path], typer.Argument(help="Scene files.", show_default=False)],
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Only problems.")] = False,
+    drift_warn: DriftWarnOpt = 10.0,
     *,
     limits: Any = None,
 ) -> None:
-    """Validate, analyse and run each scene; exit 0 only if every one is valid and stable."""
-    from animsim.analysis.check import check_scenes
+    """Validate, analyse and run each scene; exit 0 only if every one is valid and stable.
 
-    ok = check_scenes(scenes, quiet=quiet, echo=typer.echo, echo_err=_err, limits=limits)
+    A conservative scene whose energy drifts by more than --drift-warn gets a
+    warning; it still counts as stable.
+    """
+    from animsim.analysis.check import check_scenes
+    from animsim.analysis.drift import check_threshold
+
+    ok = check_scenes(
+        scenes,
+        quiet=quiet,
+        echo=typer.echo,
+        echo_err=_err,
+        limits=limits,
+        drift_warn=check_threshold(drift_warn),
+    )
     if not ok:
         raise typer.Exit(EXIT_FAILED)
 
@@ -626,6 +644,12 @@ def render(
     dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
     duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
+    integrators: Annotated[
+        str | None,
+        typer.Option(
+            "--integrators", help="Comma-separated methods: the scene once per method, panels side by side."
+        ),
+    ] = None,
     *,
     limits: Any = None,
 ) -> None:
@@ -648,6 +672,11 @@ def render(
         if out is not None:
             check_output_path(out, source)
     from_file = is_trajectory(source)
+    if integrators is not None:
+        _render_side_by_side(
+            source, integrators, gif, mp4, opts, from_file, integrator, dt, duration, quiet, limits
+        )
+        return
     compiled = None
     scene_path = scene if from_file else source
     if scene_path is not None:
@@ -681,6 +710,48 @@ def render(
         raise typer.Exit(EXIT_FAILED)
 
 
+def _render_side_by_side(
+    source: Path,
+    integrators: str,
+    gif: Path | None,
+    mp4: Path | None,
+    opts: Any,
+    from_file: bool,
+    integrator: str | None,
+    dt: float | None,
+    duration: float | None,
+    quiet: bool,
+    limits: Any,
+) -> None:
+    """`render --integrators`: one panel per method, side by side, in one animation."""
+    from animsim.analysis.compare import parse_integrators
+    from animsim.export.side_by_side import compile_each, render_side_by_side
+    from animsim.scene import models as m
+
+    if from_file:
+        raise UsageError(
+            "--integrators simulates the scene once per method: give the scene, not a trajectory"
+        )
+    if integrator is not None:
+        raise UsageError("give --integrator or --integrators, not both")
+    names = parse_integrators(integrators)
+    loaded, sc, _ = prepare_scene(source, limits, dt=dt, duration=duration)
+    sc = sc.model_copy(update={"record": m.Record(fps=opts.fps)})
+    compiled = compile_each(sc, loaded.name, names)
+    with _graceful_stop() as stop:
+        result = render_side_by_side(compiled, gif, mp4, opts, stop=stop)
+    if result.status == "interrupted":
+        raise typer.Exit(EXIT_INTERRUPTED)
+    if not quiet:
+        outs = " and ".join(str(p) for p in result.outputs)
+        typer.echo(
+            f"wrote {outs}: {len(names)} panels ({', '.join(names)}), {result.frames} frames at {opts.fps:g} fps"
+        )
+    # A method that blows up is what the picture is there to show, not a failure of the command.
+    if result.status == "unstable":
+        _err(f"{source}: a panel is marked: {result.failure.describe()}")
+
+
 @contextmanager
 def _frame_progress(total: int | None, quiet: bool):
     if quiet or total is None or total < 50 or not sys.stderr.isatty():
@@ -691,6 +762,76 @@ def _frame_progress(total: int | None, quiet: bool):
     with Progress(transient=True, console=_stderr_console()) as bar:
         task = bar.add_task("rendering", total=total)
         yield lambda done: bar.update(task, completed=done)
+
+
+# --- view ---------------------------------------------------------------------------------
+
+
+@app.command()
+@limit_options
+def view(
+    source: Annotated[
+        Path,
+        typer.Argument(
+            help="A scene (simulated first) or a trajectory (.csv, .npz).", metavar="SCENE_OR_TRAJECTORY"
+        ),
+    ],
+    output: Annotated[Path, typer.Option("-o", "--output", help="The HTML file to write.")],
+    integrators: Annotated[
+        str | None,
+        typer.Option("--integrators", help="Comma-separated methods: one panel per method, played in step."),
+    ] = None,
+    fps: Annotated[float, typer.Option("--fps", help="Frames per second recorded for playback.")] = 25.0,
+    view: Annotated[str, typer.Option("--view", help="The view it opens with: 3d, xy, xz or yz.")] = "3d",
+    scene: Annotated[
+        Path | None,
+        typer.Option("--scene", help="The scene of a trajectory, for springs, pins, planes and energy."),
+    ] = None,
+    integrator: Annotated[str | None, typer.Option(help="Override the scene's integrator.")] = None,
+    dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
+    duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
+    *,
+    limits: Any = None,
+) -> None:
+    """Write one self-contained HTML page that plays the animation (opens offline, in any current browser).
+
+    Play and pause, a time slider, playback speed, a 3D view to orbit, pan and
+    zoom (and xy, xz, yz views), springs, planes, pinned particles, colour and
+    size over life, and an energy plot whose cursor follows the time. With
+    --integrators the scene runs once per method, the panels side by side.
+    """
+    from animsim.export.viewer import VIEWS
+
+    if view not in VIEWS:
+        raise UsageError(f"--view {view!r}: choose one of {', '.join(VIEWS)}")
+    if not (fps > 0 and fps < float("inf")):
+        raise UsageError(f"--fps {fps}: must be a number > 0")
+    if output.suffix.lower() not in (".html", ".htm"):
+        raise UsageError(f"-o {output}: the file name must end in .html")
+    check_output_path(output, source)
+    from animsim.export.viewer_command import write_view
+
+    summary = write_view(
+        source,
+        output,
+        prepare=lambda path, **kw: prepare_scene(path, limits, **kw),
+        integrators=integrators,
+        fps=fps,
+        view=view,
+        scene=scene,
+        integrator=integrator,
+        dt=dt,
+        duration=duration,
+        stop_context=_graceful_stop,
+    )
+    if summary.interrupted:
+        _err(f"{source}: interrupted; {output} was not written")
+        raise typer.Exit(EXIT_INTERRUPTED)
+    if not quiet:
+        typer.echo(summary.text)
+    for note in summary.notes:
+        _err(f"{source}: {note}")
 
 
 # --- sweep ------------------------------------------------------------------------------
@@ -795,7 +936,9 @@ def sweep(
     if output is not None:
         sw.write_csv(table, output)
     if plot is not None:
-        sw.plot_table(table, plot, x_key, y_col)
+        from animsim.export import sweep_plot
+
+        sweep_plot.plot_table(table, plot, x_key, y_col)
     counts = table.counts()
     if scheduler is not None:
         where = "Dask LocalCluster" if scheduler == "local" else f"Dask at {scheduler}"
@@ -1012,6 +1155,7 @@ def _compare_progress(total: int):
 class PlotKind(StrEnum):
     trajectory = "trajectory"
     energy = "energy"
+    phase = "phase"
 
 
 @app.command()
@@ -1025,7 +1169,12 @@ def plot(
     ],
     output: Annotated[Path, typer.Option("-o", "--output", help="Picture file: .png, .svg or .pdf.")],
     kind: Annotated[
-        PlotKind, typer.Option("--kind", help="Paths of particles, or energy against time.")
+        PlotKind,
+        typer.Option(
+            "--kind",
+            help="Paths of particles; energy against time (kinetic, gravitational, spring, ...); "
+            "or phase: position against velocity per particle and axis.",
+        ),
     ] = PlotKind.trajectory,
     scene: Annotated[
         Path | None, typer.Option("--scene", help="The scene of a trajectory (needed for --kind energy).")
@@ -1036,11 +1185,19 @@ def plot(
     integrator: Annotated[str | None, typer.Option(help="Override the scene's integrator.")] = None,
     dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
     duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
+    integrators: Annotated[
+        str | None,
+        typer.Option("--integrators", help="--kind phase: comma-separated methods, overlaid."),
+    ] = None,
+    particles: Annotated[
+        str | None,
+        typer.Option("--particles", help="--kind phase: comma-separated particle ids; default up to 3."),
+    ] = None,
     *,
     limits: Any = None,
 ) -> None:
-    """Draw particle paths or the energy (kinetic, potential, total, and drift) of a run."""
-    from animsim.export.pictures import figure_format, plot_energy, plot_trajectory
+    """Draw particle paths, the energy of a run split into its parts (and its drift), or phase portraits."""
+    from animsim.export.pictures import figure_format, plot_trajectory
     from animsim.export.trajectory import TrajectoryCollector, is_trajectory, read_trajectory
 
     figure_format(output)
@@ -1048,6 +1205,25 @@ def plot(
         raise UsageError(f"--view {view!r}: plot takes xy, xz or yz")
     check_output_path(output, source)
     from_file = is_trajectory(source)
+    if kind is not PlotKind.phase and (integrators is not None or particles is not None):
+        raise UsageError("--integrators and --particles go with --kind phase")
+    if kind is PlotKind.phase:
+        from animsim.export.phase import phase_command
+
+        phase_command(
+            source,
+            output,
+            from_file=from_file,
+            scene=scene,
+            prepare=lambda path, **kw: prepare_scene(path, limits, **kw),
+            integrators=integrators,
+            particles=particles,
+            integrator=integrator,
+            dt=dt,
+            duration=duration,
+        )
+        typer.echo(f"wrote {output}")
+        return
     scene_path = scene if from_file else source
     compiled = None
     if scene_path is not None:
@@ -1058,11 +1234,13 @@ def plot(
     if kind is PlotKind.energy:
         if compiled is None:
             raise UsageError("--kind energy needs the scene: give a scene, or --scene with the trajectory")
-        times, kinetic, potential = _energies(compiled, read_trajectory(source) if from_file else None)
-        plot_energy(
+        from animsim.export.phase import energy_parts_of
+        from animsim.export.pictures import plot_energy_parts
+
+        times, parts = energy_parts_of(compiled, read_trajectory(source) if from_file else None)
+        plot_energy_parts(
             times,
-            kinetic,
-            potential,
+            parts,
             output,
             title=f"{compiled.name}: {compiled.integrator_name}, dt {compiled.clock.dt:g} s",
             conservative=compiled.conservative,
@@ -1072,7 +1250,7 @@ def plot(
             traj = read_trajectory(source)
             name = source.stem
         else:
-            from animsim.simulate import run as simulate
+            from animsim.engine import run as simulate
 
             assert compiled is not None
             collector = TrajectoryCollector()
@@ -1081,44 +1259,6 @@ def plot(
             name = compiled.name
         plot_trajectory(traj, output, view=view, title=name)
     typer.echo(f"wrote {output}")
-
-
-def _energies(compiled: Any, traj: Any) -> tuple[Any, Any, Any]:
-    """Per-frame kinetic and potential energy, from a run or from a trajectory of the scene."""
-    import numpy as np
-
-    dyn = compiled.dynamics
-    times: list[float] = []
-    kinetic: list[float] = []
-    potential: list[float] = []
-    if traj is None:
-        from animsim.simulate import run as simulate
-
-        def observe(state: Any) -> None:
-            times.append(state.time)
-            kinetic.append(dyn.kinetic_energy(state.particle_velocity))
-            potential.append(dyn.potential_energy(state.particle_position))
-
-        simulate(compiled, [], observers=[observe])
-    else:
-        if compiled.emitters is not None:
-            raise UsageError("energy from a trajectory needs a scene without emitters; give the scene itself")
-        index_of = {pid: i for i, pid in enumerate(compiled.system.ids)}
-        try:
-            rows = np.array([index_of[pid] for pid in traj.ids], dtype=np.int64)
-        except KeyError as exc:
-            raise UsageError(
-                f"the trajectory has particle {exc.args[0]!r}, which the scene does not"
-            ) from None
-        x = compiled.initial.particle_position.copy()
-        v = compiled.initial.particle_velocity.copy()
-        for frame in traj.frames():
-            x[rows[frame.index]] = frame.position
-            v[rows[frame.index]] = frame.velocity
-            times.append(frame.time)
-            kinetic.append(dyn.kinetic_energy(v))
-            potential.append(dyn.potential_energy(x))
-    return np.array(times), np.array(kinetic), np.array(potential)
 
 
 # --- entry point ----------------------------------------------------------------------------

@@ -13,25 +13,18 @@ from typing import Any
 
 import numpy as np
 
-from animsim.backends import BACKEND_REFERENCE, attach_backend
-from animsim.collisions import ImpulsePlane, PlaneColliders
+from animsim.backends import BACKEND_REFERENCE, backend_line, choose_backend
 from animsim.dynamics import Dynamics
+from animsim.elements import BuildContext, ForceElement, StepStage, build_elements
 from animsim.errors import UsageError
-from animsim.forces import ForceTerm
-from animsim.forces.attractor import Attractor
-from animsim.forces.drag import Drag, QuadraticDrag
-from animsim.forces.gravity import Gravity
 from animsim.forces.grid_springs import build_spring_term
 from animsim.forces.penalty import PenaltyPlane
-from animsim.forces.wind import Wind
 from animsim.integrators import integrator_class
 from animsim.integrators.base import Integrator
-from animsim.record import Clock, TrajectoryHeader, recording_rule, scene_record_steps
+from animsim.record import Clock, TrajectoryHeader, landing_steps, recording_rule, scene_record_steps
 from animsim.scene import models as m
-from animsim.scene.structures import expand
+from animsim.scene.structures import connectivity, expand
 from animsim.system import State, System
-
-DEFAULT_PENALTY_STIFFNESS = 1e4
 
 
 @dataclass
@@ -44,8 +37,9 @@ class Compiled:
     initial: State
     dynamics: Dynamics
     integrator: Integrator
-    colliders: PlaneColliders | None
-    emitters: Any | None  # animsim.emitters.Emitters when the scene has emitters
+    #: what runs after each integrator step, in order (collisions, then births)
+    post_step: tuple[StepStage, ...]
+    emitters: Any | None  # animsim.emitters.Emitters when the scene has emitters (also in post_step)
     clock: Clock
     record_steps: np.ndarray
     header: TrajectoryHeader
@@ -54,14 +48,35 @@ class Compiled:
     left_out: list[str] = field(default_factory=list)
     conservative: bool = False
     backend: str = "numpy"  # the backend that steps it (animsim.backends)
-    stepper: Any | None = None  # the numba backend's stepper; None: the NumPy loop
+    threads: int | None = None  # numba threads (None: numba's default)
+    adaptive: AdaptiveSpec | None = None  # step doubling, when the scene asks for it
 
     @property
     def integrator_name(self) -> str:
         return self.integrator.name
 
     def fresh_state(self) -> State:
-        return self.initial.copy()
+        state = self.initial.copy()
+        if state.particle_alive is None:
+            return state
+        # a pool's masses must be the state's own even if the initial state's were shared
+        state.particle_mass = self.initial.particle_mass.copy()
+        state.particle_inv_mass = self.initial.particle_inv_mass.copy()
+        return state
+
+    @property
+    def colliders(self) -> StepStage | None:
+        """The first stage that collides particles (for code that draws or reports them)."""
+        return next((st for st in self.post_step if st.collides_newborns), None)
+
+
+@dataclass(frozen=True)
+class AdaptiveSpec:
+    """Step doubling's settings, as plain numbers (the stepping code never reads the scene)."""
+
+    tolerance: float
+    dt_min: float
+    dt_max: float
 
 
 def with_overrides(
@@ -104,9 +119,19 @@ def with_overrides(
 
 
 def compile_scene(
-    scene: m.Scene, name: str = "scene", backend: str = "numpy", threads: int | None = None
+    scene: m.Scene,
+    name: str = "scene",
+    backend: str = "numpy",
+    threads: int | None = None,
+    *,
+    record_times: np.ndarray | None = None,
 ) -> Compiled:
-    """Compile ``scene`` for ``backend`` (see :mod:`animsim.backends`; ``threads``: numba's)."""
+    """Compile ``scene`` for ``backend`` (see :mod:`animsim.backends`; ``threads``: numba's).
+
+    ``record_times``: record exactly the steps that end at these times (references
+    and sweeps compare runs there) instead of the scene's ``record`` schedule;
+    a time no step lands on is a RuntimeError.
+    """
     stages: list[str] = []
     left_out: list[str] = []
 
@@ -211,26 +236,17 @@ def compile_scene(
         structure_grids=grids,
     )
 
-    # --- force terms: only those the scene uses -----------------------------------
-    terms: list[ForceTerm] = []
-    present = set()
-    for force_index, f in enumerate(scene.forces):
-        present.add(f.type)
-        if isinstance(f, m.Gravity):
-            terms.append(Gravity(np.array(f.g), system.particle_mass))
-        elif isinstance(f, m.Drag):
-            terms.append(Drag(f.k))
-        elif isinstance(f, m.QuadraticDrag):
-            terms.append(QuadraticDrag(f.rho, f.cd, f.area))
-        elif isinstance(f, m.Wind):
-            terms.append(Wind(np.array(f.velocity), f.k))
-            if f.turbulence > 0:
-                from animsim.forces.turbulence import Turbulence
+    system.freeze()
+    chosen, backend_note = choose_backend(backend)
+    ctx = BuildContext(system=system, index_of=index_of, seed=scene.seed, backend=chosen)
 
-                terms.append(Turbulence.from_scene(f, scene.seed, system.particle_mass, stream=force_index))
-                present.add("turbulence")
-        elif isinstance(f, m.Attractor):
-            terms.append(Attractor(np.array(f.position), f.gm, f.softening, system.particle_mass))
+    # --- elements: only those the scene uses (each module registers its builder) -----
+    built = build_elements([*scene.forces, *scene.planes], ctx)
+    terms: list[ForceElement] = [e for e in built if isinstance(e, ForceElement)]
+    post_step: list[StepStage] = [e for e in built if isinstance(e, StepStage)]
+    present = {f.type for f in scene.forces}
+    if any(getattr(f, "turbulence", 0) > 0 for f in scene.forces):
+        present.add("turbulence")
     for kind in m.FORCE_TYPES:
         if kind not in present:
             left_out.append(f"{kind}: not in the scene's forces")
@@ -239,33 +255,24 @@ def compile_scene(
 
     if system.spring_count:
         label = f"springs: {system.spring_count} in {len(families)} famil{'y' if len(families) == 1 else 'ies'} ({', '.join(f'{name} {b - a}' for name, a, b in families)})"
-        terms.append(build_spring_term(system, label, grid=backend != BACKEND_REFERENCE))
+        terms.insert(
+            sum(1 for e in terms if not isinstance(e, PenaltyPlane)),
+            build_spring_term(system, label, grid=backend != BACKEND_REFERENCE),
+        )
     else:
         left_out.append("springs: none, so no spring forces or scatter")
 
-    impulse: list[ImpulsePlane] = []
-    penalty = 0
-    for p in scene.planes:
-        normal = np.array(p.normal) / np.linalg.norm(p.normal)
-        if p.response == "penalty":
-            terms.append(
-                PenaltyPlane(
-                    np.array(p.point),
-                    normal,
-                    p.stiffness if p.stiffness is not None else DEFAULT_PENALTY_STIFFNESS,
-                    p.damping or 0.0,
-                )
-            )
-            penalty += 1
-        else:
-            impulse.append(ImpulsePlane(np.array(p.point), normal, p.restitution, p.friction))
-    colliders = PlaneColliders(impulse, system.particle_inv_mass) if impulse else None
-    if not impulse:
+    impulse_planes = [p for p in scene.planes if p.response == "impulse"]
+    penalty = len(scene.planes) - len(impulse_planes)
+    if not impulse_planes:
         left_out.append("plane collisions: no impulse planes, so no collision detection")
     if not penalty:
         left_out.append("penalty contact: no penalty planes")
 
     dynamics = Dynamics(system, terms)
+    if emitters is not None:
+        emitters.attach(dynamics, [st for st in post_step if st.collides_newborns])
+        post_step.append(emitters)  # births run after the step and its collisions
     name_ = scene.integrator_name
     try:
         integrator = integrator_class(name_)(dynamics)
@@ -274,24 +281,26 @@ def compile_scene(
 
     clock = Clock.make(scene.duration, scene.dt)
     every, fps = recording_rule(scene.record.every, scene.record.fps, clock.dt)
-    rec = scene_record_steps(clock, scene.record.every, scene.record.fps)
+    if record_times is None:
+        rec = scene_record_steps(clock, scene.record.every, scene.record.fps)
+    else:
+        landing = landing_steps(clock, record_times)
+        if any(s is None for s in landing):
+            raise RuntimeError(f"dt = {clock.dt!r} does not land on every requested record time")
+        rec = np.unique(np.array(landing, dtype=np.int64))
 
     moving_anchor = bool(np.any(particle_pinned & np.any(particle_velocity != 0, axis=1)))
-    lossy_planes = any(p.restitution < 1 or p.friction > 0 for p in scene.planes if p.response == "impulse")
     conservative = (
         dynamics.conservative
         and not moving_anchor
-        and not scene.emitters
+        and not any(st.injects or st.dissipative for st in post_step)
         and not penalty
-        and not lossy_planes
     )
 
     stages[:0] = [t.label for t in terms]
     stages.append(f"integrator: {integrator.name} ({integrator.description})")
-    if colliders:
-        stages.append(colliders.label)
-    if emitters is not None:
-        stages.extend(emitters.labels)  # they run after the step and its collisions
+    for st in post_step:
+        stages.extend(getattr(st, "labels", None) or [st.label])
     stages.append(
         f"record: {len(rec)} frames of {clock.steps} steps"
         + (f" (every {every})" if scene.record.every else "")
@@ -309,10 +318,16 @@ def compile_scene(
                 (np.array(p.point), np.array(p.normal) / np.linalg.norm(p.normal)) for p in scene.planes
             ]
         },
+        connectivity=connectivity([(s.id, e, base) for s, e, base in expanded]),
     )
     initial = State(
         particle_position=particle_position,
         particle_velocity=particle_velocity,
+        # pools switch masses on and off: such a state owns its mass arrays
+        particle_mass=system.particle_mass.copy() if emitters is not None else system.particle_mass,
+        particle_inv_mass=(
+            system.particle_inv_mass.copy() if emitters is not None else system.particle_inv_mass
+        ),
         time=0.0,
         step=0,
         particle_alive=particle_alive,
@@ -324,7 +339,7 @@ def compile_scene(
         initial=initial,
         dynamics=dynamics,
         integrator=integrator,
-        colliders=colliders,
+        post_step=tuple(post_step),
         emitters=emitters,
         clock=clock,
         record_steps=rec,
@@ -333,6 +348,13 @@ def compile_scene(
         stages=stages,
         left_out=left_out,
         conservative=conservative,
+        adaptive=(
+            None
+            if scene.adaptive is None
+            else AdaptiveSpec(scene.adaptive.tolerance, scene.adaptive.dt_min, scene.adaptive.dt_max)
+        ),
     )
-    attach_backend(compiled, backend, threads=threads)
+    compiled.backend = chosen
+    compiled.threads = threads
+    compiled.stages.append(backend_line(compiled, chosen, backend_note))
     return compiled

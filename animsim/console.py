@@ -50,39 +50,24 @@ def sig(value: float | None, digits: int = 3) -> str:
     return f"{value:.{digits}g}"
 
 
-def percent(fraction: float) -> str:
-    """A signed relative change as a percentage: +0.12%, -3.5%; large ones in powers of ten."""
-    if not math.isfinite(fraction):
-        return "n/a"
-    pct = 100 * fraction
-    if pct == 0 or 0.01 <= abs(pct) < 1000:
-        return f"{pct:+.3g}%"
-    return f"{pct:+.2e}%"  # 1.23e-09% or 3.5e+04%: never a misleading -0.00%
-
-
 def numba_cache_present() -> bool:
     """True when numba's compiled kernels of this animsim are already cached on disk.
 
-    numba caches beside the source (``__pycache__``) when it can write there,
-    else under NUMBA_CACHE_DIR or the user's cache folder; any index file of
-    the kernels module in one of those places counts.
+    numba caches beside the source (``__pycache__`` of the module holding the
+    kernel) when it can write there, else under NUMBA_CACHE_DIR or the user's
+    cache folder; any index file (``*.nbi``) of an animsim module counts.
     """
-    from animsim import backends
+    import animsim
 
-    here = Path(backends.__file__).parent / "__pycache__"
-    places = [here]
-    if os.environ.get("NUMBA_CACHE_DIR"):
-        places.append(Path(os.environ["NUMBA_CACHE_DIR"]))
-    places.append(Path.home() / ".cache" / "numba")
-    for place in places:
-        try:
-            if place == here:
-                if any(place.glob("numba_kernels.*.nbi")):
-                    return True
-            elif place.is_dir() and any(place.rglob("numba_kernels.*.nbi")):
+    package = Path(animsim.__file__).parent
+    try:
+        if any(package.rglob("__pycache__/*.nbi")):
+            return True
+        for place in (os.environ.get("NUMBA_CACHE_DIR"), Path.home() / ".cache" / "numba"):
+            if place and Path(place).is_dir() and any(Path(place).rglob("*animsim*/**/*.nbi")):
                 return True
-        except OSError:
-            continue
+    except OSError:
+        return True  # cannot tell: stay quiet rather than announce a compile that may not come
     return False
 
 
@@ -115,17 +100,3 @@ def steps_text(compiled: Any, result: Any) -> str:
     if taken < planned:
         return f"{taken} of {planned} steps of {compiled.clock.dt:g} s"
     return f"{planned} steps of {compiled.clock.dt:g} s"
-
-
-def drift_text(e0: float, e1: float, floor: float = 1e-12) -> str:
-    """An energy change in joules and relative to the size of the starting energy.
-
-    ``drift -0.0128 J (-1.28% of |E0|)``: the sign is that of E1 - E0 (energy
-    lost is negative) whatever the sign of E0, and the percentage is of |E0|
-    so a negative energy (an orbit, a spring with gravity) reads the same way.
-    """
-    change = e1 - e0
-    scale = abs(e0)
-    if scale <= floor:
-        return f"drift {change:+.3g} J"
-    return f"drift {change:+.3g} J ({percent(change / scale)} of |E0|)"

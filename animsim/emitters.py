@@ -93,10 +93,10 @@ from typing import Any
 
 import numpy as np
 
-from animsim.collisions import PlaneColliders
+from animsim.elements import StepStage
 from animsim.record import Frame
 from animsim.scene import models as m
-from animsim.system import State, System
+from animsim.system import State
 
 #: The rate noise (``rate_spread``) is held for this span of simulated time, s.
 RATE_NOISE_WINDOW = 0.1
@@ -180,40 +180,48 @@ class RateSchedule:
 
 
 class ShapeSampler:
-    """Uniform birth positions in an emitter shape (constrained randomization)."""
+    """Uniform birth positions in an emitter shape (constrained randomization).
+
+    Built from the scene's shape once (compile time); sampling reads plain numbers.
+    """
 
     def __init__(self, shape: m.PointShape | m.SphereShape | m.BoxShape | m.DiscShape):
-        self.shape = shape
-        if isinstance(shape, m.DiscShape):
+        self.kind = shape.type
+        if self.kind == "point":
+            self.center = np.array(shape.position, dtype=np.float64)
+            self.text = f"point {list(shape.position)}"
+        elif self.kind == "box":
+            self.lo = np.array(shape.min, dtype=np.float64)
+            self.hi = np.array(shape.max, dtype=np.float64)
+            self.text = f"box {list(shape.min)}..{list(shape.max)}"
+        elif self.kind == "sphere":
+            self.center, self.radius = np.array(shape.center, dtype=np.float64), float(shape.radius)
+            self.text = f"sphere at {list(shape.center)} r = {shape.radius:g} m (uniform inside, rejection)"
+        else:  # disc
+            self.center, self.radius = np.array(shape.center, dtype=np.float64), float(shape.radius)
             n = np.array(shape.normal) / np.linalg.norm(shape.normal)
             # Any vector not parallel to n gives the in-plane basis (e1, e2).
             helper = np.eye(3)[int(np.argmin(np.abs(n)))]
             e1 = np.cross(n, helper)
             e1 /= np.linalg.norm(e1)
             self.basis = np.stack([e1, np.cross(n, e1)])  # (2, 3)
+            self.text = (
+                f"disc at {list(shape.center)} normal {list(shape.normal)} r = {shape.radius:g} m (rejection)"
+            )
 
     def describe(self) -> str:
-        s = self.shape
-        if isinstance(s, m.PointShape):
-            return f"point {list(s.position)}"
-        if isinstance(s, m.SphereShape):
-            return f"sphere at {list(s.center)} r = {s.radius:g} m (uniform inside, rejection)"
-        if isinstance(s, m.BoxShape):
-            return f"box {list(s.min)}..{list(s.max)}"
-        return f"disc at {list(s.center)} normal {list(s.normal)} r = {s.radius:g} m (rejection)"
+        return self.text
 
     def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
-        s = self.shape
-        if isinstance(s, m.PointShape):
-            return np.tile(np.array(s.position), (n, 1))
-        if isinstance(s, m.BoxShape):
-            lo, hi = np.array(s.min), np.array(s.max)
-            return lo + (hi - lo) * rng.random((n, 3))
-        if isinstance(s, m.SphereShape):
+        if self.kind == "point":
+            return np.tile(self.center, (n, 1))
+        if self.kind == "box":
+            return self.lo + (self.hi - self.lo) * rng.random((n, 3))
+        if self.kind == "sphere":
             unit = _inside_unit_ball(rng, n, 3, BALL_ACCEPTANCE)
-            return np.array(s.center) + s.radius * unit
+            return self.center + self.radius * unit
         unit = _inside_unit_ball(rng, n, 2, DISC_ACCEPTANCE)
-        return np.array(s.center) + s.radius * (unit @ self.basis)
+        return self.center + self.radius * (unit @ self.basis)
 
 
 def _inside_unit_ball(rng: np.random.Generator, n: int, dim: int, acceptance: float) -> np.ndarray:
@@ -292,7 +300,11 @@ class BirthStream:
     """
 
     def __init__(self, spec: m.Emitter, seed: int):
-        self.spec = spec
+        # Plain numbers only: the stream draws while stepping and never reads the scene.
+        self.name = spec.name
+        self.v_spread = float(spec.velocity.spread)
+        self.life_mean = float(spec.lifetime.mean)
+        self.life_spread = float(spec.lifetime.spread)
         self.seed = seed
         self.rate = RateSchedule.from_spec(spec.rate)
         self.spread = float(spec.rate_spread)
@@ -304,7 +316,7 @@ class BirthStream:
         self.reset()
 
     def reset(self) -> None:
-        root = np.random.SeedSequence([self.seed, EMITTER_STREAM_TAG, *_name_words(self.spec.name)])
+        root = np.random.SeedSequence([self.seed, EMITTER_STREAM_TAG, *_name_words(self.name)])
         birth_ss, attr_ss = root.spawn(2)
         self.rng_birth = np.random.default_rng(birth_ss)
         self.rng_attr = np.random.default_rng(attr_ss)
@@ -329,10 +341,9 @@ class BirthStream:
             t = t[u * lam_max < lam]
         k = len(t)
         ra = self.rng_attr
-        spec = self.spec
         position = self.shape.sample(ra, k)
-        velocity = self.v_mean + spec.velocity.spread * ra.standard_normal((k, 3))
-        lifetime = _positive_gaussian(ra, k, spec.lifetime.mean, spec.lifetime.spread)
+        velocity = self.v_mean + self.v_spread * ra.standard_normal((k, 3))
+        lifetime = _positive_gaussian(ra, k, self.life_mean, self.life_spread)
         return Births(t, position, velocity, lifetime)
 
     def take(self, t1: float) -> Births:
@@ -348,7 +359,6 @@ class Pool:
     """One emitter's slots [first, first + capacity) in the global arrays."""
 
     def __init__(self, spec: m.Emitter, order: int, first: int, seed: int):
-        self.spec = spec
         self.name = spec.name
         self.order = order
         self.first = first
@@ -379,15 +389,16 @@ class Pool:
         self.peak_alive = 0
         self.kinetic_energy_born = 0.0
 
-    def bind(self, system: System, state: State) -> None:
+    def bind(self, state: State) -> None:
         """Point at this run's arrays and empty the pool."""
         sl = slice(self.first, self.first + self.capacity)
         self.x = state.particle_position[sl]
         self.v = state.particle_velocity[sl]
         assert state.particle_alive is not None
         self.alive = state.particle_alive[sl]
-        self.m = system.particle_mass[sl]
-        self.inv_m = system.particle_inv_mass[sl]
+        # the state's own live masses: births and deaths switch slots on and off
+        self.m = state.particle_mass[sl]
+        self.inv_m = state.particle_inv_mass[sl]
         self.alive[:] = False
         self.m[:] = 0.0
         self.inv_m[:] = 0.0
@@ -491,15 +502,22 @@ class Pool:
         }
 
 
-class Emitters:
+class Emitters(StepStage):
     """All pools of a scene and the hooks the simulation loop calls.
 
     ``reset`` before a run, ``advance`` after each step's integration and
     collisions, ``frame`` to record, ``summary`` for the metadata.
     """
 
+    #: births bring kinetic energy in (the watchdog books it separately)
+    injects = True
+    random = True
+    no_closed_form = "it has emitters (particles are born and die at random)"
+
     def __init__(self, pools: list[Pool], first_index: int):
         self.pools = pools
+        self.dynamics: Any = None
+        self.colliders: list[Any] = []
         self.first_index = first_index
         self.capacity = sum(p.capacity for p in pools)
         self.names = [p.name for p in pools]
@@ -525,13 +543,25 @@ class Emitters:
             + (f"; kill box of {', '.join(repr(k) for k in kill)}" if kill else "; no kill box"),
         ]
 
-    def reset(self, system: System, state: State) -> None:
+    def reset(self, state: State) -> None:
         for p in self.pools:
-            p.bind(system, state)
+            p.bind(state)
         self._accel = np.zeros_like(state.particle_position)
         self._next_table = self.first_index
 
-    def advance(self, compiled: Any, state: State, t0: float, t1: float) -> None:
+    def attach(self, dynamics: Any, colliders: list[Any]) -> None:
+        """The force sum newborns fly on with, and the stages they collide with (compile time)."""
+        self.dynamics = dynamics
+        self.colliders = colliders
+
+    def apply(
+        self, state: State, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, dt: float
+    ) -> bool:
+        """The step stage: births in [t0, t1), deaths at t1 (bumps the state's revision itself)."""
+        self.advance(state, t0, t1)
+        return False  # advance bumps the revision itself when a birth or death changed the state
+
+    def advance(self, state: State, t0: float, t1: float) -> None:
         """Births in [t0, t1), moved on to t1; then deaths at t1."""
         born: list[np.ndarray] = []
         times: list[np.ndarray] = []
@@ -542,28 +572,25 @@ class Emitters:
         newborn = np.concatenate(born)
         changed = bool(len(newborn))
         if len(newborn):
-            self._move_newborns(compiled, state, newborn, t1 - np.concatenate(times), 0.5 * (t0 + t1))
+            self._move_newborns(state, newborn, t1 - np.concatenate(times), 0.5 * (t0 + t1))
         for p, idx in zip(self.pools, born, strict=True):
             changed |= p.deaths(t1, idx)
         if changed:
             state.revision += 1  # integrators that cache a force must recompute it
 
-    def _move_newborns(
-        self, compiled: Any, state: State, idx: np.ndarray, rest: np.ndarray, t_mid: float
-    ) -> None:
+    def _move_newborns(self, state: State, idx: np.ndarray, rest: np.ndarray, t_mid: float) -> None:
         """x += r v0 + r^2/2 a0, v += r a0 for the rest r of the birth step; then planes."""
         x, v = state.particle_position, state.particle_velocity
         assert self._accel is not None
         # One evaluation over every slot: force terms hold per-particle arrays
         # (mass) of the full system, so they cannot be evaluated on a subset.
-        a = compiled.dynamics.acceleration(x, v, t_mid, self._accel)[idx]
+        a = self.dynamics.acceleration(x, v, t_mid, self._accel)[idx]
         x0, v0 = x[idx], v[idx]
         r = rest[:, None]
         x1 = x0 + r * v0 + (0.5 * r * r) * a
         v1 = v0 + r * a
-        if compiled.colliders is not None:
-            sub = PlaneColliders(compiled.colliders.planes, np.ones(len(idx)))
-            sub.apply(x0, v0, x1, v1, rest)
+        for stage in self.colliders:
+            stage.collide_subset(x0, v0, x1, v1, rest)
         x[idx] = x1
         v[idx] = v1
 

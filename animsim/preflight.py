@@ -77,6 +77,11 @@ SPRING_BYTES = 256
 IMPLICIT_SPRING_BYTES = 2 * 9 * 8 * 2
 # An emitter pool slot: age, lifetime, size and RGBA over life, birth order.
 EMITTER_SLOT_BYTES = 96
+# A birth event drawn but not yet placed (time, position, velocity, lifetime, the thinning
+# draw and the sort's work space): the events of one step exist together, kept or dropped.
+BIRTH_EVENT_BYTES = 128
+# Births are drawn in chunks of about this many events (animsim.emitters.CHUNK_BIRTHS).
+BIRTH_CHUNK_EVENTS = 4096
 # Per recorded frame: the record-step index, and for NPZ the frame time and
 # row offset kept as Python objects until the file is assembled.
 FRAME_BYTES = {"csv": 8, "npz": 84}
@@ -164,7 +169,7 @@ class Estimate:
     springs: int
     pool_slots: int  # emitter pool capacity (preallocated)
     alive_emitted: int  # expected peak of alive emitted particles (disk estimate)
-    births: int  # upper bound on births over the run (each keeps an id)
+    births: int  # upper bound on births over the run (kept or dropped by a full pool)
     memory: int  # bytes of live state
     # (path into the scene, bytes, what) for each part, largest blame first
     parts: list[tuple[tuple[str | int, ...], int, str]] = field(default_factory=list)
@@ -217,6 +222,27 @@ def _emitter_numbers(e: Any, duration: float) -> tuple[int, int]:
     return math.ceil(alive), math.ceil(births)
 
 
+def _emitter_memory(e: Any, births: int, frames: int, dt: float, per_particle: int) -> tuple[int, int]:
+    """(bytes, ids kept) of one emitter: what can be alive, what is recorded, one step's draws.
+
+    Births beyond the pool are dropped by design and keep nothing, so the
+    pool's capacity bounds what is alive. An id is kept once a particle is
+    recorded: at most the pool's capacity per recorded frame, and never more
+    than the births. The events drawn for one step exist together before
+    the full pool drops them (rate * dt of them, in chunks).
+    """
+    peak = max(kf[1] for kf in e.rate) if isinstance(e.rate, list) else e.rate
+    peak += SPREAD_SIGMAS * e.rate_spread
+    recorded = min(births, frames * e.max_particles)
+    events = min(peak * dt, 1e18) + BIRTH_CHUNK_EVENTS
+    cost = (
+        e.max_particles * (per_particle + EMITTER_SLOT_BYTES)
+        + recorded * ID_BYTES
+        + math.ceil(events) * BIRTH_EVENT_BYTES
+    )
+    return cost, recorded
+
+
 def estimate(scene: Scene, steps: int, fmt: str = "csv") -> Estimate:
     """Count what the scene will hold and what that costs, without building it."""
     vectors = BASE_VECTORS + INTEGRATOR_VECTORS.get(scene.integrator_name, max(INTEGRATOR_VECTORS.values()))
@@ -236,16 +262,16 @@ def estimate(scene: Scene, steps: int, fmt: str = "csv") -> Estimate:
         parts.append(
             (where, n * per_particle + k * per_spring, f"{s.type} {s.id!r}: {n} particles, {k} springs")
         )
+    frames = _frame_count(scene, steps)
     pool = alive = births = 0
     for i, e in enumerate(scene.emitters):
         a, b = _emitter_numbers(e, scene.duration)
         pool += e.max_particles
         alive += a
         births += b
-        cost = e.max_particles * (per_particle + EMITTER_SLOT_BYTES) + b * ID_BYTES
-        what = f"emitter {e.name!r}: a pool of {e.max_particles} particles and up to {b} births"
+        cost, recorded = _emitter_memory(e, b, frames, scene.dt, per_particle)
+        what = f"emitter {e.name!r}: a pool of {e.max_particles} particles and up to {recorded} recorded ids"
         parts.append((("emitters", i, "max_particles"), cost, what))
-    frames = _frame_count(scene, steps)
     parts.append((("record",), frames * FRAME_BYTES.get(fmt, 8), f"{frames} recorded frames"))
     parts.sort(key=lambda p: -p[1])
     return Estimate(

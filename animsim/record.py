@@ -90,6 +90,24 @@ def scene_record_steps(clock: Clock, every: int | None, fps: float | None) -> np
     return steps
 
 
+def landing_steps(clock: Clock, times: Sequence[float]) -> list[int | None]:
+    """For each time, the step index whose clock time is that time (to rounding), or None."""
+    out: list[int | None] = []
+    for t in times:
+        i = min(max(round(t / clock.dt), 0), clock.steps)
+        candidates = [j for j in (i - 1, i, i + 1) if 0 <= j <= clock.steps]
+        hit = next(
+            (
+                j
+                for j in candidates
+                if math.isclose(clock.time(j), t, rel_tol=1e-12, abs_tol=1e-12 * clock.duration)
+            ),
+            None,
+        )
+        out.append(hit)
+    return out
+
+
 def record_steps(clock: Clock, every: int | None = None, fps: float | None = None) -> np.ndarray:
     """Sorted step indices (0..steps) whose states are recorded.
 
@@ -122,6 +140,26 @@ def record_steps(clock: Clock, every: int | None = None, fps: float | None = Non
 
 
 @dataclass(frozen=True)
+class Connectivity:
+    """How one structure's particles connect, for exporters that keep shapes.
+
+    kind ``"mesh"``: a surface (cloth, the outside of a soft box, a mesh);
+    ``"curves"``: polylines (a strand). The particles are ids
+    ``first .. first + count - 1`` of the header's id table, and
+    ``vertex_counts`` / ``vertex_indices`` list the faces (or curves) as USD
+    does: the corner count of each, then all corners, as indices local to the
+    structure (0 = particle ``first``).
+    """
+
+    name: str
+    kind: str  # "mesh" | "curves"
+    first: int
+    count: int
+    vertex_counts: np.ndarray  # (F,) int64
+    vertex_indices: np.ndarray  # (sum(vertex_counts),) int64, local
+
+
+@dataclass(frozen=True)
 class TrajectoryHeader:
     """What every sink learns before the first frame.
 
@@ -135,6 +173,7 @@ class TrajectoryHeader:
     spring_index: np.ndarray  # (S, 2) int64 particle indices, for drawing
     has_emitters: bool
     extra: dict[str, Any] = field(default_factory=dict)
+    connectivity: tuple[Connectivity, ...] = ()  # structures' faces and curves (optional)
 
 
 @dataclass(frozen=True)

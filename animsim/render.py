@@ -213,7 +213,7 @@ def render_scene(
     stop: Callable[[], bool] | None = None,
 ) -> RenderResult:
     """Simulate (recording at the frame rate) and draw. ``compiled`` must record at opts.fps."""
-    from animsim.simulate import run
+    from animsim.engine import run
 
     planes = compiled.header.extra.get("planes", [])
     bounds_sink = _BoundsSink()

@@ -1,8 +1,12 @@
-"""The compiled system: static arrays, and the state that changes.
+"""The compiled model (static arrays) and the state that stepping changes.
 
 Structure of arrays, named ``<entity>_<quantity>``. Particles are indexed in
 creation order: listed particles first, then structures, then the emitter
-pools (issue 3), whose slots are dead until born.
+pools, whose slots are dead until born.
+
+The model (:class:`System`) is frozen once compiled: nothing writes it while
+stepping. Whatever a run changes lives in :class:`State`, including the
+masses of emitter pool slots, which births and deaths switch on and off.
 """
 
 from __future__ import annotations
@@ -14,9 +18,9 @@ import numpy as np
 
 @dataclass
 class System:
-    """What does not change during a step (pools may change it between steps).
+    """What does not change during a run.
 
-    particle_mass: (N,) kg; 0 for pinned particles and dead pool slots.
+    particle_mass: (N,) kg; 0 for pinned particles and (initially dead) pool slots.
     particle_inv_mass: (N,) 1/kg; 0 for pinned and dead slots, so no force moves them.
     particle_pinned: (N,) bool.
     spring_index: (S, 2) int64 particle indices (a, b).
@@ -35,7 +39,7 @@ class System:
     # (family label, first spring, end spring): contiguous runs of generated springs.
     spring_families: list[tuple[str, int, int]] = field(default_factory=list)
     # (first particle, grid shape, first family, end family) of each generated
-    # structure, so spring kernels can work on the grid by slices (issue 8).
+    # structure, so spring kernels can work on the grid by slices.
     structure_grids: list[tuple[int, tuple[int, ...], int, int]] = field(default_factory=list)
 
     @property
@@ -46,6 +50,12 @@ class System:
     def spring_count(self) -> int:
         return int(self.spring_index.shape[0])
 
+    def freeze(self) -> None:
+        """Make every array read-only: a write while stepping is a bug, and now an error."""
+        for value in self.__dict__.values():
+            if isinstance(value, np.ndarray):
+                value.flags.writeable = False
+
 
 @dataclass
 class State:
@@ -54,23 +64,41 @@ class State:
     particle_position: (N, 3) m.   particle_velocity: (N, 3) m/s.
     time: s.   step: steps taken.
     particle_alive: (N,) bool, or None when the scene has no emitters (all alive).
+    particle_mass, particle_inv_mass: (N,) the live masses (kg, 1/kg). Without
+    emitters they are the model's own (read-only) arrays; with emitters the
+    state owns copies that births and deaths change.
     revision: bumped whenever something outside the integrator changes the
     state (a collision, a birth), so integrators that cache a force know it is stale.
     """
 
     particle_position: np.ndarray
     particle_velocity: np.ndarray
+    particle_mass: np.ndarray
+    particle_inv_mass: np.ndarray
     time: float = 0.0
     step: int = 0
     particle_alive: np.ndarray | None = None
     revision: int = 0
 
     def copy(self) -> State:
+        owns = self.particle_alive is not None  # only pools change masses
         return State(
             self.particle_position.copy(),
             self.particle_velocity.copy(),
+            self.particle_mass.copy() if owns else self.particle_mass,
+            self.particle_inv_mass.copy() if owns else self.particle_inv_mass,
             self.time,
             self.step,
             None if self.particle_alive is None else self.particle_alive.copy(),
             self.revision,
         )
+
+    def assign(self, src: State) -> None:
+        """Become ``src`` in place (arrays copied into this state's own, so references stay valid)."""
+        np.copyto(self.particle_position, src.particle_position)
+        np.copyto(self.particle_velocity, src.particle_velocity)
+        if self.particle_alive is not None and src.particle_alive is not None:
+            np.copyto(self.particle_alive, src.particle_alive)
+            np.copyto(self.particle_mass, src.particle_mass)
+            np.copyto(self.particle_inv_mass, src.particle_inv_mass)
+        self.time, self.step, self.revision = src.time, src.step, src.revision

@@ -26,8 +26,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from animsim.compile import compile_scene, with_overrides
+from animsim.engine import run
 from animsim.scene.loader import load_scene_text
-from animsim.simulate import run
 
 PARTICLES = 100_000
 RATE = 50_000  # births/s; with 2 s lifetimes the pool is full in steady state

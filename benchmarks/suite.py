@@ -221,7 +221,7 @@ structures:
 def numpy_contender(compiled, label: str, note: str = "") -> Contender:
     """The NumPy loop's work for ``guard.stride`` steps: integrate and collide each
     step, then one watchdog check, as ``simulate.run`` does."""
-    from animsim.simulate import Guard
+    from animsim.engine import Guard
 
     state = compiled.fresh_state()
     integ, colliders, guard, dt = compiled.integrator, compiled.colliders, Guard(compiled), compiled.clock.dt
@@ -381,7 +381,7 @@ forces: [{{type: gravity}}]
 
 
 def bench_tiny(settings: Settings) -> Table:
-    from animsim.simulate import run
+    from animsim.engine import run
 
     table = Table(
         f"Tiny scene: 1 particle, gravity, symplectic Euler; whole `run()` of {TINY_STEPS:,} steps, "

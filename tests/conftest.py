@@ -51,9 +51,9 @@ def cli():
 def simulate_text(text: str, **overrides):
     """Load, compile and run a scene given as YAML text; returns (compiled, result, MemorySink)."""
     from animsim.compile import compile_scene, with_overrides
+    from animsim.engine import run
     from animsim.record import MemorySink
     from animsim.scene.loader import load_scene_text
-    from animsim.simulate import run
 
     loaded = load_scene_text(text)
     scene = with_overrides(loaded.scene, **overrides)

@@ -21,24 +21,15 @@ def energy_drift(e0: float, e1: float) -> float:
     return (e1 - e0) / max(abs(e0), ENERGY_FLOOR)
 
 
-def _energy_report(compiled: Any, result: Any) -> str:
-    """Energy at start and end, and the drift where a relative drift means something.
+def _energy_report(compiled: Any, result: Any, drift_warn: float) -> str:
+    """Energy at start and end, and the drift verdict (animsim.analysis.drift)."""
+    from animsim.analysis.drift import drift
 
-    A drift is the integrator's error only in a conservative scene; with
-    emitters the energy starts near zero and births add to it, so a
-    percentage would be noise.
-    """
     text = f"energy {result.energy_start:.4g} -> {result.energy_end:.4g} J"
-    if compiled.emitters is not None:
-        return text + " (particles bring energy as they are born)"
-    from animsim.console import drift_text
-
-    kind = (
-        "conservative: the drift is integration error"
-        if compiled.conservative
-        else "forces add or remove energy"
-    )
-    return f"{text}, {drift_text(result.energy_start, result.energy_end, ENERGY_FLOOR)}; {kind}"
+    verdict = drift(compiled, result.energy_start, result.energy_end, drift_warn)
+    if verdict.relative is None:
+        return f"{text}, {verdict.text()}"
+    return f"{text}, {verdict.text()}: integration error, the scene being conservative"
 
 
 def check_scenes(
@@ -48,12 +39,16 @@ def check_scenes(
     echo: Callable[[str], None] = print,
     echo_err: Callable[[str], None] = print,
     limits: Any = None,
+    drift_warn: float | None = None,
 ) -> bool:
-    """``limits`` (a preflight.RunLimits) bounds every scene as ``animsim run`` would."""
-    from animsim.cli import prepare_scene
+    """``limits`` (a preflight.RunLimits) bounds every scene as ``animsim run`` would;
+    ``drift_warn`` (percent) is the energy drift above which a conservative scene gets a warning."""
+    from animsim.analysis.drift import DEFAULT_DRIFT_WARN_PERCENT, drift
+    from animsim.api import prepare_file as prepare_scene
     from animsim.compile import compile_scene
-    from animsim.simulate import STATUS_OK, run
+    from animsim.engine import STATUS_OK, run
 
+    warn = DEFAULT_DRIFT_WARN_PERCENT if drift_warn is None else drift_warn
     all_ok = True
     tally: dict[str, int] = {}
     for path in paths:
@@ -70,6 +65,11 @@ def check_scenes(
         from animsim.analysis import stability
 
         report = stability.analyse(compiled)
+        from animsim.analysis.effective import fallback_note
+
+        fallback = fallback_note(compiled)
+        if fallback is not None:
+            notes.append(f"note: {fallback}")
         if report is not None:
             notes.extend(report.lines())
             if report.dt_exceeds_limit:
@@ -79,8 +79,11 @@ def check_scenes(
         head = [
             f"{path}: {result.status} ({compiled.integrator_name}, dt {compiled.clock.dt:g}, "
             f"{result.steps_taken} steps, {result.wall_time:.2f} s)",
-            f"  {_energy_report(compiled, result)}",
+            f"  {_energy_report(compiled, result, warn)}",
         ]
+        verdict = drift(compiled, result.energy_start, result.energy_end, warn)
+        if verdict.warning and result.status == STATUS_OK:
+            echo_err(wrap(f"{path}: warning: {verdict.warning_text()}"))
         if result.status != STATUS_OK:
             all_ok = False
             for line in head:

@@ -59,7 +59,6 @@ from animsim.analysis.references import (
     Trajectory,
     analytic_reference,
     dop853_reference,
-    landing_steps,
     record_at,
     rk4_reference,
     smooth,
@@ -67,7 +66,7 @@ from animsim.analysis.references import (
 from animsim.compile import Compiled
 from animsim.errors import UsageError
 from animsim.integrators import FIXED_STEP, REGISTRY, integrator_class
-from animsim.record import Clock, scene_record_steps
+from animsim.record import Clock, landing_steps, scene_record_steps
 from animsim.scene import models as m
 
 COLUMNS = (
@@ -504,8 +503,8 @@ def _measure(
 
     With ``repeat`` = 0 the accuracy run's own wall time is the row's seconds.
     """
+    from animsim.engine import run
     from animsim.record import MemorySink
-    from animsim.simulate import run
 
     compiled = record_at(scene, name, integ, dt, times, backend)
     sink = MemorySink()
@@ -570,7 +569,7 @@ def estimate(
     Recording is left out: compare records only at the common times.
     """
     from animsim.compile import with_overrides
-    from animsim.simulate import run
+    from animsim.engine import run
 
     dt = max(dts)
     total_steps = sum(Clock.make(scene.duration, d).steps for d in dts)

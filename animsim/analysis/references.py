@@ -34,14 +34,14 @@ the step halved until the change is far below the smallest error measured.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from animsim.compile import Compiled, compile_scene, with_overrides
 from animsim.errors import SimulationError
-from animsim.record import Clock, MemorySink
+from animsim.record import MemorySink
 from animsim.scene import models as m
 
 # --- tolerances (named, so that what counts as "exactly along the spring" is visible)
@@ -265,18 +265,38 @@ class ClosedForm:
         return x, v
 
 
+@dataclass(frozen=True)
+class _Attractor:
+    """An attractor's closed-form contribution (position m, gm m^3/s^2, softening m)."""
+
+    position: np.ndarray
+    gm: float
+    softening: float
+
+
 def closed_form(compiled: Compiled) -> ClosedForm:
     """The scene's closed form, or :class:`NoClosedForm` saying why there is none."""
     scene = compiled.scene
-    if scene.emitters:
-        raise NoClosedForm("it has emitters (particles are born and die at random)")
-    if scene.planes:
-        raise NoClosedForm("it has planes (collisions have no closed form here)")
-    kinds = {f.type for f in scene.forces}
-    if "quadratic_drag" in kinds:
-        raise NoClosedForm("quadratic drag has no closed form in more than one dimension")
-    if any(isinstance(f, m.Wind) and f.turbulence > 0 for f in scene.forces):
-        raise NoClosedForm("turbulent wind is a random force field")
+    # An allow-list: every element must say what it contributes (animsim.elements:
+    # closed_form); one that does not, or any post-step stage, means no closed form.
+    for stage in compiled.post_step:
+        raise NoClosedForm(stage.no_closed_form or f"it has {stage.label.split(':')[0]}")
+    g = np.zeros(3)
+    drag = 0.0  # total linear coefficient, N*s/m (drag k plus wind k)
+    push = np.zeros(3)  # sum of wind k*w, N
+    attractors: list[_Attractor] = []
+    kinds: set[str] = set()
+    for term in compiled.dynamics.terms:
+        contribution = term.closed_form
+        if contribution is None:
+            raise NoClosedForm(term.no_closed_form or f"{term.label.split(',')[0]} has no closed form here")
+        kinds.update(contribution)
+        g += contribution.get("gravity", 0.0)
+        drag += contribution.get("drag", 0.0)
+        push += contribution.get("push", 0.0)
+        if "attractor" in contribution:
+            centre, gm, eps2 = contribution["attractor"]
+            attractors.append(_Attractor(centre, gm, float(np.sqrt(eps2))))
 
     system = compiled.system
     n = system.particle_count
@@ -284,19 +304,6 @@ def closed_form(compiled: Compiled) -> ClosedForm:
     v0 = compiled.initial.particle_velocity.copy()
     pinned = system.particle_pinned
     mass = system.particle_mass
-
-    g = np.zeros(3)
-    drag = 0.0  # total linear coefficient, N*s/m (drag k plus wind k)
-    push = np.zeros(3)  # sum of wind k*w, N
-    for f in scene.forces:
-        if isinstance(f, m.Gravity):
-            g += np.array(f.g)
-        elif isinstance(f, m.Drag):
-            drag += f.k
-        elif isinstance(f, m.Wind):
-            drag += f.k
-            push += f.k * np.array(f.velocity)
-    attractors = [f for f in scene.forces if isinstance(f, m.Attractor)]
     if attractors:
         return _kepler_scene(compiled, attractors, kinds)
 
@@ -502,7 +509,7 @@ def kepler(r0: np.ndarray, v0: np.ndarray, gm: float, t: np.ndarray) -> tuple[np
     return x, v
 
 
-def _kepler_scene(compiled: Compiled, attractors: list[m.Attractor], kinds: set[str]) -> ClosedForm:
+def _kepler_scene(compiled: Compiled, attractors: list[_Attractor], kinds: set[str]) -> ClosedForm:
     system = compiled.system
     if len(attractors) > 1:
         raise NoClosedForm("more than one attractor (the three-body problem has no closed form)")
@@ -558,8 +565,9 @@ def analytic_reference(compiled: Compiled, times: np.ndarray) -> Reference:
 
 
 def smooth(compiled: Compiled) -> bool:
-    """True when the right-hand side is smooth enough for DOP853 (no planes, no emitters)."""
-    return not compiled.scene.planes and not compiled.scene.emitters
+    """True when the right-hand side is smooth enough for DOP853 (no stage after the
+    step: no collisions, no births)."""
+    return not compiled.post_step
 
 
 def dop853_reference(compiled: Compiled, times: np.ndarray) -> Reference:
@@ -618,39 +626,18 @@ def dop853_reference(compiled: Compiled, times: np.ndarray) -> Reference:
     return Reference("fine", desc, Trajectory(np.asarray(times), list(x), list(v)), accuracy)
 
 
-def landing_steps(clock: Clock, times: Sequence[float]) -> list[int | None]:
-    """For each time, the step index whose clock time is that time (to rounding), or None."""
-    out: list[int | None] = []
-    for t in times:
-        i = min(max(round(t / clock.dt), 0), clock.steps)
-        candidates = [j for j in (i - 1, i, i + 1) if 0 <= j <= clock.steps]
-        hit = next(
-            (
-                j
-                for j in candidates
-                if math.isclose(clock.time(j), t, rel_tol=1e-12, abs_tol=1e-12 * clock.duration)
-            ),
-            None,
-        )
-        out.append(hit)
-    return out
-
-
 def record_at(
     scene: m.Scene, name: str, integrator: str, dt: float, times: np.ndarray, backend: str = "numpy"
 ) -> Compiled:
     """Compile ``scene`` with ``integrator`` and ``dt`` for ``backend``, recording exactly at ``times``."""
-    compiled = compile_scene(with_overrides(scene, integrator=integrator, dt=dt), name, backend=backend)
-    steps = landing_steps(compiled.clock, times)
-    if any(s is None for s in steps):
-        raise RuntimeError(f"dt = {dt!r} does not land on every compared time")
-    compiled.record_steps = np.array(steps, dtype=np.int64)
-    return compiled
+    return compile_scene(
+        with_overrides(scene, integrator=integrator, dt=dt), name, backend=backend, record_times=times
+    )
 
 
 def run_trajectory(compiled: Compiled) -> tuple[Trajectory, str]:
     """Run ``compiled`` into memory; returns the trajectory and the run's status."""
-    from animsim.simulate import run
+    from animsim.engine import run
 
     sink = MemorySink()
     with np.errstate(all="ignore"):

@@ -23,7 +23,12 @@ one-step matrix <= 1: closed forms where they are short (explicit Euler
 h <= 2 zeta / omega, i.e. c/k for one spring; symplectic Euler
 h <= 2 (sqrt(zeta^2 + 1) - zeta) / omega, i.e. (sqrt(c^2 + 4km) - c)/k),
 otherwise a scan and bisection of the exact one-step matrix (RK4:
-2 sqrt(2) / omega undamped). Explicit Euler, euler_average, midpoint and
+2 sqrt(2) / omega undamped). The matrices are the integrators' code as
+written, including what a method carries from one step to the next: Verlet
+reuses the acceleration taken at its predicted velocity as the next step's
+first one, so its state is (x, v, a) and, with damping, its limit is lower
+than the textbook velocity Verlet's (2 (sqrt 2 - 1) / omega instead of
+2 / omega at zeta = 0.5). Explicit Euler, euler_average, midpoint and
 Heun amplify an undamped oscillation at every dt > 0 (|R(i y)| > 1 for all
 y != 0), so with zeta = 0 they have no stable dt. Backward Euler is A-stable.
 """
@@ -59,20 +64,36 @@ RADIUS_TOLERANCE = 1e-12
 #: omega*dt grid on which the stable interval is bracketed before bisection
 SCAN_GRID = np.geomspace(1e-4, 1e3, 400)
 BISECTION_STEPS = 60
+#: check states the energy swing of a stable step when it is at least this factor
+EXCURSION_NOTE = 2.0
 #: relative rounding used to group rows with the same (omega, zeta)
 GROUPING_DIGITS = 12
 
 
+#: size of each method's one-step state: (x, v), and for Verlet (x, v, a) with a
+#: the acceleration it caches from the end of one step for the start of the next
+STATE_SIZE: dict[str, int] = {name: 2 for name in INTEGRATOR_NAMES} | {"verlet": 3}
+
+
 def one_step_matrix(method: str, h: np.ndarray, omega: np.ndarray, zeta: np.ndarray) -> np.ndarray:
-    """The (..., 2, 2) matrix mapping (x, v) to the next step's (x, v) for
+    """The (..., d, d) matrix mapping one step's state to the next for
     x'' = -omega^2 x - 2 zeta omega x', exactly as the method in
-    :mod:`animsim.integrators` computes it."""
+    :mod:`animsim.integrators` computes it (d = STATE_SIZE[method]).
+
+    The state is (x, v), except for Verlet: it reuses the acceleration taken
+    at the end of a step, with the *predicted* velocity v + h a0, as the next
+    step's first acceleration instead of recomputing it at the corrected
+    velocity. That cached a is part of what one step hands to the next, so
+    Verlet's state is (x, v, a); with damping its limit is well below the
+    textbook velocity Verlet's (the 2x2 matrix with a recomputed, Hairer, Lubich
+    and Wanner, "Geometric Numerical Integration", I.1.4).
+    """
     h, omega, zeta = np.broadcast_arrays(
         np.asarray(h, float), np.asarray(omega, float), np.asarray(zeta, float)
     )
     k = omega**2  # stiffness per unit mass
     c = 2.0 * zeta * omega  # damping per unit mass
-    out = np.empty((*h.shape, 2, 2))
+    out = np.zeros((*h.shape, STATE_SIZE.get(method, 2), STATE_SIZE.get(method, 2)))
     if method in RK_POLYNOMIALS:
         # R(hA) for A = [[0, 1], [-k, -c]], by Horner's rule on 2x2 matrices
         a = np.zeros((*h.shape, 2, 2))
@@ -91,20 +112,24 @@ def one_step_matrix(method: str, h: np.ndarray, omega: np.ndarray, zeta: np.ndar
         out[..., 0, 0] = 1.0 + h * out[..., 1, 0]
         out[..., 0, 1] = h * out[..., 1, 1]
         return out
-    if method in ("euler_average", "verlet"):
-        # both: x1 = x + h v + h^2/2 a0, predicted vp = v + h a0
-        x1 = np.stack([1.0 - 0.5 * h * h * k, h - 0.5 * h * h * c], axis=-1)
-        vp = np.stack([-h * k, 1.0 - h * c], axis=-1)
+    if method == "euler_average":
+        # a0 = -k x - c v; v1 = v + h a0; x1 = x + h (v + v1)/2 = x + h v + h^2/2 a0
+        out[..., 0, 0] = 1.0 - 0.5 * h * h * k
+        out[..., 0, 1] = h - 0.5 * h * h * c
+        out[..., 1, 0] = -h * k
+        out[..., 1, 1] = 1.0 - h * c
+        return out
+    if method == "verlet":
+        # State (x, v, a0), a0 the cached acceleration (symplectic.Verlet.step):
+        #   x1 = x + h v + h^2/2 a0,  vp = v + h a0,  a1 = -k x1 - c vp,
+        #   v1 = v + h/2 (a0 + a1),   next a0 = a1.
+        zero, one = np.zeros_like(h), np.ones_like(h)
+        x1 = np.stack([one, h, 0.5 * h * h], axis=-1)
+        vp = np.stack([zero, one, h], axis=-1)
+        a1 = -k[..., None] * x1 - c[..., None] * vp
         out[..., 0, :] = x1
-        if method == "euler_average":
-            out[..., 1, :] = vp
-        else:
-            # v1 = v + h/2 (a0 + a1), a1 = -k x1 - c vp (velocity Verlet, damping at the prediction)
-            a0 = np.stack([-k, -c], axis=-1)
-            a1 = -k[..., None] * x1 - c[..., None] * vp
-            out[..., 1, :] = np.stack([np.zeros_like(h), np.ones_like(h)], axis=-1) + 0.5 * h[..., None] * (
-                a0 + a1
-            )
+        out[..., 1, :] = np.stack([zero, one, 0.5 * h], axis=-1) + 0.5 * h[..., None] * a1
+        out[..., 2, :] = a1
         return out
     if method == "implicit_euler":
         # (I - hA) y1 = y0
@@ -116,8 +141,26 @@ def one_step_matrix(method: str, h: np.ndarray, omega: np.ndarray, zeta: np.ndar
     raise KeyError(method)
 
 
+def initial_state_map(method: str, omega: np.ndarray, zeta: np.ndarray) -> np.ndarray:
+    """(..., d, 2): the method's full state at the start of a run from (x, v).
+
+    Verlet computes its first acceleration, a = -omega^2 x - 2 zeta omega v;
+    every other method's state is (x, v) itself.
+    """
+    omega, zeta = np.broadcast_arrays(np.asarray(omega, float), np.asarray(zeta, float))
+    d = STATE_SIZE.get(method, 2)
+    out = np.zeros((*omega.shape, d, 2))
+    out[..., 0, 0] = out[..., 1, 1] = 1.0
+    if d == 3:
+        out[..., 2, 0] = -(omega**2)
+        out[..., 2, 1] = -2.0 * zeta * omega
+    return out
+
+
 def spectral_radius(m: np.ndarray) -> np.ndarray:
-    """Largest |eigenvalue| of each 2x2 matrix in (..., 2, 2), from trace and determinant."""
+    """Largest |eigenvalue| of each square matrix in (..., d, d) (2x2: from trace and determinant)."""
+    if m.shape[-1] != 2:
+        return np.abs(np.linalg.eigvals(m)).max(axis=-1)
     tr = m[..., 0, 0] + m[..., 1, 1]
     det = m[..., 0, 0] * m[..., 1, 1] - m[..., 0, 1] * m[..., 1, 0]
     disc = np.sqrt((0.25 * tr * tr - det).astype(complex))
@@ -170,6 +213,84 @@ def _bisect_limit(method: str, omega: np.ndarray, zeta: np.ndarray) -> np.ndarra
     return lo / omega
 
 
+#: steps over which the energy swing of a stable step is taken (the swing's period is a few
+#: steps near a limit; far from it the swing is small anyway)
+EXCURSION_STEPS = 512
+EXCURSION_BLOCK = 32
+#: omega*dt values below each mode's own at which the swing is also taken: the Gershgorin
+#: omega is an upper bound, and the scene's true modes lie anywhere below it
+EXCURSION_GRID = 8
+
+
+def energy_excursion(method: str, theta: np.ndarray, zeta: np.ndarray) -> np.ndarray:
+    """Largest factor by which one step size can make a mode's energy exceed its start.
+
+    For x'' = -omega^2 x - 2 zeta omega x' at omega*dt = theta, with E = 1/2 (v^2 +
+    omega^2 x^2): max over starts (x, v) and over n <= EXCURSION_STEPS of
+    E(step n) / E(0), from the powers of the one-step matrix (in units where
+    omega = 1, so E is half the squared Euclidean norm of (x, v)). A stable
+    step need not keep E below its start: symplectic Euler conserves a
+    modified energy instead, and E swings by 1/(1 - (omega dt/2)^2) around it
+    (Hairer, Lubich and Wanner, "Geometric Numerical Integration", IX.8),
+    about 100 at omega*dt = 1.99. inf where the step is unstable.
+    """
+    theta = np.atleast_1d(np.asarray(theta, float))
+    zeta = np.broadcast_to(np.asarray(zeta, float), theta.shape)
+    one = np.ones_like(theta)
+    m = one_step_matrix(method, theta, one, zeta)
+    embed = initial_state_map(method, one, zeta)
+    # Powers in blocks: stack holds M^n E for n in one block of EXCURSION_BLOCK steps,
+    # and each round moves the whole block on by M^EXCURSION_BLOCK (few Python iterations).
+    stack = np.empty((*theta.shape, EXCURSION_BLOCK, *embed.shape[-2:]))
+    cur = embed
+    for i in range(EXCURSION_BLOCK):
+        stack[..., i, :, :] = cur
+        cur = _matmul(m, cur)
+    jump = np.linalg.matrix_power(m, EXCURSION_BLOCK)[..., None, :, :]
+    worst = np.ones(theta.shape)
+    with np.errstate(over="ignore", invalid="ignore"):
+        for _ in range(EXCURSION_STEPS // EXCURSION_BLOCK):
+            xv = stack[..., :2, :]  # the (x, v) part: the energy ignores Verlet's cached a
+            # largest squared singular value of a 2x2: (t + sqrt(t^2 - 4 det^2)) / 2, t = |A|_F^2
+            t = np.einsum("...ij,...ij->...", xv, xv)
+            det = xv[..., 0, 0] * xv[..., 1, 1] - xv[..., 0, 1] * xv[..., 1, 0]
+            top = 0.5 * (t + np.sqrt(np.maximum(t * t - 4.0 * det * det, 0.0)))
+            worst = np.fmax(worst, top.max(axis=-1))
+            stack = _matmul(jump, stack)
+    unstable = spectral_radius(m) > 1.0 + RADIUS_TOLERANCE
+    return np.where(unstable | ~np.isfinite(worst), np.inf, worst)
+
+
+def _matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a @ b for stacks of tiny matrices, as one broadcast product (NumPy's matmul loops per matrix)."""
+    out = a[..., :, 0:1] * b[..., 0:1, :]
+    for k in range(1, a.shape[-1]):
+        out += a[..., :, k : k + 1] * b[..., k : k + 1, :]
+    return out
+
+
+def scene_energy_excursion(method: str, omega: np.ndarray, zeta: np.ndarray, dt: float) -> float:
+    """The energy swing a stable run of these modes may show at steps up to ``dt`` (1 when none).
+
+    The largest :func:`energy_excursion` over every mode and every omega*dt
+    below its own (a mode's Gershgorin omega bounds the true ones from
+    above). A scene whose dt is beyond its limit gets 1: it is not expected
+    to stay bounded, and the watchdog's usual allowance judges it.
+    """
+    omega = np.atleast_1d(np.asarray(omega, float))
+    zeta = np.broadcast_to(np.asarray(zeta, float), omega.shape)
+    if method in UNCONDITIONAL or omega.size == 0 or not (dt > 0 and math.isfinite(dt)):
+        return 1.0
+    theta = omega * dt
+    if np.any(dt > largest_stable_dt(method, omega, zeta)):
+        return 1.0
+    frac = np.arange(1, EXCURSION_GRID + 1) / EXCURSION_GRID
+    grid = theta[:, None] * frac[None, :]
+    swing = energy_excursion(method, grid, np.broadcast_to(zeta[:, None], grid.shape))
+    finite = swing[np.isfinite(swing)]
+    return float(finite.max()) if finite.size else 1.0
+
+
 def nice_dt(limit: float) -> float:
     """A round step below SAFETY_FACTOR * limit (two significant digits, rounded down)."""
     target = SAFETY_FACTOR * limit
@@ -194,6 +315,9 @@ class StabilityReport:
     penalty_stiffness: float  # N/m, largest penalty plane (0 without penalty planes)
     limits: dict[str, float] = field(default_factory=dict)  # method -> largest stable dt (s)
     notes: list[str] = field(default_factory=list)
+    #: largest factor by which a stable run's energy may swing above its start at this dt
+    #: (:func:`energy_excursion`); 1 when the dt is beyond the limit or nothing is stiff
+    excursion: float = 1.0
 
     @property
     def limit(self) -> float:
@@ -260,7 +384,15 @@ class StabilityReport:
                 f"{self.limit:.4g} s" + ("" if self.limit > 0 else " (none)")
             )
         if not self.dt_exceeds_limit:
-            return f"dt {self.dt:.4g} s is within the limit of {self.integrator}"
+            text = f"dt {self.dt:.4g} s is within the limit of {self.integrator}"
+            if self.excursion >= EXCURSION_NOTE:
+                # The margin, stated: this close to the limit a bounded run's energy swings far
+                # above its start, and the watchdog allows that swing (times its usual factor).
+                text += (
+                    f" ({100 * self.dt / self.limit:.3g} % of it: the energy may swing up to "
+                    f"{self.excursion:.3g}x its start and back, which the watchdog allows)"
+                )
+            return text
         return f"dt {self.dt:.4g} s exceeds the limit of {self.integrator}: {self.suggestion()}"
 
 
@@ -272,29 +404,38 @@ def _row_bounds(compiled: Any) -> tuple[np.ndarray, np.ndarray, float, list[str]
     k_rows = np.zeros(n)
     c_rows = np.zeros(n)
     notes: list[str] = []
-    if system.spring_count:
-        a, b = system.spring_index[:, 0], system.spring_index[:, 1]
-        ia, ib = inv[a], inv[b]
-        cross = np.sqrt(ia * ib)
-        for coef, rows in ((system.spring_ks, k_rows), (system.spring_kd, c_rows)):
-            rows += np.bincount(a, weights=coef * (ia + cross), minlength=n)
-            rows += np.bincount(b, weights=coef * (ib + cross), minlength=n)
-    penalty_k = 0.0
-    from animsim.forces.drag import Drag
-    from animsim.forces.penalty import PenaltyPlane
-    from animsim.forces.wind import Wind
-
+    # Each element adds its own rows (animsim.elements: stiffness_rows).
     for term in compiled.dynamics.terms:
-        if isinstance(term, PenaltyPlane):
-            # Any particle may touch the plane: its stiffness and damping count on every row.
-            k_rows += term.k * inv
-            c_rows += term.c * inv
-            penalty_k = max(penalty_k, term.k)
-        elif isinstance(term, Drag | Wind):
-            c_rows += term.k * inv
+        term.stiffness_rows(inv, k_rows, c_rows)
+    penalty_k = max((term.contact_stiffness for term in compiled.dynamics.terms), default=0.0)
     if compiled.emitters is not None and penalty_k > 0:
         notes.append("emitted particles touching penalty planes are not counted")
     return k_rows, c_rows, penalty_k, notes
+
+
+def scene_modes(compiled: Any) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct (omega, zeta) of the stiff rows (Gershgorin bounds), as two arrays."""
+    k_rows, c_rows, _, _ = _row_bounds(compiled)
+    omega_rows = np.sqrt(k_rows)
+    stiff = np.flatnonzero(omega_rows > 0)
+    if not stiff.size:
+        return np.zeros(0), np.zeros(0)
+    zeta_rows = c_rows[stiff] / (2.0 * omega_rows[stiff])
+    # Rows with the same (omega, zeta) give the same answers: a cloth has a handful.
+    key = np.round(np.stack([omega_rows[stiff], zeta_rows], axis=1), GROUPING_DIGITS)
+    uniq = np.unique(key, axis=0)
+    return uniq[:, 0], uniq[:, 1]
+
+
+def run_energy_excursion(compiled: Any, dt: float) -> float:
+    """How far above its start a stable run's watched energy may swing (1: not at all).
+
+    For the watchdog: near a method's limit a bounded oscillation's energy
+    swings far above its start (:func:`energy_excursion`), and that is not a
+    blow-up. ``dt`` is the largest step the run takes.
+    """
+    omega, zeta = scene_modes(compiled)
+    return scene_energy_excursion(compiled.integrator_name, omega, zeta, dt)
 
 
 def analyse(compiled: Any) -> StabilityReport:
@@ -326,12 +467,16 @@ def analyse(compiled: Any) -> StabilityReport:
             spring, spring_omega = spring_label(system, s), float(np.sqrt(w2[s]))
 
     limits: dict[str, float] = {}
+    adaptive = scene.adaptive is not None
+    excursion = 1.0
     if stiff.size:
         # Rows with the same (omega, zeta) give the same limit: a cloth has a handful.
         key = np.round(np.stack([omega_rows[stiff], zeta_rows[stiff]], axis=1), GROUPING_DIGITS)
         uniq = np.unique(key, axis=0)
         for name in METHOD_ORDER:
             limits[name] = float(largest_stable_dt(name, uniq[:, 0], uniq[:, 1]).min())
+        largest_dt = max(scene.adaptive.dt_max, compiled.clock.dt) if adaptive else compiled.clock.dt
+        excursion = scene_energy_excursion(compiled.integrator_name, uniq[:, 0], uniq[:, 1], largest_dt)
     else:
         limits = {name: math.inf for name in METHOD_ORDER}
     if system.spring_count and np.any(system.spring_kd > 0):
@@ -344,7 +489,6 @@ def analyse(compiled: Any) -> StabilityReport:
         )
     if any(getattr(t, "label", "").startswith("quadratic drag") for t in compiled.dynamics.terms):
         notes.append("quadratic drag damps in proportion to speed and is not counted")
-    adaptive = scene.adaptive is not None
     return StabilityReport(
         integrator=compiled.integrator_name,
         dt=compiled.clock.dt,
@@ -357,6 +501,7 @@ def analyse(compiled: Any) -> StabilityReport:
         penalty_stiffness=penalty_k,
         limits=limits,
         notes=notes,
+        excursion=excursion,
     )
 
 

@@ -73,8 +73,9 @@ from typing import Any
 
 import numpy as np
 
+from animsim.analysis.references import Trajectory, run_trajectory
 from animsim.errors import AnimsimError, UsageError
-from animsim.record import Frame, TrajectoryHeader
+from animsim.record import Clock, MemorySink, landing_steps
 
 # --- names and constants -----------------------------------------------------------
 
@@ -232,18 +233,18 @@ def validate_case_data(data: dict[str, Any], file: str) -> Any:
     """The Scene for ``data`` by the file's rules; raises :class:`CaseInvalid`."""
     from pydantic import ValidationError
 
-    from animsim.scene.loader import Marks, _diagnostics
+    from animsim.scene.loader import Marks, _diagnostics, mesh_problems
     from animsim.scene.models import Scene
     from animsim.scene.validate import check_scene
 
     try:
-        scene = Scene.model_validate(data)
+        scene = Scene.model_validate(data, context={"marks": True})
     except ValidationError as exc:
         # The loader's own wording (did-you-mean and all); marks are irrelevant
         # here since the values came from the command line.
         diags = _diagnostics(exc, data, Marks(), file)
         raise CaseInvalid([(d.path, d.message) for d in diags]) from None
-    problems = check_scene(scene)
+    problems = mesh_problems(scene, file) + check_scene(scene)  # mesh files read like the loader's
     if problems:
         raise CaseInvalid([(".".join(map(str, p)), msg) for p, msg, _ in problems])
     return scene
@@ -330,45 +331,6 @@ def case_scene(case: Case) -> Any:
 # --- references ------------------------------------------------------------------------
 
 
-@dataclass
-class Trajectory:
-    """Positions at record times: ``times`` (F,), ``position`` F arrays (n_f, 3) in m,
-    ``ids`` None (every frame holds all particles in index order) or F arrays of ids."""
-
-    times: np.ndarray
-    position: list[np.ndarray]
-    ids: list[np.ndarray] | None = None
-
-
-class _Collect:
-    """A FrameSink keeping each frame's time, index and positions (memory: the recorded frames)."""
-
-    def __init__(self) -> None:
-        self.ids: list[str] = []
-        self.kept: list[tuple[float, np.ndarray, np.ndarray]] = []
-
-    def begin(self, header: TrajectoryHeader) -> None:
-        self.ids = list(header.ids)
-
-    def write(self, frame: Frame) -> None:
-        self.ids.extend(frame.new_ids)
-        self.kept.append((float(frame.time), frame.index.copy(), frame.position.copy()))
-
-    def close(self, meta: dict[str, Any]) -> None:
-        pass
-
-    def abort(self) -> None:
-        self.kept.clear()
-
-    def trajectory(self, fixed_population: bool) -> Trajectory:
-        times = np.array([t for t, _, _ in self.kept])
-        pos = [p for _, _, p in self.kept]
-        if fixed_population:
-            return Trajectory(times, pos, None)
-        table = np.array(self.ids, dtype=object)
-        return Trajectory(times, pos, [table[i] for i, _, _ in self.kept])
-
-
 class ReferenceFailed(Exception):
     """The reference itself could not be computed (the row says so; the case stands)."""
 
@@ -379,20 +341,18 @@ _FINE_CACHE: dict[tuple[str, str, bytes], Trajectory] = {}
 FINE_CACHE_SIZE = 16
 
 
-def _landing_steps(clock: Any, times: np.ndarray) -> np.ndarray:
-    """The steps of ``clock`` that end at ``times`` (those that have one)."""
-    grid = np.array([clock.time(i) for i in range(clock.steps + 1)])
-    tol = TIME_MATCH_RTOL * clock.duration
-    j = np.clip(np.searchsorted(grid, times), 1, len(grid) - 1)
-    nearest = np.where(np.abs(grid[j - 1] - times) <= np.abs(grid[j] - times), j - 1, j)
-    hit = np.abs(grid[nearest] - times) <= tol
-    return np.unique(nearest[hit]).astype(np.int64)
+def _landed(compiled: Any, times: np.ndarray, fine_dt: float) -> np.ndarray:
+    """The ``times`` that a clock of ``fine_dt`` steps lands on."""
+    fine_clock = Clock.make(compiled.clock.duration, fine_dt)
+    times = np.asarray(times, dtype=np.float64)
+    hit = [s is not None for s in landing_steps(fine_clock, times)]
+    return times[np.array(hit, dtype=bool)] if len(times) else times
 
 
 def fine_reference(compiled: Any, times: np.ndarray) -> Trajectory:
     """RK4 at the case's dt / :data:`FINE_DT_DIVISOR` on the case's own scene, at ``times``."""
     from animsim.compile import compile_scene
-    from animsim.simulate import STATUS_OK, run
+    from animsim.engine import STATUS_OK
 
     fine_dt = compiled.clock.dt / FINE_DT_DIVISOR
     scene = compiled.scene.model_copy(update={"integrator": FINE_INTEGRATOR, "dt": fine_dt})
@@ -400,15 +360,11 @@ def fine_reference(compiled: Any, times: np.ndarray) -> Trajectory:
     key = (repr(scene), compiled.name, np.asarray(times, dtype=np.float64).tobytes())
     if key in _FINE_CACHE:
         return _FINE_CACHE[key]
-    fine = compile_scene(scene, compiled.name)
     # Record only the fine steps that land on the case's record times.
-    fine.record_steps = _landing_steps(fine.clock, np.asarray(times, dtype=np.float64))
-    sink = _Collect()
-    with np.errstate(all="ignore"):
-        result = run(fine, [sink])
-    if result.status != STATUS_OK:
-        raise ReferenceFailed(f"the RK4 reference at dt = {fine_dt:.3g} s was {result.status}")
-    trajectory = sink.trajectory(fine.emitters is None)
+    fine = compile_scene(scene, compiled.name, record_times=_landed(compiled, times, fine_dt))
+    trajectory, status = run_trajectory(fine)
+    if status != STATUS_OK:
+        raise ReferenceFailed(f"the RK4 reference at dt = {fine_dt:.3g} s was {status}")
     if len(_FINE_CACHE) >= FINE_CACHE_SIZE:
         _FINE_CACHE.pop(next(iter(_FINE_CACHE)))
     _FINE_CACHE[key] = trajectory
@@ -430,8 +386,7 @@ def _closed_form(kind: str) -> Callable[[Any, np.ndarray], Trajectory]:
             if kind == "auto":
                 return fine_reference(compiled, times)
             raise ReferenceFailed(f"no closed form: {exc}") from None
-        tr = ref.trajectory
-        return Trajectory(np.asarray(tr.times), list(tr.position), tr.ids)
+        return ref.trajectory
 
     return reference
 
@@ -521,7 +476,7 @@ def run_case(case: Case) -> Row:
     """
     from animsim.analysis.check import energy_drift
     from animsim.compile import compile_scene
-    from animsim.simulate import STATUS_OK, STATUS_UNSTABLE, run
+    from animsim.engine import STATUS_OK, STATUS_UNSTABLE, run
 
     row = Row(case.index, dict(case.overrides), _integrator_of(case), case.seed, STATUS_INVALID)
     try:
@@ -533,7 +488,7 @@ def run_case(case: Case) -> Row:
     row.integrator = compiled.integrator_name
     times = compiled.clock.time
     record_times = np.array([times(int(s)) for s in compiled.record_steps])
-    sink = _Collect() if case.reference else None
+    sink = MemorySink() if case.reference else None
     # Overflow in a blowing-up run is a result (status unstable), not a warning to print.
     with np.errstate(all="ignore"):
         result = run(compiled, [sink] if sink is not None else [])
@@ -551,7 +506,8 @@ def run_case(case: Case) -> Row:
     if case.reference and sink is not None and result.status == STATUS_OK:
         try:
             ref = reference_function(case.reference)(compiled, record_times)
-            row.error = position_error(sink.trajectory(compiled.emitters is None), ref, scene.duration)
+            run_traj = Trajectory.from_sink(sink, compiled.emitters is None)
+            row.error = position_error(run_traj, ref, scene.duration)
         except (ReferenceFailed, AnimsimError) as exc:
             row.message = f"reference: {exc}"
     return row
@@ -732,115 +688,6 @@ def print_table(table: SweepTable, console: Any) -> None:
 
 
 # --- plot ----------------------------------------------------------------------------------------
-
-
-PLOT_SIZE = (7.0, 4.5)  # inches
-PLOT_DPI = 120
-# A log axis when every value is positive and they span at least this ratio.
-LOG_SPAN = 10.0
-UNSTABLE_MARKER = "x"
-
-
-def _numbers(values: Sequence[Any]) -> np.ndarray | None:
-    try:
-        return np.array([float(v) for v in values])
-    except (TypeError, ValueError):
-        return None
-
-
-def plot_table(table: SweepTable, path: Path, x: str, y: str) -> None:
-    """``y`` over the swept key ``x``; one line per combination of the other axes.
-
-    Cases that did not finish ``ok`` have no point on their line; they are
-    marked with an ``x`` at the bottom of the plot so the stability edge shows.
-    ``drift`` is plotted as its absolute value (log scale when it spans decades).
-    """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.transforms import blended_transform_factory
-
-    others = [a.key for a in table.axes if a.key != x]
-    groups: dict[tuple[str, ...], list[Row]] = {}
-    for r in table.rows:
-        groups.setdefault(tuple(repr(r.overrides[k]) for k in others), []).append(r)
-    x_numeric = _numbers([r.overrides[x] for r in table.rows])
-    x_labels = [str(v) for v in dict.fromkeys(repr(r.overrides[x]) for r in table.rows)]
-    fig, ax = plt.subplots(figsize=PLOT_SIZE, dpi=PLOT_DPI)
-    try:
-        # x in data coordinates, y in axes coordinates: marks at the bottom edge.
-        bottom = blended_transform_factory(ax.transData, ax.transAxes)
-        plotted: list[float] = []
-        for rows in groups.values():
-            label = ", ".join(f"{k}={rows[0].overrides[k]}" for k in others) or y
-            if x_numeric is not None:
-                xp = np.array([float(r.overrides[x]) for r in rows])
-            else:
-                xp = np.array([x_labels.index(repr(r.overrides[x])) for r in rows], dtype=float)
-            yp = np.array([_y_value(r, y) for r in rows])
-            plotted += [v for v in yp if math.isfinite(v)]
-            color, style = _line_look(rows[0], others, table.axes)
-            (line,) = ax.plot(xp, yp, marker="o", label=label, color=color, linestyle=style)
-            bad = [i for i, r in enumerate(rows) if r.status != "ok"]
-            if bad:
-                ax.plot(
-                    xp[bad],
-                    np.full(len(bad), BOTTOM_MARK_Y),
-                    UNSTABLE_MARKER,
-                    color=line.get_color(),
-                    transform=bottom,
-                    markersize=9,
-                    clip_on=False,
-                )
-        if x_numeric is None:
-            ax.set_xticks(range(len(x_labels)), x_labels)
-        elif _spans_decades(x_numeric):
-            ax.set_xscale("log")
-        if plotted and _spans_decades(np.array(plotted)):
-            ax.set_yscale("log")
-        ax.set_xlabel(x)
-        ax.set_ylabel("|drift|" if y == "drift" else y)
-        ax.set_title(f"{y} over {x}  ({UNSTABLE_MARKER} on the axis: run not ok)")
-        ax.grid(True, which="both", alpha=0.3)
-        if others:
-            ax.legend(fontsize="small")
-        fig.tight_layout()
-        fig.savefig(path)
-    finally:
-        plt.close(fig)
-
-
-BOTTOM_MARK_Y = 0.02  # axes fraction
-LINE_STYLES = ("-", "--", ":", "-.")
-
-
-def _line_look(row: Row, others: list[str], axes: Sequence[Axis]) -> tuple[str | None, str]:
-    """Colour by integrator and line style by the other keys, when the integrator is swept,
-    so that "which method" reads at a glance; otherwise matplotlib's colour cycle."""
-    if INTEGRATOR_KEY not in others:
-        return None, LINE_STYLES[0]
-    by_key = {a.key: a for a in axes}
-    color = f"C{by_key[INTEGRATOR_KEY].values.index(row.overrides[INTEGRATOR_KEY]) % 10}"
-    rest = [k for k in others if k != INTEGRATOR_KEY]
-    combos = list(itertools.product(*(range(len(by_key[k].values)) for k in rest)))
-    mine = tuple(
-        next(i for i, v in enumerate(by_key[k].values) if repr(v) == repr(row.overrides[k])) for k in rest
-    )
-    return color, LINE_STYLES[combos.index(mine) % len(LINE_STYLES)]
-
-
-def _y_value(row: Row, column: str) -> float:
-    v = row.value(column)
-    if row.status != "ok" or v is None:
-        return math.nan
-    v = float(v)
-    return abs(v) if column == "drift" else v
-
-
-def _spans_decades(values: np.ndarray) -> bool:
-    values = values[np.isfinite(values)]
-    return bool(len(values)) and bool(np.all(values > 0)) and values.max() / values.min() >= LOG_SPAN
 
 
 # Columns that hold numbers and can go on the y axis of a plot.

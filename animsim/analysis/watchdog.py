@@ -25,8 +25,13 @@ integration H <= B (drag and damping only remove energy). The floor covers the
 one-step lag of explicit methods from rest (explicit Euler's first step gives
 m g^2 dt^2 / 2 of kinetic energy before any position has moved).
 
-A run is unstable when H > BLOWUP_FACTOR * B: at least 99 % of the energy was
-made by the integrator. Terms whose energy input is unknown (turbulence, moving
+A run is unstable when H > BLOWUP_FACTOR * S * B: at least 99 % of the energy
+was made by the integrator. S is the energy swing the method shows on the
+scene's stiffest modes at this dt when it is stable
+(:func:`animsim.analysis.stability.energy_excursion`, 1 when the dt is beyond
+the limit): near its limit a stable method's energy oscillates far above its
+start (symplectic Euler by about 400x at omega dt = 1.99) and comes back, so a
+fixed factor would call bounded runs unstable that ``check`` calls stable. Terms whose energy input is unknown (turbulence, moving
 anchors) switch the energy test off; the finiteness test stays.
 """
 
@@ -36,12 +41,7 @@ from typing import Any
 
 import numpy as np
 
-from animsim.forces.attractor import Attractor
-from animsim.forces.drag import Drag, QuadraticDrag
-from animsim.forces.gravity import Gravity
-from animsim.forces.penalty import PenaltyPlane
-from animsim.forces.springs import Springs
-from animsim.forces.wind import Wind
+from animsim.elements import DISSIPATIVE, ELASTIC, INJECTING, RELEASING
 
 #: the energy may reach this multiple of its budget before the run is called unstable
 BLOWUP_FACTOR = 100.0
@@ -49,33 +49,33 @@ BLOWUP_FACTOR = 100.0
 ENERGY_FLOOR_STEPS = 4.0
 #: absolute energy floor, J: below it changes are rounding, not growth
 ENERGY_FLOOR_J = 1e-9
-#: energy terms of the watched energy H (conservative, bounded below by 0)
-ELASTIC = (Springs, PenaltyPlane)
-#: terms whose potential is released into H (conservative, unbounded)
-RELEASING = (Gravity, Attractor)
-#: terms that only remove energy
-DISSIPATIVE = (Drag, QuadraticDrag)
 
 
 class EnergyWatch:
-    """Per-run energy bookkeeping for the watchdog (see the module docstring)."""
+    """Per-run energy bookkeeping for the watchdog (see the module docstring).
+
+    Each force element says how its energy is booked (``watch_role``, see
+    :mod:`animsim.elements`): elastic potentials are watched, releasing ones
+    (gravity, attractors) feed the budget as they release energy, injecting
+    ones (wind) add their power bound, dissipative ones need nothing; any
+    other element, or a post-step stage that puts energy in (a moving collider),
+    switches the energy test off.
+    """
 
     def __init__(self, compiled: Any, dt: float):
         system = compiled.system
         self.system = system
         self.dynamics = compiled.dynamics
-        self.mass = system.particle_mass  # shared with the System: 0 for pinned and dead slots
-        self.elastic = [t for t in self.dynamics.terms if isinstance(t, ELASTIC)]
-        self.releasing = [t for t in self.dynamics.terms if isinstance(t, RELEASING)]
-        self.springs = next((t for t in self.dynamics.terms if isinstance(t, Springs)), None)
-        self.wind_power = 0.0
-        unknown: list[str] = []
-        for t in self.dynamics.terms:
-            if isinstance(t, Wind):
-                # max over v of k (w - v).v is k |w|^2 / 4, at v = w/2
-                self.wind_power += 0.25 * t.k * float(np.dot(t.w, t.w))
-            elif not isinstance(t, ELASTIC + RELEASING + DISSIPATIVE):
-                unknown.append(getattr(t, "label", type(t).__name__))
+        terms = self.dynamics.terms
+        self.mass = system.particle_mass  # rebound to the run's live masses by bind()
+        self.inv_mass = system.particle_inv_mass
+        self.elastic = [t for t in terms if t.watch_role == ELASTIC]
+        self.releasing = [t for t in terms if t.watch_role == RELEASING]
+        self.springs = next((t for t in terms if hasattr(t, "per_spring_energy")), None)
+        self.wind_power = sum(t.max_power_per_particle for t in terms if t.watch_role == INJECTING)
+        known = (ELASTIC, RELEASING, DISSIPATIVE, INJECTING)
+        unknown = [t.label for t in terms if t.watch_role not in known]
+        unknown += [st.label for st in compiled.post_step if st.injects and not st.random]
         x0 = compiled.initial.particle_position
         v0 = compiled.initial.particle_velocity
         if np.any(system.particle_pinned & np.any(v0 != 0, axis=1)):
@@ -83,8 +83,18 @@ class EnergyWatch:
         #: why the energy test is off, or None when it is on
         self.disabled = ", ".join(unknown) if unknown else None
         self.dt = dt
+        from animsim.analysis.stability import run_energy_excursion
+
+        #: the energy swing a stable run may show at this dt, and the growth H/B that stops a run
+        self.excursion = run_energy_excursion(compiled, dt)
+        self.allowance = BLOWUP_FACTOR * self.excursion
         self.reset(compiled.initial)
         self.floor = ENERGY_FLOOR_J + self._external_floor(x0, v0)
+
+    def bind(self, state: Any) -> None:
+        """Book the run's live masses (pool births change them)."""
+        self.mass = state.particle_mass
+        self.inv_mass = state.particle_inv_mass
 
     def _external_floor(self, x: np.ndarray, v: np.ndarray) -> float:
         if not self.releasing:
@@ -93,27 +103,17 @@ class EnergyWatch:
         with np.errstate(all="ignore"):  # a singular start is the first check's to report
             for t in self.releasing:
                 t.accumulate(x, v, 0.0, f)
-        inv = self.system.particle_inv_mass
+        inv = self.inv_mass
         return ENERGY_FLOOR_STEPS * self.dt**2 * float(np.dot(inv, np.einsum("ij,ij->i", f, f)))
 
     def reset(self, state: Any) -> None:
         """Start the books at ``state`` (the run's initial state)."""
         x = state.particle_position
         self.x_ref = x.copy()  # where each particle's released energy is measured from
-        self.u_ref = [self._per_particle_potential(t, x) for t in self.releasing]
+        self.u_ref = [t.per_particle_potential(x) for t in self.releasing]
         self.alive_prev = None if state.particle_alive is None else state.particle_alive.copy()
         self.born_energy = 0.0
         self.h0 = self.watched(state)
-
-    def _per_particle_potential(self, term: Any, x: np.ndarray, idx: np.ndarray | None = None) -> np.ndarray:
-        """U of ``term`` per particle at ``x`` (the rows ``idx`` of the system, or all)."""
-        if isinstance(term, Attractor):
-            mass = term.mass if idx is None else term.mass[idx]
-            r = x - term.center
-            d = np.sqrt(np.einsum("ij,ij->i", r, r) + term.eps2)
-            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-                return np.where(d > 0, -term.gm * mass / d, 0.0)
-        return np.zeros(len(x))  # gravity is released from x - x_ref directly
 
     def kinetic(self, v: np.ndarray) -> float:
         return float(0.5 * np.dot(self.mass, np.einsum("ij,ij->i", v, v)))
@@ -127,7 +127,7 @@ class EnergyWatch:
         return h
 
     @staticmethod
-    def _spring_energy(springs: Springs, x: np.ndarray) -> float:
+    def _spring_energy(springs: Any, x: np.ndarray) -> float:
         """sum 1/2 ks (|L| - R)^2, as Springs.potential but without its zero-length guard
         (|L| alone needs none), since this runs on every check."""
         d = x[springs.a] - x[springs.b]
@@ -145,15 +145,11 @@ class EnergyWatch:
                 self.born_energy += float(0.5 * np.dot(self.mass[idx], np.einsum("ij,ij->i", vb, vb)))
                 self.x_ref[idx] = x[idx]
                 for t, u in zip(self.releasing, self.u_ref, strict=True):
-                    u[idx] = self._per_particle_potential(t, x[idx], idx)
+                    u[idx] = t.per_particle_potential(x[idx], idx)
             np.copyto(self.alive_prev, state.particle_alive)
         released = 0.0
         for t, u in zip(self.releasing, self.u_ref, strict=True):
-            if isinstance(t, Gravity):
-                # U(x_ref) - U(x) = sum m g.(x - x_ref), differences first so 1e17 keeps its digits
-                released += float(np.dot(self.mass, (x - self.x_ref) @ t.g))
-            else:
-                released += float(np.sum(u - self._per_particle_potential(t, x)))
+            released += t.released(x, self.x_ref, u)
         movable = float(np.count_nonzero(self.mass))
         return (
             self.h0

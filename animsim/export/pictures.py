@@ -7,6 +7,7 @@ gives the same bytes (PNG, SVG or PDF, chosen by the suffix).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -150,6 +151,148 @@ def plot_energy(
     bottom.grid(True, which="both", lw=0.3, alpha=0.5)
     note = "conservative scene: drift is integration error" if conservative else "forces add or remove energy"
     bottom.set_title(note, fontsize=8)
+    fig.tight_layout()
+    save_figure(fig, path)
+    plt.close(fig)
+
+
+#: colours of the energy parts (kinetic blue, potential parts warm, total black)
+PART_STYLES = {
+    "kinetic": ("tab:blue", "kinetic"),
+    "rotational": ("tab:cyan", "rotational kinetic"),
+    "gravitational": ("tab:orange", "gravitational"),
+    "spring": ("tab:green", "spring"),
+    "other": ("tab:purple", "other stored (contact)"),
+}
+
+
+def plot_energy_parts(
+    times: np.ndarray,
+    parts: dict[str, np.ndarray],
+    path: Path,
+    *,
+    title: str = "",
+    conservative: bool = False,
+) -> None:
+    """Energy split into its parts (kinetic, rotational, gravitational, spring, other), the
+    total, and the total's relative drift on a log axis below."""
+    plt = _pyplot()
+    total = parts["total"]
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(7.0, 6.0), sharex=True, height_ratios=[2, 1])
+    for key, (colour, name) in PART_STYLES.items():
+        if key in parts:
+            top.plot(times, parts[key], label=name, lw=1.2, color=colour)
+    top.plot(times, total, label="total", lw=1.8, color="black")
+    top.set_ylabel("energy (J)")
+    top.grid(True, lw=0.3, alpha=0.5)
+    top.legend(loc="best", fontsize=8)
+    top.set_title(title or "energy")
+    scale = max(abs(total[0]), np.abs(total).max() * 1e-12, 1e-300)
+    drift = np.abs(total - total[0]) / scale
+    bottom.semilogy(times, np.where(drift > 0, drift, np.nan), color="tab:red", lw=1.2)
+    bottom.set_ylabel("|E - E0| / |E0|")
+    bottom.set_xlabel("t (s)")
+    bottom.grid(True, which="both", lw=0.3, alpha=0.5)
+    note = "conservative scene: drift is integration error" if conservative else "forces add or remove energy"
+    bottom.set_title(note, fontsize=8)
+    fig.tight_layout()
+    save_figure(fig, path)
+    plt.close(fig)
+
+
+#: most particles a phase plot shows by default (one row of panels each)
+PHASE_DEFAULT_PARTICLES = 3
+#: an axis whose positions span less than this fraction of the largest span is left out
+PHASE_STILL_FRACTION = 1e-6
+
+
+@dataclass
+class PhaseRun:
+    """One run for a phase plot: dense (F, N, 3) positions and velocities over its frames."""
+
+    label: str
+    ids: list[str]
+    position: np.ndarray
+    velocity: np.ndarray
+    status: str = "ok"
+    failure_time: float | None = None
+
+
+def phase_particles(run: PhaseRun, pinned: np.ndarray, requested: list[str] | None) -> list[int]:
+    """Columns to plot: the requested ids, or up to PHASE_DEFAULT_PARTICLES free ones spread evenly."""
+    if requested:
+        missing = [pid for pid in requested if pid not in run.ids]
+        if missing:
+            raise UsageError(f"--particles: no particle {missing[0]!r} in this run")
+        return [run.ids.index(pid) for pid in requested]
+    free = np.flatnonzero(~pinned)
+    if len(free) == 0:
+        raise UsageError("--kind phase: every particle is pinned, nothing moves")
+    picks = np.unique(
+        np.linspace(0, len(free) - 1, min(PHASE_DEFAULT_PARTICLES, len(free))).round().astype(int)
+    )
+    return [int(free[i]) for i in picks]
+
+
+def phase_axes(runs: list[PhaseRun], rows: list[int]) -> list[int]:
+    """The axes along which the chosen particles move (in any run)."""
+    span = np.zeros(3)
+    names = [runs[0].ids[r] for r in rows]
+    for run in runs:
+        cols = [run.ids.index(pid) for pid in names if pid in run.ids]
+        if not cols or not len(run.position):
+            continue
+        p = run.position[:, cols]
+        with np.errstate(invalid="ignore"):
+            span = np.maximum(span, np.nan_to_num(np.nanmax(p, axis=(0, 1)) - np.nanmin(p, axis=(0, 1))))
+    moving = [a for a in range(3) if span[a] > PHASE_STILL_FRACTION * max(span.max(), 1e-300)]
+    return moving or [0]
+
+
+def plot_phase(
+    runs: list[PhaseRun],
+    path: Path,
+    *,
+    rows: list[int],
+    axes: list[int] | None = None,
+    title: str = "",
+) -> None:
+    """Position against velocity, one panel per (particle, axis), the runs overlaid.
+
+    A symplectic method keeps an oscillator's orbit closed; explicit Euler's
+    grows outward every turn (its amplification factor per step is
+    sqrt(1 + (omega dt)^2) > 1, Hairer, Lubich and Wanner, "Geometric
+    Numerical Integration", I.1). A run the watchdog stopped ends in a cross.
+    """
+    plt = _pyplot()
+    axes = axes if axes is not None else phase_axes(runs, rows)
+    nrows, ncols = len(rows), len(axes)
+    fig, grid = plt.subplots(nrows, ncols, figsize=(3.6 * ncols + 0.6, 3.2 * nrows + 0.6), squeeze=False)
+    colours = plt.get_cmap("tab10")
+    for r, row in enumerate(rows):
+        for c, a in enumerate(axes):
+            ax = grid[r][c]
+            pid = runs[0].ids[row]
+            for k, run in enumerate(runs):
+                if pid not in run.ids:  # a particle system's runs may differ in who was born
+                    continue
+                col = run.ids.index(pid)
+                x, v = run.position[:, col, a], run.velocity[:, col, a]
+                ok = np.isfinite(x) & np.isfinite(v)
+                colour = colours(k % 10)
+                label = run.label + ("" if run.status == "ok" else f" ({run.status})")
+                ax.plot(x[ok], v[ok], lw=1.0, color=colour, label=label)
+                if ok.any():
+                    first, last = np.flatnonzero(ok)[[0, -1]]
+                    ax.plot(x[first], v[first], "o", ms=4, color=colour)
+                    if run.status != "ok":
+                        ax.plot(x[last], v[last], "x", ms=9, mew=2, color="tab:red")
+            ax.set_xlabel(f"{'xyz'[a]} (m)")
+            ax.set_ylabel(f"v{'xyz'[a]} (m/s)")
+            ax.set_title(f"{runs[0].ids[row]}, {'xyz'[a]}", fontsize=9)
+            ax.grid(True, lw=0.3, alpha=0.5)
+    grid[0][0].legend(loc="best", fontsize=7)
+    fig.suptitle(title or "phase portrait")
     fig.tight_layout()
     save_figure(fig, path)
     plt.close(fig)

@@ -20,10 +20,40 @@ property                 PLY type           meaning
 ``id``                   ``int``            row of the id table (see below)
 ``red green blue alpha`` ``uchar``          colour, ``round(255 * c)``
 ``size``                 ``float``          particle size (radius), m
+``radius``               ``float``          the same number, under the name
+                                            Blender's point clouds use
 =======================  =================  ==================================
 
-No ``face`` element: the file is a point cloud. Frames without ``size`` get
-:data:`DEFAULT_SIZE`, frames without ``color`` get opaque white.
+Frames without ``size`` get :data:`DEFAULT_SIZE`, frames without ``color``
+get opaque white. Colours are sRGB bytes (the scene's ``#rrggbb`` values),
+which Blender, ParaView and Houdini decode as sRGB; the USD export writes the
+same colours decoded to linear light, so both look alike.
+
+Velocity is three scalar properties ``vx vy vz``: PLY has no vector type,
+and the only vector names readers know (``nx ny nz``) mean a surface normal,
+so putting the velocity there would shade meshes wrongly. Blender 4.1+ brings
+them in as three float attributes; combine them in Geometry Nodes, or use the
+USD export, where ``velocities`` is a real vector (motion blur included).
+
+Shapes. When the run has structures (the header's connectivity):
+
+* a ``face`` element (``property list uchar int vertex_indices``, the name
+  Blender, trimesh, plyfile, Open3D and VTK read) with the faces of every
+  cloth (grid quads), soft box (the quads of its outer surface) and mesh
+  structure (triangles), wound counter-clockwise seen from outside, indices
+  into this file's vertex rows;
+* an ``edge`` element (``property int vertex1``, ``property int vertex2``,
+  Turk's names) with the segments of every strand.
+
+Loose particles (listed or emitted) are vertices no face uses.
+
+Empty frames. A frame with no particle (before an emitter's first birth, or
+after the last death) would be a file with zero vertices, which Blender,
+Open3D and trimesh refuse. Such a frame holds instead one placeholder
+vertex at the origin with ``id`` -1, size, radius and alpha 0, and the
+header says so (``comment placeholder vertex id -1: this frame has no
+particles``). ``id`` -1 is never a row of the id table; drop the vertex by
+that test (Blender: Delete Geometry where the ``id`` attribute is below 0).
 
 **double, not float, for positions and velocities.** The data is the
 simulation state and must read back bit for bit (the tests compare exactly);
@@ -111,7 +141,7 @@ from animsim import __version__
 from animsim.atomic import AtomicFile
 from animsim.errors import SimulationError
 from animsim.export.meta import meta_file, meta_path
-from animsim.record import Frame, TrajectoryHeader
+from animsim.record import Connectivity, Frame, TrajectoryHeader
 
 PLY_SUFFIX = ".ply"
 DEFAULT_STEM = "frames"
@@ -136,6 +166,10 @@ POSITION_TYPES: dict[str, str] = {"double": "<f8", "float": "<f4"}
 ID_TYPE = ("int", "<i4")
 COLOR_TYPE = ("uchar", "u1")
 SIZE_TYPE = ("float", "<f4")
+PLACEHOLDER_ID = -1
+PLACEHOLDER_COMMENT = "placeholder vertex id -1: this frame has no particles"
+FACE_ELEMENT = "face"
+EDGE_ELEMENT = "edge"
 
 POSITION_FIELDS = ("x", "y", "z")
 VELOCITY_FIELDS = ("vx", "vy", "vz")
@@ -176,6 +210,7 @@ def vertex_dtype(position_type: str = "double") -> np.dtype:
     fields.append(("id", ID_TYPE[1]))
     fields += [(n, COLOR_TYPE[1]) for n in COLOR_FIELDS]
     fields.append(("size", SIZE_TYPE[1]))
+    fields.append(("radius", SIZE_TYPE[1]))
     return np.dtype(fields)
 
 
@@ -184,6 +219,7 @@ def _property_lines(position_type: str) -> list[str]:
     lines.append(f"property {ID_TYPE[0]} id")
     lines += [f"property {COLOR_TYPE[0]} {n}" for n in COLOR_FIELDS]
     lines.append(f"property {SIZE_TYPE[0]} size")
+    lines.append(f"property {SIZE_TYPE[0]} radius")
     return lines
 
 
@@ -263,6 +299,31 @@ def validate_frame(frame: Frame, table_size: int) -> int:
     return n
 
 
+def _placeholder(frame: Frame) -> Frame:
+    """The one vertex an empty frame holds (module docstring, "Empty frames")."""
+    return Frame(
+        step=frame.step,
+        time=frame.time,
+        index=np.array([PLACEHOLDER_ID], dtype=np.int64),
+        position=np.zeros((1, 3)),
+        velocity=np.zeros((1, 3)),
+        size=np.zeros(1),
+        color=np.zeros((1, 4)),
+    )
+
+
+def _first_row(frame: Frame, c: Connectivity, n: int) -> int:
+    """The frame row of structure ``c``'s first particle (its rows are contiguous:
+    structures are never born or killed)."""
+    index = np.asarray(frame.index)
+    r0 = int(np.searchsorted(index, c.first)) if n else 0
+    if r0 + c.count > n or not np.array_equal(
+        index[r0 : r0 + c.count], np.arange(c.first, c.first + c.count)
+    ):
+        raise ValueError(f"frame at step {frame.step}: the particles of {c.name!r} are not all in it")
+    return r0
+
+
 class PlySequenceSink:
     """A :class:`animsim.record.FrameSink` writing one binary PLY file per frame.
 
@@ -298,6 +359,7 @@ class PlySequenceSink:
         self.written: list[Path] = []  # files committed by this run, in order
         self._ids: list[str] = []
         self._scene = ""
+        self._conn: tuple[Connectivity, ...] = ()
         self._created_dirs: list[Path] = []
         self._pending: AtomicFile | None = None
         self._sidecars_pending: list[AtomicFile] = []
@@ -319,6 +381,7 @@ class PlySequenceSink:
             raise RuntimeError("begin() called twice")
         self._ids = list(header.ids)
         self._scene = header.scene_name
+        self._conn = tuple(header.connectivity)
         missing = []
         d = self.directory
         while not d.exists() and d != d.parent:
@@ -337,13 +400,18 @@ class PlySequenceSink:
         n = validate_frame(frame, len(self._ids) + len(frame.new_ids))
         self._ids.extend(frame.new_ids)
         k = len(self.written)
-        data = self.encode(frame, n)
-        header = self.header_text(frame, k, n).encode("ascii")
+        faces, face_count, edges = self.shapes(frame, n)
+        if n == 0:
+            frame = _placeholder(frame)
+        data = self.encode(frame, max(n, 1))
+        header = self.header_text(frame, k, n, face_count, len(edges)).encode("ascii")
         target = self.frame_path(k)
         try:
             self._pending = AtomicFile(target, "wb")
             self._pending.handle.write(header)
             self._pending.handle.write(data.data)
+            self._pending.handle.write(faces)
+            self._pending.handle.write(edges.data)
         except OSError as exc:
             if self._pending is not None:
                 self._pending.abort()
@@ -400,8 +468,40 @@ class PlySequenceSink:
 
     # -- encoding ------------------------------------------------------------
 
-    def header_text(self, frame: Frame, k: int, n: int) -> str:
-        """The ASCII header of frame ``k`` with ``n`` vertices."""
+    def shapes(self, frame: Frame, n: int) -> tuple[bytes, int, np.ndarray]:
+        """The frame's faces (packed ``face`` rows, count) and strand edges ((E,) vertex1/vertex2 rows)."""
+        blocks: list[bytes] = []
+        count = 0
+        edges: list[np.ndarray] = []
+        for c in self._conn:
+            r0 = _first_row(frame, c, n)
+            if c.kind == "mesh":
+                k = int(c.vertex_counts[0]) if len(c.vertex_counts) else 0
+                if not len(c.vertex_counts) or np.any(c.vertex_counts != k):
+                    raise ValueError(f"structure {c.name!r}: faces must all have the same corner count")
+                rows = np.empty(len(c.vertex_counts), dtype=np.dtype([("n", "u1"), ("v", "<i4", (k,))]))
+                rows["n"] = k
+                rows["v"] = c.vertex_indices.reshape(-1, k) + r0
+                blocks.append(rows.tobytes())
+                count += len(rows)
+            else:
+                start = 0
+                for length in c.vertex_counts.tolist():
+                    idx = c.vertex_indices[start : start + length] + r0
+                    edges.append(np.stack([idx[:-1], idx[1:]], axis=1))
+                    start += length
+        pairs = np.concatenate(edges) if edges else np.zeros((0, 2), dtype=np.int64)
+        packed = np.empty(len(pairs), dtype=np.dtype([("vertex1", "<i4"), ("vertex2", "<i4")]))
+        packed["vertex1"], packed["vertex2"] = pairs[:, 0], pairs[:, 1]
+        return b"".join(blocks), count, packed
+
+    def header_text(self, frame: Frame, k: int, n: int, faces: int = 0, edges: int = 0) -> str:
+        """The ASCII header of frame ``k`` with ``n`` particles (and its faces and edges)."""
+        shape_lines = []
+        if faces:
+            shape_lines += [f"element {FACE_ELEMENT} {faces}", "property list uchar int vertex_indices"]
+        if edges:
+            shape_lines += [f"element {EDGE_ELEMENT} {edges}", "property int vertex1", "property int vertex2"]
         lines = [
             "ply",
             FORMAT_LINE,
@@ -411,8 +511,10 @@ class PlySequenceSink:
             f"comment step {int(frame.step)}",
             f"comment time {float(frame.time)!r}",
             f"comment ids {_comment_text(self.ids_path.name)}",
-            f"element {VERTEX_ELEMENT} {n}",
+            *([f"comment {PLACEHOLDER_COMMENT}"] if n == 0 else []),
+            f"element {VERTEX_ELEMENT} {max(n, 1)}",
             *_property_lines(self.position_type),
+            *shape_lines,
             "end_header",
         ]
         return "\n".join(lines) + "\n"
@@ -431,6 +533,7 @@ class PlySequenceSink:
         for j, name in enumerate(COLOR_FIELDS):
             rows[name] = rgba[:, j]
         rows["size"] = DEFAULT_SIZE if frame.size is None else np.asarray(frame.size)
+        rows["radius"] = rows["size"]
         return rows
 
     def _remove_stale(self) -> None:

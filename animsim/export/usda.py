@@ -29,6 +29,31 @@ What the file holds
         }
     }
 
+Structures keep their shape. When the run has cloth, soft boxes, meshes or
+strands (the trajectory header's connectivity), each becomes its own prim
+beside ``particles``, named after the structure (sanitised as below):
+
+* cloth, soft box (its outer surface) and mesh structures: ``def Mesh`` with
+  ``faceVertexCounts`` / ``faceVertexIndices`` (quads or triangles, wound
+  counter-clockwise seen from outside), ``subdivisionScheme = "none"``
+  (the faces are the simulated ones, not a control cage),
+  ``doubleSided = true``, and time-sampled ``points``, ``velocities``,
+  ``extent``; ``animsim:ids`` names the particle behind each point;
+* strands: ``def BasisCurves`` with ``type = "linear"``,
+  ``curveVertexCounts``, a constant ``widths`` of ``2 * DEFAULT_SIZE`` and
+  time-sampled ``points``, ``velocities``, ``extent``.
+
+``particles`` then holds only the other particles (listed ones and emitted
+ones) and is left out when there are none and no emitters. With emitters it
+also carries ``primvars:age`` (s since birth, vertex interpolation; ``nan``
+for particles that were not emitted).
+
+Colour space: scene colours are sRGB (``#rrggbb`` as on the web); USD's
+``displayColor`` is read as linear light by Blender, Houdini and usdview,
+so it holds the sRGB colour decoded to linear (IEC 61966-2-1). The PLY
+export stores the sRGB bytes, which those tools decode the same way, so a
+colour looks the same through both.
+
 Every time-sampled attribute has one sample per recorded frame, all at the
 same time codes. ``ids`` (int64 in ``UsdGeomPoints``) gives each point's
 identity, which is what USD uses to follow points when the count changes
@@ -93,7 +118,7 @@ from animsim.atomic import AtomicFile
 from animsim.errors import SimulationError
 from animsim.export.meta import meta_file
 from animsim.export.ply import DEFAULT_RGBA, DEFAULT_SIZE, validate_frame
-from animsim.record import Frame, TrajectoryHeader
+from animsim.record import Connectivity, Frame, TrajectoryHeader
 
 USDA_MAGIC = "#usda 1.0"
 UP_AXIS = "Y"
@@ -136,6 +161,36 @@ ATTRIBUTES: tuple[_Attribute, ...] = (
     _Attribute("velocities", "vector3f[]"),
     _Attribute("widths", "float[]", VERTEX_INTERPOLATION),
 )
+
+AGE_ATTRIBUTE = _Attribute("primvars:age", "float[]", VERTEX_INTERPOLATION)
+# Time-sampled attributes of the shape prims (alphabetical, as USD writes them).
+SHAPE_ATTRIBUTES: tuple[_Attribute, ...] = (
+    _Attribute("extent", "float3[]"),
+    _Attribute("points", "point3f[]"),
+    _Attribute("velocities", "vector3f[]"),
+)
+
+
+class _Prim:
+    """One prim of the output: its type, name and time-sampled attributes."""
+
+    def __init__(
+        self, usd_type: str, name: str, attributes: tuple[_Attribute, ...], conn: Connectivity | None
+    ) -> None:
+        self.usd_type = usd_type
+        self.name = name
+        self.attributes = attributes
+        self.conn = conn
+
+    def key(self, attr: _Attribute) -> str:
+        return f"{self.name}/{attr.name}"
+
+
+def srgb_to_linear(c: np.ndarray) -> np.ndarray:
+    """IEC 61966-2-1 decoding of sRGB values in [0, 1] to linear light."""
+    c = np.asarray(c, dtype=np.float64)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
 
 _ESCAPES = {"\\": "\\\\", '"': '\\"', "\n": "\\n", "\r": "\\r", "\t": "\\t"}
 _CONTROL = re.compile(r"[\x00-\x1f\x7f]")
@@ -244,6 +299,8 @@ class UsdaSink:
         self._times: list[float] = []
         self._steps: list[int] = []
         self._tmp: dict[str, tuple[Path, IO[str]]] = {}
+        self._prims: list[_Prim] = []
+        self._has_emitters = False
         self._pending: list[AtomicFile] = []  # the .usda, then the metadata
         self._committed: list[Path] = []  # of those, renamed into place by a close in progress
         self._state = "new"
@@ -255,13 +312,18 @@ class UsdaSink:
             raise RuntimeError("begin() called twice")
         self._ids = list(header.ids)
         self._scene = header.scene_name
+        self._has_emitters = header.has_emitters
+        self._prims = self._plan(header)
         self._state = "open"
         folder = self.path.parent
         try:
-            for attr in ATTRIBUTES:
-                slug = attr.name.replace(":", "_")
-                fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=f".{slug}.tmp", dir=folder)
-                self._tmp[attr.name] = (Path(tmp), os.fdopen(fd, "w", encoding="utf-8"))
+            for prim in self._prims:
+                for attr in prim.attributes:
+                    slug = prim.key(attr).replace(":", "_").replace("/", ".")
+                    fd, tmp = tempfile.mkstemp(
+                        prefix=f".{self.path.name}.", suffix=f".{slug}.tmp", dir=folder
+                    )
+                    self._tmp[prim.key(attr)] = (Path(tmp), os.fdopen(fd, "w", encoding="utf-8"))
         except OSError as exc:
             self._discard_temporaries()
             self._state = "aborted"
@@ -273,8 +335,8 @@ class UsdaSink:
         n = validate_frame(frame, len(self._ids) + len(frame.new_ids))
         self._ids.extend(frame.new_ids)
         try:
-            for name, text in self.sample_texts(frame, n).items():
-                fh = self._tmp[name][1]
+            for key, text in self._frame_texts(frame, n):
+                fh = self._tmp[key][1]
                 fh.write(text + "\n")
                 fh.flush()  # a full disk shows up now, not at close
         except OSError as exc:
@@ -339,7 +401,7 @@ class UsdaSink:
             opacity_text = _repeated(a, n)
         else:
             rgba = np.asarray(frame.color, dtype=np.float64).reshape(n, 4)
-            color_text = format_tuples(rgba[:, :3], 3)
+            color_text = format_tuples(srgb_to_linear(rgba[:, :3]), 3)
             opacity_text = format_floats(rgba[:, 3])
         if n:
             half = widths[:, None] / 2.0
@@ -355,6 +417,68 @@ class UsdaSink:
             "velocities": format_tuples(vel, 3),
             "widths": widths_text,
         }
+
+    def _plan(self, header: TrajectoryHeader) -> list[_Prim]:
+        """The prims of this run: shapes of structures, then the loose particles (if any)."""
+        shapes: list[_Prim] = []
+        taken = {POINTS_PRIM}
+        covered = 0
+        for conn in header.connectivity:
+            name = prim_name(conn.name)
+            base, k = name, 1
+            while name in taken:  # two structures whose names sanitise alike
+                k += 1
+                name = f"{base}_{k}"
+            taken.add(name)
+            usd_type = "Mesh" if conn.kind == "mesh" else "BasisCurves"
+            shapes.append(_Prim(usd_type, name, SHAPE_ATTRIBUTES, conn))
+            covered += conn.count
+        attrs = ATTRIBUTES[:3] + ((AGE_ATTRIBUTE,) if header.has_emitters else ()) + ATTRIBUTES[3:]
+        points = _Prim("Points", POINTS_PRIM, attrs, None)
+        if not shapes or header.has_emitters or len(header.ids) > covered:
+            return [points, *shapes]
+        return shapes
+
+    def _frame_texts(self, frame: Frame, n: int) -> Iterator[tuple[str, str]]:
+        """(temporary-file key, sample text) of every time-sampled attribute for ``frame``."""
+        free = np.ones(n, dtype=bool)
+        for prim in self._prims:
+            if prim.conn is None:
+                continue
+            c = prim.conn
+            rows = _structure_rows(frame, c, n)
+            free[rows] = False
+            pos = np.asarray(frame.position, dtype=np.float64)[rows]
+            vel = np.asarray(frame.velocity, dtype=np.float64)[rows]
+            if prim.usd_type == "BasisCurves":
+                half = DEFAULT_SIZE  # widths / 2
+                extent = np.stack([pos.min(axis=0) - half, pos.max(axis=0) + half])
+            else:
+                extent = np.stack([pos.min(axis=0), pos.max(axis=0)])
+            yield prim.key(SHAPE_ATTRIBUTES[0]), format_tuples(extent, 3)
+            yield prim.key(SHAPE_ATTRIBUTES[1]), format_tuples(pos, 3)
+            yield prim.key(SHAPE_ATTRIBUTES[2]), format_tuples(vel, 3)
+        points = self._prims[0] if self._prims and self._prims[0].conn is None else None
+        if points is None:
+            return
+        if not free.all():
+            sub = Frame(
+                step=frame.step,
+                time=frame.time,
+                index=np.asarray(frame.index)[free],
+                position=np.asarray(frame.position)[free],
+                velocity=np.asarray(frame.velocity)[free],
+                age=None if frame.age is None else np.asarray(frame.age)[free],
+                size=None if frame.size is None else np.asarray(frame.size)[free],
+                color=None if frame.color is None else np.asarray(frame.color)[free],
+            )
+            frame, n = sub, int(free.sum())
+        texts = self.sample_texts(frame, n)
+        if AGE_ATTRIBUTE in points.attributes:
+            age = np.full(n, np.nan) if frame.age is None else np.asarray(frame.age, dtype=np.float64)
+            texts[AGE_ATTRIBUTE.name] = format_floats(age)
+        for attr in points.attributes:
+            yield points.key(attr), texts[attr.name]
 
     def _assemble(self, out: IO[str], meta: dict[str, Any]) -> None:
         codes, rate, even = time_codes(self._times, self.uneven_rate)
@@ -379,16 +503,44 @@ class UsdaSink:
         w(f"{INDENT}metersPerUnit = {METERS_PER_UNIT}\n")
         w(f"{INDENT}startTimeCode = {codes_text[0] if codes else '0'}\n")
         w(f"{INDENT}timeCodesPerSecond = {format_time_code(rate)}\n")
-        w(f"{INDENT}upAxis = {usd_string(UP_AXIS)}\n)\n\n")
+        # USD knows Y or Z up; a run whose gravity pulls along -z says Z (meta "up_axis").
+        up = "Z" if meta.get("up_axis") == "z" else UP_AXIS
+        w(f"{INDENT}upAxis = {usd_string(up)}\n)\n\n")
         w(f"def Xform {usd_string(root)} (\n{INDENT}doc = {usd_string(self._scene)}\n)\n{{\n")
-        w(f"{INDENT}def Points {usd_string(POINTS_PRIM)}\n{INDENT}{{\n")
-        ids = ", ".join(map(usd_string, self._ids))
-        w(f"{INDENT * 2}custom uniform string[] {ID_TABLE_ATTR} = [{ids}]\n")
-        for attr in ATTRIBUTES:
-            self._copy_samples(w, attr, codes_text)
-        w(f"{INDENT}}}\n}}\n")
+        for i, prim in enumerate(self._prims):
+            if i:
+                w("\n")
+            w(f"{INDENT}def {prim.usd_type} {usd_string(prim.name)}\n{INDENT}{{\n")
+            if prim.conn is None:
+                ids = ", ".join(map(usd_string, self._ids))
+                w(f"{INDENT * 2}custom uniform string[] {ID_TABLE_ATTR} = [{ids}]\n")
+            else:
+                self._write_topology(w, prim)
+            for attr in prim.attributes:
+                self._copy_samples(w, attr, codes_text, prim.key(attr))
+            w(f"{INDENT}}}\n")
+        w("}\n")
 
-    def _copy_samples(self, w: Callable[[str], Any], attr: _Attribute, codes: list[str]) -> None:
+    def _write_topology(self, w: Callable[[str], Any], prim: _Prim) -> None:
+        c = prim.conn
+        assert c is not None
+        pad = INDENT * 2
+        ids = ", ".join(map(usd_string, self._ids[c.first : c.first + c.count]))
+        w(f"{pad}custom uniform string[] animsim:ids = [{ids}]\n")
+        if prim.usd_type == "Mesh":
+            w(f"{pad}uniform bool doubleSided = true\n")
+            w(f"{pad}int[] faceVertexCounts = {format_ints(c.vertex_counts)}\n")
+            w(f"{pad}int[] faceVertexIndices = {format_ints(c.vertex_indices)}\n")
+            w(f'{pad}uniform token subdivisionScheme = "none"\n')
+        else:
+            w(f"{pad}int[] curveVertexCounts = {format_ints(c.vertex_counts)}\n")
+            w(f'{pad}uniform token type = "linear"\n')
+            w(f"{pad}float[] widths = [{2.0 * DEFAULT_SIZE!r}] (\n")
+            w(f'{pad}{INDENT}interpolation = "constant"\n{pad})\n')
+
+    def _copy_samples(
+        self, w: Callable[[str], Any], attr: _Attribute, codes: list[str], key: str | None = None
+    ) -> None:
         if attr.interpolation is not None:
             w(f"{INDENT * 2}{attr.usd_type} {attr.name} (\n")
             w(f"{INDENT * 3}interpolation = {usd_string(attr.interpolation)}\n")
@@ -396,7 +548,7 @@ class UsdaSink:
         if not codes:
             return
         w(f"{INDENT * 2}{attr.usd_type} {attr.name}.timeSamples = {{\n")
-        tmp_path = self._tmp[attr.name][0]
+        tmp_path = self._tmp[key or attr.name][0]
         count = 0
         with open(tmp_path, encoding="utf-8") as fh:
             for count, line in enumerate(fh, start=1):
@@ -414,3 +566,14 @@ class UsdaSink:
             with contextlib.suppress(OSError):
                 path.unlink()
         self._tmp.clear()
+
+
+def _structure_rows(frame: Frame, c: Connectivity, n: int) -> slice:
+    """The frame rows of structure ``c``: structures are never born or killed, so
+    their particles are the contiguous rows whose ids are first .. first + count - 1."""
+    index = np.asarray(frame.index)
+    r0 = int(np.searchsorted(index, c.first)) if n else 0
+    rows = slice(r0, r0 + c.count)
+    if r0 + c.count > n or not np.array_equal(index[rows], np.arange(c.first, c.first + c.count)):
+        raise ValueError(f"frame at step {frame.step}: the particles of {c.name!r} are not all in it")
+    return rows

@@ -24,13 +24,22 @@ generators can cost speed but never correctness.
 
 from __future__ import annotations
 
+import types
 from dataclasses import dataclass
 
 import numpy as np
 
+from animsim.elements import numba_helper
 from animsim.forces.springs import Springs
+from animsim.forces.springs import _kernel as _springs_kernel
 from animsim.system import System
+from animsim.vec import dot3
 
+#: the bincount-order kernel of the springs outside the blocks, compiled with the grid kernel
+#: (a twin of springs._kernel, so marking it leaves that module's kernel alone)
+springs_kernel = numba_helper(
+    types.FunctionType(_springs_kernel.__code__, _springs_kernel.__globals__, "springs_kernel")
+)
 #: einsum spec of a row-wise dot product over the last (xyz) axis
 _DOT = "...k,...k->..."
 
@@ -95,7 +104,7 @@ class GridBlock:
         X = self.grid(x)
         d, length, inv, mag = self.d, self.length, self.inv, self.mag
         np.subtract(X[self.lo], X[self.hi], out=d)
-        np.einsum(_DOT, d, d, out=length)
+        dot3(d, d, out=length)
         np.sqrt(length, out=length)
         # Coincident ends have no direction and exert no force (see springs.py);
         # the min test keeps the common case to one division.
@@ -110,7 +119,7 @@ class GridBlock:
             V = self.grid(v)
             np.subtract(V[self.lo], V[self.hi], out=self.dv)
             dot = self.dot
-            np.einsum(_DOT, self.dv, d, out=dot)
+            dot3(self.dv, d, out=dot)
             dot *= self.kd
             dot *= inv
             mag += dot
@@ -166,6 +175,60 @@ def find_blocks(system: System) -> list[GridBlock]:
     return blocks
 
 
+def _grid_kernel(x, v, t, out, mass, fp, ip):
+    """The numba twin of GridSprings.accumulate, summing in the same order as the NumPy
+    slices (block after block: every lo end, then every hi end), so the backends agree
+    to the bit; then the other springs as springs.Springs' bincount (per particle, in
+    the order of the ends, from 0).
+
+    ip = [blocks, (count, lo (count), hi (count)) per block, S_o, N, a (S_o), b (S_o),
+    ptr (N+1), inc (2 S_o)]; fp = [damped, (rest, ks, kd) (count each) per block,
+    rest, ks, kd (S_o each)].
+    """
+    damped = fp[0] > 0
+    nblocks = ip[0]
+    p = 1
+    q = 1
+    for _ in range(nblocks):
+        count = ip[p]
+        lo = ip[p + 1 : p + 1 + count]
+        hi = ip[p + 1 + count : p + 1 + 2 * count]
+        rest = fp[q : q + count]
+        ks = fp[q + count : q + 2 * count]
+        kd = fp[q + 2 * count : q + 3 * count]
+        p += 1 + 2 * count
+        q += 3 * count
+        fs = np.empty((count, 3))
+        for s in range(count):
+            a = lo[s]
+            b = hi[s]
+            d0 = x[a, 0] - x[b, 0]
+            d1 = x[a, 1] - x[b, 1]
+            d2 = x[a, 2] - x[b, 2]
+            length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            inv = 1.0 / length if length > 0.0 else 0.0
+            mag = (length - rest[s]) * ks[s]
+            if damped:
+                dot = (v[a, 0] - v[b, 0]) * d0 + (v[a, 1] - v[b, 1]) * d1 + (v[a, 2] - v[b, 2]) * d2
+                mag += dot * kd[s] * inv
+            mag *= inv
+            fs[s, 0] = d0 * mag
+            fs[s, 1] = d1 * mag
+            fs[s, 2] = d2 * mag
+        for s in range(count):
+            a = lo[s]
+            out[a, 0] -= fs[s, 0]
+            out[a, 1] -= fs[s, 1]
+            out[a, 2] -= fs[s, 2]
+        for s in range(count):
+            b = hi[s]
+            out[b, 0] += fs[s, 0]
+            out[b, 1] += fs[s, 1]
+            out[b, 2] += fs[s, 2]
+    if ip[p] > 0:
+        springs_kernel(x, v, t, out, mass, fp[q:], ip[p:])
+
+
 class GridSprings(Springs):
     """All of a scene's springs: grid blocks by slices, the rest by bincount.
 
@@ -184,6 +247,7 @@ class GridSprings(Springs):
             label,
         )
         self.blocks = blocks
+        self.numba_parallel = False
         covered = np.zeros(system.spring_count, dtype=bool)
         for blk in blocks:
             covered[blk.springs] = True
@@ -198,6 +262,28 @@ class GridSprings(Springs):
                 system.spring_kd[left],
                 system.particle_count,
             )
+
+    numba_source = staticmethod(_grid_kernel)
+    #: serial, to add the forces in the NumPy slices' order (the backends then agree to the bit)
+    numba_parallel = False
+
+    def numba_params(self) -> tuple[np.ndarray, np.ndarray]:
+        fps: list[np.ndarray] = [np.array([1.0 if self.has_damping else 0.0])]
+        ips: list[np.ndarray] = [np.array([len(self.blocks)])]
+        for blk in self.blocks:
+            pairs = _block_pairs(blk.shape, blk.lo, blk.hi) + blk.first
+            count = len(pairs)
+            ips += [np.array([count]), pairs[:, 0], pairs[:, 1]]
+            fps += [blk.rest.ravel(), np.broadcast_to(blk.ks, blk.rest.shape).ravel()]
+            fps += [np.broadcast_to(blk.kd, blk.rest.shape).ravel()]
+        if self.others is not None:
+            fo, io = self.others.numba_params()
+            # the others' kernel reads its own damped flag at the end of its floats
+            fps.append(fo)
+            ips.append(io)
+        else:
+            ips.append(np.array([0]))
+        return np.concatenate(fps).astype(np.float64), np.concatenate(ips).astype(np.int64)
 
     def accumulate(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None:
         # The slice views need C-contiguous (N, 3) rows; every buffer the

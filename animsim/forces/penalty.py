@@ -14,22 +14,56 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from animsim.elements import ELASTIC, ForceElement
 from animsim.forces.jacobian import diagonal_blocks
+from animsim.vec import dot3
 
 
-class PenaltyPlane:
+def _kernel(x, v, t, out, mass, fp, ip):
+    p0, p1, p2, n0, n1, n2, k, c = fp[0], fp[1], fp[2], fp[3], fp[4], fp[5], fp[6], fp[7]
+    for i in range(x.shape[0]):
+        d = (x[i, 0] - p0) * n0 + (x[i, 1] - p1) * n1 + (x[i, 2] - p2) * n2
+        if d < 0:
+            push = -k * d
+            if c > 0:
+                vn = v[i, 0] * n0 + v[i, 1] * n1 + v[i, 2] * n2
+                if vn < 0:
+                    push -= c * vn
+            out[i, 0] += push * n0
+            out[i, 1] += push * n1
+            out[i, 2] += push * n2
+
+
+class PenaltyPlane(ForceElement):
+    """Built by the plane module (:mod:`animsim.collisions`) for planes with ``response: penalty``."""
+
+    watch_role = ELASTIC
+    no_closed_form = "it has planes (collisions have no closed form here)"
+
     def __init__(self, point: np.ndarray, normal: np.ndarray, stiffness: float, damping: float):
         self.p = np.asarray(point, dtype=np.float64)
         self.n = np.asarray(normal, dtype=np.float64) / np.linalg.norm(normal)
         self.k = float(stiffness)
         self.c = float(damping)
         self.label = f"penalty plane through {self.p.tolist()} normal {self.n.tolist()} k = {self.k} N/m"
+        self.has_damping = self.c > 0
+        self.contact_stiffness = self.k
+
+    def stiffness_rows(self, inv_mass: np.ndarray, k_rows: np.ndarray, c_rows: np.ndarray) -> None:
+        # Any particle may touch the plane: its stiffness and damping count on every row.
+        k_rows += self.k * inv_mass
+        c_rows += self.c * inv_mass
+
+    numba_source = staticmethod(_kernel)
+
+    def numba_params(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.concatenate([self.p, self.n, [self.k, self.c]]), np.zeros(0, dtype=np.int64)
 
     def accumulate(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None:
-        d = (x - self.p) @ self.n
+        d = dot3(x - self.p, self.n)
         push = np.where(d < 0, -self.k * d, 0.0)
         if self.c > 0:
-            vn = v @ self.n
+            vn = dot3(v, self.n)
             push -= np.where((d < 0) & (vn < 0), self.c * vn, 0.0)
         out += push[:, None] * self.n
 

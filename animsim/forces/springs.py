@@ -14,13 +14,76 @@ end indices; ``out[idx] += f`` would apply a repeated index only once.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import scipy.sparse as sp
 
+from animsim.elements import ELASTIC, ForceElement
 from animsim.forces.jacobian import block_pattern
+from animsim.vec import dot3
+
+prange = range  # numba's prange once the kernel is compiled (see animsim.elements.jit_kernel)
 
 
-class Springs:
+def _kernel(x, v, t, out, mass, fp, ip):
+    """Lander Eq. 2 per spring (in parallel), then each particle gathers its springs (CSR).
+
+    fp = [rest (S), ks (S), kd (S), damped]; ip = [S, N, a (S), b (S), ptr (N+1), inc (2S)],
+    where inc lists, per particle, spring s for an end a and S + s for an end b.
+    """
+    ns = ip[0]
+    n = ip[1]
+    sa = ip[2 : 2 + ns]
+    sb = ip[2 + ns : 2 + 2 * ns]
+    ptr = ip[2 + 2 * ns : 3 + 2 * ns + n]
+    inc = ip[3 + 2 * ns + n :]
+    rest = fp[:ns]
+    ks = fp[ns : 2 * ns]
+    kd = fp[2 * ns : 3 * ns]
+    damped = fp[3 * ns] > 0
+    fs = np.empty((ns, 3))
+    for s in prange(ns):
+        a = sa[s]
+        b = sb[s]
+        d0 = x[a, 0] - x[b, 0]
+        d1 = x[a, 1] - x[b, 1]
+        d2 = x[a, 2] - x[b, 2]
+        length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        inv = 1.0 / length if length > 0.0 else 0.0
+        mag = ks[s] * (length - rest[s])
+        if damped:
+            dot = (v[a, 0] - v[b, 0]) * d0 + (v[a, 1] - v[b, 1]) * d1 + (v[a, 2] - v[b, 2]) * d2
+            mag += kd[s] * dot * inv
+        scale = -mag * inv
+        fs[s, 0] = scale * d0
+        fs[s, 1] = scale * d1
+        fs[s, 2] = scale * d2
+    for i in prange(n):
+        f0 = 0.0
+        f1 = 0.0
+        f2 = 0.0
+        for k in range(ptr[i], ptr[i + 1]):
+            s = inc[k]
+            if s < ns:
+                f0 += fs[s, 0]
+                f1 += fs[s, 1]
+                f2 += fs[s, 2]
+            else:
+                f0 -= fs[s - ns, 0]
+                f1 -= fs[s - ns, 1]
+                f2 -= fs[s - ns, 2]
+        out[i, 0] += f0
+        out[i, 1] += f1
+        out[i, 2] += f2
+
+
+#: springs from which the numba kernel runs its loops in parallel; below, a
+#: parallel region's start-up costs more than it saves
+PARALLEL_MIN_SPRINGS = 20_000
+
+
+class Springs(ForceElement):
     def __init__(
         self,
         index: np.ndarray,
@@ -43,10 +106,37 @@ class Springs:
         # CSR structure of the Jacobians, built on first use (explicit methods never need it).
         self._jac: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.label = label or f"springs: {s} (Hooke + damping, Lander Eq. 2)"
+        self.numba_parallel = s >= PARALLEL_MIN_SPRINGS
+
+    watch_role = ELASTIC
+    energy_part = "spring"
+    #: springs take part in closed forms through the system's spring arrays (no uniform part)
+    closed_form: dict[str, Any] = {}  # noqa: RUF012 - read-only allow-list entry
+
+    def stiffness_rows(self, inv_mass: np.ndarray, k_rows: np.ndarray, c_rows: np.ndarray) -> None:
+        """Gershgorin rows of M^-1/2 K M^-1/2: spring k adds k (1/m_a + 1/sqrt(m_a m_b)) on row a."""
+        a, b, n = self.a, self.b, len(k_rows)
+        ia, ib = inv_mass[a], inv_mass[b]
+        cross = np.sqrt(ia * ib)
+        for coef, rows in ((self.ks, k_rows), (self.kd, c_rows)):
+            rows += np.bincount(a, weights=coef * (ia + cross), minlength=n)
+            rows += np.bincount(b, weights=coef * (ib + cross), minlength=n)
+
+    numba_source = staticmethod(_kernel)
+
+    def numba_params(self) -> tuple[np.ndarray, np.ndarray]:
+        ns, n = len(self.a), self.n
+        ends = self.ends
+        order = np.argsort(ends, kind="stable")
+        ptr = np.zeros(n + 1, dtype=np.int64)
+        np.cumsum(np.bincount(ends, minlength=n), out=ptr[1:])
+        fp = np.concatenate([self.rest, self.ks, self.kd, [1.0 if self.has_damping else 0.0]])
+        ip = np.concatenate([[ns, n], self.a, self.b, ptr, order]).astype(np.int64)
+        return fp, ip
 
     def _geometry(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         d = x[self.a] - x[self.b]
-        length = np.sqrt(np.einsum("ij,ij->i", d, d))
+        length = np.sqrt(dot3(d, d))
         with np.errstate(divide="ignore", invalid="ignore"):
             inv = np.where(length > 0, 1.0 / length, 0.0)
         return d, length, inv
@@ -56,7 +146,7 @@ class Springs:
         magnitude = self.ks * (length - self.rest)
         if self.has_damping:
             dv = v[self.a] - v[self.b]
-            magnitude += self.kd * np.einsum("ij,ij->i", dv, d) * inv
+            magnitude += self.kd * dot3(dv, d) * inv
         # force on a = -magnitude * unit; on b the opposite
         scale = -magnitude * inv
         s = len(self.a)

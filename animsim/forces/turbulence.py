@@ -28,8 +28,11 @@ pushed harder than a heavy one.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
+from animsim.elements import UNKNOWN, ForceElement
 from animsim.scene import models as m
 
 #: Number of Fourier modes. More modes make the field's one-point statistics
@@ -42,11 +45,38 @@ TURBULENCE_STREAM_TAG = 0x7475_7262  # "turb"
 DIMENSIONS = 3
 
 
-class Turbulence:
+def _kernel(x, v, t, out, mass, fp, ip):
+    # fp = [modes, kt (3*M, row-major 3 x M), omega (M), phi (M), direction (M*3)]
+    modes = int(fp[0])
+    kt = fp[1 : 1 + 3 * modes]
+    omega = fp[1 + 3 * modes : 1 + 4 * modes]
+    phi = fp[1 + 4 * modes : 1 + 5 * modes]
+    direction = fp[1 + 5 * modes : 1 + 8 * modes]
+    for i in range(x.shape[0]):
+        if mass[i] > 0:
+            f0 = 0.0
+            f1 = 0.0
+            f2 = 0.0
+            for j in range(modes):
+                c = np.cos(
+                    x[i, 0] * kt[j]
+                    + x[i, 1] * kt[modes + j]
+                    + x[i, 2] * kt[2 * modes + j]
+                    + (omega[j] * t + phi[j])
+                )
+                f0 += c * direction[3 * j]
+                f1 += c * direction[3 * j + 1]
+                f2 += c * direction[3 * j + 2]
+            out[i, 0] += f0
+            out[i, 1] += f1
+            out[i, 2] += f2
+
+
+class Turbulence(ForceElement):
     """A wind's turbulent part, one vectorised term of the force sum.
 
-    ``particle_mass`` is the System's mass array (shared, so pool births and
-    deaths are seen): particles of mass 0 (pinned, or dead pool slots) get no
+    ``particle_mass`` is the live mass array (bound to the run's state, so pool
+    births and deaths are seen): particles of mass 0 (pinned, or dead pool slots) get no
     turbulent force, and the field is not even evaluated for them, which
     matters when an emitter pool is much larger than its alive population.
     """
@@ -95,6 +125,20 @@ class Turbulence:
         np.cos(phase, out=phase)
         return phase @ self.direction
 
+    #: a random field: its energy input has no bound the watchdog could use
+    watch_role = UNKNOWN
+    no_closed_form = "turbulent wind is a random force field"
+
+    def bind(self, state: Any) -> None:
+        self.mass = state.particle_mass
+
+    numba_source = staticmethod(_kernel)
+
+    def numba_params(self) -> tuple[np.ndarray, np.ndarray]:
+        m_ = len(self.omega)
+        fp = np.concatenate([[m_], self.kt.ravel(), self.omega, self.phi, self.direction.ravel()])
+        return fp, np.zeros(0, dtype=np.int64)
+
     def accumulate(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None:
         movable = self.mass > 0
         count = int(np.count_nonzero(movable))
@@ -105,6 +149,3 @@ class Turbulence:
             return
         idx = np.flatnonzero(movable)
         out[idx] += self.field(x[idx], t)  # idx has no repeats, so fancy += is exact
-
-    def potential(self, x: np.ndarray) -> None:
-        return None

@@ -11,21 +11,56 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from animsim.elements import INJECTING, BuildContext, ForceElement, register
 from animsim.forces.jacobian import scaled_identity
+from animsim.scene import models as m
 
 
-class Wind:
+def _kernel(x, v, t, out, mass, fp, ip):
+    k, w0, w1, w2 = fp[0], fp[1], fp[2], fp[3]
+    for i in range(x.shape[0]):
+        out[i, 0] += k * (w0 - v[i, 0])
+        out[i, 1] += k * (w1 - v[i, 1])
+        out[i, 2] += k * (w2 - v[i, 2])
+
+
+class Wind(ForceElement):
+    watch_role = INJECTING
+    has_damping = True
+
     def __init__(self, velocity: np.ndarray, k: float):
         self.w = np.asarray(velocity, dtype=np.float64)
         self.k = float(k)
         self.label = f"wind {self.w.tolist()} m/s, k = {self.k} N*s/m"
+        # a linear drag toward w: the closed form of drag with a constant push k w
+        self.closed_form = {"drag": self.k, "push": self.k * self.w}
+        #: the most power the wind can put into one particle: max over v of k (w - v).v = k |w|^2 / 4
+        self.max_power_per_particle = 0.25 * self.k * float(np.dot(self.w, self.w))
 
     def accumulate(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None:
         out += self.k * (self.w - v)
 
-    def potential(self, x: np.ndarray) -> None:
-        return None
+    def stiffness_rows(self, inv_mass: np.ndarray, k_rows: np.ndarray, c_rows: np.ndarray) -> None:
+        c_rows += self.k * inv_mass
 
     def jacobians(self, x: np.ndarray, v: np.ndarray) -> tuple[None, sp.csr_matrix]:
         """The steady part k (w - v) has dF/dv = -k I."""
         return None, scaled_identity(-self.k, len(v))
+
+    numba_source = staticmethod(_kernel)
+
+    def numba_params(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.concatenate([[self.k], self.w]), np.zeros(0, dtype=np.int64)
+
+
+@register(m.Wind)
+def build(entries: list[tuple[int, m.Wind]], ctx: BuildContext) -> list[ForceElement]:
+    from animsim.forces.turbulence import Turbulence
+
+    out: list[ForceElement] = []
+    for index, f in entries:
+        out.append(Wind(np.array(f.velocity), f.k))
+        if f.turbulence > 0:
+            # the stream is the wind's position among the scene's forces, so two winds differ
+            out.append(Turbulence.from_scene(f, ctx.seed, ctx.system.particle_mass, stream=index))
+    return out

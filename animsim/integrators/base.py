@@ -15,10 +15,16 @@ change the state behind the integrator's back.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import ClassVar
+from typing import Any, ClassVar
 
 from animsim.dynamics import Dynamics
 from animsim.system import State
+
+#: method families of the numba backend's fused kernel (animsim.backends.fused)
+FUSED_SYMPLECTIC_EULER = 0
+FUSED_EULER_AVERAGE = 1
+FUSED_VERLET = 2
+FUSED_RUNGE_KUTTA = 3
 
 
 class Integrator(ABC):
@@ -38,3 +44,7 @@ class Integrator(ABC):
 
     def reset(self) -> None:  # noqa: B027 - optional hook, most methods cache nothing
         """Forget anything cached between steps."""
+
+    def numba_chunk_kind(self) -> tuple[int, Any] | None:
+        """(fused family, tableau or None) when the numba backend can fuse this method's steps."""
+        return None

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from animsim.dynamics import Dynamics
-from animsim.integrators.base import Integrator
+from animsim.integrators.base import FUSED_RUNGE_KUTTA, Integrator
 from animsim.system import State
 
 
@@ -51,6 +51,9 @@ class RungeKutta(Integrator):
         self._kv = np.zeros((s, n, 3))  # stage accelerations K_i
         self._x = np.zeros((n, 3))
         self._v = np.zeros((n, 3))
+
+    def numba_chunk_kind(self) -> tuple[int, Tableau]:
+        return FUSED_RUNGE_KUTTA, self.tableau
 
     def step(self, state: State, dt: float) -> None:
         tab = self.tableau

@@ -16,7 +16,12 @@ from __future__ import annotations
 import numpy as np
 
 from animsim.dynamics import Dynamics
-from animsim.integrators.base import Integrator
+from animsim.integrators.base import (
+    FUSED_EULER_AVERAGE,
+    FUSED_SYMPLECTIC_EULER,
+    FUSED_VERLET,
+    Integrator,
+)
 from animsim.system import State
 
 #: relative tolerance when deciding that Verlet's cached acceleration is for this time
@@ -32,6 +37,9 @@ class SymplecticEuler(Integrator):
     def __init__(self, dynamics: Dynamics):
         super().__init__(dynamics)
         self._a = np.zeros((dynamics.system.particle_count, 3))
+
+    def numba_chunk_kind(self) -> tuple[int, None]:
+        return FUSED_SYMPLECTIC_EULER, None
 
     def step(self, state: State, dt: float) -> None:
         x, v = state.particle_position, state.particle_velocity
@@ -55,6 +63,9 @@ class EulerAverage(Integrator):
         n = dynamics.system.particle_count
         self._a = np.zeros((n, 3))
         self._v1 = np.zeros((n, 3))
+
+    def numba_chunk_kind(self) -> tuple[int, None]:
+        return FUSED_EULER_AVERAGE, None
 
     def step(self, state: State, dt: float) -> None:
         x, v = state.particle_position, state.particle_velocity
@@ -82,6 +93,9 @@ class Verlet(Integrator):
 
     def reset(self) -> None:
         self._cache = None
+
+    def numba_chunk_kind(self) -> tuple[int, None]:
+        return FUSED_VERLET, None
 
     def step(self, state: State, dt: float) -> None:
         x, v = state.particle_position, state.particle_velocity

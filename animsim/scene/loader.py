@@ -487,7 +487,7 @@ def load_scene_bytes(raw: bytes, file: str, limits: Limits = Limits()) -> Loaded
     from animsim.scene.validate import check_scene, partial_scene  # late: validate imports structures
 
     try:
-        scene = Scene.model_validate(body)
+        scene = Scene.model_validate(body, context={"marks": True})
     except ValidationError as exc:
         # Report the cross-field problems of the parts that did validate too,
         # so one round of fixes is enough (never twice for one key).
@@ -498,12 +498,22 @@ def load_scene_bytes(raw: bytes, file: str, limits: Limits = Limits()) -> Loaded
             if _dotted(p) not in seen:
                 found.append(Diagnostic(file, *marks.at(p, prefer_key=key), _dotted(p), msg))
         raise SceneError(found) from None
-    problems = check_scene(scene)
+    problems = mesh_problems(scene, file) + check_scene(scene)
     if problems:
         raise SceneError(
             [Diagnostic(file, *marks.at(p, prefer_key=key), _dotted(p), msg) for p, msg, key in problems]
         )
     return LoadedScene(scene=scene, file=file, sha256=sha, marks=marks, data=body, source=text)
+
+
+def mesh_problems(scene: Scene, file: str) -> list[tuple[Path_, str, bool]]:
+    """Read the mesh files of ``type: mesh`` structures, relative to the scene's folder."""
+    if not any(s.type == "mesh" for s in scene.structures):
+        return []
+    from animsim.scene.meshes import check_meshes
+
+    scene_dir = None if file.startswith("<") else Path(file).parent
+    return check_meshes(scene, scene_dir)
 
 
 def _decode(raw: bytes, file: str) -> str:

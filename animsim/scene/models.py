@@ -19,6 +19,7 @@ from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
+    PrivateAttr,
     StrictBool,
     StrictInt,
     StrictStr,
@@ -36,6 +37,8 @@ IntegratorName = Literal[
     "verlet",
     "implicit_euler",
 ]
+#: the "file" of diagnostics about a scene built in Python (it has no lines)
+PYTHON_SOURCE = "<python>"
 #: the names, in the order of the spec's table
 INTEGRATOR_NAMES: tuple[str, ...] = get_args(IntegratorName)
 DEFAULT_INTEGRATOR = "symplectic_euler"
@@ -151,11 +154,27 @@ class Attractor(Model):
     )
 
 
+class Vortex(Model):
+    type: Literal["vortex"]
+    center: Vec3 = Field([0.0, 0.0, 0.0], description="a point on the vortex axis, m")
+    axis: Vec3 = Field([0.0, 1.0, 0.0], description="direction of the axis (need not be unit length)")
+    k: FiniteFloat = Field(
+        description="swirl strength, N/m: f = k * (axis x r); negative turns the other way"
+    )
+
+    @field_validator("axis")
+    @classmethod
+    def _axis_not_zero(cls, value: list[float]) -> list[float]:
+        if not any(value):
+            raise ValueError("the axis must not be zero")
+        return value
+
+
 Force = Annotated[
-    Gravity | Drag | QuadraticDrag | Wind | Attractor,
+    Gravity | Drag | QuadraticDrag | Wind | Attractor | Vortex,
     Field(discriminator="type"),
 ]
-FORCE_TYPES = ("gravity", "drag", "quadratic_drag", "wind", "attractor")
+FORCE_TYPES = ("gravity", "drag", "quadratic_drag", "wind", "attractor", "vortex")
 
 
 # --- planes -----------------------------------------------------------------
@@ -325,8 +344,72 @@ class SoftBox(_StructureCommon):
     body_diagonal: SpringFamily | None = None
 
 
-Structure = Annotated[Cloth | Strand | SoftBox, Field(discriminator="type")]
-STRUCTURE_TYPES = ("cloth", "strand", "soft_box")
+class AxisAngle(Model):
+    """A right-handed rotation about ``axis`` by ``angle`` degrees."""
+
+    axis: Vec3 = Field(description="need not be unit length; must not be zero")
+    angle: FiniteFloat = Field(description="degrees, right-handed about the axis")
+
+    @field_validator("axis")
+    @classmethod
+    def _nonzero(cls, v: tuple[float, float, float]) -> tuple[float, float, float]:
+        if v == (0.0, 0.0, 0.0):
+            raise ValueError("the axis must not be zero")
+        return v
+
+
+class PinBox(Model):
+    min: Vec3
+    max: Vec3
+
+    @model_validator(mode="after")
+    def _ordered(self) -> PinBox:
+        if any(a > b for a, b in zip(self.min, self.max, strict=True)):
+            raise ValueError("min must not exceed max in any axis")
+        return self
+
+
+class PinInside(Model):
+    inside: PinBox = Field(description="pin every vertex inside this box (world coordinates, m)")
+
+
+MAX_MESH_VERTICES = 200_000
+
+
+class MeshStructure(Model):
+    """A triangle or polygon mesh from a file, turned into particles and springs."""
+
+    type: Literal["mesh"]
+    id: StrictStr = Field(
+        min_length=1, description="particle ids become <id>[k], k = vertex index in the file"
+    )
+    file: StrictStr = Field(
+        min_length=1, description="OBJ or PLY (STL with the 'mesh' extra), relative to the scene file"
+    )
+    mode: Literal["soft_body", "cloth"] = Field(
+        description="soft_body: a closed surface kept full by interior struts; cloth: a sheet"
+    )
+    mass: Positive = Field(description="total mass, kg, spread over the vertices by area")
+    scale: Positive = 1.0
+    rotation: AxisAngle | None = Field(None, description="applied after scale, before position")
+    position: Vec3 = Field([0.0, 0.0, 0.0], description="added after scale and rotation, m")
+    velocity: Vec3 = Field([0.0, 0.0, 0.0], description="initial velocity of every vertex, m/s")
+    stretch: SpringFamily | None = Field(None, description="one spring per mesh edge")
+    bend: SpringFamily | None = Field(
+        None, description="across each interior edge, between the two opposite vertices"
+    )
+    volume: SpringFamily | None = Field(None, description="soft_body only: interior struts")
+    pin: list[Annotated[StrictInt, Field(ge=0)]] | PinInside = Field(
+        [], description="vertex indices, or {inside: {min, max}}"
+    )
+
+    # The geometry read from ``file`` (animsim.scene.meshes.MeshGeometry),
+    # attached by the loader once the file has been checked; not a scene key.
+    _geometry: Any = PrivateAttr(None)
+
+
+Structure = Annotated[Cloth | Strand | SoftBox | MeshStructure, Field(discriminator="type")]
+STRUCTURE_TYPES = ("cloth", "strand", "soft_box", "mesh")
 
 
 # --- integrator, record, scene ----------------------------------------------
@@ -376,6 +459,9 @@ class Scene(Model):
         json_schema_extra={"$schema": "https://json-schema.org/draft/2020-12/schema"},
     )
 
+    #: where a loaded scene came from ({"file", "sha256"}), for the metadata; not part of the scene
+    _source: dict[str, str] | None = PrivateAttr(default=None)
+
     name: StrictStr | None = Field(None, description="defaults to the file stem")
     duration: Positive = Field(description="simulated seconds")
     dt: Positive = Field(DEFAULT_DT, description="step size, s; <= duration")
@@ -388,6 +474,25 @@ class Scene(Model):
     planes: list[Plane] = []
     emitters: list[Emitter] = []
     structures: list[Structure] = []
+
+    @model_validator(mode="after")
+    def _cross_checks(self, info: Any) -> Scene:
+        """The rules that span sections (a spring to an unknown id, ...), for scenes built in
+        Python. The loader runs them itself, with line marks (context ``{"marks": True}``)."""
+        if info.context and info.context.get("marks"):
+            return self
+        from animsim.errors import Diagnostic, SceneError
+        from animsim.scene.validate import check_scene
+
+        problems = check_scene(self)
+        if problems:
+            raise SceneError(
+                [
+                    Diagnostic(PYTHON_SOURCE, 0, 0, ".".join(str(p) for p in path), message)
+                    for path, message, _ in problems
+                ]
+            )
+        return self
 
     @property
     def integrator_name(self) -> str:

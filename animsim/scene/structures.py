@@ -10,6 +10,13 @@ Ids are ``<id>[i,j]`` (cloth), ``<id>[i]`` (strand) and ``<id>[i,j,k]``
 (soft_box), created in row-major order, so index = i*ny + j (cloth) and
 (i*ny + j)*nz + k (soft_box). The regular layout is kept (``grid_shape``) so
 later stages can use array slices instead of index lists.
+
+A ``mesh`` structure (:mod:`animsim.scene.meshes`) has ids ``<id>[k]``, k the
+vertex index in its file, and a one-dimensional "grid" of its vertex count.
+
+Every expansion also says how its particles connect, for the exporters: the
+surface faces of cloth (grid quads), soft boxes (the quads of the six outer
+faces, outward) and meshes (triangles), and the particle order of a strand.
 """
 
 from __future__ import annotations
@@ -17,12 +24,13 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # numpy is imported where arrays are built, so validating a scene
     import numpy as np  # (and refusing a bad one) does not pay for importing it
 
-from animsim.scene.models import Cloth, SoftBox, SpringFamily, Strand, Structure
+from animsim.scene.models import Cloth, MeshStructure, SoftBox, SpringFamily, Strand, Structure
 
 _PLANE_AXES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}
 
@@ -46,9 +54,18 @@ class Expanded:
     pinned: np.ndarray  # (n,) bool
     springs: list[SpringGroup]
     grid_shape: tuple[int, ...]
+    # For export: (F, k) local vertex indices of the surface faces (quads or
+    # triangles, counter-clockwise seen from outside where there is one), or
+    # None; ``curves``: (C, L) local indices, one row per polyline, or None.
+    faces: np.ndarray | None = None
+    curves: np.ndarray | None = None
 
 
 def grid_shape(s: Structure) -> tuple[int, ...]:
+    if isinstance(s, MeshStructure):
+        # Known once the loader has read the file; (0,) before that.
+        geom = s._geometry
+        return (0 if geom is None else geom.vertex_count,)
     if isinstance(s, Cloth):
         return (s.resolution[0], s.resolution[1])
     if isinstance(s, Strand):
@@ -63,6 +80,10 @@ def particle_count(s: Structure) -> int:
 def structure_spring_count(s: Structure) -> int:
     """Number of springs the structure generates, counted without generating them
     (the memory pre-flight calls this on lattices far too large to build)."""
+    if isinstance(s, MeshStructure):
+        from animsim.scene.meshes import mesh_spring_count
+
+        return mesh_spring_count(s)
     shape = grid_shape(s)
     total = 0
     for _name, _fam, offsets in _family_offsets(s):
@@ -175,9 +196,13 @@ def _families(s: Structure, shape: tuple[int, ...]) -> list[tuple[str, np.ndarra
     ]
 
 
-def expand(s: Structure) -> Expanded:
+def expand(s: Structure, scene_dir: Path | None = None) -> Expanded:
+    """Particles, springs and connectivity of ``s`` (``scene_dir``: where a mesh
+    file's relative path starts when the loader has not read it already)."""
     import numpy as np
 
+    if isinstance(s, MeshStructure):
+        return _expand_mesh(s, scene_dir)
     shape = grid_shape(s)
     n = int(np.prod(shape))
     if isinstance(s, Cloth):
@@ -211,4 +236,80 @@ def expand(s: Structure) -> Expanded:
         pinned=pinned,
         springs=groups,
         grid_shape=shape,
+        faces=_grid_faces(s, shape),
+        curves=np.arange(n, dtype=np.int64)[None, :] if isinstance(s, Strand) else None,
     )
+
+
+def _grid_faces(s: Structure, shape: tuple[int, ...]) -> np.ndarray | None:
+    """Quads of a cloth sheet, or of the outer surface of a soft box (outward)."""
+    import numpy as np
+
+    flat = np.arange(math.prod(shape), dtype=np.int64).reshape(shape)
+    if isinstance(s, Cloth):
+        return _quads(flat)
+    if not isinstance(s, SoftBox):
+        return None
+    quads = []
+    for axis in range(3):
+        for side in (0, -1):
+            sheet = np.moveaxis(flat, axis, 0)[side]  # the two other axes in cyclic order
+            q = _quads(sheet)
+            # _quads winds counter-clockwise about u x v, (u, v) the remaining
+            # axes in order: u x v is +x, -y, +z for axis 0, 1, 2. Flip the faces
+            # whose u x v points inward.
+            if (axis == 1) != (side == 0):
+                q = q[:, ::-1]
+            quads.append(q)
+    return np.concatenate(quads)
+
+
+def _quads(sheet: np.ndarray) -> np.ndarray:
+    """(i, j), (i+1, j), (i+1, j+1), (i, j+1) for every cell of a 2-D index grid."""
+    import numpy as np
+
+    return np.stack(
+        [sheet[:-1, :-1].ravel(), sheet[1:, :-1].ravel(), sheet[1:, 1:].ravel(), sheet[:-1, 1:].ravel()],
+        axis=1,
+    )
+
+
+def _expand_mesh(s: MeshStructure, scene_dir: Path | None) -> Expanded:
+    import numpy as np
+
+    from animsim.scene.meshes import mesh_parts
+
+    parts = mesh_parts(s, scene_dir)
+    n = len(parts.position)
+    groups = [
+        SpringGroup(f"mesh {s.id}: {name}", np.ascontiguousarray(pairs, dtype=np.int64), fam.ks, fam.kd)
+        for name, pairs, fam in parts.families
+    ]
+    return Expanded(
+        ids=format_id(s.id, (n,)),
+        position=parts.position,
+        velocity=np.tile(np.asarray(s.velocity, dtype=np.float64), (n, 1)),
+        mass=parts.mass,
+        pinned=parts.pinned,
+        springs=groups,
+        grid_shape=(n,),
+        faces=parts.triangles,
+    )
+
+
+def connectivity(expanded: list[tuple[str, Expanded, int]]) -> tuple[Any, ...]:
+    """:class:`animsim.record.Connectivity` of each expanded structure (id, expansion, first row)."""
+    import numpy as np
+
+    from animsim.record import Connectivity
+
+    out = []
+    for name, e, first in expanded:
+        n = len(e.ids)
+        for kind, table in (("mesh", e.faces), ("curves", e.curves)):
+            if table is None or len(table) == 0:
+                continue
+            t = np.asarray(table, dtype=np.int64)
+            counts = np.full(len(t), t.shape[1], dtype=np.int64)
+            out.append(Connectivity(name, kind, first, n, counts, t.ravel()))
+    return tuple(out)

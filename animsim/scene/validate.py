@@ -19,7 +19,7 @@ from typing import Any, get_args
 
 from pydantic import TypeAdapter, ValidationError
 
-from animsim.scene.models import Id, Particle, Scene
+from animsim.scene.models import Id, MeshStructure, Particle, Scene
 from animsim.scene.structures import grid_shape, local_index, parse_structure_id
 
 Problem = tuple[tuple[str | int, ...], str, bool]
@@ -128,6 +128,8 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
             out.append((("structures", i, "id"), f"duplicate structure id {s.id!r}", False))
         else:
             structures[s.id] = s
+        if isinstance(s, MeshStructure):
+            continue  # its pins are vertex numbers, checked with the file (animsim.scene.meshes)
         for k, pid in enumerate(s.pin):
             if local_index(s, pid) is None:
                 out.append(
@@ -143,6 +145,8 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
         if parsed is None or parsed[0] not in structures:
             return None
         s = structures[parsed[0]]
+        if isinstance(s, MeshStructure) and s._geometry is None:
+            return s  # its file could not be read (reported there): do not guess which ids exist
         return s if local_index(s, pid) is not None else None
 
     # Particles: unique ids (after 1 -> "1"), masses.

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from animsim.analysis.compare import DEFAULT_REPEAT, OrderFit, default_dts, estimate
-from animsim.console import drift_text, numba_notice, percent, steps_text
+from animsim.console import numba_notice, steps_text
 from animsim.record import DEFAULT_RECORD_FPS, Clock, record_steps, recording_rule, scene_record_steps
 from animsim.render import frames_at_rate
 from animsim.scene.loader import load_scene, load_scene_text
@@ -70,15 +70,6 @@ def test_order_capped_by_emitters_says_why() -> None:
 
 
 # --- the run summary ------------------------------------------------------------------------
-
-
-def test_drift_is_in_joules_and_percent_of_the_size_of_e0() -> None:
-    assert drift_text(-1.0, -4.5809) == "drift -3.58 J (-358% of |E0|)"
-    assert drift_text(-1.0, 0.5) == "drift +1.5 J (+150% of |E0|)"
-    assert drift_text(2.0, 1.0) == "drift -1 J (-50% of |E0|)"
-    assert drift_text(0.0, 1e-3) == "drift +0.001 J"
-    assert percent(-1.7e-11) == "-1.70e-09%"  # never a misleading -0.00%
-    assert percent(0.0) == "+0%"
 
 
 def test_adaptive_runs_are_not_a_fraction_of_the_fixed_plan(tmp_path) -> None:

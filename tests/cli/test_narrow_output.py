@@ -134,7 +134,7 @@ def test_check_explain_and_run_summary_wrap_at_width(width: int, tmp_path) -> No
         assert_fits(r.stdout, width)
     # numbers survive wrapping: each is a whole word of the output
     r = run_cli("check", SCENES / "orbit.yaml", env_extra={"COLUMNS": "80"})
-    assert re.search(r"drift [-+]\d\.\d\de-\d\d J \([-+]\d\.\d\de-\d\d% of \|E0\|\)", r.stdout), r.stdout
+    assert re.search(r"energy drift [-+]\d\.\d\de-\d\d % of \|E0\|", r.stdout), r.stdout
 
 
 def test_check_ends_with_a_tally_also_when_quiet(tmp_path) -> None:

@@ -10,9 +10,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from animsim.engine import STATUS_OK, STATUS_UNSTABLE
 from animsim.forces.springs import Springs
 from animsim.integrators import FIXED_STEP
-from animsim.simulate import STATUS_OK, STATUS_UNSTABLE
 from tests.conftest import SCENES, simulate_text
 
 STRESS = SCENES / "stress"

@@ -189,7 +189,7 @@ def test_fine_reference_error_column() -> None:
 def test_reference_is_pluggable(monkeypatch) -> None:
     def frozen(compiled, times):  # the initial positions at every time
         x = compiled.initial.particle_position
-        return sw.Trajectory(np.asarray(times), [x] * len(times))
+        return sw.Trajectory(np.asarray(times), [x] * len(times), [np.zeros_like(x)] * len(times))
 
     monkeypatch.setitem(sw.REFERENCES, "frozen", frozen)
     data = load_scene_text(OSCILLATOR).data

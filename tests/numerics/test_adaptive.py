@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from animsim.simulate import STATUS_OK, STATUS_UNSTABLE
+from animsim.engine import STATUS_OK, STATUS_UNSTABLE
 from tests.conftest import simulate_text
 
 OSCILLATOR = """

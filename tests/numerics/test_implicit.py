@@ -13,13 +13,13 @@ import math
 import numpy as np
 import pytest
 
+from animsim.engine import STATUS_OK, STATUS_UNSTABLE
 from animsim.forces.drag import Drag, QuadraticDrag
 from animsim.forces.penalty import PenaltyPlane
 from animsim.forces.springs import Springs
 from animsim.forces.wind import Wind
 from animsim.integrators import REGISTRY
 from animsim.integrators.implicit import ImplicitEuler
-from animsim.simulate import STATUS_OK, STATUS_UNSTABLE
 from tests.conftest import simulate_text
 
 OSCILLATOR = """

@@ -20,7 +20,6 @@ from animsim.analysis.references import (
     Trajectory,
     closed_form,
     kepler,
-    landing_steps,
     run_trajectory,
 )
 from animsim.analysis.references import _phi as phi
@@ -31,16 +30,16 @@ FINE_DT = 5e-4
 AGREE = 1e-9  # m: RK4 at FINE_DT is far more accurate than this on every scene below
 
 
-def _compiled(text: str, dt: float = FINE_DT):
+def _compiled(text: str, dt: float = FINE_DT, record_times=None):
     loaded = load_scene_text(text)
     scene = loaded.scene.model_copy(update={"dt": dt, "integrator": "rk4"})
-    return compile_scene(scene, loaded.name)
+    return compile_scene(scene, loaded.name, record_times=record_times)
 
 
 def _check_against_rk4(text: str, label_part: str) -> None:
-    compiled = _compiled(text)
-    times = np.linspace(0.0, compiled.clock.duration, 21)
-    compiled.record_steps = np.array(landing_steps(compiled.clock, times))
+    duration = _compiled(text).clock.duration
+    times = np.linspace(0.0, duration, 21)
+    compiled = _compiled(text, record_times=times)
     traj, status = run_trajectory(compiled)
     assert status == "ok"
     form = closed_form(compiled)

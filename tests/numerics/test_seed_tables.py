@@ -22,9 +22,9 @@ TOL = 1e-9
 
 def _run(path):
     from animsim.compile import compile_scene
+    from animsim.engine import run
     from animsim.record import MemorySink
     from animsim.scene.loader import load_scene
-    from animsim.simulate import run
 
     loaded = load_scene(path)
     sink = MemorySink()

@@ -9,8 +9,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from animsim.compile import compile_scene, with_overrides
+from animsim.engine import run
 from animsim.scene.loader import load_scene
-from animsim.simulate import run
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
 

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 
 from animsim.compile import compile_scene
+from animsim.engine import run
 from animsim.forces.grid_springs import GridSprings, find_blocks
 from animsim.forces.springs import Springs
 from animsim.record import MemorySink
 from animsim.scene.loader import load_scene_text
-from animsim.simulate import run
 
 RTOL = 1e-12
 

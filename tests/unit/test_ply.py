@@ -31,8 +31,9 @@ EXPECTED_PROPERTIES = [
     ("uchar", "blue"),
     ("uchar", "alpha"),
     ("float", "size"),
+    ("float", "radius"),  # the size again, under the name Blender's point clouds use
 ]
-ROW_BYTES = 6 * 8 + 4 + 4 * 1 + 4
+ROW_BYTES = 6 * 8 + 4 + 4 * 1 + 4 + 4
 
 
 def header_for(ids: list[str], *, emitters: bool = False) -> TrajectoryHeader:
@@ -316,7 +317,7 @@ def test_float_positions_option(tmp_path: Path) -> None:
     data = read_ply(path)
     assert data["x"].dtype == np.float32
     assert np.array_equal(data["x"], frames[0].position[:, 0].astype(np.float32))
-    assert path.stat().st_size == len("\n".join(raw_header(path))) + 1 + 3 * (6 * 4 + 12)
+    assert path.stat().st_size == len("\n".join(raw_header(path))) + 1 + 3 * (6 * 4 + 16)
 
 
 def test_ids_with_line_breaks_survive_the_sidecar(tmp_path: Path) -> None:
@@ -401,3 +402,43 @@ def test_failed_close_can_still_be_aborted(tmp_path: Path) -> None:
     sink.abort()
     assert [p.name for p in (tmp_path / "out").iterdir()] == ["frames_ids.txt"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def test_faces_and_edges_point_at_the_structure_rows(tmp_path: Path) -> None:
+    from animsim.record import Connectivity
+
+    ids = ["hook", "c[0,0]", "c[0,1]", "c[1,0]", "c[1,1]", "s[0]", "s[1]", "s[2]"]
+    quad = Connectivity("c", "mesh", 1, 4, np.array([4]), np.array([0, 2, 3, 1]))
+    strand = Connectivity("s", "curves", 5, 3, np.array([3]), np.arange(3))
+    header = TrajectoryHeader(
+        "mixed", ids, np.zeros((0, 2), dtype=np.int64), False, connectivity=(quad, strand)
+    )
+    frame = Frame(0, 0.0, np.arange(8), np.zeros((8, 3)), np.zeros((8, 3)))
+    run(PlySequenceSink(tmp_path, write_meta=False), header, [frame])
+    path = tmp_path / "frames_00000.ply"
+    lines = raw_header(path)
+    assert lines[-6:] == [
+        "element face 1",
+        "property list uchar int vertex_indices",
+        "element edge 2",
+        "property int vertex1",
+        "property int vertex2",
+        "end_header",
+    ]
+    faces = read_ply(path, "face")
+    assert [f.tolist() for f in faces["vertex_indices"]] == [[1, 3, 4, 2]]  # local + the cloth's first row
+    edges = read_ply(path, "edge")
+    assert edges["vertex1"].tolist() == [5, 6] and edges["vertex2"].tolist() == [6, 7]
+    assert read_ply(path).trailing == 0
+
+
+def test_an_empty_frame_holds_one_placeholder_vertex(tmp_path: Path) -> None:
+    header = header_for(["a"], emitters=True)
+    empty = Frame(3, 0.5, np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros((0, 3)))
+    run(PlySequenceSink(tmp_path, write_meta=False), header, [empty])
+    path = tmp_path / "frames_00000.ply"
+    assert "comment placeholder vertex id -1: this frame has no particles" in raw_header(path)
+    data = read_ply(path)
+    assert data["id"].tolist() == [-1]
+    assert data["radius"].tolist() == [0.0] and data["alpha"].tolist() == [0]
+    assert data.trailing == 0

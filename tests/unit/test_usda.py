@@ -214,7 +214,10 @@ def test_time_samples_equal_the_frames_exactly(tmp_path: Path) -> None:
         assert np.array_equal(s["points"].values[k], frame.position)
         assert np.array_equal(s["velocities"].values[k], frame.velocity)
         assert np.array_equal(s["widths"].values[k], 2.0 * frame.size)
-        assert np.array_equal(s["primvars:displayColor"].values[k], frame.color[:, :3])
+        # Scene colours are sRGB; displayColor holds them in linear light (IEC 61966-2-1).
+        c = frame.color[:, :3]
+        linear = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+        assert np.array_equal(s["primvars:displayColor"].values[k], linear)
         assert np.array_equal(s["primvars:displayOpacity"].values[k], frame.color[:, 3])
         assert np.array_equal(s["ids"].values[k], frame.index)
         half = frame.size[:, None]
@@ -380,3 +383,57 @@ def test_failed_close_leaves_nothing(tmp_path: Path) -> None:
         sink.close({"status": "ok"})
     sink.abort()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m.usda.meta.json"]
+
+
+def test_structures_become_mesh_and_curves_prims_beside_the_loose_particles(tmp_path: Path) -> None:
+    pytest.importorskip("pxr")
+    from pxr import Usd as usd
+    from pxr import UsdGeom as usd_geom
+
+    from animsim.record import Connectivity
+
+    # Row 0 a listed particle, rows 1-4 a one-quad cloth, rows 5-7 a strand, then emitted ones.
+    ids = ["hook", "c[0,0]", "c[0,1]", "c[1,0]", "c[1,1]", "s[0]", "s[1]", "s[2]"]
+    quad = Connectivity("c", "mesh", 1, 4, np.array([4]), np.array([0, 2, 3, 1]))
+    strand = Connectivity("s", "curves", 5, 3, np.array([3]), np.arange(3))
+    header = TrajectoryHeader(
+        "mixed", ids, np.zeros((0, 2), dtype=np.int64), True, connectivity=(quad, strand)
+    )
+    rng = np.random.default_rng(11)
+    frames = []
+    for k, index in enumerate([list(range(8)), [*range(8), 8, 9]]):
+        n = len(index)
+        frames.append(
+            Frame(k, 0.1 * k, np.array(index), rng.normal(size=(n, 3)), rng.normal(size=(n, 3)),
+                  new_ids=("e0", "e1") if k else (), age=np.r_[np.full(8, np.nan), 0.05, 0.01][:n])
+        )  # fmt: skip
+    sink = UsdaSink(tmp_path / "mixed.usda", write_meta=False)  # parse_usda reads one prim only
+    sink.begin(header)
+    for f in frames:
+        sink.write(f)
+    sink.close({"status": "ok"})
+    stage = usd.Stage.Open(str(tmp_path / "mixed.usda"))
+    points = usd_geom.Points(stage.GetPrimAtPath("/mixed/particles"))
+    mesh = usd_geom.Mesh(stage.GetPrimAtPath("/mixed/c"))
+    curves = usd_geom.BasisCurves(stage.GetPrimAtPath("/mixed/s"))
+    assert points and mesh and curves
+    for k, f in enumerate(frames):
+        free = np.r_[0, np.arange(8, len(f.index))]
+        assert list(points.GetIdsAttr().Get(k)) == f.index[free].tolist()
+        np.testing.assert_array_equal(
+            np.array(points.GetPointsAttr().Get(k)), f.position[free].astype(np.float32)
+        )
+        np.testing.assert_array_equal(
+            np.array(mesh.GetPointsAttr().Get(k)), f.position[1:5].astype(np.float32)
+        )
+        np.testing.assert_array_equal(
+            np.array(curves.GetPointsAttr().Get(k)), f.position[5:8].astype(np.float32)
+        )
+        np.testing.assert_array_equal(
+            np.array(mesh.GetVelocitiesAttr().Get(k)), f.velocity[1:5].astype(np.float32)
+        )
+    assert list(mesh.GetFaceVertexIndicesAttr().Get()) == [0, 2, 3, 1]
+    assert list(curves.GetCurveVertexCountsAttr().Get()) == [3]
+    age = usd_geom.PrimvarsAPI(points.GetPrim()).GetPrimvar("age").Get(1)
+    assert math.isnan(age[0]) and np.allclose(list(age)[1:], [0.05, 0.01])
+    assert list(mesh.GetPrim().GetAttribute("animsim:ids").Get()) == ids[1:5]

@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from animsim.compile import compile_scene, with_overrides
+from animsim.engine import STATUS_OK, STATUS_UNSTABLE, Guard, run
 from animsim.record import MemorySink
 from animsim.scene.loader import load_scene_text
-from animsim.simulate import CHECK_STRIDE, STATUS_OK, STATUS_UNSTABLE, Guard, run
+from animsim.steppers import CHECK_STRIDE
 from tests.conftest import simulate_text
 
 STIFF = """

@@ -1,9 +1,11 @@
-"""The simulation loop, readable as a table of contents:
+"""The one simulation loop, readable as a table of contents:
 
-    for each step: integrate, collide, emit/age/kill, guard, record
+    for each stretch of steps: advance (integrate, collide, emit), guard, record
 
-Everything scene-specific was decided by the compiler; this loop only calls
-the stages that exist. Frames stream to the sinks as they are made.
+Everything scene-specific was decided by the compiler; which code advances
+the state (NumPy step by step, numba fused chunks, adaptive steps) is the
+stepper's business (:mod:`animsim.steppers`). Frames stream to the sinks as
+they are made.
 """
 
 from __future__ import annotations
@@ -16,8 +18,8 @@ from typing import Any
 import numpy as np
 
 from animsim import __version__
-from animsim.analysis.watchdog import BLOWUP_FACTOR
 from animsim.compile import Compiled
+from animsim.export.meta import run_facts
 from animsim.record import Frame, FrameSink
 from animsim.system import State
 
@@ -67,20 +69,14 @@ class RunResult:
     meta: dict[str, Any] = field(default_factory=dict)
 
 
-#: steps between two full watchdog checks on the fixed-step path (and at the
-#: last step); frames recorded in between are held until a check passes, and a
-#: failure found at a check is traced back to its first step by a replay
-CHECK_STRIDE = 16
-
-
 class Guard:
     """The watchdog: stops a run at the first step whose state is not finite or
     whose mechanical energy has grown far beyond what the forces put in
     (:mod:`animsim.analysis.watchdog`).
 
     ``check`` returns a Failure (with the particle and spring most to blame and
-    a fix from :mod:`animsim.analysis.stability`) or None. ``stride`` says how
-    often the loop must call it; 1 when the run cannot be replayed (emitters).
+    a fix from :mod:`animsim.analysis.stability`) or None. How often it runs
+    is the stepper's ``check_stride`` (:mod:`animsim.steppers`).
     """
 
     def __init__(self, compiled: Compiled, dt: float | None = None):
@@ -88,12 +84,10 @@ class Guard:
 
         self.compiled = compiled
         self.watch = EnergyWatch(compiled, dt if dt is not None else compiled.clock.dt)
-        # Emitters draw random numbers and age particles: a replay would not be
-        # the same run, so they are checked every step.
-        self.stride = 1 if compiled.emitters is not None else CHECK_STRIDE
 
     def start(self, state: State) -> None:
         """Open the energy books at the run's initial state."""
+        self.watch.bind(state)
         self.watch.reset(state)
 
     def check(self, state: State) -> Failure | None:
@@ -111,7 +105,7 @@ class Guard:
             return None
         with np.errstate(over="ignore", invalid="ignore"):
             h, b, growth = self.watch.growth(state)
-        if growth <= BLOWUP_FACTOR:  # False for NaN too: an overflowed energy is a blow-up
+        if growth <= self.watch.allowance:  # False for NaN too: an overflowed energy is a blow-up
             return None
         particle, spring = self.watch.blame(state)
         reason = f"the mechanical energy {h:.3g} J is {growth:.3g} times what the forces put in ({b:.3g} J)"
@@ -146,6 +140,10 @@ class Guard:
         )
 
 
+#: frames held (copied) at most while waiting for a watchdog check; more forces a check
+MAX_PENDING_FRAMES = 64
+
+
 def run(
     compiled: Compiled,
     sinks: Sequence[FrameSink] = (),
@@ -155,42 +153,37 @@ def run(
     guard: Guard | None = None,
     meta_extra: dict[str, Any] | None = None,
     observers: Sequence[Callable[[State], None]] = (),
+    notice: Callable[[str], None] | None = None,
 ) -> RunResult:
-    """Simulate ``compiled`` from its initial state, streaming frames to ``sinks``.
+    """THE loop: simulate ``compiled`` from its initial state, streaming frames to ``sinks``.
+
+    The stepper (:mod:`animsim.steppers`: NumPy step by step, numba fused
+    chunks, or adaptive step doubling) only advances the state; this loop
+    owns the clock, recording, the watchdog, stop, progress, metadata and the
+    sinks, so every stepper behaves the same.
 
     ``observers`` are called with the live state at every recorded frame
     (energy plots read whole states, which frames of alive rows are not).
-
-    ``stop`` is polled at each step boundary (Ctrl-C handling sets it); the
-    frames so far are kept and the status is ``interrupted``.
+    ``stop`` is polled between stretches of steps (Ctrl-C handling sets it);
+    the frames so far are kept and the status is ``interrupted``.
+    ``notice`` hears one-line messages meant for a person (numba compiling).
     """
-    if compiled.stepper is not None:  # a compiled backend fuses the steps (issue 8)
-        from animsim.backends.chunked import run_chunked
+    from animsim.steppers import make_stepper
 
-        chunk_guard = guard or Guard(compiled)
-        return run_chunked(
-            compiled, sinks, stop=stop, progress=progress, guard=chunk_guard, meta_extra=meta_extra
-        )
     state = compiled.fresh_state()
     dyn = compiled.dynamics
-    integ = compiled.integrator
-    integ.reset()
-    if compiled.emitters is not None:
-        compiled.emitters.reset(compiled.system, state)
-    colliders = compiled.colliders
-    emitters = compiled.emitters
+    stepper = make_stepper(compiled)
     clock = compiled.clock
-    adaptive_spec = compiled.scene.adaptive
-    # The watchdog's one-step energy slack uses the largest step the run can take.
-    guard = guard or Guard(
-        compiled, dt=None if adaptive_spec is None else max(adaptive_spec.dt_max, clock.dt)
-    )
+    dyn.bind(state)
+    for stage in compiled.post_step:
+        stage.reset(state)
+    guard = guard or Guard(compiled, dt=stepper.largest_dt)
+    # Compiling numba kernels (first run on a machine) is not run time.
+    compile_seconds = stepper.prepare(state, notice)
     record = compiled.record_steps
     next_rec = 0
     dyn.evaluations = 0
-
-    x_old = np.empty_like(state.particle_position) if colliders else None
-    v_old = np.empty_like(state.particle_velocity) if colliders else None
+    steps = clock.steps
 
     for sink in sinks:
         sink.begin(compiled.header)
@@ -200,105 +193,87 @@ def run(
             _emit(compiled, state, sinks, observers)
             frames += 1
             next_rec = 1
+        # Overflow on the way to a blow-up is the watchdog's to report, not numpy's.
         with np.errstate(over="ignore", invalid="ignore"):
             energy_start = dyn.energy(state.particle_position, state.particle_velocity)
             guard.start(state)
         failure: Failure | None = None
         status = STATUS_OK
         t_start = _time.perf_counter()
-        steps = clock.steps
-        adaptive = adaptive_spec
-        # Overflow on the way to a blow-up is the watchdog's to report, not numpy's.
+        # The watchdog runs every `stride` steps, at the end, and when a stepper
+        # reports a non-finite state. Frames recorded in between wait (copied, a
+        # bounded number) until a check has passed, so no unverified frame
+        # reaches a sink; a failure is traced back to its first step by replaying
+        # from the last good check, one step at a time.
+        stride = stepper.check_stride
+        last_good = state.copy() if stepper.replayable else None
+        # A run that cannot be replayed (births draw random numbers) is checked after every step.
+        one = None if stepper.replayable else 1
+        pending: list[tuple[int, Frame | None, State | None]] = []
+        k = 0  # position on the nominal clock (== steps taken, except with adaptive steps)
+        checked = 0
         with np.errstate(over="ignore", invalid="ignore"):
-            if adaptive is not None:
-                from animsim.adaptive import StepDoubling
-
-                stepper = StepDoubling(compiled, adaptive, guard)
-                status, failure, frames = stepper.run(state, sinks, frames, stop, progress, observers)
-                extra_meta = stepper.summary()
-            else:
-                extra_meta = {}
-
-                def advance(i: int) -> None:
-                    dt = clock.step_size(i)
-                    if colliders is not None:
-                        np.copyto(x_old, state.particle_position)
-                        np.copyto(v_old, state.particle_velocity)
-                    integ.step(state, dt)
-                    if colliders is not None and colliders.apply(
-                        x_old, v_old, state.particle_position, state.particle_velocity, dt
-                    ):
-                        state.revision += 1
-                    t_end = clock.time(i + 1)
-                    if emitters is not None:
-                        emitters.advance(compiled, state, state.time, t_end)
-                    state.step = i + 1
-                    state.time = t_end
-
-                # The watchdog runs every `stride` steps and at the end. Frames recorded in
-                # between wait (copied, at most `stride` of them) until a check has passed,
-                # so no unverified frame reaches a sink; a failure is traced back to its
-                # first step by replaying from the last good check.
-                stride = guard.stride
-                last_good = state.copy() if stride > 1 else None
-                pending: list[tuple[int, Frame | None, State | None]] = []
-                checked = 0
-
-                def verify() -> Failure | None:
-                    nonlocal frames, checked
-                    found = guard.check(state)
-                    if found is not None and last_good is not None and state.step - checked > 1:
-                        found = _first_failure(state, last_good, found, advance, guard, integ, dyn)
-                    for step, frame, seen in pending:
-                        if found is None or step < found.step:
-                            if seen is not None:
-                                for observe in observers:
-                                    observe(seen)
-                            if frame is not None:
-                                for sink in sinks:
-                                    sink.write(frame)
-                            frames += 1
-                    pending.clear()
-                    checked = state.step
-                    if found is None and last_good is not None:
-                        _copy_state(last_good, state)
-                    return found
-
-                for i in range(steps):
-                    advance(i)
-                    recording = next_rec < len(record) and record[next_rec] == state.step
+            while k < steps:
+                goal = min(int(record[next_rec]) if next_rec < len(record) else steps, checked + stride)
+                k, failure, nonfinite = stepper.advance(state, k, goal, max_steps=one)
+                if failure is not None:  # the stepper itself gave up (adaptive: below dt_min)
+                    status = STATUS_UNSTABLE
+                    frames += _flush(pending, sinks, observers, None)
+                    break
+                recording = next_rec < len(record) and record[next_rec] == k
+                if recording:
+                    next_rec += 1
+                interrupted = stop is not None and stop()
+                check_now = (
+                    k - checked >= stride
+                    or one is not None
+                    or k == steps
+                    or nonfinite
+                    or interrupted
+                    or len(pending) >= MAX_PENDING_FRAMES
+                )
+                if recording and not check_now:
+                    pending.append(
+                        (
+                            state.step,
+                            _frame_copy(compiled, state) if sinks else None,
+                            state.copy() if observers else None,
+                        )
+                    )
+                if check_now:
+                    failure = guard.check(state)
+                    if failure is not None and last_good is not None and state.step - last_good.step > 1:
+                        failure = _first_failure(state, last_good, failure, stepper, guard, dyn)
+                    frames += _flush(pending, sinks, observers, failure)
+                    checked = k
+                    if failure is not None:
+                        status = STATUS_UNSTABLE
+                        break
                     if recording:
-                        next_rec += 1
-                        if last_good is not None:
-                            pending.append(
-                                (
-                                    state.step,
-                                    _frame_copy(compiled, state) if sinks else None,
-                                    state.copy() if observers else None,
-                                )
-                            )
-                    interrupted = stop is not None and stop()
-                    if state.step - checked >= stride or state.step == steps or interrupted:
-                        failure = verify()
-                        if failure is not None:
-                            status = STATUS_UNSTABLE
-                            break
-                    if recording and last_good is None:  # stride 1: checked above, emit now
                         _emit(compiled, state, sinks, observers)
                         frames += 1
-                    if progress is not None:
-                        progress(state.step, steps)
-                    if interrupted:
-                        status = STATUS_INTERRUPTED
-                        break
+                    if last_good is not None:
+                        last_good.assign(state)
+                if progress is not None:
+                    progress(k, steps)
+                if interrupted:
+                    status = STATUS_INTERRUPTED
+                    frames += _flush(pending, sinks, observers, None)
+                    break
         wall = _time.perf_counter() - t_start
         with np.errstate(over="ignore", invalid="ignore"):
             energy_end = dyn.energy(state.particle_position, state.particle_velocity)
         meta = _meta(compiled, status, state, wall, energy_start, energy_end, frames, failure)
-        meta.update(extra_meta)
+        meta["backend"] = compiled.backend
+        if compile_seconds:
+            meta["compile_time"] = compile_seconds
+        meta.update(stepper.summary())
         meta.update(meta_extra or {})
-        if emitters is not None:
-            meta["emitters"] = emitters.summary()
+        from animsim.analysis.drift import annotate
+
+        annotate(meta, compiled)  # energy drift as a verdict of its own, in the metadata
+        if compiled.emitters is not None:
+            meta["emitters"] = compiled.emitters.summary()
         return finish(sinks, state, dyn, status, wall, energy_start, energy_end, frames, failure, meta)
     except BaseException:
         for sink in sinks:
@@ -306,20 +281,29 @@ def run(
         raise
 
 
-def _copy_state(dst: State, src: State) -> None:
-    np.copyto(dst.particle_position, src.particle_position)
-    np.copyto(dst.particle_velocity, src.particle_velocity)
-    dst.time, dst.step, dst.revision = src.time, src.step, src.revision
+def _flush(
+    pending: list[tuple[int, Frame | None, State | None]],
+    sinks: Sequence[FrameSink],
+    observers: Sequence[Callable[[State], None]],
+    failure: Failure | None,
+) -> int:
+    """Hand the held frames before ``failure``'s step (all, without one) to the sinks; how many."""
+    count = 0
+    for step, frame, seen in pending:
+        if failure is None or step < failure.step:
+            if seen is not None:
+                for observe in observers:
+                    observe(seen)
+            if frame is not None:
+                for sink in sinks:
+                    sink.write(frame)
+            count += 1
+    pending.clear()
+    return count
 
 
 def _first_failure(
-    state: State,
-    last_good: State,
-    failure: Failure,
-    advance: Callable[[int], None],
-    guard: Guard,
-    integ: Any,
-    dyn: Any,
+    state: State, last_good: State, failure: Failure, stepper: Any, guard: Guard, dyn: Any
 ) -> Failure:
     """Replay from the last state that passed a check, checking every step, so
     the report names the first failing step; ``state`` ends there.
@@ -330,11 +314,12 @@ def _first_failure(
     """
     failed_at = state.step
     evaluations = dyn.evaluations
-    _copy_state(state, last_good)
-    integ.reset()
+    state.assign(last_good)
+    stepper.forget()
+    k = stepper.position(last_good)
     first = failure
-    for i in range(last_good.step, failed_at):
-        advance(i)
+    while state.step < failed_at:
+        k, _, _ = stepper.advance(state, k, stepper.end, max_steps=1)
         found = guard.check(state)
         if found is not None:
             first = found
@@ -446,4 +431,5 @@ def _meta(
     }
     if failure is not None:
         meta["failure"] = failure.as_dict()
+    meta.update(run_facts(compiled, state))
     return meta

@@ -1,0 +1,344 @@
+"""The numba backend's two ways to step: element kernels called from the loop, or fused chunks.
+
+Every force element and collision stage carries its own numba kernel with one
+uniform signature (:mod:`animsim.elements`). Here they are *called*, never
+re-implemented:
+
+* :class:`NumbaForces` replaces :meth:`Dynamics.acceleration` with one numba
+  call that sums every element's kernel (first-class functions), divides by
+  the mass and zeroes pinned rows, so any integrator (including implicit
+  Euler, adaptive steps and scenes with emitters) runs on numba kernels
+  through the one loop.
+* :class:`FusedStepper` runs many steps per call for the fixed-step explicit
+  methods: the integrator's arithmetic (the same operations, in the same
+  order, as :mod:`animsim.integrators`), the element kernels and the
+  collision stage, stopping after the first step that is not finite.
+
+Imported only when numba is in use.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from typing import Any
+
+import numba
+import numpy as np
+from numba import njit
+from numba.core.errors import NumbaExperimentalFeatureWarning
+from numba.typed import List
+
+from animsim.integrators.base import (
+    FUSED_EULER_AVERAGE as EULER_AVERAGE,
+)
+from animsim.integrators.base import (
+    FUSED_SYMPLECTIC_EULER as SYMPLECTIC_EULER,
+)
+from animsim.integrators.base import (
+    FUSED_VERLET as VERLET,
+)
+
+warnings.filterwarnings("ignore", category=NumbaExperimentalFeatureWarning)
+
+#: largest (particles + springs) x steps one call may do, so Ctrl-C and the
+#: progress bar are served about every few tenths of a second
+MAX_WORK_PER_CALL = 20_000_000
+
+
+def _no_force(x, v, t, out, mass, fp, ip):
+    """Stands in when a scene has no force at all (numba needs a non-empty tuple)."""
+
+
+def _no_stage(x_old, v_old, x, v, dt, inv_mass, fp, ip):
+    return False
+
+
+@njit(cache=True)
+def _acc(x, v, t, out, kernels, fps, ips, mass, inv_mass, pinned):
+    """out = F(x, v, t) / m, pinned rows 0 (Dynamics.acceleration)."""
+    out[:] = 0.0
+    for k in range(len(kernels)):
+        kernels[k](x, v, t, out, mass, fps[k], ips[k])
+    for i in range(x.shape[0]):
+        w = inv_mass[i]
+        out[i, 0] *= w
+        out[i, 1] *= w
+        out[i, 2] *= w
+    for p in pinned:
+        out[p, 0] = 0.0
+        out[p, 1] = 0.0
+        out[p, 2] = 0.0
+
+
+@njit(cache=True)
+def _finite(x, v):
+    for i in range(x.shape[0]):
+        for k in range(3):
+            if not (np.isfinite(x[i, k]) and np.isfinite(v[i, k])):
+                return False
+    return True
+
+
+@njit(cache=True)
+def _axpy(y, c, z):
+    for i in range(y.shape[0]):
+        for k in range(3):
+            y[i, k] += c * z[i, k]
+
+
+@njit(cache=True)
+def fused_chunk(
+    x,
+    v,
+    times,
+    dts,
+    method,
+    tab_c,
+    tab_a,
+    tab_b,
+    kernels,
+    fps,
+    ips,
+    mass,
+    inv_mass,
+    pinned,
+    stage,
+    stage_fp,
+    stage_ip,
+    kx,
+    kv,
+    xs,
+    vs,
+    a0,
+    a1,
+    xo,
+    vo,
+    a0_valid,
+):
+    """Advance len(dts) steps of dts from times[0]; stop after the first non-finite step.
+
+    ``times`` are the clock's step start times (the loop's clock, not a running sum).
+
+    Returns (steps taken, force evaluations, steps a collision changed, Verlet's
+    cache still valid, the last step was not finite).
+    """
+    evals = 0
+    changed_steps = 0
+    steps = dts.shape[0]
+    for step in range(steps):
+        t = times[step]
+        dt = dts[step]
+        xo[:] = x
+        vo[:] = v
+        if method == SYMPLECTIC_EULER:
+            _acc(x, v, t, a0, kernels, fps, ips, mass, inv_mass, pinned)
+            evals += 1
+            for i in range(x.shape[0]):
+                for k in range(3):
+                    v[i, k] += a0[i, k] * dt
+                    x[i, k] += v[i, k] * dt
+        elif method == EULER_AVERAGE:
+            _acc(x, v, t, a0, kernels, fps, ips, mass, inv_mass, pinned)
+            evals += 1
+            half = 0.5 * dt
+            for i in range(x.shape[0]):
+                for k in range(3):
+                    e = a0[i, k] * dt + v[i, k]
+                    x[i, k] += half * (v[i, k] + e)
+                    v[i, k] = e
+        elif method == VERLET:
+            if not a0_valid:
+                _acc(x, v, t, a0, kernels, fps, ips, mass, inv_mass, pinned)
+                evals += 1
+            half = 0.5 * dt
+            half2 = 0.5 * dt * dt
+            for i in range(x.shape[0]):
+                for k in range(3):
+                    vs[i, k] = a0[i, k] * dt + v[i, k]
+                    x[i, k] += dt * v[i, k] + half2 * a0[i, k]
+            _acc(x, vs, t + dt, a1, kernels, fps, ips, mass, inv_mass, pinned)
+            evals += 1
+            for i in range(x.shape[0]):
+                for k in range(3):
+                    v[i, k] += half * (a0[i, k] + a1[i, k])
+            a0[:] = a1
+            a0_valid = True
+        else:  # RUNGE_KUTTA: the engine of runge_kutta.RungeKutta
+            stages = tab_b.shape[0]
+            for j in range(stages):
+                if j == 0:
+                    kx[0][:] = v
+                    _acc(x, v, t, kv[0], kernels, fps, ips, mass, inv_mass, pinned)
+                else:
+                    xs[:] = x
+                    vs[:] = v
+                    for m in range(j):
+                        if tab_a[j, m] != 0.0:
+                            _axpy(xs, dt * tab_a[j, m], kx[m])
+                            _axpy(vs, dt * tab_a[j, m], kv[m])
+                    kx[j][:] = vs
+                    _acc(xs, vs, t + tab_c[j] * dt, kv[j], kernels, fps, ips, mass, inv_mass, pinned)
+                evals += 1
+            for j in range(stages):
+                if tab_b[j] != 0.0:
+                    _axpy(x, dt * tab_b[j], kx[j])
+                    _axpy(v, dt * tab_b[j], kv[j])
+        if stage[0](xo, vo, x, v, dt, inv_mass, stage_fp, stage_ip):
+            changed_steps += 1
+            a0_valid = False  # the state changed behind the integrator's back
+        if not _finite(x, v):
+            return step + 1, evals, changed_steps, a0_valid, True
+    return steps, evals, changed_steps, a0_valid, False
+
+
+def _element_tables(terms: Any) -> tuple[tuple[Any, ...], Any, Any]:
+    kernels = [t.numba_kernel for t in terms if t.numba_source is not None]
+    params = [t.numba_params() for t in terms if t.numba_source is not None]
+    if not kernels:
+        from animsim.elements import jit_kernel
+
+        kernels = [jit_kernel(_no_force)]
+        params = [(np.zeros(0), np.zeros(0, dtype=np.int64))]
+    fps = List([np.ascontiguousarray(p[0], dtype=np.float64) for p in params])
+    ips = List([np.ascontiguousarray(p[1], dtype=np.int64) for p in params])
+    return tuple(kernels), fps, ips
+
+
+def _live(a: np.ndarray, cache: dict[int, np.ndarray]) -> np.ndarray:
+    """``a`` as numba's signature wants it: the model's read-only arrays never change, so a
+    writable copy made once stands for them; a state's own (writable) arrays pass as they are."""
+    if a.flags.writeable:
+        return a
+    got = cache.get(id(a))
+    if got is None:
+        got = cache[id(a)] = a.copy()
+    return got
+
+
+class NumbaForces:
+    """Dynamics.acceleration through the elements' numba kernels (see the module docstring).
+
+    Elements without a numba kernel keep their NumPy kernel, added after.
+    """
+
+    def __init__(self, dynamics: Any):
+        self.dynamics = dynamics
+        self.kernels, self.fps, self.ips = _element_tables(dynamics.terms)
+        self.others = tuple(t for t in dynamics.terms if t.numba_source is None)
+        self.pinned = np.ascontiguousarray(np.flatnonzero(dynamics.system.particle_pinned), dtype=np.int64)
+        self._copies: dict[int, np.ndarray] = {}
+
+    def acceleration(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> np.ndarray:
+        d = self.dynamics
+        d.evaluations += 1
+        mass = _live(d.mass, self._copies)
+        if not self.others:
+            inv_mass = _live(d.inv_mass, self._copies)
+            _acc(x, v, float(t), out, self.kernels, self.fps, self.ips, mass, inv_mass, self.pinned)
+            return out
+        # Mixed: sum every force first (numba kernels, then NumPy ones), then divide.
+        out.fill(0.0)
+        for kern, fp, ip in zip(self.kernels, self.fps, self.ips, strict=True):
+            kern(x, v, float(t), out, mass, fp, ip)
+        for term in self.others:
+            term.accumulate(x, v, t, out)
+        for j in range(3):
+            out[:, j] *= d.inv_mass
+        if len(self.pinned):
+            out[self.pinned] = 0.0
+        return out
+
+
+class FusedStepper:
+    """Many fixed steps per numba call (see the module docstring)."""
+
+    def __init__(self, compiled: Any):
+        self.compiled = compiled
+        integ = compiled.integrator
+        n = compiled.system.particle_count
+        self.method, tableau = integ.numba_chunk_kind()
+        if tableau is None:
+            c, a, b = np.zeros(1), np.zeros((1, 1)), np.zeros(1)
+        else:
+            s = len(tableau.b)
+            c = np.array(tableau.c, dtype=np.float64)
+            a = np.zeros((s, s))
+            for i, row in enumerate(tableau.a):
+                a[i, : len(row)] = row
+            b = np.array(tableau.b, dtype=np.float64)
+        self.tab = (c, a, b)
+        stages = b.shape[0]
+        self.kernels, self.fps, self.ips = _element_tables(compiled.dynamics.terms)
+        planes = [st for st in compiled.post_step if st.numba_stage_source is not None]
+        if planes:
+            self.stage = planes[0].numba_stage
+            self.stage_owner = planes[0]
+            self.stage_fp, self.stage_ip = planes[0].numba_stage_params()
+        else:
+            from animsim.elements import jit_kernel
+
+            self.stage = jit_kernel(_no_stage, stage=True)
+            self.stage_owner = None
+            self.stage_fp, self.stage_ip = np.zeros(0), np.zeros(0, dtype=np.int64)
+        self.pinned = np.ascontiguousarray(np.flatnonzero(compiled.system.particle_pinned), dtype=np.int64)
+        self.kx = np.zeros((stages, n, 3))
+        self.kv = np.zeros((stages, n, 3))
+        self.work = tuple(np.zeros((n, 3)) for _ in range(6))  # xs, vs, a0, a1, xo, vo
+        self.a0_valid = False
+        work = n + compiled.system.spring_count
+        self.max_steps_per_call = max(1, MAX_WORK_PER_CALL // max(work, 1))
+        self.compile_seconds = 0.0
+        self._copies: dict[int, np.ndarray] = {}
+
+    def reset(self) -> None:
+        self.a0_valid = False
+
+    def warm_up(self, state: Any) -> float:
+        """Compile (or load from the disk cache) every kernel with a zero-step call; its seconds."""
+        t0 = time.perf_counter()
+        self.advance(state, np.array([state.time]), np.zeros(0))
+        self.compile_seconds = time.perf_counter() - t0
+        return self.compile_seconds
+
+    def advance(self, state: Any, times: np.ndarray, dts: np.ndarray) -> tuple[int, int, bool]:
+        """len(dts) steps from times[0]; (steps taken, force evaluations, failed)."""
+        d = self.compiled.dynamics
+        c, a, b = self.tab
+        xs, vs, a0, a1, xo, vo = self.work
+        taken, evals, changed, self.a0_valid, failed = fused_chunk(
+            state.particle_position,
+            state.particle_velocity,
+            times,
+            dts,
+            self.method,
+            c,
+            a,
+            b,
+            self.kernels,
+            self.fps,
+            self.ips,
+            _live(d.mass, self._copies),
+            _live(d.inv_mass, self._copies),
+            self.pinned,
+            # a 1-tuple, so numba types it as a first-class function (by signature), not as
+            # this one dispatcher: the cached kernel then serves every stage
+            (self.stage,),
+            self.stage_fp,
+            self.stage_ip,
+            self.kx,
+            self.kv,
+            xs,
+            vs,
+            a0,
+            a1,
+            xo,
+            vo,
+            self.a0_valid,
+        )
+        if changed:
+            state.revision += 1
+        return int(taken), int(evals), bool(failed)
+
+
+__all__ = ["FusedStepper", "NumbaForces", "numba"]

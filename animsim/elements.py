@@ -1,0 +1,290 @@
+"""The element contract: one module per piece of physics, found through one registry.
+
+A scene entry (a force, a plane, an emitter, ...) becomes one or more
+*elements* at compile time. The module that defines an element owns all of
+it: the builder that reads the scene model (the only code that sees the
+pydantic spec), the NumPy kernel, the numba kernel where it has one, and its
+capabilities, which the rest of animsim reads instead of asking "what type is
+this?":
+
+* energy: ``potential(x)`` (None when not conservative) and ``watch_role``,
+  how the watchdog books it (:mod:`animsim.analysis.watchdog`);
+* stability: ``stiffness_rows(inv_mass, k_rows, c_rows)`` adds the element's
+  stiffness (N/m) and damping (N s/m) per particle row
+  (:mod:`animsim.analysis.stability`);
+* implicit Euler: ``jacobians(x, v)``;
+* references: ``closed_form`` is an allow-list entry; ``None`` means "no
+  analytic reference may include this element" (:mod:`animsim.analysis.references`).
+
+Elements come in two kinds:
+
+* :class:`ForceElement`: adds a force ``accumulate(x, v, t, out)`` (N, in
+  place into an (N, 3) array). Its numba kernel has one uniform signature,
+  :func:`kernel_signature`, so the compiled stepper can call any element
+  through a first-class function without knowing its type.
+* :class:`StepStage`: runs after each integrator step (collisions, births),
+  ``apply(state, x_old, v_old, t0, t1, dt) -> changed``.
+
+Builders register against the scene model class they read::
+
+    @register(models.Gravity)
+    def build(entries, ctx): return [Gravity(...) for index, spec in entries]
+
+and :func:`build_elements` calls them in scene order; an entry whose class no
+module registered is a compile error, never a silent omission.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+
+#: numba backend name, as the compiler passes it in the build context
+NUMBA = "numba"
+
+# --- how the watchdog books an element's energy -----------------------------------
+#: conservative, bounded below: its potential is part of the watched energy H
+ELASTIC = "elastic"
+#: conservative, unbounded (gravity, attractors): its potential is *released* into the budget
+RELEASING = "releasing"
+#: only removes energy
+DISSIPATIVE = "dissipative"
+#: puts energy in at a bounded power (``max_power_per_particle``)
+INJECTING = "injecting"
+#: energy input unknown: the watchdog's energy test is switched off, the finiteness test stays
+UNKNOWN = "unknown"
+
+
+@dataclass(frozen=True)
+class BuildContext:
+    """What a builder may read besides its own spec (all frozen, all compile-time)."""
+
+    system: Any  # animsim.system.System
+    index_of: Mapping[str, int]
+    seed: int
+    backend: str  # "numpy" | "numba" | "reference"
+    scene_dir: Path | None = None
+    clock: Any = None  # animsim.record.Clock
+    body_index_of: Mapping[str, int] | None = None
+
+
+class ForceElement:
+    """Base of force elements; subclasses override what they have."""
+
+    label: str = ""
+    #: the watchdog's booking of this element's energy
+    watch_role: ClassVar[str] = UNKNOWN
+    #: a velocity-dependent force (drag, damping): Verlet predicts the velocity for it
+    has_damping: bool = False
+    #: allow-list entry for analytic references: a dict of what the element contributes
+    #: (see animsim.analysis.references), or None when no closed form may include it
+    closed_form: Mapping[str, Any] | None = None
+    #: why no analytic reference may include it (when closed_form is None), for ``compare``
+    no_closed_form: str | None = None
+    #: the plain Python function numba compiles into this element's kernel
+    #: (kernel_signature()), or None when the element has none; see numba_params
+    numba_source: Callable[..., None] | None = None
+    #: compile the kernel with numba's parallel loops (``prange``)
+    numba_parallel: bool = False
+    #: which part of the energy plots its potential belongs to (gravitational, spring, other)
+    energy_part: str = "other"
+    #: stiffness (N/m) of a contact that may act on any particle (penalty planes), for the stability notes
+    contact_stiffness: float = 0.0
+    #: body-aware forces (springs to points of rigid bodies) set this
+    acts_on_bodies: bool = False
+
+    def accumulate(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None:
+        raise NotImplementedError  # pragma: no cover - every element defines its kernel
+
+    def potential(self, x: np.ndarray) -> float | None:
+        return None
+
+    def stiffness_rows(self, inv_mass: np.ndarray, k_rows: np.ndarray, c_rows: np.ndarray) -> None:
+        """Add this element's stiffness (N/m) and damping (N s/m), weighted by inverse mass, per row."""
+
+    @property
+    def numba_kernel(self) -> Callable[..., None] | None:
+        """The compiled numba kernel (compiles, or loads from the disk cache, on first use)."""
+        if self.numba_source is None:
+            return None
+        return jit_kernel(self.numba_source, parallel=self.numba_parallel)
+
+    def numba_params(self) -> tuple[np.ndarray, np.ndarray]:
+        """(float parameters, integer parameters) for ``numba_kernel``."""
+        return np.zeros(0), np.zeros(0, dtype=np.int64)
+
+    def bind(self, state: Any) -> None:
+        """Called once per run with the live state (elements that read state arrays keep them)."""
+
+
+class StepStage:
+    """Base of stages that run after each integrator step."""
+
+    label: str = ""
+    #: puts energy in (moving colliders, keyframes, births): the watchdog must not call it a blow-up
+    injects: bool = False
+    #: removes energy (inelastic or frictional contact)
+    dissipative: bool = False
+    #: the Python function numba compiles into this stage's fused kernel (stage_signature()), or None
+    numba_stage_source: Callable[..., bool] | None = None
+    #: why no analytic reference may include a scene with this stage, for ``compare``
+    no_closed_form: str | None = None
+    #: draws random numbers (births): runs once per accepted step, and a run with it is not replayed
+    random: bool = False
+    #: newborn particles (emitters) are collided with this stage's ``collide_subset`` too
+    collides_newborns: bool = False
+
+    def reset(self, state: Any) -> None:
+        """Called at the start of every run (and replay) with the run's state."""
+
+    def apply(
+        self, state: Any, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, dt: float
+    ) -> bool:
+        """After the integrator's step of ``dt`` from t0 to t1 (t1 is the clock's time, which
+        may differ from t0 + dt in the last bit): change the state in place; True if changed."""
+        raise NotImplementedError  # pragma: no cover
+
+    @property
+    def numba_stage(self) -> Callable[..., bool] | None:
+        if self.numba_stage_source is None:
+            return None
+        return jit_kernel(self.numba_stage_source, stage=True)
+
+    def numba_stage_params(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.zeros(0), np.zeros(0, dtype=np.int64)
+
+
+Builder = Callable[[list[tuple[int, Any]], BuildContext], list[Any]]
+_BUILDERS: dict[type, Builder] = {}
+
+
+def register(model: type) -> Callable[[Builder], Builder]:
+    """Register the builder of the elements made from scene entries of class ``model``."""
+
+    def wrap(fn: Builder) -> Builder:
+        _BUILDERS[model] = fn
+        return fn
+
+    return wrap
+
+
+#: packages whose every module may hold elements (found, not listed: a new force family
+#: is a new module in animsim/forces and nothing else here)
+ELEMENT_PACKAGES = ("animsim.forces",)
+#: single modules that hold elements
+ELEMENT_MODULES = ("animsim.collisions",)
+
+
+@functools.cache
+def _load_element_modules() -> None:
+    # Importing a module registers its builders.
+    import importlib
+    import pkgutil
+
+    for package in ELEMENT_PACKAGES:
+        pkg = importlib.import_module(package)
+        for info in pkgutil.iter_modules(pkg.__path__):
+            importlib.import_module(f"{package}.{info.name}")
+    for module in ELEMENT_MODULES:
+        importlib.import_module(module)
+
+
+def build_elements(specs: Iterable[Any], ctx: BuildContext) -> list[Any]:
+    """Elements for ``specs`` (scene entries), grouped by model class in first-seen order.
+
+    Each builder gets its entries as (position in ``specs``, spec) pairs: the
+    position tells two entries of one class apart (a seed stream, a label).
+    """
+    _load_element_modules()
+    groups: dict[type, list[tuple[int, Any]]] = {}
+    for i, spec in enumerate(specs):
+        groups.setdefault(type(spec), []).append((i, spec))
+    out: list[Any] = []
+    for model, group in groups.items():
+        builder = _BUILDERS.get(model)
+        if builder is None:
+            raise TypeError(f"no element module registered for {model.__name__}")
+        out.extend(builder(group, ctx))
+    return out
+
+
+# --- numba kernels -----------------------------------------------------------------
+
+
+@functools.cache
+def kernel_signature() -> Any:
+    """(x f8[:,::1], v f8[:,::1], t f8, out f8[:,::1], mass f8[::1], fp f8[::1], ip i64[::1]) -> None.
+
+    ``mass`` is the live particle mass (kg, 0 for pinned rows and dead pool slots).
+    """
+    from numba import types
+
+    a2 = types.float64[:, ::1]
+    a1 = types.float64[::1]
+    return types.void(a2, a2, types.float64, a2, a1, a1, types.int64[::1])
+
+
+@functools.cache
+def stage_signature() -> Any:
+    """(x_old, v_old, x, v, dt, inv_mass, fp, ip) -> bool: a post-step stage's numba kernel."""
+    from numba import types
+
+    a2 = types.float64[:, ::1]
+    return types.boolean(
+        a2, a2, a2, a2, types.float64, types.float64[::1], types.float64[::1], types.int64[::1]
+    )
+
+
+def numba_helper(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """Mark a module-level function a numba kernel calls; it is compiled with the kernel.
+
+    Until then it stays plain Python (importing an element never imports numba).
+    """
+    fn._numba_helper = True  # type: ignore[attr-defined]
+    return fn
+
+
+def _compile_helpers(namespace: dict[str, Any]) -> None:
+    import numba
+
+    for name, obj in list(namespace.items()):
+        if getattr(obj, "_numba_helper", False):
+            namespace[name] = numba.njit(cache=True)(obj)
+
+
+_JITTED: dict[tuple[Callable[..., Any], bool, bool], Any] = {}
+
+
+def jit_kernel(fn: Callable[..., Any], *, parallel: bool = False, stage: bool = False) -> Any:
+    """``fn`` compiled by numba with the uniform element signature (imported lazily, cached on disk)."""
+    key = (fn, parallel, stage)
+    got = _JITTED.get(key)
+    if got is None:
+        import types as pytypes
+        import warnings
+
+        import numba
+        from numba.core.errors import NumbaExperimentalFeatureWarning
+
+        # First-class function types are how the fused stepper calls any element;
+        # numba still labels them experimental.
+        warnings.filterwarnings("ignore", category=NumbaExperimentalFeatureWarning)
+        sig = stage_signature() if stage else kernel_signature()
+        _compile_helpers(fn.__globals__)
+        target = fn
+        if parallel:
+            # Kernels loop with a module-level ``prange`` that is plain ``range`` until
+            # numba is asked for (so importing an element never imports numba). The
+            # parallel build is a twin function, so its on-disk cache entry is its own.
+            fn.__globals__["prange"] = numba.prange
+            target = pytypes.FunctionType(fn.__code__, fn.__globals__, fn.__name__ + "_parallel")
+            target.__qualname__ = fn.__qualname__ + "_parallel"
+            target.__module__ = fn.__module__
+        got = numba.njit(sig, cache=True, parallel=parallel)(target)
+        _JITTED[key] = got
+    return got

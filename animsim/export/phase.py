@@ -1,0 +1,95 @@
+"""``animsim plot --kind phase`` and the split energy of ``--kind energy``: runs in, figures out."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from animsim.errors import UsageError
+
+
+def energy_parts_of(compiled: Any, traj: Any = None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """(times, parts) of a run of ``compiled`` (simulated), or of a trajectory of its scene."""
+    from animsim.export.viewer import simulate_panel
+    from animsim.export.viewer_command import energies_from_trajectory
+
+    if traj is not None:
+        return np.asarray(traj.times, dtype=np.float64), energies_from_trajectory(compiled, traj)
+    run = simulate_panel(compiled)
+    return np.asarray(run.trajectory.times, dtype=np.float64), run.energies
+
+
+def phase_command(
+    source: Path,
+    output: Path,
+    *,
+    from_file: bool,
+    scene: Path | None,
+    prepare: Callable[..., tuple[Any, Any, Any]],
+    integrators: str | None,
+    particles: str | None,
+    integrator: str | None,
+    dt: float | None,
+    duration: float | None,
+) -> None:
+    """Simulate once per integrator (or read a trajectory) and draw the phase portraits."""
+    from animsim.export.pictures import PhaseRun, phase_particles, plot_phase
+    from animsim.export.viewer import dense_frames
+
+    requested = [p.strip() for p in particles.split(",") if p.strip()] if particles is not None else None
+    if particles is not None and not requested:
+        raise UsageError("--particles: give at least one particle id")
+    runs: list[PhaseRun] = []
+    pinned: np.ndarray
+    if from_file:
+        from animsim.export.trajectory import read_trajectory
+
+        if integrators is not None:
+            raise UsageError(
+                "--integrators simulates the scene once per method: give the scene, not a trajectory"
+            )
+        traj = read_trajectory(source)
+        dense = dense_frames(traj)
+        runs.append(PhaseRun(source.name, list(traj.ids), dense["position"], dense["velocity"]))
+        pinned = np.zeros(len(traj.ids), dtype=bool)
+        if scene is not None:
+            from animsim.compile import compile_scene
+            from animsim.export.viewer import _pinned_for
+
+            loaded, sc, _ = prepare(scene)
+            pinned = _pinned_for(compile_scene(sc, loaded.name), traj.ids)
+        title = f"{source.name}: phase portrait"
+    else:
+        from animsim.export.side_by_side import compile_each
+        from animsim.export.viewer import panel_label, simulate_panel
+
+        names = None
+        if integrators is not None:
+            from animsim.analysis.compare import parse_integrators
+
+            if integrator is not None:
+                raise UsageError("give --integrator or --integrators, not both")
+            names = parse_integrators(integrators)
+        loaded, sc, _ = prepare(source, integrator=integrator, dt=dt, duration=duration)
+        compiled = compile_each(sc, loaded.name, names)
+        for c in compiled:
+            run = simulate_panel(c)
+            dense = dense_frames(run.trajectory)
+            failure = run.result.failure
+            runs.append(
+                PhaseRun(
+                    panel_label(c),
+                    list(run.trajectory.ids),
+                    dense["position"],
+                    dense["velocity"],
+                    status=run.result.status,
+                    failure_time=None if failure is None else failure.time,
+                )
+            )
+        pinned = run.panel.pinned if run.panel.pinned is not None else np.zeros(len(runs[0].ids), dtype=bool)
+        title = f"{compiled[0].name}: phase portrait"
+    rows = phase_particles(runs[0], pinned, requested)
+    plot_phase(runs, output, rows=rows, title=title)

@@ -1,0 +1,153 @@
+"""``animsim view``: simulate (once per integrator) or read a trajectory, write the HTML viewer."""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from animsim.atomic import AtomicFile
+from animsim.errors import UsageError
+
+#: pages above this size get a note on stderr (they still work; they open slowly)
+LARGE_PAGE_BYTES = 50_000_000
+
+
+@dataclass
+class ViewSummary:
+    text: str = ""
+    notes: list[str] = field(default_factory=list)
+    interrupted: bool = False
+    panels: int = 0
+    bytes: int = 0
+
+
+def energies_from_trajectory(compiled: Any, traj: Any) -> dict[str, np.ndarray]:
+    """Energy parts of every frame of a trajectory of ``compiled``'s scene.
+
+    Particles missing from a frame keep their initial state; a scene with
+    emitters cannot be rebuilt from a trajectory, so it is refused.
+    """
+    from animsim.analysis.energy_parts import EnergyRecorder
+
+    if compiled.emitters is not None:
+        raise UsageError("energy from a trajectory needs a scene without emitters; give the scene itself")
+    index_of = {pid: i for i, pid in enumerate(compiled.system.ids)}
+    try:
+        rows = np.array([index_of[pid] for pid in traj.ids], dtype=np.int64)
+    except KeyError as exc:
+        raise UsageError(f"the trajectory has particle {exc.args[0]!r}, which the scene does not") from None
+    state = compiled.fresh_state()
+    recorder = EnergyRecorder(compiled.dynamics)
+    for frame in traj.frames():
+        state.particle_position[rows[frame.index]] = frame.position
+        state.particle_velocity[rows[frame.index]] = frame.velocity
+        state.time = frame.time
+        recorder(state)
+    series = recorder.series()
+    series.pop("time")
+    return series
+
+
+def _megabytes(n: int) -> str:
+    return f"{n / 1e6:.2f} MB"
+
+
+def write_view(
+    source: Path,
+    output: Path,
+    *,
+    prepare: Callable[..., tuple[Any, Any, Any]],
+    integrators: str | None,
+    fps: float,
+    view: str,
+    scene: Path | None,
+    integrator: str | None,
+    dt: float | None,
+    duration: float | None,
+    stop_context: Callable[[], Any] = contextlib.nullcontext,
+) -> ViewSummary:
+    """Build the panels and write ``output`` (atomically). ``prepare`` is the CLI's scene loader."""
+    from animsim.export.trajectory import is_trajectory, read_trajectory
+    from animsim.export.viewer import panel_from_trajectory, panels_html
+    from animsim.render import _up_axis
+    from animsim.scene import models as m
+
+    summary = ViewSummary()
+    from_file = is_trajectory(source)
+    panels = []
+    names: Sequence[str] | None = None
+    if integrators is not None:
+        from animsim.analysis.compare import parse_integrators
+
+        if from_file:
+            raise UsageError(
+                "--integrators simulates the scene once per method: give the scene, not a trajectory"
+            )
+        if integrator is not None:
+            raise UsageError("give --integrator or --integrators, not both")
+        names = parse_integrators(integrators)
+    if from_file:
+        compiled = None
+        if scene is not None:
+            from animsim.compile import compile_scene
+
+            loaded, sc, _ = prepare(scene, integrator=integrator, dt=dt, duration=duration)
+            compiled = compile_scene(sc, loaded.name)
+        traj = read_trajectory(source)
+        energies = None
+        if compiled is not None and compiled.emitters is not None:
+            # Who was alive with what mass is not in the file: no energy rather than a wrong one.
+            summary.notes.append(
+                "no energy plot: a particle system's energy needs the scene itself, not a trajectory"
+            )
+        elif compiled is not None:
+            energies = energies_from_trajectory(compiled, traj)
+        panels.append(panel_from_trajectory(traj, compiled, energies=energies, label=source.name))
+        title = source.name if compiled is None else f"{compiled.name} ({source.name})"
+        up = "y" if compiled is None else _up_axis(compiled.scene)
+        total = None
+    else:
+        from animsim.export.side_by_side import compile_each
+        from animsim.export.viewer import simulate_panel
+
+        loaded, sc, _ = prepare(source, integrator=integrator, dt=dt, duration=duration)
+        sc = sc.model_copy(update={"record": m.Record(fps=fps)})
+        compiled_runs = compile_each(sc, loaded.name, names)
+        with stop_context() as stop:
+            for c in compiled_runs:
+                run = simulate_panel(c, stop=stop)
+                if run.result.status == "interrupted":
+                    summary.interrupted = True
+                    return summary
+                if run.result.status == "unstable" and run.result.failure is not None:
+                    summary.notes.append(f"{c.integrator_name}: {run.result.failure.describe()}")
+                panels.append(run.panel)
+        title = compiled_runs[0].name
+        up = _up_axis(compiled_runs[0].scene)
+        total = compiled_runs[0].clock.duration
+    page = panels_html(panels, title=title, up=up, view=view, duration=total)
+    out = AtomicFile(output, "w", newline="\n")
+    try:
+        out.handle.write(page)
+    except BaseException:
+        out.abort()
+        raise
+    out.commit()
+    size = len(page.encode("utf-8"))
+    frames = max(len(p.times) for p in panels)
+    particles = max(p.positions.shape[1] for p in panels)
+    summary.panels = len(panels)
+    summary.bytes = size
+    what = f"{len(panels)} panels" if len(panels) > 1 else "1 panel"
+    summary.text = f"wrote {output} ({_megabytes(size)}): {what}, {frames} frames, {particles} particles"
+    if size > LARGE_PAGE_BYTES:
+        summary.notes.append(
+            f"{output} is {_megabytes(size)}: browsers take a while to open such a page; "
+            "a lower --fps or a shorter --duration makes it smaller"
+        )
+    return summary

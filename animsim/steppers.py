@@ -1,0 +1,376 @@
+"""Steppers: what advances the state between two points of the loop's clock.
+
+The one loop (:func:`animsim.engine.run`) asks a stepper to move the state
+from nominal clock position ``k`` to ``goal``; the stepper says where it got
+to. Everything else (recording, the watchdog and its replay, stop, progress,
+metadata, sinks) is the loop's, so it is the same for every stepper:
+
+* :class:`StepByStep`: one integrator step at a time, then the post-step
+  stages (collisions, births). NumPy kernels, or the elements' numba kernels
+  (:class:`animsim.backends.fused.NumbaForces`) on the numba backend.
+* :class:`Fused`: the numba backend's fused chunks, many steps per call.
+* :class:`StepDoubling`: adaptive step size (the course notes' "Adaptive
+  Stepsizes"), on either backend's kernels.
+
+The protocol (every stepper):
+
+``largest_dt``
+    the longest step it can take (the watchdog's one-step energy slack uses it).
+``check_stride``
+    the most steps between two watchdog checks it wants (1: every step).
+``replayable``
+    whether a stretch of steps can be replayed to find a failure's first step.
+``end``
+    the last clock position.
+``prepare(state, notice) -> seconds``
+    before the run, untimed: reset caches, compile kernels (numba), saying so
+    through ``notice`` when it takes a while.
+``advance(state, k, goal, max_steps=None) -> (k, failure, nonfinite)``
+    move the state from position k toward ``goal``; stop early after
+    ``max_steps`` steps or at a non-finite state. ``failure`` is set only when
+    the stepper itself cannot go on (adaptive: below dt_min).
+``position(state) -> k``
+    the clock position of a state this run went through (for the replay).
+``forget()``
+    drop cached quantities (Verlet's force) after the state was replaced.
+``summary() -> dict``
+    extra metadata.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from animsim.system import State
+
+#: a doubled step has about DOUBLING_BASE^(p+1) times the local error of the two halves
+DOUBLING_BASE = 2.0
+#: a step this close (relative) to the distance left lands on the record time, so
+#: rounding in the accumulated time never leaves a sliver of a step behind
+LANDING_SLACK = 1e-6
+#: a rest shorter than dt_min by up to this fraction of dt_min counts as a sliver too, so
+#: rounding in the accumulated time cannot turn a rest of exactly dt_min into a step below it
+SLIVER_SLACK = 1e-3
+#: steps between watchdog checks on the NumPy path (a check costs about a step of a small scene)
+CHECK_STRIDE = 16
+#: seconds of compiling after which the person waiting is told why
+COMPILE_NOTICE_SECONDS = 0.5
+
+
+def next_step(h: float, distance: float, dt_min: float, dt_max: float) -> tuple[float, bool]:
+    """The step to try next and whether it lands on the record time ``distance`` ahead.
+
+    ``h`` is the controller's step size, kept within [dt_min, dt_max]. The
+    step is h, except near the record time:
+
+    * the whole distance when it is at most h (within LANDING_SLACK), or
+      when a step of h would leave less than dt_min and the distance is at most
+      dt_max (one step of at most h + dt_min instead of h and a sliver);
+    * half the distance when a step of h would leave less than dt_min but the
+      distance is beyond dt_max: two equal steps, each at most dt_max (the
+      distance is below h + dt_min <= 2 dt_max) and at least dt_min whenever
+      dt_max >= 2 dt_min.
+
+    So every step is within [dt_min, dt_max], except one that lands on a
+    record time closer than dt_min to the previous one (the record clock's own
+    spacing, which no step size can avoid).
+    """
+    h = min(max(h, dt_min), dt_max)
+    sliver = distance - h < dt_min * (1.0 + SLIVER_SLACK)
+    if distance <= h * (1.0 + LANDING_SLACK) and distance <= dt_max:
+        return distance, True
+    if sliver:
+        if distance <= dt_max:
+            return distance, True
+        return 0.5 * distance, False
+    return h, False
+
+
+def make_stepper(compiled: Any) -> Any:
+    """The stepper for ``compiled`` on its backend (chosen once, at compile time)."""
+    numba = compiled.backend == "numba"
+    if compiled.adaptive is not None:
+        return StepDoubling(compiled, numba=numba)
+    if numba:
+        from animsim.backends import fused_unsupported
+
+        if not fused_unsupported(compiled):
+            return Fused(compiled)
+    return StepByStep(compiled, numba=numba)
+
+
+class _Base:
+    def __init__(self, compiled: Any, numba: bool = False):
+        self.compiled = compiled
+        self.clock = compiled.clock
+        self.end = compiled.clock.steps
+        self.largest_dt = compiled.clock.dt
+        self.numba = numba
+        self.stages = compiled.post_step
+        # A stage that draws random numbers (births) makes a replay a different run:
+        # such runs are checked at every step instead of replayed.
+        self.replayable = not any(st.random for st in compiled.post_step)
+        self.check_stride = CHECK_STRIDE if self.replayable else 1
+        n = compiled.system.particle_count
+        self._x_old = np.empty((n, 3))
+        self._v_old = np.empty((n, 3))
+
+    def prepare(self, state: State, notice: Callable[[str], None] | None) -> float:
+        self.forget()
+        if not self.numba:
+            return 0.0
+        return _compile_numba(self, state, notice)
+
+    def forget(self) -> None:
+        self.compiled.integrator.reset()
+
+    def position(self, state: State) -> int:
+        return state.step
+
+    def summary(self) -> dict[str, Any]:
+        return {}
+
+    def _one(self, state: State, dt: float, t1: float) -> None:
+        """One integrator step of dt ending at t1, then the post-step stages."""
+        t0 = state.time
+        if self.stages:
+            np.copyto(self._x_old, state.particle_position)
+            np.copyto(self._v_old, state.particle_velocity)
+        self.compiled.integrator.step(state, dt)
+        for stage in self.stages:
+            if stage.apply(state, self._x_old, self._v_old, t0, t1, dt):
+                state.revision += 1
+        state.time = t1
+
+
+def _compile_numba(stepper: Any, state: State, notice: Callable[[str], None] | None) -> float:
+    """Swap the NumPy force sum for the numba kernels' and compile them (on a throwaway state)."""
+    import time
+
+    t0 = time.perf_counter()
+    from animsim.backends.fused import NumbaForces
+
+    integ = stepper.compiled.integrator
+    dyn = stepper.compiled.dynamics
+    if not hasattr(stepper, "forces"):
+        stepper.forces = NumbaForces(dyn)
+    # Integrators evaluate forces only through dynamics.acceleration: point it at the kernels.
+    integ.dynamics = _NumbaDynamics(dyn, stepper.forces)
+    if notice is not None and not _kernels_cached():
+        notice("compiling numba kernels (first run only, cached afterwards)...")
+    scratch = np.zeros_like(state.particle_position)
+    stepper.forces.acceleration(state.particle_position, state.particle_velocity, state.time, scratch)
+    dyn.evaluations -= 1
+    return time.perf_counter() - t0
+
+
+def _kernels_cached() -> bool:
+    """Cheap guess whether numba has compiled animsim's kernels on this machine before."""
+    from pathlib import Path
+
+    return any(Path(__file__).parent.glob("__pycache__/*.nbi"))
+
+
+class _NumbaDynamics:
+    """A Dynamics whose acceleration runs the elements' numba kernels (everything else delegated)."""
+
+    def __init__(self, dynamics: Any, forces: Any):
+        self._dynamics = dynamics
+        self.acceleration = forces.acceleration
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._dynamics, name)
+
+
+class StepByStep(_Base):
+    """One step at a time through the integrator and the post-step stages."""
+
+    def __init__(self, compiled: Any, numba: bool = False):
+        super().__init__(compiled, numba)
+
+    def advance(self, state: State, k: int, goal: int, max_steps: int | None = None) -> tuple[int, Any, bool]:
+        clock = self.clock
+        stop = goal if max_steps is None else min(goal, k + max_steps)
+        while k < stop:
+            self._one(state, clock.step_size(k), clock.time(k + 1))
+            k += 1
+            state.step = k
+        return k, None, False
+
+
+class Fused(_Base):
+    """The numba backend's fused chunks (:class:`animsim.backends.fused.FusedStepper`)."""
+
+    def __init__(self, compiled: Any):
+        super().__init__(compiled, numba=True)
+        clock = compiled.clock
+        self.times = np.array([clock.time(i) for i in range(clock.steps + 1)])
+        self.dts = np.array([clock.step_size(i) for i in range(clock.steps)])
+        self.fused: Any = None
+
+    def prepare(self, state: State, notice: Callable[[str], None] | None) -> float:
+        import time
+
+        t0 = time.perf_counter()
+        from animsim.backends.fused import FusedStepper
+
+        if notice is not None and not _kernels_cached():
+            notice("compiling numba kernels (first run only, cached afterwards)...")
+        self.fused = FusedStepper(self.compiled)
+        self.check_stride = max(CHECK_STRIDE, self.fused.max_steps_per_call)
+        self.fused.warm_up(state)
+        self.fused.reset()
+        return time.perf_counter() - t0
+
+    def forget(self) -> None:
+        if self.fused is not None:
+            self.fused.reset()
+
+    def advance(self, state: State, k: int, goal: int, max_steps: int | None = None) -> tuple[int, Any, bool]:
+        stop = goal if max_steps is None else min(goal, k + max_steps)
+        failed = False
+        while k < stop and not failed:
+            end = min(stop, k + self.fused.max_steps_per_call)
+            taken, evals, failed = self.fused.advance(state, self.times[k:end], self.dts[k:end])
+            self.compiled.dynamics.evaluations += evals
+            k += taken
+            state.step = k
+            state.time = self.clock.time(k)
+        return k, None, failed
+
+
+class StepDoubling(_Base):
+    """Adaptive step size by step doubling.
+
+    "Every so often test the difference between using step size dt and dt/2. If
+    the difference is big enough start using dt/2. Do the same for dt*2." (the
+    course notes). Here the test is made on every step: one step of h and two of
+    h/2 from the same state; their difference estimates the local error of the
+    two half steps (Hairer, Norsett and Wanner I, II.4, "Richardson
+    extrapolation"). The step is
+
+    * rejected and retried with h/2 while the difference exceeds ``tolerance``
+      (a run whose step would fall below ``dt_min`` stops as ``unstable``);
+    * accepted otherwise, keeping the two half steps (the more accurate result);
+    * doubled, up to ``dt_max``, when the difference is below
+      tolerance / 2^(p+1), p the method's order: a step twice as long has about
+      2^(p+1) times the local error, so the doubled step should still pass.
+
+    Steps are shortened to land exactly on the record clock's times, without
+    changing the step size the controller carries on with, and every step stays
+    within [dt_min, dt_max] (:func:`next_step`): a step that would leave less
+    than dt_min before a record time is stretched to land on it, or, where that
+    would pass dt_max, the rest is split in two equal steps.
+    """
+
+    def __init__(self, compiled: Any, numba: bool = False):
+        super().__init__(compiled, numba)
+        spec = compiled.adaptive
+        self.tolerance = float(spec.tolerance)
+        self.dt_min = float(spec.dt_min)
+        self.dt_max = float(spec.dt_max)
+        self.largest_dt = max(self.dt_max, compiled.clock.dt)
+        # Steps grow past the nominal clock: run to each record time, check there (and replay).
+        self.check_stride = self.end
+        self.grow_below = self.tolerance / DOUBLING_BASE ** (compiled.integrator.order + 1)
+        self._movable = compiled.system.particle_inv_mass > 0
+        self._big: State | None = None
+        self._small: State | None = None
+        self.h = min(max(compiled.clock.dt, self.dt_min), self.dt_max)
+        self.accepted = 0
+        self.rejected = 0
+        self.smallest = np.inf
+        self.largest = 0.0
+        # Trial steps run the stages that draw no random numbers; the others run once accepted.
+        self.once = tuple(st for st in self.stages if st.random)
+        self.stages = tuple(st for st in self.stages if not st.random)
+
+    def summary(self) -> dict[str, Any]:
+        return {
+            "adaptive": {
+                "tolerance": self.tolerance,
+                "dt_min": self.dt_min,
+                "dt_max": self.dt_max,
+                "accepted_steps": self.accepted,
+                "rejected_steps": self.rejected,
+                "smallest_dt": float(self.smallest) if self.accepted else None,
+                "largest_dt": float(self.largest) if self.accepted else None,
+            }
+        }
+
+    def position(self, state: State) -> int:
+        # the last clock point at or before the state's time (replays start from checked states)
+        k = 0
+        while k < self.end and self.clock.time(k + 1) <= state.time:
+            k += 1
+        return k
+
+    def _error(self, big: State, small: State, h: float) -> tuple[float, int]:
+        """Largest difference (m) between the two results, and the particle it is at."""
+        dx = np.abs(big.particle_position - small.particle_position).max(axis=1)
+        dv = np.abs(big.particle_velocity - small.particle_velocity).max(axis=1)
+        e = np.where(self._movable, np.maximum(dx, h * dv), 0.0)
+        i = int(np.argmax(np.where(np.isfinite(e), e, np.inf)))
+        return float(e[i]) if np.isfinite(e[i]) else np.inf, i
+
+    def _trial(self, trial: State, state: State, h: float, halves: int) -> None:
+        trial.assign(state)
+        self.compiled.integrator.reset()  # Verlet's cached force belongs to one trajectory
+        for _ in range(halves):
+            self._one(trial, h / halves, trial.time + h / halves)
+
+    def advance(self, state: State, k: int, goal: int, max_steps: int | None = None) -> tuple[int, Any, bool]:
+        from animsim.analysis.stability import particle_name
+        from animsim.engine import Failure
+
+        if self._big is None:
+            self._big, self._small = state.copy(), state.copy()
+        big, small = self._big, self._small
+        assert small is not None
+        clock = self.clock
+        taken = 0
+        while k < goal and (max_steps is None or taken < max_steps):
+            target = clock.time(goal)
+            h_try, landing = next_step(self.h, target - state.time, self.dt_min, self.dt_max)
+            # The trial steps only see dynamics (no births): emitters run once, on the accepted step.
+            self._trial(big, state, h_try, 1)
+            self._trial(small, state, h_try, 2)
+            err, worst = self._error(big, small, h_try)
+            if not err <= self.tolerance:  # NaN or inf count as too large
+                if 0.5 * h_try < self.dt_min:
+                    failure = Failure(
+                        step=state.step,
+                        time=state.time,
+                        particle=particle_name(self.compiled, worst),
+                        reason=(
+                            f"adaptive step: the step-doubling error {err:.3g} m exceeds the "
+                            f"tolerance {self.tolerance:g} m even at dt_min = {self.dt_min:g} s"
+                        ),
+                        suggestion=(
+                            "raise tolerance or lower dt_min; for a stiff scene use "
+                            "implicit_euler, which needs no tiny steps"
+                        ),
+                    )
+                    return k, failure, False
+                self.h = 0.5 * h_try
+                self.rejected += 1
+                continue
+            t_start, t_end = state.time, (target if landing else state.time + h_try)
+            state.assign(small)
+            state.time = t_end
+            for stage in self.once:  # births: once per accepted step, never on a trial
+                if stage.apply(state, self._x_old, self._v_old, t_start, t_end, h_try):
+                    state.revision += 1
+            state.step += 1
+            taken += 1
+            self.accepted += 1
+            self.smallest = min(self.smallest, h_try)
+            self.largest = max(self.largest, h_try)
+            if not landing and err < self.grow_below:
+                self.h = min(2.0 * self.h, self.dt_max)
+            if landing:
+                k = goal
+        return k, None, False
