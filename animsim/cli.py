@@ -1006,11 +1006,11 @@ def compare(
     repeat: Annotated[
         int,
         typer.Option(
-            help="Extra timed runs per row after its accuracy run (the median is reported); default 0: "
-            "the accuracy run's own time, after a warm-up. More runs, steadier timings.",
+            help="Timed runs per row after its accuracy run (the median is reported); more runs, steadier "
+            "timings. 0 times the accuracy run itself, recording included: cheaper, less exact.",
             min=0,
         ),
-    ] = 0,
+    ] = 1,
     output: Annotated[Path | None, typer.Option("-o", "--output", help="Write the table as CSV.")] = None,
     plot: Annotated[
         Path | None,

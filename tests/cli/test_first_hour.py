@@ -53,7 +53,7 @@ def test_a_three_second_cloth_writes_a_small_csv_by_default(tmp_path) -> None:
 def test_compare_defaults_are_cheap() -> None:
     assert default_dts(0.002, 5.0) == [0.004, 0.002, 0.001, 0.0005]
     assert default_dts(0.5, 0.5) == [0.5, 0.25, 0.125, 0.0625]  # 2 dt would outlast the scene
-    assert DEFAULT_REPEAT == 0  # the accuracy run is timed (after the cost probe warmed it up)
+    assert DEFAULT_REPEAT == 1
     loaded = load_scene(SCENES / "oscillator.yaml")
     cost = estimate(loaded.scene, loaded.name, integrators=["euler", "rk4"], dts=[0.01, 0.005], repeat=1)
     assert cost.runs == 2 * 2 * 2
