@@ -390,9 +390,8 @@ def run(
 
     compiled = compile_scene(sc, loaded.name, backend=_backend(backend))
     from animsim.analysis import stability
-    from animsim.console import numba_notice
+    from animsim.console import terminal_notice
 
-    numba_notice(compiled.backend)
     report = stability.analyse(compiled)
     if report.dt_exceeds_limit:  # warn before the first step; the watchdog judges the run
         _err(f"{scene}: warning: {report.verdict()}")
@@ -410,7 +409,9 @@ def run(
     )
     extra = {"scene_sha256": loaded.sha256, "scene_file": str(scene), META_THRESHOLD_KEY: drift_warn}
     with _graceful_stop() as stop, _progress(compiled.clock.steps, quiet) as progress:
-        result = simulate(compiled, [sink], stop=stop, progress=progress, meta_extra=extra)
+        result = simulate(
+            compiled, [sink], stop=stop, progress=progress, meta_extra=extra, notice=terminal_notice()
+        )
     if fmt is Format.ply and sink.written:
         first, last = sink.written[0], sink.written[-1]
         span = f"{first}" if first == last else f"{first} .. {last.name}"
@@ -1088,13 +1089,18 @@ def compare(
         plot_format(plot)
     backend = _backend(backend)
     console = _stdout_console()
-    if backend != "numpy":
-        from animsim.compile import compile_scene
-        from animsim.console import numba_notice
+    from animsim.console import terminal_notice
 
-        # Which backend the rows will really run on (auto falls back to numpy for some scenes).
-        numba_notice(compile_scene(loaded.scene, loaded.name, backend=backend).backend)
-    cost = estimate(loaded.scene, loaded.name, integrators=names, dts=dts, repeat=repeat, backend=backend)
+    # The probe runs first, so numba's one-time compilation is announced (on a terminal) and done there.
+    cost = estimate(
+        loaded.scene,
+        loaded.name,
+        integrators=names,
+        dts=dts,
+        repeat=repeat,
+        backend=backend,
+        notice=terminal_notice(),
+    )
     _err(f"comparing {len(names)} methods at {len(dts)} step sizes: {cost.describe()}")
     with _compare_progress(len(names) * len(dts)) as progress:
         result = run_compare(

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import os
 import sys
-from pathlib import Path
+from collections.abc import Callable
 from typing import Any
 
 #: Width of a printed table when stdout is not a terminal and COLUMNS is not set
@@ -50,37 +50,20 @@ def sig(value: float | None, digits: int = 3) -> str:
     return f"{value:.{digits}g}"
 
 
-def numba_cache_present() -> bool:
-    """True when numba's compiled kernels of this animsim are already cached on disk.
+def terminal_notice(stream: Any = None) -> Callable[[str], None] | None:
+    """A ``notice`` for the engine (e.g. "compiling numba kernels (first run only...)") on a terminal.
 
-    numba caches beside the source (``__pycache__`` of the module holding the
-    kernel) when it can write there, else under NUMBA_CACHE_DIR or the user's
-    cache folder; any index file (``*.nbi``) of an animsim module counts.
-    """
-    import animsim
-
-    package = Path(animsim.__file__).parent
-    try:
-        if any(package.rglob("__pycache__/*.nbi")):
-            return True
-        for place in (os.environ.get("NUMBA_CACHE_DIR"), Path.home() / ".cache" / "numba"):
-            if place and Path(place).is_dir() and any(Path(place).rglob("*animsim*/**/*.nbi")):
-                return True
-    except OSError:
-        return True  # cannot tell: stay quiet rather than announce a compile that may not come
-    return False
-
-
-def numba_notice(backend: str, stream: Any = None) -> bool:
-    """On a terminal, say that the first numba run compiles (seconds of silence otherwise).
-
-    Returns True when the notice was printed.
+    The first numba run compiles for seconds; without a word it looks hung.
+    None when ``stream`` (stderr by default) is a pipe or a file: logs stay clean.
     """
     stream = stream or sys.stderr
-    if backend != "numba" or not stream.isatty() or numba_cache_present():
-        return False
-    print("compiling numba kernels (first run only)...", file=stream, flush=True)
-    return True
+    if not stream.isatty():
+        return None
+
+    def notice(text: str) -> None:
+        print(text, file=stream, flush=True)
+
+    return notice
 
 
 def steps_text(compiled: Any, result: Any) -> str:

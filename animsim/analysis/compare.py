@@ -566,6 +566,7 @@ def estimate(
     dts: Sequence[float],
     repeat: int = DEFAULT_REPEAT,
     backend: str = "numpy",
+    notice: Callable[[str], None] | None = None,
 ) -> Estimate:
     """Time each method over a few steps at the largest dt and scale to every row's steps.
 
@@ -586,7 +587,7 @@ def estimate(
         compiled = record_at(probe, name, integ, dt, np.array([0.0, probe.duration]), backend)
         chosen = compiled.backend if compiled.backend != "numpy" else chosen
         with np.errstate(all="ignore"):
-            run(compiled, [])
+            run(compiled, [], notice=notice)
             result = run(compiled, [])
         per_step = result.wall_time / max(result.steps_taken, 1)
         seconds += per_step * total_steps * (1 + repeat)

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from animsim.analysis.compare import DEFAULT_REPEAT, OrderFit, default_dts, estimate
-from animsim.console import numba_notice, steps_text
+from animsim.console import steps_text, terminal_notice
 from animsim.record import DEFAULT_RECORD_FPS, Clock, record_steps, recording_rule, scene_record_steps
 from animsim.render import frames_at_rate
 from animsim.scene.loader import load_scene, load_scene_text
@@ -129,17 +129,13 @@ class _Tty(io.StringIO):
         return True
 
 
-def test_numba_notice_only_on_a_terminal_and_only_without_a_cache(monkeypatch) -> None:
-    import animsim.console as console
-
-    monkeypatch.setattr(console, "numba_cache_present", lambda: False)
+def test_notices_only_on_a_terminal() -> None:
     tty = _Tty()
-    assert numba_notice("numba", tty)
-    assert tty.getvalue() == "compiling numba kernels (first run only)...\n"
-    assert not numba_notice("numpy", _Tty())
-    assert not numba_notice("numba", io.StringIO())  # a pipe or a log: silent
-    monkeypatch.setattr(console, "numba_cache_present", lambda: True)
-    assert not numba_notice("numba", _Tty())
+    notice = terminal_notice(tty)
+    assert notice is not None
+    notice("compiling numba kernels (first run only, cached afterwards)...")
+    assert tty.getvalue() == "compiling numba kernels (first run only, cached afterwards)...\n"
+    assert terminal_notice(io.StringIO()) is None  # a pipe or a log: silent
 
 
 # --- pipes and Ctrl-C -----------------------------------------------------------------------------
