@@ -476,6 +476,12 @@ def _summary(compiled: Any, result: Any, wrote: str | None) -> None:
         + _drift_of(compiled, result).text(),
     ]
     lines.extend(_summary_notes(compiled, result))
+    if "springs_broken" in result.meta:
+        first = result.meta.get("first_break_time")
+        lines.append(
+            f"  springs broken: {result.meta['springs_broken']}"
+            + (f" (first at t = {first:.6g} s)" if first is not None else "")
+        )
     if wrote is not None:
         lines.append(f"  wrote {wrote}")
     from animsim.analysis.check import wrap
@@ -561,6 +567,30 @@ def schema_text() -> str:
 def schema() -> None:
     """Print the scene JSON Schema (schemas/scene.schema.json is this output)."""
     sys.stdout.write(schema_text())
+
+
+# --- init -------------------------------------------------------------------------------
+
+
+def _template_help() -> str:
+    from animsim.templates import TEMPLATES
+
+    return "Starter scene: " + "; ".join(f"{k} ({t.summary})" for k, t in TEMPLATES.items()) + "."
+
+
+@app.command()
+def init(
+    path: Annotated[
+        Path, typer.Argument(help="The scene file to write, e.g. my_scene.yaml.", show_default=False)
+    ],
+    template: Annotated[str, typer.Option("--template", "-t", help=_template_help())] = "projectile",
+    force: Annotated[bool, typer.Option("--force", help="Replace an existing file.")] = False,
+) -> None:
+    """Write a commented starter scene, and scene.schema.json beside it for editors."""
+    from animsim.templates import write_starter
+
+    for line in write_starter(path, template, force=force):
+        typer.echo(line)
 
 
 # --- check ------------------------------------------------------------------------------

@@ -253,12 +253,17 @@ def compile_scene(
     if "wind" in present and "turbulence" not in present:
         left_out.append("turbulence: the wind has none")
 
+    # keyframes, solid colliders, particle contacts, tearing (animsim.contact_stages)
+    from animsim import contact_stages
+
+    tearing_limits = contact_stages.spring_max_strain(scene)
+    can_tear = bool(system.spring_count and np.isfinite(tearing_limits).any())
+    springs_term = None
     if system.spring_count:
         label = f"springs: {system.spring_count} in {len(families)} famil{'y' if len(families) == 1 else 'ies'} ({', '.join(f'{name} {b - a}' for name, a, b in families)})"
-        terms.insert(
-            sum(1 for e in terms if not isinstance(e, PenaltyPlane)),
-            build_spring_term(system, label, grid=backend != BACKEND_REFERENCE),
-        )
+        # tearing switches single springs off: the generic kernel, not grid slices
+        springs_term = build_spring_term(system, label, grid=backend != BACKEND_REFERENCE and not can_tear)
+        terms.insert(sum(1 for e in terms if not isinstance(e, PenaltyPlane)), springs_term)
     else:
         left_out.append("springs: none, so no spring forces or scatter")
 
@@ -269,7 +274,13 @@ def compile_scene(
     if not penalty:
         left_out.append("penalty contact: no penalty planes")
 
+    solids = contact_stages.build(scene, system, chosen, springs_term, particle_position)
+    post_step = [*solids.front, *post_step, *solids.back]
+    if solids.contacts is not None:  # contacts push out of planes too, after the colliders
+        solids.contacts.planes = next((st for st in post_step if hasattr(st, "_project")), None)
+    left_out.extend(solids.left_out)
     dynamics = Dynamics(system, terms)
+    dynamics.drivers = tuple(solids.drivers)
     if emitters is not None:
         emitters.attach(dynamics, [st for st in post_step if st.collides_newborns])
         post_step.append(emitters)  # births run after the step and its collisions
@@ -316,7 +327,12 @@ def compile_scene(
         extra={
             "planes": [
                 (np.array(p.point), np.array(p.normal) / np.linalg.norm(p.normal)) for p in scene.planes
-            ]
+            ],
+            # per row radius (m) and colour for rendering; broken springs come with each frame
+            "particle_radius": solids.radius,
+            "particle_color": [p.color for p in scene.particles],
+            "particle_pinned": system.particle_pinned,
+            "collider_surface": solids.collider_surface,
         },
         connectivity=connectivity([(s.id, e, base) for s, e, base in expanded]),
     )
@@ -331,6 +347,7 @@ def compile_scene(
         time=0.0,
         step=0,
         particle_alive=particle_alive,
+        spring_intact=np.ones(system.spring_count, dtype=bool) if can_tear else None,
     )
     compiled = Compiled(
         name=name,

@@ -26,6 +26,9 @@ class Dynamics:
         # Pinned particles are driven, never pushed: an infinite force on one
         # times its zero inverse mass would be NaN and poison a moving anchor.
         self._pinned = np.flatnonzero(system.particle_pinned)
+        #: keyframe drives (animsim.keyframes.KeyframeDrive): driven rows are put on their
+        #: path before every force evaluation, so springs to them see the path inside a step
+        self.drivers: tuple[Any, ...] = ()
 
     def bind(self, state: Any) -> None:
         """Use ``state``'s live masses, and hand it to every element that reads state arrays."""
@@ -43,6 +46,8 @@ class Dynamics:
     def acceleration(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> np.ndarray:
         """Write a = F/m into ``out``; pinned particles and dead slots get 0 (inverse mass 0)."""
         self.evaluations += 1
+        for drive in self.drivers:
+            drive.drive(t, x, v)
         self.force(x, v, t, out)
         inv_mass = self.inv_mass
         for j in range(out.shape[1]):  # per column: much faster than broadcasting (N, 1)

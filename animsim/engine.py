@@ -214,6 +214,8 @@ def run(
         checked = 0
         with np.errstate(over="ignore", invalid="ignore"):
             while k < steps:
+                while next_rec < len(record) and record[next_rec] <= k:  # never aim behind us
+                    next_rec += 1
                 goal = min(int(record[next_rec]) if next_rec < len(record) else steps, checked + stride)
                 k, failure, nonfinite = stepper.advance(state, k, goal, max_steps=one)
                 if failure is not None:  # the stepper itself gave up (adaptive: below dt_min)
@@ -274,6 +276,10 @@ def run(
         annotate(meta, compiled)  # energy drift as a verdict of its own, in the metadata
         if compiled.emitters is not None:
             meta["emitters"] = compiled.emitters.summary()
+        for stage in compiled.post_step:  # tearing: how many springs broke, and when first
+            report = getattr(stage, "run_summary", None)
+            if report is not None:
+                meta.update(report())
         return finish(sinks, state, dyn, status, wall, energy_start, energy_end, frames, failure, meta)
     except BaseException:
         for sink in sinks:
@@ -336,6 +342,7 @@ def _frame_copy(compiled: Compiled, state: State) -> Frame:
         index=_all_index(compiled),
         position=state.particle_position.copy(),
         velocity=state.particle_velocity.copy(),
+        spring_intact=None if state.spring_intact is None else state.spring_intact.copy(),
     )
 
 
@@ -385,9 +392,14 @@ def _emit(
             index=_all_index(compiled),
             position=state.particle_position,
             velocity=state.particle_velocity,
+            spring_intact=state.spring_intact,
         )
     else:
         frame = compiled.emitters.frame(compiled, state)
+        if state.spring_intact is not None:
+            import dataclasses
+
+            frame = dataclasses.replace(frame, spring_intact=state.spring_intact)
     for sink in sinks:
         sink.write(frame)
 

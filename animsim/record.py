@@ -124,6 +124,8 @@ def record_steps(clock: Clock, every: int | None = None, fps: float | None = Non
             idx = np.append(idx, n)
         return idx
     period = 1.0 / fps
+    if not math.isfinite(period):  # a rate so low (5e-324 fps) that one frame never ends
+        return np.array([0], dtype=np.int64)
     count = math.floor(clock.duration / period * (1 + STEP_COUNT_RTOL)) + 1
     targets = np.arange(count, dtype=np.float64) * period
     if clock.divides:
@@ -193,6 +195,7 @@ class Frame:
     age: np.ndarray | None = None  # (n,) s, emitted particles only (NaN for others)
     size: np.ndarray | None = None  # (n,) m, for rendering
     color: np.ndarray | None = None  # (n, 4) RGBA in [0, 1]
+    spring_intact: np.ndarray | None = None  # (S,) bool: False for springs torn by now (None: none can tear)
 
 
 class FrameSink(Protocol):
@@ -238,6 +241,7 @@ class MemorySink:
                 age=None if frame.age is None else frame.age.copy(),
                 size=None if frame.size is None else frame.size.copy(),
                 color=None if frame.color is None else frame.color.copy(),
+                spring_intact=None if frame.spring_intact is None else frame.spring_intact.copy(),
             )
         )
 

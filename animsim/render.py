@@ -102,12 +102,16 @@ class _BoundsSink:
     def __init__(self) -> None:
         self.lo = np.full(3, np.inf)
         self.hi = np.full(3, -np.inf)
+        self.surface: Callable[[float], np.ndarray] | None = None
 
     def begin(self, header: TrajectoryHeader) -> None:
-        pass
+        # solid colliders stay in view too (where they are at each frame)
+        self.surface = header.extra.get("collider_surface")
 
     def write(self, frame: Frame) -> None:
         p = frame.position
+        if self.surface is not None:
+            p = np.concatenate([p, self.surface(frame.time)])
         if len(p):
             finite = p[np.isfinite(p).all(axis=1)]
             if len(finite):
@@ -235,6 +239,25 @@ def render_scene(
     )
 
 
+def _extras_for(compiled: Any, traj_ids: Any) -> dict[str, Any]:
+    """The scene's per-particle radius, colour and pins, renumbered as the trajectory's ids
+    (what a render of the scene itself draws), and its colliders."""
+    src = compiled.header.extra
+    row_of = {pid: k for k, pid in enumerate(compiled.system.ids)}
+    rows = np.array([row_of.get(pid, -1) for pid in traj_ids], dtype=np.int64)
+    found = rows >= 0
+    out: dict[str, Any] = {"collider_surface": src.get("collider_surface")}
+    radius = src.get("particle_radius")
+    if radius is not None:
+        out["particle_radius"] = np.where(found, np.asarray(radius)[np.maximum(rows, 0)], 0.0)
+    pinned = src.get("particle_pinned")
+    if pinned is not None:
+        out["particle_pinned"] = found & np.asarray(pinned)[np.maximum(rows, 0)]
+    colors = src.get("particle_color") or []
+    out["particle_color"] = [colors[r] if 0 <= r < len(colors) else None for r in rows.tolist()]
+    return out
+
+
 def render_trajectory(
     traj: Any,
     gif: Path | None,
@@ -248,6 +271,7 @@ def render_trajectory(
     spring_index = np.zeros((0, 2), dtype=np.int64)
     planes: list[tuple[np.ndarray, np.ndarray]] = []
     up = "y"
+    extra: dict[str, Any] = {}
     if compiled is not None:
         planes = compiled.header.extra.get("planes", [])
         up = _up_axis(compiled.scene)
@@ -257,11 +281,14 @@ def render_trajectory(
         pairs = compiled.system.spring_index
         keep = [(pos_of.get(ids[a]), pos_of.get(ids[b])) for a, b in pairs.tolist()]
         spring_index = np.array([p for p in keep if None not in p], dtype=np.int64).reshape(-1, 2)
+        extra = _extras_for(compiled, traj.ids)
     lo, hi = traj.bounds()
     bounds = _bounds(lo, hi, planes)
     opts = _with_view(opts, lo, hi)
     sinks = _sinks(gif, mp4, opts, bounds, planes, up, progress)
-    header = TrajectoryHeader(scene_name="trajectory", ids=[], spring_index=spring_index, has_emitters=False)
+    header = TrajectoryHeader(
+        scene_name="trajectory", ids=[], spring_index=spring_index, has_emitters=False, extra=extra
+    )
     # Play at the recorded times: pick the frame nearest each k/fps.
     shown = frames_at_rate(traj.times, opts.fps)
     recorded = list(traj.frames())

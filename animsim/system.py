@@ -79,6 +79,8 @@ class State:
     step: int = 0
     particle_alive: np.ndarray | None = None
     revision: int = 0
+    #: (S,) bool, False for a spring that tore; None unless some spring can tear
+    spring_intact: np.ndarray | None = None
 
     def copy(self) -> State:
         owns = self.particle_alive is not None  # only pools change masses
@@ -91,6 +93,7 @@ class State:
             self.step,
             None if self.particle_alive is None else self.particle_alive.copy(),
             self.revision,
+            None if self.spring_intact is None else self.spring_intact.copy(),
         )
 
     def assign(self, src: State) -> None:
@@ -101,4 +104,6 @@ class State:
             np.copyto(self.particle_alive, src.particle_alive)
             np.copyto(self.particle_mass, src.particle_mass)
             np.copyto(self.particle_inv_mass, src.particle_inv_mass)
+        if self.spring_intact is not None and src.spring_intact is not None:
+            np.copyto(self.spring_intact, src.spring_intact)
         self.time, self.step, self.revision = src.time, src.step, src.revision

@@ -353,7 +353,10 @@ class StabilityReport:
 
     def lines(self) -> list[str]:
         if self.omega_max == 0:
-            return ["stiffness: no springs or penalty contact, so no stiffness limit on dt"]
+            return [
+                "stiffness: no springs or penalty contact, so no stiffness limit on dt",
+                *(f"  {n}" for n in self.notes),
+            ]
         out = [
             f"stiffness: omega_max <= {self.omega_max:.4g} rad/s (Gershgorin bound, row of particle "
             f"{self.particle!r}), damping ratio {self.zeta:.3g}",
@@ -410,6 +413,12 @@ def _row_bounds(compiled: Any) -> tuple[np.ndarray, np.ndarray, float, list[str]
     penalty_k = max((term.contact_stiffness for term in compiled.dynamics.terms), default=0.0)
     if compiled.emitters is not None and penalty_k > 0:
         notes.append("emitted particles touching penalty planes are not counted")
+    # Post-step stages resolved by impulses (colliders, contacts, keyframes, tearing) add no
+    # stiffness; each says what limits it instead (animsim.contact_stages).
+    for stage in compiled.post_step:
+        note = getattr(stage, "stability_note", None)
+        if note is not None:
+            notes.append(note(compiled.clock.dt))
     return k_rows, c_rows, penalty_k, notes
 
 

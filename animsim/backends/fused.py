@@ -232,6 +232,8 @@ class NumbaForces:
     def acceleration(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> np.ndarray:
         d = self.dynamics
         d.evaluations += 1
+        for drive in getattr(d, "drivers", ()):  # keyframed rows on their path (animsim.keyframes)
+            drive.drive(t, x, v)
         mass = _live(d.mass, self._copies)
         if not self.others:
             inv_mass = _live(d.inv_mass, self._copies)

@@ -57,6 +57,10 @@ from animsim.export.raster import (
 )
 from animsim.record import Frame, TrajectoryHeader
 
+#: solid colliders: dim grey dots on their surfaces; pinned particles: a light ring
+COLLIDER_RGBA = (0.6, 0.6, 0.6, 0.8)
+PIN_RGBA = (1.0, 1.0, 0.8, 1.0)
+
 DEFAULT_FPS = 25.0
 DEFAULT_SIZE = (480, 480)
 DEFAULT_VIEW = "xy"  # the scene language is y-up: x right, y up is the side view
@@ -174,6 +178,12 @@ class FrameRenderer:
         paint_planes(self.canvas, camera, planes)
         self.canvas.keep_as_background()
         self.spring_index = np.zeros((0, 2), dtype=np.int64)
+        # per particle row (id table index): radius (m, 0 = none), RGBA (NaN = none), pinned;
+        # and a function t -> points on the solid colliders' surfaces (drawn as grey dots)
+        self.row_radius: np.ndarray | None = None
+        self.row_rgba: np.ndarray | None = None
+        self.row_pinned: np.ndarray | None = None
+        self.collider_surface: Callable[[float], np.ndarray] | None = None
         self.time_stamp = time_stamp
         self.time_decimals = time_decimals
         self.text_scale = max(1, round(min(camera.width, camera.height) / TEXT_PIXELS_PER_SCALE))
@@ -185,6 +195,35 @@ class FrameRenderer:
             raise ValueError("spring indices must be >= 0")
         self.spring_index = springs
 
+    def set_particles(self, extra: dict[str, Any]) -> None:
+        """Per-particle radius, colour and pins, and the colliders, from a trajectory header's extras."""
+        from animsim.emitters import parse_color
+
+        radius = extra.get("particle_radius")
+        if radius is not None:
+            self.row_radius = np.asarray(radius, dtype=np.float64)
+        colors = extra.get("particle_color") or []
+        if any(c is not None for c in colors):
+            rgba = np.full((len(colors), 4), np.nan, dtype=np.float32)
+            for i, c in enumerate(colors):  # listed particles only: a short list
+                if c is not None:
+                    rgba[i] = parse_color(c)
+            self.row_rgba = rgba
+        pinned = extra.get("particle_pinned")
+        if pinned is not None and np.any(pinned):
+            self.row_pinned = np.asarray(pinned, dtype=bool)
+        self.collider_surface = extra.get("collider_surface")
+
+    @staticmethod
+    def _rows_of(table: np.ndarray, index: np.ndarray | None, n: int, fill: Any) -> np.ndarray:
+        """``table`` (per id) looked up for a frame's rows; ``fill`` past its end."""
+        idx = np.arange(n) if index is None else np.asarray(index)
+        out = np.empty((n, *table.shape[1:]), dtype=table.dtype)
+        out[...] = fill
+        inside = idx < len(table)
+        out[inside] = table[idx[inside]]
+        return out
+
     def render(
         self,
         position: np.ndarray,
@@ -193,6 +232,7 @@ class FrameRenderer:
         size: np.ndarray | None = None,
         color: np.ndarray | None = None,
         time: float | None = None,
+        spring_intact: np.ndarray | None = None,
     ) -> Canvas:
         """Draw one frame and return the canvas (valid until the next call).
 
@@ -206,16 +246,31 @@ class FrameRenderer:
         position = np.asarray(position, dtype=np.float64).reshape(-1, 3)
         n = len(position)
         proj = self.camera.project(position)
+        if self.collider_surface is not None and time is not None:
+            pts = self.collider_surface(time)
+            sp = self.camera.project(pts)
+            keep = np.flatnonzero(sp.visible)
+            canvas.draw_dots(
+                sp.pixel[keep], np.full(len(keep), 1.2), np.array(COLLIDER_RGBA, dtype=np.float32)
+            )
         if len(self.spring_index):
-            self._draw_springs(proj.pixel, proj.visible, index, n)
+            self._draw_springs(proj.pixel, proj.visible, index, n, spring_intact)
 
         radius = np.full(n, self.dot_radius)
+        if self.row_radius is not None:
+            # a particle's own radius (m) draws its dot, where no emitter size says otherwise
+            own = 2.0 * self._rows_of(self.row_radius, index, n, 0.0)
+            size = own if size is None else np.where(np.isfinite(size), size, np.where(own > 0, own, np.nan))
         if size is not None:
             diameter = np.asarray(size, dtype=np.float64)
             has = np.isfinite(diameter) & (diameter > 0)
             radius[has] = diameter[has] / 2 * proj.px_per_m[has]
         rgba = np.empty((n, 4), dtype=np.float32)
         rgba[:] = DEFAULT_PARTICLE_RGBA
+        if self.row_rgba is not None:
+            own_rgba = self._rows_of(self.row_rgba, index, n, np.nan)
+            has = np.isfinite(own_rgba).all(axis=1)
+            rgba[has] = own_rgba[has]
         if color is not None:
             given = np.asarray(color, dtype=np.float32).reshape(n, 4)
             has = np.isfinite(given).all(axis=1)
@@ -224,6 +279,10 @@ class FrameRenderer:
         # Far to near, so nearer dots cover farther ones; stable, so equal
         # depths (a flat scene) keep creation order.
         rows = rows[np.argsort(-proj.depth[rows], kind="stable")]
+        if self.row_pinned is not None:
+            # pinned particles are marked by a ring: a larger light dot under their own
+            pinned = rows[self._rows_of(self.row_pinned, index, n, False)[rows]]
+            canvas.draw_dots(proj.pixel[pinned], radius[pinned] + 2.0, np.array(PIN_RGBA, dtype=np.float32))
         canvas.draw_dots(proj.pixel[rows], radius[rows], rgba[rows])
 
         if self.time_stamp and time is not None:
@@ -234,8 +293,19 @@ class FrameRenderer:
     def time_label(self, time: float) -> str:
         return f"t = {time:.{self.time_decimals}f} s"
 
-    def _draw_springs(self, pixel: np.ndarray, visible: np.ndarray, index: np.ndarray | None, n: int) -> None:
+    def _draw_springs(
+        self,
+        pixel: np.ndarray,
+        visible: np.ndarray,
+        index: np.ndarray | None,
+        n: int,
+        intact: np.ndarray | None = None,
+    ) -> None:
         springs = self.spring_index
+        if intact is not None and len(intact) == len(springs):
+            springs = springs[np.asarray(intact, dtype=bool)]  # torn springs are not drawn
+            if not len(springs):
+                return
         if index is None or (n and index[0] == 0 and index[-1] == n - 1):
             # Rows are ids 0..n-1 (index is strictly increasing): no lookup.
             rows = np.where(springs < n, springs, -1)
@@ -404,6 +474,7 @@ class AnimationSink:
         if self._state != "new":
             raise RuntimeError(f"begin() called on a sink that is {self._state}")
         self.renderer.set_springs(header.spring_index)
+        self.renderer.set_particles(header.extra)
         try:
             self._file = AtomicFile(self.path, "wb")
         except OSError as exc:
@@ -432,7 +503,12 @@ class AnimationSink:
         if self._state != "open":
             raise RuntimeError(f"write() called on a sink that is {self._state}")
         canvas = self.renderer.render(
-            frame.position, frame.index, size=frame.size, color=frame.color, time=frame.time
+            frame.position,
+            frame.index,
+            size=frame.size,
+            color=frame.color,
+            time=frame.time,
+            spring_intact=frame.spring_intact,
         )
         if self._gif is not None:
             self._gif.add(quantise(canvas), gif_delay_cs(self.fps, self.frames_written))
@@ -485,7 +561,12 @@ class AnimationSink:
     def render_frame(self, frame: Frame) -> np.ndarray:
         """(H, W) palette indices of ``frame`` without writing it."""
         canvas = self.renderer.render(
-            frame.position, frame.index, size=frame.size, color=frame.color, time=frame.time
+            frame.position,
+            frame.index,
+            size=frame.size,
+            color=frame.color,
+            time=frame.time,
+            spring_intact=frame.spring_intact,
         )
         return quantise(canvas)
 

@@ -107,6 +107,23 @@ class Springs(ForceElement):
         self._jac: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.label = label or f"springs: {s} (Hooke + damping, Lander Eq. 2)"
         self.numba_parallel = s >= PARALLEL_MIN_SPRINGS
+        # tearing (animsim.tearing): the unbroken ks and kd, and the numba parameters in use
+        self._base: tuple[np.ndarray, np.ndarray] | None = None
+        self._fp: np.ndarray | None = None
+
+    def set_intact(self, intact: np.ndarray) -> None:
+        """Broken springs (``intact`` False) exert no force and hold no energy: their ks and kd
+        become 0 in the live parameters of both kernels (NumPy arrays and the numba fp)."""
+        if self._base is None:
+            self._base = (np.array(self.ks, dtype=np.float64), np.array(self.kd, dtype=np.float64))
+            self.ks = self._base[0].copy()
+            self.kd = self._base[1].copy()
+        np.multiply(self._base[0], intact, out=self.ks)
+        np.multiply(self._base[1], intact, out=self.kd)
+        if self._fp is not None:
+            ns = len(self.a)
+            self._fp[ns : 2 * ns] = self.ks
+            self._fp[2 * ns : 3 * ns] = self.kd
 
     watch_role = ELASTIC
     energy_part = "spring"
@@ -132,6 +149,7 @@ class Springs(ForceElement):
         np.cumsum(np.bincount(ends, minlength=n), out=ptr[1:])
         fp = np.concatenate([self.rest, self.ks, self.kd, [1.0 if self.has_damping else 0.0]])
         ip = np.concatenate([[ns, n], self.a, self.b, ptr, order]).astype(np.int64)
+        self._fp = fp  # kept: tearing zeroes broken springs' ks and kd in it (set_intact)
         return fp, ip
 
     def _geometry(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

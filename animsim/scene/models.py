@@ -1,4 +1,4 @@
-"""Pydantic models of the scene language (``scene-language.md``).
+"""Pydantic models of the scene language (``docs/scenes.md`` is generated from them).
 
 Every model forbids unknown keys and is strict: a string is never silently
 read as a number or a boolean (``"1.5"`` or ``yes`` where a number belongs is
@@ -39,12 +39,12 @@ IntegratorName = Literal[
 ]
 #: the "file" of diagnostics about a scene built in Python (it has no lines)
 PYTHON_SOURCE = "<python>"
-#: the names, in the order of the spec's table
+#: the names, in the order of the integrator table
 INTEGRATOR_NAMES: tuple[str, ...] = get_args(IntegratorName)
 DEFAULT_INTEGRATOR = "symplectic_euler"
 DEFAULT_DT = 0.01
-# Bounds that keep a typo from asking for an absurd lattice; issue 7's
-# memory budget is the real guard, these only catch nonsense early.
+# Bounds that keep a typo from asking for an absurd lattice; the memory
+# budget (animsim.preflight) is the real guard, these only catch nonsense early.
 MAX_RESOLUTION = 4096
 MAX_STRAND_COUNT = 1_000_000
 MAX_EMITTER_PARTICLES = 100_000_000
@@ -89,77 +89,187 @@ HexColor = Annotated[
 ]
 
 
+def Doc(
+    default: Any = ...,
+    /,
+    description: str = "",
+    *,
+    unit: str | None = None,
+    example: Any = None,
+    **kw: Any,
+) -> Any:
+    """A ``Field`` that documents a key: what it means, its unit, an example.
+
+    Editors show ``description`` on hover; ``unit`` is kept as its own schema
+    keyword (and appended to the description) and ``example`` as JSON
+    Schema's ``examples``, so ``tools/make_scene_guide.py`` builds the key
+    reference of ``docs/scenes.md`` from these models alone.
+    """
+    text = f"{description} ({unit})" if unit else description
+    extra: dict[str, Any] = {"unit": unit} if unit else {}
+    if example is not None:
+        kw["examples"] = [example]
+    return Field(default, description=text, json_schema_extra=extra or None, **kw)
+
+
+# --- keyframes, tearing (shared by particles, structures and colliders) --------
+
+
+def _keyframe(v: list[Any]) -> tuple[float, tuple[float, float, float]]:
+    if not isinstance(v[0], float | int) or isinstance(v[0], bool) or not isinstance(v[1], tuple):
+        raise ValueError("a keyframe is [t, [x, y, z]]")
+    return (float(v[0]), v[1])
+
+
+def _increasing(v: list[tuple[float, Any]]) -> list[tuple[float, Any]]:
+    for k in range(1, len(v)):
+        if v[k][0] <= v[k - 1][0]:
+            raise ValueError(
+                f"keyframe times must increase: key {k} at t = {v[k][0]!r} does not come after "
+                f"key {k - 1} at t = {v[k - 1][0]!r}"
+            )
+    return v
+
+
+Keyframe = Annotated[
+    list[FiniteFloat | Vec3],
+    Field(min_length=2, max_length=2, description="[t, [x, y, z]]: time in s, position in m"),
+    AfterValidator(_keyframe),
+]
+Keyframes = Annotated[list[Keyframe], Field(min_length=1), AfterValidator(_increasing)]
+Interpolation = Literal["linear", "smooth"]
+MaxStrain = Annotated[
+    float | None,
+    Field(
+        gt=0,
+        allow_inf_nan=False,
+        description="the spring breaks for good once |L| / rest - 1 exceeds this (tearing)",
+    ),
+]
+
+
+class Motion(Model):
+    """A keyframed path (colliders, a structure's pins)."""
+
+    keyframes: Keyframes = Doc(
+        description="[[t, [x, y, z]], ...]: times in s (increasing), positions in m",
+        example=[[0, [0, 0.5, 0]], [2, [1, 0.5, 0]]],
+    )
+    interpolation: Interpolation = Doc(
+        "linear", "linear, or smooth (C1 cubic through the keys, easing in and out)", example="smooth"
+    )
+
+
 class SpringFamily(Model):
     """Stiffness and damping of one family of generated springs."""
 
-    ks: NonNegative = Field(description="stiffness, N/m")
-    kd: NonNegative = Field(0.0, description="damping along the spring, N*s/m")
+    ks: NonNegative = Doc(description="stiffness", unit="N/m", example=500)
+    kd: NonNegative = Doc(0.0, "damping along the spring", unit="N*s/m", example=0.5)
+    max_strain: MaxStrain = None
 
 
 class Particle(Model):
-    id: Id
-    mass: NonNegative | None = Field(None, description="kg, > 0; may be omitted or 0 only when pinned")
-    position: Vec3
-    velocity: Vec3 = [0.0, 0.0, 0.0]
-    pinned: StrictBool = Field(
-        False, description="forces never move it; it keeps its velocity (a moving anchor)"
+    """One point mass."""
+
+    id: Id = Doc(description="unique name of the particle; an integer becomes a string", example="ball")
+    mass: NonNegative | None = Doc(
+        None, "mass, > 0; may be omitted or 0 only when pinned", unit="kg", example=1.0
     )
+    position: Vec3 = Doc(description="position at t = 0; [x, y] means z = 0", unit="m", example=[0, 1, 0])
+    velocity: Vec3 = Doc([0.0, 0.0, 0.0], "velocity at t = 0", unit="m/s", example=[10, 10, 0])
+    pinned: StrictBool = Doc(
+        False, "forces never move it; it keeps its velocity (a moving anchor)", example=True
+    )
+    keyframes: Keyframes | None = Field(
+        None, description="pinned only: [[t, [x, y, z]], ...], times increasing; the particle follows them"
+    )
+    interpolation: Interpolation | None = Field(
+        None, description="with keyframes: linear (default) or smooth (C1 cubic through the keys)"
+    )
+    radius: NonNegative | None = Field(None, description="m, for particle contacts, colliders and rendering")
+    color: HexColor | None = Field(None, description="for rendering, #rrggbb or #rrggbbaa")
+
+    @model_validator(mode="after")
+    def _interpolation_needs_keys(self) -> Particle:
+        if self.interpolation is not None and self.keyframes is None:
+            raise ValueError("interpolation applies only with keyframes")
+        return self
 
 
 class Spring(Model):
-    between: Annotated[list[Id], Field(min_length=2, max_length=2)]
-    ks: NonNegative = Field(description="stiffness, N/m")
-    kd: NonNegative = Field(0.0, description="damping along the spring, N*s/m")
-    rest: Literal["auto"] | NonNegative = Field(
-        "auto", description="rest length in m, or auto = initial distance"
+    """A damped Hooke spring between two particles."""
+
+    between: Annotated[list[Id], Field(min_length=2, max_length=2)] = Doc(
+        description="the ids of the two particles it joins", example=["anchor", "bob"]
     )
+    ks: NonNegative = Doc(description="stiffness", unit="N/m", example=100)
+    kd: NonNegative = Doc(0.0, "damping along the spring", unit="N*s/m", example=0.5)
+    rest: Literal["auto"] | NonNegative = Doc(
+        "auto", "rest length, or auto = the initial distance", unit="m", example=0.6
+    )
+    max_strain: MaxStrain = None
 
 
 # --- forces -----------------------------------------------------------------
 
 
 class Gravity(Model):
-    type: Literal["gravity"]
-    g: Vec3 = [0.0, -9.81, 0.0]
+    """A uniform field: f = m*g on every particle."""
+
+    type: Literal["gravity"] = Doc(description="selects this force")
+    g: Vec3 = Doc([0.0, -9.81, 0.0], "acceleration of gravity", unit="m/s^2", example=[0, -9.81, 0])
 
 
 class Drag(Model):
-    type: Literal["drag"]
-    k: NonNegative = Field(description="viscous coefficient, f = -k*v, N*s/m")
+    """Viscous drag: f = -k*v."""
+
+    type: Literal["drag"] = Doc(description="selects this force")
+    k: NonNegative = Doc(description="viscous coefficient, f = -k*v", unit="N*s/m", example=0.1)
 
 
 class QuadraticDrag(Model):
-    type: Literal["quadratic_drag"]
-    rho: NonNegative = Field(1.2, description="fluid density, kg/m^3")
-    cd: NonNegative = Field(0.47, description="drag coefficient (0.47: sphere)")
-    area: NonNegative = Field(description="cross-section, m^2")
+    """Air drag growing with the square of speed: f = -0.5*rho*cd*area*|v|*v."""
+
+    type: Literal["quadratic_drag"] = Doc(description="selects this force")
+    rho: NonNegative = Doc(1.2, "fluid density (air: 1.2)", unit="kg/m^3")
+    cd: NonNegative = Doc(0.47, "drag coefficient (sphere: 0.47)")
+    area: NonNegative = Doc(description="cross-section of one particle", unit="m^2", example=0.01)
 
 
 class Wind(Model):
-    type: Literal["wind"]
-    velocity: Vec3 = Field(description="wind velocity, m/s")
-    k: NonNegative = Field(description="coupling, f = k*(wind - v), N*s/m")
-    turbulence: NonNegative = Field(0.0, description="standard deviation of the turbulent force, N")
-    turbulence_scale: Positive = Field(1.0, description="length scale of the turbulence, m")
-    turbulence_time: Positive = Field(1.0, description="time scale of the turbulence, s")
+    """Wind: f = k*(wind - v), plus optional seeded turbulence."""
+
+    type: Literal["wind"] = Doc(description="selects this force")
+    velocity: Vec3 = Doc(description="wind velocity", unit="m/s", example=[3, 0, 0])
+    k: NonNegative = Doc(description="coupling, f = k*(wind - v)", unit="N*s/m", example=0.2)
+    turbulence: NonNegative = Doc(
+        0.0, "standard deviation of a smooth random force field (0: none)", unit="N", example=0.5
+    )
+    turbulence_scale: Positive = Doc(1.0, "length scale of the turbulence", unit="m")
+    turbulence_time: Positive = Doc(1.0, "time scale of the turbulence", unit="s")
 
 
 class Attractor(Model):
-    type: Literal["attractor"]
-    position: Vec3 = [0.0, 0.0, 0.0]
-    gm: FiniteFloat = Field(description="G*M in m^3/s^2; f = -m*gm*r/|r|^3; negative repels")
-    softening: NonNegative = Field(
-        0.0,
-        description="Plummer softening length, m: |r|^2 -> |r|^2 + softening^2 (0 = exact)",
+    """Point gravity: f = -m*gm*r/|r|^3."""
+
+    type: Literal["attractor"] = Doc(description="selects this force")
+    position: Vec3 = Doc([0.0, 0.0, 0.0], "where the attracting mass is", unit="m")
+    gm: FiniteFloat = Doc(description="G*M; f = -m*gm*r/|r|^3; negative repels", unit="m^3/s^2", example=1.0)
+    softening: NonNegative = Doc(
+        0.0, "Plummer softening length: |r|^2 -> |r|^2 + softening^2 (0 = exact)", unit="m", example=0.05
     )
 
 
 class Vortex(Model):
-    type: Literal["vortex"]
-    center: Vec3 = Field([0.0, 0.0, 0.0], description="a point on the vortex axis, m")
-    axis: Vec3 = Field([0.0, 1.0, 0.0], description="direction of the axis (need not be unit length)")
-    k: FiniteFloat = Field(
-        description="swirl strength, N/m: f = k * (axis x r); negative turns the other way"
+    """A swirl about an axis: f = k * (axis x r), r = position - center."""
+
+    type: Literal["vortex"] = Doc(description="selects this force")
+    center: Vec3 = Doc([0.0, 0.0, 0.0], "a point on the vortex axis", unit="m", example=[0, 0, 0])
+    axis: Vec3 = Doc([0.0, 1.0, 0.0], "direction of the axis (need not be unit length)", example=[0, 1, 0])
+    k: FiniteFloat = Doc(
+        description="swirl strength: f = k * (axis x r); negative turns the other way",
+        unit="N/m",
+        example=2.0,
     )
 
     @field_validator("axis")
@@ -181,16 +291,24 @@ FORCE_TYPES = ("gravity", "drag", "quadratic_drag", "wind", "attractor", "vortex
 
 
 class Plane(Model):
-    point: Vec3
-    normal: Vec3 = Field(description="need not be unit length; must not be zero")
-    restitution: Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)] = 0.5
-    friction: NonNegative = Field(0.0, description="Coulomb coefficient")
-    response: Literal["impulse", "penalty"] = "impulse"
-    stiffness: Positive | None = Field(
-        None, description="penalty spring stiffness, N/m (penalty only; default 1e4)"
+    """An infinite one-sided collider: particles stay on the side the normal points to."""
+
+    point: Vec3 = Doc(description="any point on the plane", unit="m", example=[0, 0, 0])
+    normal: Vec3 = Doc(
+        description="points to the free side; need not be unit length; must not be zero", example=[0, 1, 0]
     )
-    damping: NonNegative | None = Field(
-        None, description="penalty damping along the normal, N*s/m (penalty only; default 0)"
+    restitution: Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)] = Doc(
+        0.5, "share of the normal speed kept in a bounce: 0 sticks, 1 perfectly elastic", example=0.8
+    )
+    friction: NonNegative = Doc(0.0, "Coulomb friction coefficient", example=0.2)
+    response: Literal["impulse", "penalty"] = Doc(
+        "impulse", "impulse: reflect at the moment of contact; penalty: push out with a stiff spring force"
+    )
+    stiffness: Positive | None = Doc(
+        None, "penalty spring stiffness (penalty only; default 1e4)", unit="N/m", example=10000
+    )
+    damping: NonNegative | None = Doc(
+        None, "penalty damping along the normal (penalty only; default 0)", unit="N*s/m", example=5
     )
 
     @field_validator("normal")
@@ -207,24 +325,93 @@ class Plane(Model):
         return self
 
 
+# --- colliders and particle contacts ------------------------------------------
+
+Restitution = Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)]
+
+
+def _unit_quaternion(v: list[float]) -> tuple[float, float, float, float]:
+    norm = sum(c * c for c in v) ** 0.5
+    if abs(norm - 1.0) > 1e-6:
+        raise ValueError(f"a unit quaternion [w, x, y, z] is needed; this one has length {norm:.9g}")
+    return tuple(c / norm for c in v)  # type: ignore[return-value]
+
+
+Quaternion = Annotated[
+    list[FiniteFloat],
+    Field(min_length=4, max_length=4, description="unit quaternion [w, x, y, z]"),
+    AfterValidator(_unit_quaternion),
+]
+
+
+# AxisAngle ({axis, angle} in degrees) is defined with the mesh structures below.
+
+
+class _ColliderCommon(Model):
+    restitution: Restitution = Doc(0.5, "0 = sticks, 1 = perfectly elastic", example=0.0)
+    friction: NonNegative = Field(0.0, description="Coulomb coefficient")
+    motion: Motion | None = Field(
+        None,
+        description="keyframed path of the centre (a capsule's: the midpoint of a-b); the shape translates",
+    )
+
+
+class SphereCollider(_ColliderCommon):
+    type: Literal["sphere"] = Doc(description="selects this shape")
+    center: Vec3
+    radius: Positive = Doc(description="radius", unit="m", example=0.5)
+
+
+class BoxCollider(_ColliderCommon):
+    type: Literal["box"] = Doc(description="selects this shape")
+    center: Vec3
+    size: Annotated[list[Positive], Field(min_length=3, max_length=3, description="full edge lengths, m")]
+    orientation: Quaternion | AxisAngle = Field(
+        [1.0, 0.0, 0.0, 0.0], description="[w, x, y, z], or {axis, angle} in degrees"
+    )
+
+
+class CapsuleCollider(_ColliderCommon):
+    type: Literal["capsule"] = Doc(description="selects this shape")
+    a: Vec3
+    b: Vec3
+    radius: Positive = Doc(description="radius", unit="m", example=0.5)
+
+
+Collider = Annotated[SphereCollider | BoxCollider | CapsuleCollider, Field(discriminator="type")]
+COLLIDER_TYPES = ("sphere", "box", "capsule")
+
+
+class ParticleCollisions(Model):
+    radius: Positive = Field(description="m, every particle's unless it has its own")
+    restitution: Restitution = Doc(0.5, "0 = sticks, 1 = perfectly elastic", example=0.3)
+    friction: NonNegative = Field(0.0, description="Coulomb coefficient")
+
+
 # --- emitters (particle systems) --------------------------------------------
 
 
 class PointShape(Model):
-    type: Literal["point"]
-    position: Vec3
+    """Births at one point."""
+
+    type: Literal["point"] = Doc(description="selects this shape")
+    position: Vec3 = Doc(description="where particles are born", unit="m", example=[0, 0, 0])
 
 
 class SphereShape(Model):
-    type: Literal["sphere"]
-    center: Vec3
-    radius: NonNegative
+    """Births uniformly inside a ball."""
+
+    type: Literal["sphere"] = Doc(description="selects this shape")
+    center: Vec3 = Doc(description="centre of the ball", unit="m", example=[0, 0, 0])
+    radius: NonNegative = Doc(description="radius of the ball", unit="m", example=0.1)
 
 
 class BoxShape(Model):
-    type: Literal["box"]
-    min: Vec3
-    max: Vec3
+    """Births uniformly inside an axis-aligned box."""
+
+    type: Literal["box"] = Doc(description="selects this shape")
+    min: Vec3 = Doc(description="the corner with the smallest x, y, z", unit="m", example=[-1, 2, -1])
+    max: Vec3 = Doc(description="the corner with the largest x, y, z", unit="m", example=[1, 2.2, 1])
 
     @model_validator(mode="after")
     def _ordered(self) -> BoxShape:
@@ -234,10 +421,12 @@ class BoxShape(Model):
 
 
 class DiscShape(Model):
-    type: Literal["disc"]
-    center: Vec3
-    normal: Vec3
-    radius: NonNegative
+    """Births uniformly on a flat disc."""
+
+    type: Literal["disc"] = Doc(description="selects this shape")
+    center: Vec3 = Doc(description="centre of the disc", unit="m", example=[0, 0.05, 0])
+    normal: Vec3 = Doc(description="axis of the disc; must not be zero", example=[0, 1, 0])
+    radius: NonNegative = Doc(description="radius of the disc", unit="m", example=0.03)
 
     @field_validator("normal")
     @classmethod
@@ -251,47 +440,82 @@ Shape = Annotated[PointShape | SphereShape | BoxShape | DiscShape, Field(discrim
 
 
 class VelocityDistribution(Model):
-    mean: Vec3 = [0.0, 0.0, 0.0]
-    spread: NonNegative = Field(0.0, description="standard deviation per component, m/s")
+    """Initial velocity of a newborn particle: mean plus a normal random spread."""
+
+    mean: Vec3 = Doc([0.0, 0.0, 0.0], "mean initial velocity", unit="m/s", example=[0, 6, 0])
+    spread: NonNegative = Doc(0.0, "standard deviation per component", unit="m/s", example=0.4)
 
 
 class LifetimeDistribution(Model):
-    mean: Positive = Field(description="s")
-    spread: NonNegative = Field(0.0, description="standard deviation, s")
+    """How long a particle lives: mean plus a normal random spread."""
+
+    mean: Positive = Doc(description="mean lifetime", unit="s", example=2.0)
+    spread: NonNegative = Doc(0.0, "standard deviation of the lifetime", unit="s", example=0.5)
 
 
 class SizeOverLife(Model):
-    start: NonNegative = 0.02
-    end: NonNegative = 0.02
+    """Particle size for rendering, linear from birth to death."""
+
+    start: NonNegative = Doc(0.02, "size at birth", unit="m")
+    end: NonNegative = Doc(0.02, "size at death", unit="m", example=0.1)
 
 
 class ColorOverLife(Model):
-    start: HexColor = "#ffffffff"
-    end: HexColor = "#ffffffff"
+    """Particle colour for rendering, linear from birth to death."""
+
+    start: HexColor = Doc("#ffffffff", "colour at birth, #rrggbb or #rrggbbaa", example="#66aaffff")
+    end: HexColor = Doc("#ffffffff", "colour at death, #rrggbb or #rrggbbaa", example="#2255aa00")
 
 
 class KillBox(Model):
-    min: Vec3
-    max: Vec3
+    """A box particles die on leaving."""
+
+    min: Vec3 = Doc(description="the corner with the smallest x, y, z", unit="m", example=[-5, -1, -5])
+    max: Vec3 = Doc(description="the corner with the largest x, y, z", unit="m", example=[5, 10, 5])
 
 
 RateKeyframe = Annotated[list[NonNegative], Field(min_length=2, max_length=2)]
 
 
 class Emitter(Model):
-    name: StrictStr = Field(min_length=1)
-    rate: NonNegative | Annotated[list[RateKeyframe], Field(min_length=1)] = Field(
-        description="mean births per second, or keyframes [[t, rate], ...] (piecewise linear)"
+    """A particle system: particles born at a random rate, living for a while."""
+
+    name: StrictStr = Doc(
+        description="unique name; its particles are <name>#0, <name>#1, ...", min_length=1, example="smoke"
     )
-    rate_spread: NonNegative = Field(0.0, description="standard deviation of births per second")
-    shape: Shape
-    velocity: VelocityDistribution = {"mean": [0.0, 0.0, 0.0], "spread": 0.0}  # type: ignore[assignment]
-    lifetime: LifetimeDistribution
-    mass: Positive = 0.01
-    size: SizeOverLife = SizeOverLife()
-    color: ColorOverLife = ColorOverLife()
-    max_particles: Annotated[StrictInt, Field(ge=1, le=MAX_EMITTER_PARTICLES)] = DEFAULT_MAX_PARTICLES
-    kill_box: KillBox | None = None
+    rate: NonNegative | Annotated[list[RateKeyframe], Field(min_length=1)] = Doc(
+        description="mean births per second, or keyframes [[t, rate], ...] (piecewise linear)",
+        unit="1/s",
+        example=200,
+    )
+    rate_spread: NonNegative = Doc(0.0, "standard deviation of births per second", unit="1/s", example=20)
+    shape: Shape = Doc(
+        description="where particles are born: a point, sphere, box or disc",
+        example={"type": "sphere", "center": [0, 0, 0], "radius": 0.1},
+    )
+    velocity: VelocityDistribution = Doc(  # type: ignore[assignment]
+        {"mean": [0.0, 0.0, 0.0], "spread": 0.0},
+        "initial velocity: mean and spread",
+        example={"mean": [0, 1, 0], "spread": 0.2},
+    )
+    lifetime: LifetimeDistribution = Doc(
+        description="how long a particle lives: mean and spread, s", example={"mean": 2.0, "spread": 0.5}
+    )
+    mass: Positive = Doc(0.01, "mass of each particle", unit="kg")
+    size: SizeOverLife = Doc(
+        SizeOverLife(), "size for rendering, start and end of life", example={"start": 0.02, "end": 0.1}
+    )
+    color: ColorOverLife = Doc(
+        ColorOverLife(),
+        "RGBA colour for rendering, start and end of life",
+        example={"start": "#ffffffff", "end": "#55555500"},
+    )
+    max_particles: Annotated[StrictInt, Field(ge=1, le=MAX_EMITTER_PARTICLES)] = Doc(
+        DEFAULT_MAX_PARTICLES, "most particles of this emitter alive at once; more births are dropped"
+    )
+    kill_box: KillBox | None = Doc(
+        None, "particles outside this box die", example={"min": [-5, -1, -5], "max": [5, 10, 5]}
+    )
 
 
 # --- structures ---------------------------------------------------------------
@@ -308,47 +532,107 @@ def _lattice(dims: int) -> Any:
 class _StructureCommon(Model):
     """What every structure has: an id prefix, per-particle mass, start velocity, pins."""
 
-    id: StrictStr = Field(min_length=1, description="particle ids become <id>[i,...]")
-    mass: Positive = Field(description="per particle, kg")
-    velocity: Vec3 = Field([0.0, 0.0, 0.0], description="initial velocity of every particle, m/s")
-    pin: list[Id] = Field([], description="ids of particles held in place")
+    id: StrictStr = Doc(description="particle ids become <id>[i,j]", min_length=1, example="sheet")
+    mass: Positive = Doc(description="mass of each particle", unit="kg", example=0.01)
+    velocity: Vec3 = Doc([0.0, 0.0, 0.0], "initial velocity of every particle", unit="m/s")
+    pin: list[Id] = Doc([], "ids of particles held in place", example=["sheet[0,0]", "sheet[19,0]"])
+    pin_motion: Motion | None = Doc(
+        None,
+        "keyframed offsets [[t, [dx, dy, dz]], ...] added to every pinned particle's "
+        "initial position: the pins move together",
+        example={"keyframes": [[0, [0, 0, 0]], [1, [0.5, 0, 0]]], "interpolation": "smooth"},
+    )
+    radius: NonNegative | None = Doc(
+        None, "each particle's radius, for contacts and colliders", unit="m", example=0.01
+    )
 
 
 class Cloth(_StructureCommon):
-    type: Literal["cloth"]
-    origin: Vec3 = [0.0, 0.0, 0.0]
-    size: Vec2Positive = Field(description="extent along u and v, m")
-    plane: Literal["xy", "xz", "yz"] = "xz"
-    resolution: _lattice(2)  # type: ignore[valid-type]
-    structural: SpringFamily | None = None
-    shear: SpringFamily | None = None
-    bend: SpringFamily | None = None
+    """A rectangular grid of particles joined by structural, shear and bend springs."""
+
+    type: Literal["cloth"] = Doc(description="selects this structure")
+    origin: Vec3 = Doc([0.0, 0.0, 0.0], "position of particle [0,0], a corner", unit="m", example=[0, 2, 0])
+    size: Vec2Positive = Doc(
+        description="extent along u (index i) and v (index j)", unit="m", example=[1.0, 1.0]
+    )
+    plane: Literal["xy", "xz", "yz"] = Doc(
+        "xz", "which world axes u and v follow: xz is u = x, v = z (a horizontal sheet)"
+    )
+    resolution: _lattice(2) = Doc(  # type: ignore[valid-type]
+        description="particles along u and v, each at least 2", example=[20, 20]
+    )
+    structural: SpringFamily | None = Doc(
+        None,
+        "springs to the grid neighbours [i+1,j] and [i,j+1]; omit to leave out",
+        example={"ks": 500, "kd": 0.5},
+    )
+    shear: SpringFamily | None = Doc(
+        None, "springs on both diagonals of each cell; omit to leave out", example={"ks": 200, "kd": 0.2}
+    )
+    bend: SpringFamily | None = Doc(
+        None,
+        "springs that skip one particle, [i+2,j] and [i,j+2]; omit to leave out",
+        example={"ks": 50, "kd": 0.05},
+    )
 
 
 class Strand(_StructureCommon):
-    type: Literal["strand"]
-    start: Vec3
-    end: Vec3
-    count: Annotated[StrictInt, Field(ge=2, le=MAX_STRAND_COUNT)]
-    stretch: SpringFamily | None = None
-    bend: SpringFamily | None = None
+    """Hair, rope or chain: particles in a line, stretch springs and skip-one bend springs."""
+
+    type: Literal["strand"] = Doc(description="selects this structure")
+    # id and pin again only for examples that fit a strand (the order of keys stays the common one)
+    id: StrictStr = Doc(description="particle ids become <id>[i]", min_length=1, example="hair")
+    pin: list[Id] = Doc([], "ids of particles held in place", example=["hair[0]"])
+    start: Vec3 = Doc(description="position of particle [0]", unit="m", example=[0, 2, 0])
+    end: Vec3 = Doc(description="position of the last particle [count-1]", unit="m", example=[0, 1, 0])
+    count: Annotated[StrictInt, Field(ge=2, le=MAX_STRAND_COUNT)] = Doc(
+        description="number of particles, at least 2", example=30
+    )
+    stretch: SpringFamily | None = Doc(
+        None, "springs between neighbours [i] and [i+1]; omit to leave out", example={"ks": 300, "kd": 0.1}
+    )
+    bend: SpringFamily | None = Doc(
+        None,
+        "springs that skip one particle, [i] and [i+2]; omit to leave out",
+        example={"ks": 30, "kd": 0.01},
+    )
 
 
 class SoftBox(_StructureCommon):
-    type: Literal["soft_box"]
-    center: Vec3 = [0.0, 0.0, 0.0]
-    size: Annotated[list[Positive], Field(min_length=3, max_length=3)]
-    resolution: _lattice(3)  # type: ignore[valid-type]
-    edge: SpringFamily | None = None
-    face_diagonal: SpringFamily | None = None
-    body_diagonal: SpringFamily | None = None
+    """A jello cube: a 3-D lattice with edge, face-diagonal and body-diagonal springs."""
+
+    type: Literal["soft_box"] = Doc(description="selects this structure")
+    id: StrictStr = Doc(description="particle ids become <id>[i,j,k]", min_length=1, example="jello")
+    pin: list[Id] = Doc([], "ids of particles held in place", example=["jello[0,0,0]"])
+    center: Vec3 = Doc([0.0, 0.0, 0.0], "centre of the box", unit="m", example=[0, 1, 0])
+    size: Annotated[list[Positive], Field(min_length=3, max_length=3)] = Doc(
+        description="edge lengths along x, y, z", unit="m", example=[0.5, 0.5, 0.5]
+    )
+    resolution: _lattice(3) = Doc(  # type: ignore[valid-type]
+        description="particles along x (i), y (j) and z (k), each at least 2", example=[4, 4, 4]
+    )
+    edge: SpringFamily | None = Doc(
+        None, "springs along the lattice edges; omit to leave out", example={"ks": 800, "kd": 1}
+    )
+    face_diagonal: SpringFamily | None = Doc(
+        None,
+        "springs on both diagonals of every face of every cell; omit to leave out",
+        example={"ks": 400, "kd": 0.5},
+    )
+    body_diagonal: SpringFamily | None = Doc(
+        None,
+        "springs on the four long diagonals of every cell; omit to leave out",
+        example={"ks": 400, "kd": 0.5},
+    )
 
 
 class AxisAngle(Model):
     """A right-handed rotation about ``axis`` by ``angle`` degrees."""
 
-    axis: Vec3 = Field(description="need not be unit length; must not be zero")
-    angle: FiniteFloat = Field(description="degrees, right-handed about the axis")
+    axis: Vec3 = Doc(
+        description="the rotation axis; need not be unit length; must not be zero", example=[0, 1, 0]
+    )
+    angle: FiniteFloat = Doc(description="right-handed about the axis", unit="degrees", example=90)
 
     @field_validator("axis")
     @classmethod
@@ -359,8 +643,10 @@ class AxisAngle(Model):
 
 
 class PinBox(Model):
-    min: Vec3
-    max: Vec3
+    """An axis-aligned box in world coordinates."""
+
+    min: Vec3 = Doc(description="the corner with the smallest x, y, z", unit="m", example=[-1, 1.9, -1])
+    max: Vec3 = Doc(description="the corner with the largest x, y, z", unit="m", example=[1, 2.1, 1])
 
     @model_validator(mode="after")
     def _ordered(self) -> PinBox:
@@ -370,7 +656,12 @@ class PinBox(Model):
 
 
 class PinInside(Model):
-    inside: PinBox = Field(description="pin every vertex inside this box (world coordinates, m)")
+    """Pins chosen by place instead of by index."""
+
+    inside: PinBox = Doc(
+        description="pin every vertex inside this box (world coordinates, after scale, rotation and position)",
+        example={"min": [-1, 1.9, -1], "max": [1, 2.1, 1]},
+    )
 
 
 MAX_MESH_VERTICES = 200_000
@@ -379,28 +670,37 @@ MAX_MESH_VERTICES = 200_000
 class MeshStructure(Model):
     """A triangle or polygon mesh from a file, turned into particles and springs."""
 
-    type: Literal["mesh"]
-    id: StrictStr = Field(
-        min_length=1, description="particle ids become <id>[k], k = vertex index in the file"
+    type: Literal["mesh"] = Doc(description="selects this structure")
+    id: StrictStr = Doc(
+        description="particle ids become <id>[k], k = the vertex's index in the file",
+        min_length=1,
+        example="bunny",
     )
-    file: StrictStr = Field(
-        min_length=1, description="OBJ or PLY (STL with the 'mesh' extra), relative to the scene file"
+    file: StrictStr = Doc(
+        description="OBJ or PLY (STL with the 'mesh' extra), relative to the scene file",
+        min_length=1,
+        example="bunny.obj",
     )
-    mode: Literal["soft_body", "cloth"] = Field(
-        description="soft_body: a closed surface kept full by interior struts; cloth: a sheet"
+    mode: Literal["soft_body", "cloth"] = Doc(
+        description="soft_body: a closed surface kept full by interior struts; cloth: a sheet",
+        example="soft_body",
     )
-    mass: Positive = Field(description="total mass, kg, spread over the vertices by area")
-    scale: Positive = 1.0
-    rotation: AxisAngle | None = Field(None, description="applied after scale, before position")
-    position: Vec3 = Field([0.0, 0.0, 0.0], description="added after scale and rotation, m")
-    velocity: Vec3 = Field([0.0, 0.0, 0.0], description="initial velocity of every vertex, m/s")
-    stretch: SpringFamily | None = Field(None, description="one spring per mesh edge")
-    bend: SpringFamily | None = Field(
-        None, description="across each interior edge, between the two opposite vertices"
+    mass: Positive = Doc(description="total mass, spread over the vertices by area", unit="kg", example=1.0)
+    scale: Positive = Doc(1.0, "factor applied to the file's coordinates first", example=0.01)
+    rotation: AxisAngle | None = Doc(
+        None, "applied after scale, before position", example={"axis": [1, 0, 0], "angle": -90}
     )
-    volume: SpringFamily | None = Field(None, description="soft_body only: interior struts")
-    pin: list[Annotated[StrictInt, Field(ge=0)]] | PinInside = Field(
-        [], description="vertex indices, or {inside: {min, max}}"
+    position: Vec3 = Doc([0.0, 0.0, 0.0], "added after scale and rotation", unit="m", example=[0, 1, 0])
+    velocity: Vec3 = Doc([0.0, 0.0, 0.0], "initial velocity of every vertex", unit="m/s")
+    stretch: SpringFamily | None = Doc(None, "one spring per mesh edge", example={"ks": 500, "kd": 0.5})
+    bend: SpringFamily | None = Doc(
+        None, "across each interior edge, between the two opposite vertices", example={"ks": 50, "kd": 0.05}
+    )
+    volume: SpringFamily | None = Doc(
+        None, "soft_body only: interior struts that keep the volume", example={"ks": 200, "kd": 0.2}
+    )
+    pin: list[Annotated[StrictInt, Field(ge=0)]] | PinInside = Doc(
+        [], "vertex indices, or {inside: {min, max}}", example=[0, 5]
     )
 
     # The geometry read from ``file`` (animsim.scene.meshes.MeshGeometry),
@@ -416,9 +716,13 @@ STRUCTURE_TYPES = ("cloth", "strand", "soft_box", "mesh")
 
 
 class Adaptive(Model):
-    tolerance: Positive = 1e-4
-    dt_min: Positive = 1e-6
-    dt_max: Positive = 0.1
+    """Step doubling: dt shrinks where the motion is hard and grows where it is easy."""
+
+    tolerance: Positive = Doc(
+        1e-4, "largest accepted difference between one step of dt and two of dt/2", unit="m", example=1e-5
+    )
+    dt_min: Positive = Doc(1e-6, "smallest step allowed", unit="s")
+    dt_max: Positive = Doc(0.1, "largest step allowed", unit="s", example=0.01)
 
     @model_validator(mode="after")
     def _ordered(self) -> Adaptive:
@@ -428,17 +732,23 @@ class Adaptive(Model):
 
 
 class IntegratorSpec(Model):
-    method: IntegratorName
-    adaptive: Adaptive | None = None
+    """An integrator with options (the mapping form of ``integrator``)."""
+
+    method: IntegratorName = Doc(description="the integration method", example="rk4")
+    adaptive: Adaptive | None = Doc(
+        None,
+        "adapt the step size by step doubling",
+        example={"tolerance": 1e-4, "dt_min": 1e-6, "dt_max": 0.1},
+    )
 
 
 class Record(Model):
-    """Which steps become frames; without either key, 60 frames per second (every step when dt >= 1/60 s)."""
+    """Which steps are written to the trajectory; without every or fps, 60 frames per second (every step when dt >= 1/60 s)."""
 
-    every: Annotated[StrictInt, Field(ge=1)] | None = Field(
-        None, description="record every n-th step (and always the last)"
+    every: Annotated[StrictInt, Field(ge=1)] | None = Doc(
+        None, "record every n-th step (and always the last)", example=10
     )
-    fps: Positive | None = Field(None, description="record the step closest to each k/fps")
+    fps: Positive | None = Doc(None, "record the step closest to each k/fps", unit="1/s", example=25)
 
     @model_validator(mode="after")
     def _one(self) -> Record:
@@ -462,18 +772,71 @@ class Scene(Model):
     #: where a loaded scene came from ({"file", "sha256"}), for the metadata; not part of the scene
     _source: dict[str, str] | None = PrivateAttr(default=None)
 
-    name: StrictStr | None = Field(None, description="defaults to the file stem")
-    duration: Positive = Field(description="simulated seconds")
-    dt: Positive = Field(DEFAULT_DT, description="step size, s; <= duration")
-    integrator: IntegratorName | IntegratorSpec = DEFAULT_INTEGRATOR
-    seed: Annotated[StrictInt, Field(ge=0, le=2**63 - 1)] = 0
-    record: Record = Record()
-    particles: list[Particle] = []
-    springs: list[Spring] = []
-    forces: list[Force] = []
-    planes: list[Plane] = []
-    emitters: list[Emitter] = []
-    structures: list[Structure] = []
+    name: StrictStr | None = Doc(None, "the scene's name; defaults to the file stem", example="projectile")
+    duration: Positive = Doc(description="simulated time", unit="s", example=2.0)
+    dt: Positive = Doc(DEFAULT_DT, "step size; at most duration", unit="s", example=0.001)
+    integrator: IntegratorName | IntegratorSpec = Doc(
+        DEFAULT_INTEGRATOR, "a method name, or {method, adaptive} for step-size control", example="rk4"
+    )
+    seed: Annotated[StrictInt, Field(ge=0, le=2**63 - 1)] = Doc(
+        0, "seeds every random draw (emitters, turbulence): same seed, same result", example=7
+    )
+    record: Record = Doc(
+        Record(), "which steps are written as frames: {every: n} or {fps: f}", example={"fps": 25}
+    )
+    particles: list[Particle] = Doc(
+        [], "point masses, each with an id", example=[{"id": "ball", "mass": 1.0, "position": [0, 0, 0]}]
+    )
+    springs: list[Spring] = Doc(
+        [], "damped springs between two particles", example=[{"between": ["a", "b"], "ks": 100}]
+    )
+    forces: list[Force] = Doc(
+        [],
+        "forces on every particle: gravity, drag, quadratic_drag, wind, attractor, vortex",
+        example=[{"type": "gravity"}],
+    )
+    planes: list[Plane] = Doc(
+        [],
+        "infinite one-sided colliders (a floor, a wall)",
+        example=[{"point": [0, 0, 0], "normal": [0, 1, 0]}],
+    )
+    emitters: list[Emitter] = Doc(
+        [],
+        "particle systems",
+        example=[
+            {
+                "name": "smoke",
+                "rate": 200,
+                "shape": {"type": "point", "position": [0, 0, 0]},
+                "lifetime": {"mean": 2.0},
+            }
+        ],
+    )
+    structures: list[Structure] = Doc(
+        [],
+        "generators of particles and springs: cloth, strand, soft_box, mesh",
+        example=[
+            {
+                "type": "strand",
+                "id": "rope",
+                "start": [0, 2, 0],
+                "end": [1, 2, 0],
+                "count": 10,
+                "mass": 0.1,
+                "stretch": {"ks": 500},
+            }
+        ],
+    )
+    colliders: list[Collider] = Doc(
+        [],
+        "solid shapes particles cannot enter: sphere, box, capsule, fixed or keyframed",
+        example=[{"type": "sphere", "center": [0, 0.5, 0], "radius": 0.5}],
+    )
+    particle_collisions: ParticleCollisions | None = Doc(
+        None,
+        "particles collide with each other as spheres",
+        example={"radius": 0.02, "restitution": 0.3, "friction": 0.1},
+    )
 
     @model_validator(mode="after")
     def _cross_checks(self, info: Any) -> Scene:

@@ -43,6 +43,7 @@ class SpringGroup:
     index: np.ndarray  # (m, 2) int64, local indices
     ks: float
     kd: float
+    max_strain: float = float("inf")  # tearing limit; inf: never breaks
 
 
 @dataclass(frozen=True)
@@ -225,7 +226,13 @@ def expand(s: Structure, scene_dir: Path | None = None) -> Expanded:
         if li is not None:
             pinned[li] = True
     groups = [
-        SpringGroup(f"{s.type} {s.id}: {name}", pairs, fam.ks, fam.kd)
+        SpringGroup(
+            f"{s.type} {s.id}: {name}",
+            pairs,
+            fam.ks,
+            fam.kd,
+            float("inf") if fam.max_strain is None else fam.max_strain,
+        )
         for name, pairs, fam in _families(s, shape)
     ]
     return Expanded(
@@ -282,7 +289,13 @@ def _expand_mesh(s: MeshStructure, scene_dir: Path | None) -> Expanded:
     parts = mesh_parts(s, scene_dir)
     n = len(parts.position)
     groups = [
-        SpringGroup(f"mesh {s.id}: {name}", np.ascontiguousarray(pairs, dtype=np.int64), fam.ks, fam.kd)
+        SpringGroup(
+            f"mesh {s.id}: {name}",
+            np.ascontiguousarray(pairs, dtype=np.int64),
+            fam.ks,
+            fam.kd,
+            float("inf") if fam.max_strain is None else fam.max_strain,  # tearing
+        )
         for name, pairs, fam in parts.families
     ]
     return Expanded(

@@ -59,9 +59,25 @@ def assert_same(scene) -> tuple[object, object]:
     return fast, ref
 
 
+#: Scenes with solid colliders or particle contacts are compared frame by frame only
+#: over their first CONTACT_PREFIX seconds. Contact is not smooth: a rounding-level
+#: difference (springs gather per particle on numba, bincount on NumPy) can flip a
+#: discrete decision (resting or bouncing, sticking or sliding, which grains touch),
+#: after which the two runs are both right but no longer equal to 1e-9; granular
+#: flow (sand_pour) is chaotic outright. The whole run must still agree in status,
+#: steps and frames. (The kernels themselves agree to rounding:
+#: tests/unit/test_colliders.py and test_particle_contacts.py.)
+CONTACT_PREFIX = 0.1
+
+
 @pytest.mark.parametrize("path", SCENES, ids=lambda p: str(Path(p).relative_to(ROOT / "scenes")))
 def test_every_example_scene_agrees(path):
-    assert_same(load_scene(path).scene)
+    scene = load_scene(path).scene
+    if scene.colliders or scene.particle_collisions is not None:
+        fast, ref = _frames(scene, "numba")[0], _frames(scene, "numpy")[0]
+        assert (fast.status, fast.steps_taken, fast.frames) == (ref.status, ref.steps_taken, ref.frames)
+        scene = scene.model_copy(update={"duration": min(scene.duration, CONTACT_PREFIX)})
+    assert_same(scene)
 
 
 RESTING_TWO = """

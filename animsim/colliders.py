@@ -1,0 +1,657 @@
+"""Solid colliders: spheres, oriented boxes and capsules, static or keyframed.
+
+Each shape is a signed distance function (negative inside) with its outward
+normal, the gradient of the distance (Hart, "Sphere tracing", The Visual
+Computer 1996; Quilez's closed forms for the box and the capsule):
+
+* sphere (c, r):           d = |x - c| - r
+* box (c, half sizes h, rotation R): q = R^T (x - c), e = |q| - h;
+  outside d = |max(e, 0)|, inside d = max_k e_k (the nearest face)
+* capsule (segment a-b, r): d = |x - closest point of [a, b]| - r
+
+The response copies the planes' (:mod:`animsim.collisions`, Lander, Game
+Developer 1999, Eq. 3) in the collider's frame: a collider that moves
+translates from c(t0) to c(t1) during a step, so the particle's path relative
+to it is the segment ``x_old + c(t1) - c(t0) -> x``, and the collider's
+velocity over the step ``u = (c(t1) - c(t0)) / dt`` is taken off the particle's.
+Along that segment the first contact is found by sphere tracing (march by the
+distance, which can never overshoot a surface), so a 1,000 m/s particle meets
+a 1 cm box instead of jumping over it. At the contact the relative velocity
+is reflected (``v_t - e v_n``, Coulomb friction taking at most ``friction``
+times the change of ``v_n`` off ``v_t``), ``u`` is added back, and the
+particle flies on for the rest of the step with the step's mean acceleration.
+A particle that still ends inside (resting under gravity, a collider that
+scoops it up) is projected out along the normal and loses its inward
+relative velocity, so resting and sliding contact stay still as on planes and
+a moving collider pushes what it meets. A particle never ends a step inside.
+
+Particles are points here unless they have a radius (``radius``, or
+``particle_collisions``): then the shape is grown by that radius.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from animsim.collisions import RESTING_STEPS, _apply_friction
+from animsim.elements import StepStage
+
+SPHERE, BOX, CAPSULE = 0, 1, 2
+KIND_NAMES = {SPHERE: "sphere", BOX: "box", CAPSULE: "capsule"}
+#: parameters of one collider in the packed array handed to kernels
+#: [kind, c(3), radius, half(3), R (9, row major), s (3): capsule half segment, restitution, friction]
+PARAMS = 21
+#: sphere-tracing iterations; a grazing segment that needs more ends in the projection
+MARCH_STEPS = 48
+
+
+@dataclass(frozen=True)
+class Shape:
+    """One collider's geometry at its reference position (``center``)."""
+
+    kind: int
+    center: np.ndarray  # (3,) sphere/box centre; capsule: midpoint of a-b
+    radius: float = 0.0  # sphere, capsule
+    half: np.ndarray = field(default_factory=lambda: np.zeros(3))  # box half sizes
+    rotation: np.ndarray = field(default_factory=lambda: np.eye(3))  # box: body frame -> world
+    segment: np.ndarray = field(
+        default_factory=lambda: np.zeros(3)
+    )  # capsule: b - center (a = center - segment)
+    restitution: float = 0.5
+    friction: float = 0.0
+
+    def packed(self) -> np.ndarray:
+        p = np.zeros(PARAMS)
+        p[0] = self.kind
+        p[1:4] = self.center
+        p[4] = self.radius
+        p[5:8] = self.half
+        p[8:17] = np.asarray(self.rotation).reshape(9)
+        p[17:20] = self.segment
+        p[20] = self.restitution
+        return p
+
+    def signed_distance(
+        self, x: np.ndarray, offset: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Signed distance (M,) and unit outward normal (M, 3) at points ``x`` (M, 3).
+
+        ``offset``: where the shape is, as a displacement from its reference
+        position (a moving collider). Rigid-body contacts use this too.
+        """
+        c = self.center if offset is None else self.center + offset
+        return sdf(self.kind, x - c, self.radius, self.half, self.rotation, self.segment)
+
+
+def quaternion_matrix(q: np.ndarray) -> np.ndarray:
+    """Rotation matrix of a unit quaternion [w, x, y, z] (Hamilton)."""
+    w, x, y, z = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def axis_angle_quaternion(axis: np.ndarray, degrees: float) -> np.ndarray:
+    a = np.asarray(axis, dtype=np.float64)
+    a = a / np.linalg.norm(a)
+    h = np.radians(degrees) / 2
+    return np.concatenate([[np.cos(h)], np.sin(h) * a])
+
+
+def sdf(
+    kind: int, p: np.ndarray, radius: float, half: np.ndarray, rotation: np.ndarray, segment: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Signed distance and outward unit normal of points ``p`` (M, 3), relative to the shape's centre."""
+    if kind == SPHERE:
+        length = np.sqrt(np.einsum("ij,ij->i", p, p))
+        n = np.empty_like(p)
+        ok = length > 0
+        n[ok] = p[ok] / length[ok, None]
+        n[~ok] = (0.0, 1.0, 0.0)  # at the very centre any direction is out; pick up
+        return length - radius, n
+    if kind == CAPSULE:
+        ss = float(segment @ segment)
+        t = np.clip(p @ segment / ss, -1.0, 1.0) if ss > 0 else np.zeros(len(p))
+        w = p - t[:, None] * segment
+        length = np.sqrt(np.einsum("ij,ij->i", w, w))
+        n = np.empty_like(p)
+        ok = length > 0
+        n[ok] = w[ok] / length[ok, None]
+        if not ok.all():  # on the axis: any direction perpendicular to it
+            perp = (
+                np.cross(segment, (1.0, 0.0, 0.0))
+                if abs(segment[0]) < 0.9 * np.sqrt(ss)
+                else np.cross(segment, (0.0, 1.0, 0.0))
+            )
+            nrm = np.linalg.norm(perp)
+            n[~ok] = perp / nrm if nrm > 0 else (0.0, 1.0, 0.0)
+        return length - radius, n
+    # box: in the box frame. Column by column: (N, 3) @ (3, 3) through matmul costs
+    # ten times more than these three multiply-adds at this shape.
+    r = rotation
+    q0 = p[:, 0] * r[0, 0] + p[:, 1] * r[1, 0] + p[:, 2] * r[2, 0]  # q = R^T p
+    q1 = p[:, 0] * r[0, 1] + p[:, 1] * r[1, 1] + p[:, 2] * r[2, 1]
+    q2 = p[:, 0] * r[0, 2] + p[:, 1] * r[1, 2] + p[:, 2] * r[2, 2]
+    e0, e1, e2 = np.abs(q0) - half[0], np.abs(q1) - half[1], np.abs(q2) - half[2]
+    o0, o1, o2 = np.maximum(e0, 0.0), np.maximum(e1, 0.0), np.maximum(e2, 0.0)
+    out_len = np.sqrt(o0 * o0 + o1 * o1 + o2 * o2)
+    inside = out_len == 0
+    s0, s1, s2 = np.where(q0 < 0, -1.0, 1.0), np.where(q1 < 0, -1.0, 1.0), np.where(q2 < 0, -1.0, 1.0)
+    safe = np.where(inside, 1.0, out_len)
+    # outside: towards the nearest point; inside: the nearest face (first of equals: x, y, z)
+    f0 = (e0 >= e1) & (e0 >= e2)
+    f1 = ~f0 & (e1 >= e2)
+    f2 = ~f0 & ~f1
+    n0 = np.where(inside, np.where(f0, s0, 0.0), s0 * o0 / safe)
+    n1 = np.where(inside, np.where(f1, s1, 0.0), s1 * o1 / safe)
+    n2 = np.where(inside, np.where(f2, s2, 0.0), s2 * o2 / safe)
+    d = np.where(inside, np.maximum(np.maximum(e0, e1), e2), out_len)
+    n = np.empty_like(p)
+    n[:, 0] = r[0, 0] * n0 + r[0, 1] * n1 + r[0, 2] * n2  # n = R n_local
+    n[:, 1] = r[1, 0] * n0 + r[1, 1] * n1 + r[1, 2] * n2
+    n[:, 2] = r[2, 0] * n0 + r[2, 1] * n1 + r[2, 2] * n2
+    return d, n
+
+
+@dataclass
+class StepMotion:
+    """Where every collider is over one step: displacement from the reference at t0 and t1."""
+
+    at0: np.ndarray  # (C, 3)
+    at1: np.ndarray  # (C, 3)
+
+
+class Colliders(StepStage):
+    """All solid colliders of a scene: a step stage after each integrator step.
+
+    shapes: the colliders; ``motion``: a :class:`animsim.keyframes.PathEvaluator`
+    for the moving ones (``moving`` lists which path drives which collider),
+    or None. ``radius``: (N,) particle radii (0: points). ``active``: (N,) bool
+    rows colliders act on (particles, not rigid bodies); pinned and dead rows
+    (inverse mass 0) are never moved.
+    """
+
+    def __init__(
+        self,
+        shapes: list[Shape],
+        inv_mass: np.ndarray,
+        radius: np.ndarray | None = None,
+        active: np.ndarray | None = None,
+        motion=None,
+        moving: np.ndarray | None = None,
+        backend: str = "numpy",
+    ):
+        self.shapes = shapes
+        self.inv_mass = inv_mass
+        n = inv_mass.shape[0]
+        self.radius = np.zeros(n) if radius is None else np.asarray(radius, dtype=np.float64)
+        self.active = np.ones(n, dtype=bool) if active is None else np.asarray(active, dtype=bool)
+        self.motion = motion
+        self.moving = np.full(len(shapes), -1, dtype=np.int64) if moving is None else np.asarray(moving)
+        self.backend = backend
+        self.params = np.array([s.packed() for s in shapes]).reshape(-1, PARAMS)
+        self.params[:, 20] = [s.restitution for s in shapes]
+        self.friction = np.array([s.friction for s in shapes], dtype=np.float64)
+        self._kernel = numba_kernel() if backend == "numba" else None
+        self.no_closed_form = "solid colliders"
+        self.injects = bool((self.moving >= 0).any())
+        self.dissipative = any(s.restitution < 1 or s.friction > 0 for s in shapes)
+        counts: dict[str, int] = {}
+        for s in shapes:
+            counts[KIND_NAMES[s.kind]] = counts.get(KIND_NAMES[s.kind], 0) + 1
+        what = ", ".join(
+            f"{v} {k}{('es' if k == 'box' else 's') if v > 1 else ''}" for k, v in counts.items()
+        )
+        n_moving = int((self.moving >= 0).sum())
+        self.label = (
+            f"colliders: {what}"
+            + (f" ({n_moving} keyframed)" if n_moving else " (static)")
+            + ", time of impact inside the step, restitution and Coulomb friction"
+        )
+
+    def stability_note(self, dt: float) -> str:
+        return (
+            "colliders: impulses at the time of impact inside each step, no stiffness and no limit on dt"
+            + ("; moving ones put energy in (the watchdog's energy test is off)" if self.injects else "")
+        )
+
+    def offsets(self, t: float) -> np.ndarray:
+        """Displacement (C, 3) of every collider from its reference position at ``t``."""
+        off = np.zeros((len(self.shapes), 3))
+        if self.motion is not None:
+            pos, _ = self.motion(t)
+            m = self.moving >= 0
+            off[m] = pos[self.moving[m]] - self.params[m, 1:4]
+        return off
+
+    def reset(self, state) -> None:
+        """Nothing to reset: colliders keep no state between steps."""
+
+    def surface_points(self, t: float, per_shape: int = 600) -> np.ndarray:
+        """About ``per_shape`` points on each collider's surface at time ``t`` (for drawing)."""
+        if not hasattr(self, "_surface"):
+            # a Fibonacci sphere of directions, pushed onto each surface along its own
+            # distance function: points spread evenly enough to show the shape
+            k = np.arange(per_shape) + 0.5
+            phi = np.arccos(1 - 2 * k / per_shape)
+            theta = np.pi * (1 + 5**0.5) * k
+            dirs = np.stack([np.cos(theta) * np.sin(phi), np.cos(phi), np.sin(theta) * np.sin(phi)], axis=1)
+            pts = []
+            for s in self.shapes:
+                reach = s.radius + float(np.linalg.norm(s.half)) + float(np.linalg.norm(s.segment))
+                p = s.center + dirs * reach * 1.5
+                for _ in range(60):  # march inward onto the surface (sphere tracing)
+                    d, n = s.signed_distance(p)
+                    p = p - d[:, None] * n
+                pts.append(p - s.center)
+            self._surface = pts
+        off = self.offsets(t)
+        return np.concatenate(
+            [s.center + off[c] + p for c, (s, p) in enumerate(zip(self.shapes, self._surface, strict=True))]
+        )
+
+    def apply(
+        self,
+        state,
+        x_old: np.ndarray,
+        v_old: np.ndarray,
+        t0: float,
+        t1: float,
+        dt: float | None = None,
+        project_only: bool = False,
+    ) -> bool:
+        dt = t1 - t0 if dt is None else dt
+        if dt <= 0:
+            return False
+        off0, off1 = self.offsets(t0), self.offsets(t1)
+        x, v = state.particle_position, state.particle_velocity
+        # the state's live masses: emitter pools switch theirs on at birth
+        inv_mass = getattr(state, "particle_inv_mass", self.inv_mass)
+        movable = self.active & (inv_mass > 0)
+        if state.particle_alive is not None:
+            movable = movable & state.particle_alive
+        if self._kernel is not None:
+            return bool(
+                self._kernel(
+                    self.params,
+                    self.friction,
+                    off0,
+                    off1,
+                    x_old,
+                    v_old,
+                    x,
+                    v,
+                    dt,
+                    self.radius,
+                    movable,
+                    project_only,
+                )
+            )
+        return resolve_numpy(
+            self.params, self.friction, off0, off1, x_old, v_old, x, v, dt, self.radius, movable, project_only
+        )
+
+    def project(self, state, t0: float, t1: float) -> bool:
+        """Push out of every collider whatever another stage (particle contacts) pushed in."""
+        x, v = state.particle_position, state.particle_velocity
+        return self.apply(state, x, v, t0, t1, t1 - t0, project_only=True)
+
+
+def _shape_of(params: np.ndarray, friction: float) -> Shape:
+    return Shape(
+        kind=int(params[0]),
+        center=params[1:4],
+        radius=float(params[4]),
+        half=params[5:8],
+        rotation=params[8:17].reshape(3, 3),
+        segment=params[17:20],
+        restitution=float(params[20]),
+        friction=friction,
+    )
+
+
+def resolve_numpy(
+    params: np.ndarray,
+    friction: np.ndarray,
+    off0: np.ndarray,
+    off1: np.ndarray,
+    x_old: np.ndarray,
+    v_old: np.ndarray,
+    x: np.ndarray,
+    v: np.ndarray,
+    dt: float,
+    radius: np.ndarray,
+    movable: np.ndarray,
+    project_only: bool = False,
+) -> bool:
+    """Resolve the step x_old -> x against every collider, in place (NumPy kernel).
+
+    ``project_only``: no time of impact, only push out whatever is inside
+    (after particle contacts moved particles).
+    """
+    changed = False
+    for c in range(params.shape[0]):  # colliders, not particles
+        shape = _shape_of(params[c], float(friction[c]))
+        center = shape.center + off1[c]
+        u = (off1[c] - off0[c]) / dt  # the collider's velocity over the step
+        if project_only:
+            if _project(shape, center, u, x, v, np.flatnonzero(movable), radius):
+                changed = True
+            continue
+        shift = off1[c] - off0[c]
+        # Cheap filter: the relative segment lies in the ball around its midpoint
+        # of radius half its length; if that ball misses the shape, so does the segment.
+        p0_all = x_old + shift
+        mid = 0.5 * (p0_all + x)
+        seg = x - p0_all
+        half_len = 0.5 * np.sqrt(np.einsum("ij,ij->i", seg, seg))
+        d_mid, _ = shape.signed_distance(mid, off1[c])
+        cand = np.flatnonzero((d_mid - radius <= half_len * (1 + 1e-12) + 1e-12) & movable)
+        if cand.size == 0:
+            continue
+        r = radius[cand]
+        p0 = p0_all[cand]
+        p1 = x[cand]
+        sg = p1 - p0
+        length = np.sqrt(np.einsum("ij,ij->i", sg, sg))
+        tol = 1e-9 * (1.0 + length)
+        s = np.zeros(len(cand))
+        hit = np.zeros(len(cand), dtype=bool)
+        alive = np.ones(len(cand), dtype=bool)
+        for _ in range(MARCH_STEPS):  # sphere tracing, vectorised over candidates
+            idx = np.flatnonzero(alive)
+            if idx.size == 0:
+                break
+            d, _ = sdf(
+                shape.kind,
+                p0[idx] + s[idx, None] * sg[idx] - center,
+                shape.radius,
+                shape.half,
+                shape.rotation,
+                shape.segment,
+            )
+            d = d - r[idx]
+            touched = d <= tol[idx]
+            hit[idx[touched]] = True
+            step = np.divide(d, length[idx], out=np.full(idx.size, 2.0), where=length[idx] > 0)
+            s[idx] = np.where(touched, s[idx], s[idx] + step)
+            alive[idx[touched | (s[idx] > 1.0)]] = False
+        h = np.flatnonzero(hit)
+        if h.size:
+            changed = True
+            rows = cand[h]
+            sh = np.minimum(s[h], 1.0)[:, None]
+            xc = p0[h] + sh * sg[h]
+            vo, vh = v_old[rows], v[rows]
+            mean_acc = (vh - vo) / dt
+            vc = vo + sh * (vh - vo) - u  # relative velocity at the contact
+            _, n = sdf(shape.kind, xc - center, shape.radius, shape.half, shape.rotation, shape.segment)
+            vn = np.einsum("ij,ij->i", vc, n)
+            approaching = vn < 0
+            an = np.einsum("ij,ij->i", mean_acc, n)
+            pressing = np.maximum(-an, 0.0)
+            resting = approaching & (-vn <= RESTING_STEPS * pressing * dt)
+            e = np.where(resting, 0.0, shape.restitution)
+            vn_new = np.where(approaching, -e * vn, vn)
+            vt = vc - vn[:, None] * n
+            vt = _apply_friction(vt, np.abs(vn_new - vn), shape.friction)
+            vr = vt + vn_new[:, None] * n
+            rest = (1.0 - sh) * dt
+            x[rows] = xc + rest * vr + 0.5 * rest * rest * mean_acc
+            v[rows] = vr + u + rest * mean_acc
+        if _project(shape, center, u, x, v, cand, radius):
+            changed = True
+    return changed
+
+
+def _project(
+    shape: Shape,
+    center: np.ndarray,
+    u: np.ndarray,
+    x: np.ndarray,
+    v: np.ndarray,
+    idx: np.ndarray,
+    radius: np.ndarray,
+) -> bool:
+    """Put any of ``idx`` still inside the shape on its surface; stop its inward relative motion."""
+    d, n = sdf(shape.kind, x[idx] - center, shape.radius, shape.half, shape.rotation, shape.segment)
+    d = d - radius[idx]
+    sel = d < 0
+    if not sel.any():
+        return False
+    rows = idx[sel]
+    n = n[sel]
+    xb = x[rows] - d[sel, None] * n
+    # Rounding can leave the projected point a hair inside; push until it is not.
+    for _ in range(4):
+        db, _ = sdf(shape.kind, xb - center, shape.radius, shape.half, shape.rotation, shape.segment)
+        db = db - radius[rows]
+        still = db < 0
+        if not still.any():
+            break
+        xb[still] += (np.spacing(np.abs(xb[still]).max(axis=1) + 1.0) * 4 - db[still])[:, None] * n[still]
+    x[rows] = xb
+    vr = v[rows] - u
+    vn = np.einsum("ij,ij->i", vr, n)
+    inward = np.minimum(vn, 0.0)
+    vt = vr - vn[:, None] * n
+    vt = _apply_friction(vt, -inward, shape.friction)
+    v[rows] = vt + (vn - inward)[:, None] * n + u
+    return True
+
+
+# --- numba twin ------------------------------------------------------------------------------
+
+_NUMBA_KERNEL = None
+
+
+def numba_kernel():
+    """The numba kernel: the same algorithm as :func:`resolve_numpy`, one particle at a time."""
+    global _NUMBA_KERNEL
+    if _NUMBA_KERNEL is not None:
+        return _NUMBA_KERNEL
+    import numba
+
+    @numba.njit(cache=True, inline="always")
+    def sdf1(pr, px, py, pz, out_n):  # pragma: no cover - compiled
+        kind = int(pr[0])
+        if kind == 0:
+            ln = np.sqrt(px * px + py * py + pz * pz)
+            if ln > 0:
+                out_n[0] = px / ln
+                out_n[1] = py / ln
+                out_n[2] = pz / ln
+            else:
+                out_n[0] = 0.0
+                out_n[1] = 1.0
+                out_n[2] = 0.0
+            return ln - pr[4]
+        if kind == 2:
+            sx, sy, sz = pr[17], pr[18], pr[19]
+            ss = sx * sx + sy * sy + sz * sz
+            t = 0.0
+            if ss > 0:
+                t = (px * sx + py * sy + pz * sz) / ss
+                if t < -1.0:
+                    t = -1.0
+                elif t > 1.0:
+                    t = 1.0
+            wx, wy, wz = px - t * sx, py - t * sy, pz - t * sz
+            ln = np.sqrt(wx * wx + wy * wy + wz * wz)
+            if ln > 0:
+                out_n[0] = wx / ln
+                out_n[1] = wy / ln
+                out_n[2] = wz / ln
+            else:
+                sn = np.sqrt(ss)
+                if abs(sx) < 0.9 * sn:  # cross(s, x-axis)
+                    cx, cy, cz = 0.0, sz, -sy
+                else:  # cross(s, y-axis)
+                    cx, cy, cz = -sz, 0.0, sx
+                cn = np.sqrt(cx * cx + cy * cy + cz * cz)
+                if cn > 0:
+                    out_n[0] = cx / cn
+                    out_n[1] = cy / cn
+                    out_n[2] = cz / cn
+                else:
+                    out_n[0] = 0.0
+                    out_n[1] = 1.0
+                    out_n[2] = 0.0
+            return ln - pr[4]
+        # box: q = R^T p, R row major at pr[8:17]
+        q0 = pr[8] * px + pr[11] * py + pr[14] * pz
+        q1 = pr[9] * px + pr[12] * py + pr[15] * pz
+        q2 = pr[10] * px + pr[13] * py + pr[16] * pz
+        e0 = abs(q0) - pr[5]
+        e1 = abs(q1) - pr[6]
+        e2 = abs(q2) - pr[7]
+        s0 = -1.0 if q0 < 0 else 1.0
+        s1 = -1.0 if q1 < 0 else 1.0
+        s2 = -1.0 if q2 < 0 else 1.0
+        o0 = max(e0, 0.0)
+        o1 = max(e1, 0.0)
+        o2 = max(e2, 0.0)
+        ol = np.sqrt(o0 * o0 + o1 * o1 + o2 * o2)
+        if ol > 0:
+            n0, n1, n2 = s0 * o0 / ol, s1 * o1 / ol, s2 * o2 / ol
+            d = ol
+        else:
+            n0 = n1 = n2 = 0.0
+            if e0 >= e1 and e0 >= e2:
+                n0 = s0
+                d = e0
+            elif e1 >= e2:
+                n1 = s1
+                d = e1
+            else:
+                n2 = s2
+                d = e2
+        out_n[0] = pr[8] * n0 + pr[9] * n1 + pr[10] * n2
+        out_n[1] = pr[11] * n0 + pr[12] * n1 + pr[13] * n2
+        out_n[2] = pr[14] * n0 + pr[15] * n1 + pr[16] * n2
+        return d
+
+    @numba.njit(cache=True)
+    def friction1(vt, dvn, mu):  # pragma: no cover - compiled
+        if mu == 0.0:
+            return
+        sp = np.sqrt(vt[0] * vt[0] + vt[1] * vt[1] + vt[2] * vt[2])
+        keep = 0.0
+        if sp > 0:
+            keep = max(sp - mu * dvn, 0.0) / sp
+        for a in range(3):
+            vt[a] *= keep
+
+    @numba.njit(cache=True)
+    def resolve(
+        params, friction, off0, off1, x_old, v_old, x, v, dt, radius, movable, project_only
+    ):  # pragma: no cover
+        changed = False
+        n = np.zeros(3)
+        vt = np.zeros(3)
+        acc = np.zeros(3)
+        for c in range(params.shape[0]):
+            pr = params[c]
+            mu = friction[c]
+            e_rest = pr[20]
+            cx, cy, cz = pr[1] + off1[c, 0], pr[2] + off1[c, 1], pr[3] + off1[c, 2]
+            shx, shy, shz = off1[c, 0] - off0[c, 0], off1[c, 1] - off0[c, 1], off1[c, 2] - off0[c, 2]
+            ux, uy, uz = shx / dt, shy / dt, shz / dt
+            for i in range(x.shape[0]):
+                if not movable[i]:
+                    continue
+                r = radius[i]
+                if project_only:
+                    hit = False
+                    sgx = sgy = sgz = 0.0
+                    p0x, p0y, p0z = x[i, 0], x[i, 1], x[i, 2]
+                    length = 0.0
+                    dm = -1.0
+                else:
+                    p0x, p0y, p0z = x_old[i, 0] + shx, x_old[i, 1] + shy, x_old[i, 2] + shz
+                    sgx, sgy, sgz = x[i, 0] - p0x, x[i, 1] - p0y, x[i, 2] - p0z
+                    length = np.sqrt(sgx * sgx + sgy * sgy + sgz * sgz)
+                    dm = sdf1(pr, p0x + 0.5 * sgx - cx, p0y + 0.5 * sgy - cy, p0z + 0.5 * sgz - cz, n) - r
+                if not (dm <= 0.5 * length * (1 + 1e-12) + 1e-12):
+                    continue
+                tol = 1e-9 * (1.0 + length)
+                s = 0.0
+                hit = False
+                for _ in range(0 if project_only else 48):
+                    d = sdf1(pr, p0x + s * sgx - cx, p0y + s * sgy - cy, p0z + s * sgz - cz, n) - r
+                    if d <= tol:
+                        hit = True
+                        break
+                    s += d / length if length > 0 else 2.0
+                    if s > 1.0:
+                        break
+                if hit:
+                    changed = True
+                    if s > 1.0:
+                        s = 1.0
+                    xcx, xcy, xcz = p0x + s * sgx, p0y + s * sgy, p0z + s * sgz
+                    sdf1(pr, xcx - cx, xcy - cy, xcz - cz, n)
+                    for a in range(3):
+                        acc[a] = (v[i, a] - v_old[i, a]) / dt
+                    vcx = v_old[i, 0] + s * (v[i, 0] - v_old[i, 0]) - ux
+                    vcy = v_old[i, 1] + s * (v[i, 1] - v_old[i, 1]) - uy
+                    vcz = v_old[i, 2] + s * (v[i, 2] - v_old[i, 2]) - uz
+                    vn = vcx * n[0] + vcy * n[1] + vcz * n[2]
+                    an = acc[0] * n[0] + acc[1] * n[1] + acc[2] * n[2]
+                    pressing = max(-an, 0.0)
+                    vn_new = vn
+                    if vn < 0:
+                        e = e_rest
+                        if -vn <= 2.0 * pressing * dt:
+                            e = 0.0
+                        vn_new = -e * vn
+                    vt[0] = vcx - vn * n[0]
+                    vt[1] = vcy - vn * n[1]
+                    vt[2] = vcz - vn * n[2]
+                    friction1(vt, abs(vn_new - vn), mu)
+                    rest = (1.0 - s) * dt
+                    vrx = vt[0] + vn_new * n[0]
+                    vry = vt[1] + vn_new * n[1]
+                    vrz = vt[2] + vn_new * n[2]
+                    x[i, 0] = xcx + rest * vrx + 0.5 * rest * rest * acc[0]
+                    x[i, 1] = xcy + rest * vry + 0.5 * rest * rest * acc[1]
+                    x[i, 2] = xcz + rest * vrz + 0.5 * rest * rest * acc[2]
+                    v[i, 0] = vrx + ux + rest * acc[0]
+                    v[i, 1] = vry + uy + rest * acc[1]
+                    v[i, 2] = vrz + uz + rest * acc[2]
+                # projection (every candidate, as the NumPy kernel)
+                d = sdf1(pr, x[i, 0] - cx, x[i, 1] - cy, x[i, 2] - cz, n) - r
+                if d < 0:
+                    changed = True
+                    bx, by, bz = x[i, 0] - d * n[0], x[i, 1] - d * n[1], x[i, 2] - d * n[2]
+                    nx, ny, nz = n[0], n[1], n[2]
+                    for _ in range(4):
+                        db = sdf1(pr, bx - cx, by - cy, bz - cz, n) - r
+                        if db >= 0:
+                            break
+                        big = max(abs(bx), max(abs(by), abs(bz))) + 1.0
+                        push = np.spacing(big) * 4 - db
+                        bx += push * nx
+                        by += push * ny
+                        bz += push * nz
+                    x[i, 0], x[i, 1], x[i, 2] = bx, by, bz
+                    rvx, rvy, rvz = v[i, 0] - ux, v[i, 1] - uy, v[i, 2] - uz
+                    vn = rvx * nx + rvy * ny + rvz * nz
+                    inward = min(vn, 0.0)
+                    vt[0] = rvx - vn * nx
+                    vt[1] = rvy - vn * ny
+                    vt[2] = rvz - vn * nz
+                    friction1(vt, -inward, mu)
+                    v[i, 0] = vt[0] + (vn - inward) * nx + ux
+                    v[i, 1] = vt[1] + (vn - inward) * ny + uy
+                    v[i, 2] = vt[2] + (vn - inward) * nz + uz
+        return changed
+
+    _NUMBA_KERNEL = resolve
+    return resolve

@@ -1,0 +1,90 @@
+"""`animsim init`: starter scenes that load, validate against the schema beside them, and run."""
+
+from __future__ import annotations
+
+import json
+
+import jsonschema
+import pytest
+import yaml
+
+from animsim.cli import schema_text
+from animsim.templates import MODELINE, SCHEMA_NAME, TEMPLATES
+from tests.conftest import run_cli
+
+
+def test_every_template_is_written_with_its_schema_and_checks_clean(tmp_path):
+    for name in TEMPLATES:
+        proc = run_cli("init", f"{name}.yaml", "--template", name, cwd=tmp_path)
+        assert proc.returncode == 0, proc.stderr
+        assert f"wrote {name}.yaml" in proc.stdout
+    schema = (tmp_path / SCHEMA_NAME).read_text(encoding="utf-8")
+    assert schema == schema_text()
+    validator = jsonschema.Draft202012Validator(json.loads(schema))
+    for name in TEMPLATES:
+        text = (tmp_path / f"{name}.yaml").read_text(encoding="utf-8")
+        first = text.splitlines()[0]
+        assert first == MODELINE
+        # the modeline's target, resolved as an editor does (relative to the scene), is that schema
+        target = tmp_path / first.split("$schema=", 1)[1]
+        assert target.read_text(encoding="utf-8") == schema
+        errors = list(validator.iter_errors(yaml.safe_load(text)))
+        assert errors == [], (name, [e.message for e in errors])
+        assert text.count("\n#") >= 3, f"{name}: a starter scene explains itself in comments"
+    proc = run_cli("check", *(f"{n}.yaml" for n in TEMPLATES), cwd=tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert proc.stdout.count(": ok (") == len(TEMPLATES), proc.stdout
+
+
+def test_the_default_template_runs_where_it_was_written(tmp_path):
+    sub = tmp_path / "elsewhere"
+    sub.mkdir()
+    proc = run_cli("init", str(sub / "first.yaml"), cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    proc = run_cli("run", "first.yaml", "-q", cwd=sub)
+    assert proc.returncode == 0, proc.stderr
+    assert (sub / "first.csv").read_text().startswith("t,id,x,y,z,vx,vy,vz\n0.0,ball,")
+
+
+def test_an_existing_file_is_kept_unless_forced(tmp_path):
+    scene = tmp_path / "mine.yaml"
+    scene.write_text("duration: 1\n", encoding="utf-8")
+    proc = run_cli("init", "mine.yaml", cwd=tmp_path)
+    assert proc.returncode == 2
+    assert "already exists" in proc.stderr and "--force" in proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert scene.read_text(encoding="utf-8") == "duration: 1\n"
+    assert not (tmp_path / SCHEMA_NAME).exists()
+    proc = run_cli("init", "mine.yaml", "--force", "--template", "pendulum", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert "id: bob" in scene.read_text(encoding="utf-8")
+
+
+def test_a_stale_schema_is_reported_and_refreshed_only_when_forced(tmp_path):
+    (tmp_path / SCHEMA_NAME).write_text("{}\n", encoding="utf-8")
+    proc = run_cli("init", "a.yaml", cwd=tmp_path)
+    assert proc.returncode == 0
+    assert "differs" in proc.stdout
+    assert (tmp_path / SCHEMA_NAME).read_text(encoding="utf-8") == "{}\n"
+    proc = run_cli("init", "a.yaml", "--force", cwd=tmp_path)
+    assert proc.returncode == 0
+    assert (tmp_path / SCHEMA_NAME).read_text(encoding="utf-8") == schema_text()
+
+
+@pytest.mark.parametrize(
+    ("name", "hint"),
+    [("clth", "did you mean 'cloth'?"), ("pendulm", "did you mean 'pendulum'?"), ("zzz", "")],
+)
+def test_an_unknown_template_is_a_usage_error_with_a_suggestion(tmp_path, name, hint):
+    proc = run_cli("init", "x.yaml", "--template", name, cwd=tmp_path)
+    assert proc.returncode == 2
+    assert f"unknown template '{name}'" in proc.stderr
+    assert hint in proc.stderr
+    assert "projectile, pendulum, cloth, fountain" in proc.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_missing_folder_is_a_usage_error(tmp_path):
+    proc = run_cli("init", str(tmp_path / "no" / "x.yaml"))
+    assert proc.returncode == 2
+    assert "does not exist" in proc.stderr
