@@ -40,6 +40,10 @@ def writing(path: str | os.PathLike[str]) -> Iterator[None]:
     """Turn an OSError inside the block into a SimulationError naming ``path``."""
     try:
         yield
+    except BrokenPipeError as exc:
+        if str(path) == "-":
+            raise  # the reader of stdout left (`animsim run -o - | head`): the CLI exits quietly
+        raise io_error(path, exc) from exc
     except OSError as exc:
         raise io_error(path, exc) from exc
 

@@ -46,10 +46,54 @@ class _App(typer.Typer):
         main(kwargs.get("args") if "args" in kwargs else (args[0] if args else None))
 
 
+# How help shows a value's type: words a user knows, not Python's names.
+_TYPE_WORDS = {"str": "text", "float": "number", "int": "integer", "Path": "path", "path": "path"}
+
+
+def _help_type(label: str | None) -> str | None:
+    """``<bool>`` -> nothing (a flag takes no value), ``<list[Path]>`` -> ``<path>...``, ``<str>`` -> ``<text>``."""
+    if not label or not label.startswith("<") or not label.endswith(">"):
+        return label
+    inner = label[1:-1]
+    many = inner.startswith("list[") and inner.endswith("]")
+    if many:
+        inner = inner[5:-1]
+    if inner == "bool":
+        return None
+    word = _TYPE_WORDS.get(inner.removesuffix(" range"), inner.removesuffix(" range"))
+    return f"<{word}>" + ("..." if many else "")
+
+
+def _plain_help_types() -> None:
+    """Make typer's help show :func:`_help_type` words (it prints ``<bool>`` for flags and ``--help``).
+
+    Typer has no option for this, so its one display method is wrapped; the
+    values parsed are unchanged.
+    """
+    from typer.core import TyperArgument, TyperOption
+
+    for cls in (TyperArgument, TyperOption):
+        original = cls.display_type_rich
+        if getattr(original, "_animsim", False):
+            continue
+
+        def display(self: Any, ctx: Any, _original: Any = original) -> str | None:
+            if getattr(self, "is_flag", False):
+                return None
+            return _help_type(_original(self, ctx))
+
+        display._animsim = True  # type: ignore[attr-defined]
+        cls.display_type_rich = display  # type: ignore[method-assign]
+
+
+_plain_help_types()
+
 app = _App(
     name="animsim",
-    help="Physically based animation from a text file: particles, springs, cloth, hair, particle systems.",
-    add_completion=False,
+    help="Physically based animation from a text file: particles, springs, cloth, hair, particle systems.\n\n"
+    "Tab completion of commands and options: animsim --install-completion (bash, zsh, fish, PowerShell), "
+    "then open a new shell.",
+    add_completion=True,
     no_args_is_help=True,
     pretty_exceptions_enable=False,
     rich_markup_mode="rich",
@@ -78,7 +122,8 @@ BackendOpt = Annotated[
     str,
     typer.Option(
         "--backend",
-        help="auto (default: numba when installed, else numpy), numpy, or numba (compiled; pip install -e '.[fast]').",
+        help="auto (the default: numba when installed, else numpy), numpy, or numba (compiled; needs "
+        'pip install -e ".\\[fast]").',
     ),
 ]
 
@@ -91,7 +136,7 @@ DriftWarnOpt = Annotated[
     ),
 ]
 
-_LIMITS_PANEL = "Limits (spec: Errors and limits)"
+_LIMITS_PANEL = "Limits (what a scene may ask for)"
 
 # The limit options, shared by every command that loads a scene (see
 # limit_options). Sizes take suffixes (50MiB, 4GiB); counts take 1e9.
@@ -359,11 +404,13 @@ def run(
         _err(f"{scene}: warning: {report.verdict()}")
     wrote = f"{out} and {out}.meta.json"
     from animsim.export.sinks import open_sink
+    from animsim.record import recording_rule
 
     sink: Any = open_sink(
         Path("-") if to_stdout else out,
         fmt.value,
-        meta_rate=sc.record.fps,
+        # the frame rate recorded at, when there is one (the scene's, or the 60 fps default)
+        meta_rate=recording_rule(sc.record.every, sc.record.fps, compiled.clock.dt)[1],
         extra_columns=extra_columns,
         expected_frames=len(compiled.record_steps),
     )
@@ -418,10 +465,11 @@ def _progress(total: int, quiet: bool):
 
 
 def _notice(quiet: bool):
-    """Where the engine's one-line notices (numba compiling on a first run) go: stderr, on a terminal."""
-    if quiet or not sys.stderr.isatty():
-        return None
-    return _err
+    """Where the engine's one-line notices (numba compiling on a first run) go: stderr, on a
+    terminal, unless --quiet."""
+    from animsim.console import terminal_notice
+
+    return None if quiet else terminal_notice()
 
 
 def _stderr_console():
@@ -432,10 +480,12 @@ def _stderr_console():
 
 def _summary(compiled: Any, result: Any, wrote: str | None) -> None:
     """Print the run summary; ``wrote`` names the files written (None: the trajectory went to stdout)."""
+    from animsim.console import steps_text
+
     stream_err = wrote is None  # trajectory went to stdout: keep stdout clean
     lines = [
         f"{compiled.name}: {compiled.system.particle_count} particles, {compiled.system.spring_count} springs, "
-        f"{result.steps_taken}/{compiled.clock.steps} steps of {compiled.clock.dt:g} s with {compiled.integrator_name}",
+        f"{steps_text(compiled, result)} with {compiled.integrator_name}",
         f"  wall time {result.wall_time:.3f} s, {result.frames} frames, {result.force_evals} force evaluations",
         f"  energy {result.energy_start:.6g} J -> {result.energy_end:.6g} J, status {result.status}, "
         + _drift_of(compiled, result).text(),
@@ -449,7 +499,9 @@ def _summary(compiled: Any, result: Any, wrote: str | None) -> None:
         )
     if wrote is not None:
         lines.append(f"  wrote {wrote}")
-    typer.echo("\n".join(lines), err=stream_err)
+    from animsim.analysis.check import wrap
+
+    typer.echo("\n".join(wrap(line) for line in lines), err=stream_err)
 
 
 def _drift_of(compiled: Any, result: Any) -> Any:
@@ -491,26 +543,29 @@ def explain(
     from animsim.compile import compile_scene
 
     loaded, sc, _ = prepare_scene(scene, limits, integrator=integrator)
+    from animsim.analysis.check import wrap
+
     c = compile_scene(sc, loaded.name, backend=_backend(backend))
     s = c.system
-    typer.echo(f"scene {c.name!r} ({scene})")
-    typer.echo(
+    lines = [
+        f"scene {c.name!r} ({scene})",
         f"  {s.particle_count} particles ({int(s.particle_pinned.sum())} pinned), {s.spring_count} springs, "
         f"{len(sc.planes)} planes, {len(sc.emitters)} emitters"
-        + (f", {s.body_count} rigid bodies (their centres counted as particles)" if s.body_count else "")
-    )
-    typer.echo(f"  {c.clock.steps} steps of {c.clock.dt:g} s to t = {c.clock.duration:g} s, seed {c.seed}")
-    typer.echo("each step runs:")
+        + (f", {s.body_count} rigid bodies (their centres counted as particles)" if s.body_count else ""),
+        f"  {c.clock.steps} steps of {c.clock.dt:g} s to t = {c.clock.duration:g} s, seed {c.seed}",
+        "each step runs:",
+    ]
     from animsim.analysis.effective import fallback_note
 
     note = fallback_note(c)
     for stage in c.stages:
         if note is not None and stage.startswith("integrator:"):
             stage = f"integrator: {note}"  # what the step really computes
-        typer.echo(f"  + {stage}")
-    typer.echo("left out (the scene does not need them):")
-    for item in c.left_out:
-        typer.echo(f"  - {item}")
+        lines.append(f"  + {stage}")
+    lines.append("left out (the scene does not need them):")
+    lines.extend(f"  - {item}" for item in c.left_out)
+    for line in lines:
+        typer.echo(wrap(line))
 
 
 # --- schema ---------------------------------------------------------------------------
@@ -606,9 +661,20 @@ def render(
         float, typer.Option("--fps", help="Frames per second; GIF delays come in 10 ms steps.")
     ] = 25.0,
     view: Annotated[
-        str, typer.Option("--view", help="xy, xz, yz (orthographic) or 3d (perspective).")
-    ] = "xy",
-    size: Annotated[str, typer.Option("--size", help="WIDTHxHEIGHT in pixels.")] = "480x480",
+        str | None,
+        typer.Option(
+            "--view",
+            help="xy, xz, yz (orthographic) or 3d (perspective); default: the two axes along which "
+            "the motion is widest.",
+        ),
+    ] = None,
+    size: Annotated[
+        str | None,
+        typer.Option(
+            "--size",
+            help="WIDTHxHEIGHT in pixels; default 480 on the longer side, shaped like the motion (16:9 at most).",
+        ),
+    ] = None,
     scene: Annotated[
         Path | None,
         typer.Option("--scene", help="The scene of a trajectory, to draw its springs and planes."),
@@ -677,14 +743,18 @@ def render(
         else:
             with _graceful_stop() as stop:
                 result = render_scene(compiled, gif, mp4, opts, progress=progress, stop=stop)
+    outs = " and ".join(str(p) for p in result.outputs)
+    if result.status == "interrupted":
+        if result.outputs:
+            _err(f"{source}: interrupted; {outs} has the {result.frames} frames drawn so far")
+        else:
+            _err(f"{source}: interrupted before the first frame was drawn; nothing written")
+        raise typer.Exit(EXIT_INTERRUPTED)
     if not quiet:
-        outs = " and ".join(str(p) for p in result.outputs)
-        typer.echo(f"wrote {outs}: {result.frames} frames at {fps:g} fps, view {view}, {size}")
+        typer.echo(f"wrote {outs}: {result.frames} frames at {fps:g} fps, view {result.view}, {result.size}")
     if result.status == "unstable":
         _err(f"{source}: {result.failure.describe()}")
         raise typer.Exit(EXIT_FAILED)
-    if result.status == "interrupted":
-        raise typer.Exit(EXIT_INTERRUPTED)
 
 
 def _render_side_by_side(
@@ -945,14 +1015,10 @@ def _cases_progress(quiet: bool):
         yield update
 
 
-# Width of the printed table when stdout is not a terminal (a file or a pipe).
-PIPE_TABLE_WIDTH = 200
-
-
 def _stdout_console():
-    from rich.console import Console
+    from animsim.console import stdout_console
 
-    return Console() if sys.stdout.isatty() else Console(width=PIPE_TABLE_WIDTH)
+    return stdout_console()
 
 
 # --- compare ------------------------------------------------------------------------------
@@ -972,7 +1038,8 @@ def compare(
         str | None,
         typer.Option(
             "--dt",
-            help="Comma-separated step sizes (s); default the scene's dt halved four times: dt, dt/2, dt/4, dt/8, dt/16.",
+            help="Comma-separated step sizes (s); default 2 dt, dt, dt/2 and dt/4 of the scene's dt "
+            "(dt/8 instead of 2 dt when 2 dt is longer than the duration).",
         ),
     ] = None,
     reference: Annotated[
@@ -983,7 +1050,14 @@ def compare(
             "(analytic when possible); the one used is printed."
         ),
     ] = ReferenceKind.auto,
-    repeat: Annotated[int, typer.Option(help="Timed runs per row; the median is reported.", min=1)] = 3,
+    repeat: Annotated[
+        int,
+        typer.Option(
+            help="Timed runs per row after its accuracy run (the median is reported); more runs, steadier "
+            "timings. 0 times the accuracy run itself, recording included: cheaper, less exact.",
+            min=0,
+        ),
+    ] = 1,
     output: Annotated[Path | None, typer.Option("-o", "--output", help="Write the table as CSV.")] = None,
     plot: Annotated[
         Path | None,
@@ -1010,6 +1084,14 @@ def compare(
             'needs pip install "animsim\\[dask]". Same caveat on timings as --jobs.',
         ),
     ] = None,
+    backend: Annotated[
+        str,
+        typer.Option(
+            "--backend",
+            help="auto (default: numba when installed and it can run the scene, else numpy), numpy or numba "
+            '(needs pip install -e ".\\[fast]"). Rows are timed on it; the reference always runs on numpy.',
+        ),
+    ] = "auto",
     *,
     limits: Any = None,
 ) -> None:
@@ -1020,16 +1102,25 @@ def compare(
     the median simulation time and force evaluations. Under the table: each
     integrator's observed order of convergence.
 
-    Cost: each row is run 1 + --repeat times (an accuracy run that is also the
-    warm-up, then the timed runs), so the finest dt dominates; pass fewer or
-    larger step sizes with --dt for big scenes.
+    Cost: each row is run 1 + --repeat times (the accuracy run, then any
+    extra timed runs), so the finest dt dominates; the estimated total is
+    printed before the runs start. Pass fewer or larger step sizes with --dt
+    for big scenes.
 
     An unstable run is a row with status 'unstable', not a failure of the
     comparison: the exit status is 0 when the comparison itself completed
     (use --fail-on-unstable to exit 1 instead), 2 for a bad scene or option.
     """
     from animsim.analysis.compare import compare as run_compare
-    from animsim.analysis.compare import parse_dts, parse_integrators, summary_lines, table, write_csv
+    from animsim.analysis.compare import (
+        estimate,
+        left_out,
+        parse_dts,
+        parse_integrators,
+        summary_lines,
+        table,
+        write_csv,
+    )
     from animsim.export.plots import plot_format, write_compare_plot
 
     # The scene's own file, step and memory limits; each step size is checked
@@ -1042,7 +1133,21 @@ def compare(
             check_output_path(path, scene)
     if plot is not None:
         plot_format(plot)
+    backend = _backend(backend)
     console = _stdout_console()
+    from animsim.console import terminal_notice
+
+    # The probe runs first, so numba's one-time compilation is announced (on a terminal) and done there.
+    cost = estimate(
+        loaded.scene,
+        loaded.name,
+        integrators=names,
+        dts=dts,
+        repeat=repeat,
+        backend=backend,
+        notice=terminal_notice(),
+    )
+    _err(f"comparing {len(names)} methods at {len(dts)} step sizes: {cost.describe()}")
     with _compare_progress(len(names) * len(dts)) as progress:
         result = run_compare(
             loaded.scene,
@@ -1055,8 +1160,16 @@ def compare(
             max_steps=limits.max_steps,
             jobs=jobs,
             scheduler=scheduler,
+            backend=backend,
         )
-    console.print(table(result))
+    console.print(table(result, width=console.width))
+    hidden = left_out(result, console.width)
+    if hidden:
+        console.print(
+            f"(left out at {console.width} columns: {', '.join(hidden)}; a wider window or -o FILE.csv has them)",
+            highlight=False,
+            markup=False,
+        )
     for line in summary_lines(result):
         console.print(line, highlight=False, markup=False)
     if output is not None:

@@ -21,7 +21,7 @@ from animsim.forces.grid_springs import build_spring_term
 from animsim.forces.penalty import PenaltyPlane
 from animsim.integrators import integrator_class
 from animsim.integrators.base import Integrator
-from animsim.record import Clock, TrajectoryHeader, landing_steps, record_steps
+from animsim.record import Clock, TrajectoryHeader, landing_steps, recording_rule, scene_record_steps
 from animsim.scene import models as m
 from animsim.scene.structures import connectivity, expand
 from animsim.system import State, System
@@ -91,10 +91,9 @@ def with_overrides(
     update: dict[str, Any] = {}
     if integrator is not None:
         if integrator not in m.INTEGRATOR_NAMES:
-            import difflib
+            from animsim.scene.loader import did_you_mean
 
-            close = difflib.get_close_matches(integrator, m.INTEGRATOR_NAMES, n=1)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
+            hint = did_you_mean(integrator, m.INTEGRATOR_NAMES)
             raise UsageError(
                 f"--integrator: unknown method {integrator!r}{hint} (valid: {', '.join(m.INTEGRATOR_NAMES)})"
             )
@@ -348,8 +347,9 @@ def compile_scene(
         raise UsageError(f"integrator {name_!r} is not available in this build") from None
 
     clock = Clock.make(scene.duration, scene.dt)
+    every, fps = recording_rule(scene.record.every, scene.record.fps, clock.dt)
     if record_times is None:
-        rec = record_steps(clock, every=scene.record.every, fps=scene.record.fps)
+        rec = scene_record_steps(clock, scene.record.every, scene.record.fps)
     else:
         landing = landing_steps(clock, record_times)
         if any(s is None for s in landing):
@@ -371,8 +371,9 @@ def compile_scene(
         stages.extend(getattr(st, "labels", None) or [st.label])
     stages.append(
         f"record: {len(rec)} frames of {clock.steps} steps"
-        + (f" (every {scene.record.every})" if scene.record.every else "")
-        + (f" ({scene.record.fps} fps)" if scene.record.fps else "")
+        + (f" (every {every})" if scene.record.every else "")
+        + (f" ({fps} fps)" if scene.record.fps else "")
+        + (f" ({fps:g} fps by default)" if fps is not None and scene.record.fps is None else "")
     )
 
     header = TrajectoryHeader(

@@ -202,10 +202,13 @@ def step_count(duration: float, dt: float, max_steps: int) -> int | None:
 
 
 def _frame_count(scene: Scene, steps: int) -> int:
-    if scene.record.fps is not None:
-        span = min(scene.duration * scene.record.fps, float(steps))
+    from animsim.record import recording_rule
+
+    every, fps = recording_rule(scene.record.every, scene.record.fps, scene.duration / max(steps, 1))
+    if fps is not None:
+        span = min(scene.duration * fps, float(steps))
         return min(steps + 1, math.floor(span) + 2)
-    every = scene.record.every or 1
+    every = every or 1
     return min(steps + 1, steps // every + 2)
 
 

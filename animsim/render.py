@@ -25,8 +25,8 @@ from animsim.record import Frame, TrajectoryHeader
 @dataclass(frozen=True)
 class RenderOptions:
     fps: float = 25.0
-    size: str = "480x480"
-    view: str = "xy"
+    size: str | None = None  # WIDTHxHEIGHT; None: DEFAULT_LONG_SIDE shaped like the motion
+    view: str | None = None  # None: the two axes along which the motion is widest
     azimuth: float | None = None
     elevation: float | None = None
     distance: float | None = None
@@ -39,6 +39,61 @@ class RenderResult:
     outputs: list[Path]
     status: str
     failure: Any = None
+    view: str | None = None  # the view drawn (chosen from the bounds when not given)
+    size: str | None = None  # the picture size drawn
+
+
+#: the longer side of the picture, px, when --size is not given
+DEFAULT_LONG_SIDE = 480
+#: the widest (and, inverted, the tallest) automatic picture shape
+MAX_ASPECT = 16 / 9
+
+
+def _with_view(opts: RenderOptions, lo: np.ndarray, hi: np.ndarray) -> RenderOptions:
+    """``opts`` with a view and a size: as asked, else chosen from the motion's bounds.
+
+    The view is the widest pair of axes, as ``animsim plot`` picks it; the
+    size is DEFAULT_LONG_SIDE on the longer side and shaped like the motion
+    (within MAX_ASPECT), so what moves fills the picture instead of a square
+    of empty ground.
+    """
+    from dataclasses import replace
+
+    from animsim.export.pictures import AXES, pick_view
+
+    finite = bool(np.isfinite(lo).all() and np.isfinite(hi).all())
+    view = opts.view or (pick_view(lo, hi) if finite else "xy")
+    size = opts.size
+    if size is None:
+        size = f"{DEFAULT_LONG_SIDE}x{DEFAULT_LONG_SIDE}"
+        if finite and view in AXES:
+            a, b = AXES[view]
+            ext = np.asarray(hi, dtype=np.float64) - np.asarray(lo, dtype=np.float64)
+            if ext[a] > 0 and ext[b] > 0:
+                aspect = float(np.clip(ext[a] / ext[b], 1 / MAX_ASPECT, MAX_ASPECT))
+                w, h = (1.0, 1 / aspect) if aspect >= 1 else (aspect, 1.0)
+                # even sides: MP4 (yuv420p) needs them
+                size = f"{2 * round(DEFAULT_LONG_SIDE * w / 2)}x{2 * round(DEFAULT_LONG_SIDE * h / 2)}"
+    return replace(opts, view=view, size=size)
+
+
+def frames_at_rate(times: np.ndarray, fps: float) -> np.ndarray:
+    """For each animation frame k/fps up to the last recorded time, the nearest recorded frame.
+
+    A trajectory recorded at 50 fps and shown at 25 fps skips every other
+    frame; one recorded at 10 fps holds each frame 2.5 times on average. So an
+    animation always lasts as long as the motion it shows.
+    """
+    times = np.asarray(times, dtype=np.float64)
+    if len(times) == 0:
+        return np.zeros(0, dtype=np.int64)
+    start, end = float(times[0]), float(times[-1])
+    count = int(np.floor((end - start) * fps * (1 + 1e-9))) + 1
+    targets = start + np.arange(count) / fps
+    hi = np.clip(np.searchsorted(times, targets), 0, len(times) - 1)
+    lo = np.clip(hi - 1, 0, len(times) - 1)
+    nearer_lo = np.abs(times[lo] - targets) <= np.abs(times[hi] - targets)
+    return np.where(nearer_lo, lo, hi).astype(np.int64)
 
 
 class _BoundsSink:
@@ -98,7 +153,7 @@ def validate(gif: Path | None, mp4: Path | None, opts: RenderOptions) -> tuple[i
     if gif is None and mp4 is None:
         raise UsageError("give --gif PATH and/or --mp4 PATH")
     try:
-        size = parse_size(opts.size)
+        size = parse_size(opts.size or f"{DEFAULT_LONG_SIDE}x{DEFAULT_LONG_SIDE}")
         for path, fmt in ((gif, "gif"), (mp4, "mp4")):
             if path is not None:
                 check_fps(opts.fps, fmt)
@@ -108,7 +163,7 @@ def validate(gif: Path | None, mp4: Path | None, opts: RenderOptions) -> tuple[i
         raise UsageError(str(exc)) from None
     if not (np.isfinite(opts.dot_radius) and opts.dot_radius > 0):
         raise UsageError(f"--dot-radius {opts.dot_radius}: must be a number of pixels > 0")
-    if opts.view not in VIEWS:
+    if opts.view is not None and opts.view not in VIEWS:
         raise UsageError(f"--view {opts.view!r}: choose one of {', '.join(VIEWS)}")
     if gif is not None and gif.suffix.lower() != ".gif":
         raise UsageError(f"--gif {gif}: the file name must end in .gif")
@@ -166,8 +221,12 @@ def render_scene(
 
     planes = compiled.header.extra.get("planes", [])
     bounds_sink = _BoundsSink()
-    run(compiled, [bounds_sink])
+    # The first pass (finding the bounds) obeys Ctrl-C too; stopped there, nothing is drawn.
+    first = run(compiled, [bounds_sink], stop=stop)
+    if first.status == "interrupted":
+        return RenderResult(frames=0, outputs=[], status="interrupted")
     bounds = _bounds(bounds_sink.lo, bounds_sink.hi, planes)
+    opts = _with_view(opts, bounds_sink.lo, bounds_sink.hi)
     sinks = _sinks(gif, mp4, opts, bounds, planes, _up_axis(compiled.scene), progress)
     result = run(compiled, sinks, stop=stop)
     return RenderResult(
@@ -175,6 +234,8 @@ def render_scene(
         outputs=[s.path for s in sinks],
         status=result.status,
         failure=result.failure,
+        view=opts.view,
+        size=opts.size,
     )
 
 
@@ -223,20 +284,26 @@ def render_trajectory(
         extra = _extras_for(compiled, traj.ids)
     lo, hi = traj.bounds()
     bounds = _bounds(lo, hi, planes)
+    opts = _with_view(opts, lo, hi)
     sinks = _sinks(gif, mp4, opts, bounds, planes, up, progress)
     header = TrajectoryHeader(
         scene_name="trajectory", ids=[], spring_index=spring_index, has_emitters=False, extra=extra
     )
+    # Play at the recorded times: pick the frame nearest each k/fps.
+    shown = frames_at_rate(traj.times, opts.fps)
+    recorded = list(traj.frames())
     try:
         for s in sinks:
             s.begin(header)
-        for frame in traj.frames():
+        for k in shown.tolist():
             for s in sinks:
-                s.write(frame)
+                s.write(recorded[k])
         for s in sinks:
             s.close({"status": "ok"})
     except BaseException:
         for s in sinks:
             s.abort()
         raise
-    return RenderResult(frames=traj.frame_count, outputs=[s.path for s in sinks], status="ok")
+    return RenderResult(
+        frames=len(shown), outputs=[s.path for s in sinks], status="ok", view=opts.view, size=opts.size
+    )

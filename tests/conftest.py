@@ -20,11 +20,18 @@ SCENES = ROOT / "scenes"
 
 
 def run_cli(
-    *args: str | os.PathLike[str], cwd: Path | None = None, timeout: float = 300, **kw
+    *args: str | os.PathLike[str],
+    cwd: Path | None = None,
+    timeout: float = 300,
+    env_extra: dict[str, str] | None = None,
+    **kw,
 ) -> subprocess.CompletedProcess[str]:
+    """``env_extra``: variables set for this run only (e.g. COLUMNS)."""
     env = dict(os.environ)
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
     env.pop("ANIMSIM_DEBUG", None)
+    env.pop("COLUMNS", None)  # a test's width never depends on the terminal pytest runs in
+    env.update(env_extra or {})
     return subprocess.run(
         [sys.executable, "-m", "animsim", *map(str, args)],
         capture_output=True,

@@ -71,6 +71,7 @@ def check_scenes(
 
     warn = DEFAULT_DRIFT_WARN_PERCENT if drift_warn is None else drift_warn
     all_ok = True
+    tally: dict[str, int] = {}
     for path in paths:
         try:
             loaded, scene, _ = prepare_scene(path, limits)
@@ -79,6 +80,7 @@ def check_scenes(
             echo_err(str(exc))
             echo_err(f"{path}: INVALID")
             all_ok = False
+            tally["invalid"] = tally.get("invalid", 0) + 1
             continue
         notes = []
         from animsim.analysis import stability
@@ -94,23 +96,59 @@ def check_scenes(
             if report.dt_exceeds_limit:
                 notes.append("warning: dt exceeds the stable limit for this integrator")
         result = run(compiled)
-        head = (
+        tally[result.status] = tally.get(result.status, 0) + 1
+        head = [
             f"{path}: {result.status} ({compiled.integrator_name}, dt {compiled.clock.dt:g}, "
-            f"{result.steps_taken} steps, {result.wall_time:.2f} s; {_energy_report(compiled, result, warn)})"
-        )
+            f"{result.steps_taken} steps, {result.wall_time:.2f} s)",
+            f"  {_energy_report(compiled, result, warn)}",
+        ]
         verdict = drift(compiled, result.energy_start, result.energy_end, warn)
         if verdict.warning and result.status == STATUS_OK:
-            echo_err(f"{path}: warning: {verdict.warning_text()}")
+            echo_err(wrap(f"{path}: warning: {verdict.warning_text()}"))
         if compiled.system.body_count:
             notes.append(_momentum_report(compiled, result))
         if result.status != STATUS_OK:
             all_ok = False
-            echo_err(head)
+            for line in head:
+                echo_err(wrap(line))
             if result.failure is not None:
-                echo_err("  " + result.failure.describe())
+                echo_err(wrap("  " + result.failure.describe()))
         elif not quiet:
-            echo(head)
+            for line in head:
+                echo(wrap(line))
         if not quiet or result.status != STATUS_OK:
             for line in notes:
-                echo(f"  {line}")
+                echo(wrap(f"  {line}"))
+    # Always, also with --quiet: silence after a check reads as "did it run?".
+    echo(tally_line(len(paths), tally))
     return all_ok
+
+
+def wrap(line: str, width: int | None = None) -> str:
+    """``line`` broken at spaces to the screen's width, continuation lines indented under it.
+
+    Numbers never break (no word is split), so a narrow terminal shows them whole.
+    """
+    import shutil
+    import textwrap
+
+    from animsim.console import table_width
+
+    width = width or table_width() or shutil.get_terminal_size().columns
+    if len(line) <= width:
+        return line
+    indent = " " * (len(line) - len(line.lstrip(" ")) + 4)
+    return textwrap.fill(
+        line,
+        width=width,
+        subsequent_indent=indent,
+        break_long_words=False,
+        break_on_hyphens=False,
+    )
+
+
+def tally_line(total: int, tally: dict[str, int]) -> str:
+    """``12 scenes: 11 ok, 1 unstable`` (ok first, then the rest by name)."""
+    order = sorted(tally, key=lambda status: (status != "ok", status))
+    counts = ", ".join(f"{tally[status]} {status}" for status in order)
+    return f"{total} scene{'s' if total != 1 else ''}: {counts}"

@@ -1,10 +1,14 @@
 """``animsim compare``: error against run time for every integrator (``cli.md``).
 
-For each integrator and each step size the scene is run once into memory
-(which also warms up the code paths), its positions are compared with a
-reference (:mod:`animsim.analysis.references`) at common record times, and
-then it is run ``repeat`` more times without any sink to time the simulation
-loop alone. The result is a table, one row per (integrator, dt), and each
+For each integrator and each step size the scene is run once into memory,
+its positions are compared with a reference
+(:mod:`animsim.analysis.references`) at common record times, and, with
+``repeat`` > 0 (default 1), it is run that many more times without any sink
+to time the simulation loop alone (the median is reported). With ``repeat``
+= 0 the accuracy run's own time is reported, recording included: cheaper, but
+on the numba backend each recorded frame leaves the compiled loop, which can
+cost more than the steps themselves (0.3 s for 251 frames of a 2-particle
+scene), so it is not the default. The timed runs record nothing. The result is a table, one row per (integrator, dt), and each
 integrator's observed order of convergence.
 
 Common record times. Runs at different dt must be compared at the same
@@ -39,7 +43,6 @@ idea is SciML DiffEqDevTools' ``WorkPrecisionSet``.
 
 from __future__ import annotations
 
-import difflib
 import math
 import statistics
 from collections.abc import Callable, Sequence
@@ -58,13 +61,12 @@ from animsim.analysis.references import (
     dop853_reference,
     record_at,
     rk4_reference,
-    run_trajectory,
     smooth,
 )
 from animsim.compile import Compiled
 from animsim.errors import UsageError
 from animsim.integrators import FIXED_STEP, REGISTRY, integrator_class
-from animsim.record import Clock, landing_steps, record_steps
+from animsim.record import Clock, landing_steps, scene_record_steps
 from animsim.scene import models as m
 
 COLUMNS = (
@@ -80,9 +82,16 @@ COLUMNS = (
     "status",
 )
 REFERENCE_KINDS = ("auto", "analytic", "fine")
-#: the default step sizes are the scene's dt and this many halvings of it
-DEFAULT_HALVINGS = 4
-DEFAULT_REPEAT = 3
+#: the default step sizes, as multiples of the scene's dt: four points for the
+#: order fit, nested (each halves the one before, so they share record times),
+#: and the finest only 4 times finer than the scene's, so the rows together
+#: cost 7.5 runs of the scene and the reference (from a quarter of the finest)
+#: stays affordable; a bigger step also shows where a method stops being stable
+DEFAULT_STEP_FACTORS = (2.0, 1.0, 0.5, 0.25)
+#: timed runs per row, after its accuracy run (which also warms it up)
+DEFAULT_REPEAT = 1
+#: the probe that estimates the total time runs each method this many steps
+PROBE_STEPS = 200
 #: the most steps one run may take (the spec's limit; --max-steps raises it)
 DEFAULT_MAX_STEPS = 100_000_000
 #: an error below this many machine epsilons of |x| sqrt(steps) is round-off
@@ -96,6 +105,8 @@ REFERENCE_MARGIN = 3.0
 ASYMPTOTIC_LIMIT = 0.5
 #: below this (J) an energy scale means nothing
 ENERGY_FLOOR = 1e-12
+#: the best order a scene with emitters allows (births within a step)
+EMITTER_ORDER_CAP = 2
 STATUS_OK = "ok"
 STATUS_UNSTABLE = "unstable"
 
@@ -154,12 +165,19 @@ class OrderFit:
     total: int
     below: int = 0  # stable points at round-off or reference accuracy
     above: int = 0  # stable points not yet in the asymptotic regime
+    #: the order this scene allows, when something in it caps the method's own
+    capped: int | None = None
+    cap_reason: str = ""
+
+    @property
+    def expected_text(self) -> str:
+        if self.capped is None or self.capped >= self.expected:
+            return f"expected {self.expected}"
+        return f"expected {self.capped}, not {self.expected}: {self.cap_reason}"
 
     def describe(self) -> str:
         if self.order is not None:
-            return (
-                f"{self.order:.2f}  (expected {self.expected}; fit over {self.points} of {self.total} points)"
-            )
+            return f"{self.order:.2f}  ({self.expected_text}; fit over {self.points} of {self.total} points)"
         if self.stable == 0:
             why = "unstable at every dt"
         elif self.below == self.stable:
@@ -172,7 +190,7 @@ class OrderFit:
             ]
             detail = ", ".join(f"{n} {what}" for n, what in left_out if n)
             why = f"{self.points} usable of {self.total} points ({detail}); need 2"
-        return f"n/a  (expected {self.expected}; {why})"
+        return f"n/a  ({self.expected_text}; {why})"
 
 
 @dataclass
@@ -205,21 +223,26 @@ def parse_integrators(text: str | None) -> list[str]:
         if name not in REGISTRY:
             if name in m.INTEGRATOR_NAMES:
                 raise UsageError(f"--integrators: {name!r} is not available in this build")
-            close = difflib.get_close_matches(name, list(REGISTRY), n=1)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
+            from animsim.scene.loader import did_you_mean
+
+            hint = did_you_mean(name, list(REGISTRY))
             raise UsageError(f"--integrators: unknown method {name!r}{hint} (valid: {', '.join(REGISTRY)})")
     return list(dict.fromkeys(names))
 
 
-def default_dts(dt: float, halvings: int = DEFAULT_HALVINGS) -> list[float]:
-    """The scene's dt and ``halvings`` halvings of it: dt, dt/2, ..., dt/2^halvings."""
-    return [dt / 2**k for k in range(halvings + 1)]
+def default_dts(dt: float, duration: float | None = None) -> list[float]:
+    """2 dt, dt, dt/2, dt/4 (DEFAULT_STEP_FACTORS); when 2 dt is longer than the
+    duration, dt/8 takes its place, so there are always four."""
+    dts = [dt * f for f in DEFAULT_STEP_FACTORS]
+    if duration is not None and dts[0] > duration:
+        dts = [*dts[1:], dt * DEFAULT_STEP_FACTORS[-1] / 2]
+    return dts
 
 
 def parse_dts(text: str | None, scene: m.Scene) -> list[float]:
     """Step sizes from ``--dt``, largest first; default :func:`default_dts` of the scene's dt."""
     if text is None:
-        return default_dts(scene.dt)
+        return default_dts(scene.dt, scene.duration)
     values: list[float] = []
     for part in (s.strip() for s in text.split(",")):
         if not part:
@@ -343,7 +366,7 @@ def common_times(
                 f"--dt {dt:g}: {clock.steps} steps is more than the limit of {max_steps} (raise it with --max-steps)"
             )
     coarse = Clock.make(scene.duration, max(dts))
-    recorded = record_steps(coarse, every=scene.record.every, fps=scene.record.fps)
+    recorded = scene_record_steps(coarse, scene.record.every, scene.record.fps)
     candidates = [coarse.time(int(s)) for s in recorded]
     keep = np.ones(len(candidates), dtype=bool)
     for clock in clocks:
@@ -370,6 +393,7 @@ def compare(
     max_steps: int = DEFAULT_MAX_STEPS,
     jobs: int = 1,
     scheduler: Any = None,
+    backend: str = "numpy",
 ) -> Comparison:
     """Run every (integrator, dt), measure errors against a reference and time the runs.
 
@@ -379,8 +403,8 @@ def compare(
     """
     if reference not in REFERENCE_KINDS:
         raise UsageError(f"--reference: {reference!r} is not one of {', '.join(REFERENCE_KINDS)}")
-    if repeat < 1:
-        raise UsageError(f"--repeat: must be >= 1, not {repeat}")
+    if repeat < 0:
+        raise UsageError(f"--repeat: must be >= 0, not {repeat}")
     notes: list[str] = []
     if scene.adaptive is not None:
         notes.append("the scene's adaptive stepping is ignored: compare runs each method at fixed steps")
@@ -409,7 +433,7 @@ def compare(
         except ReferenceFailed as exc:
             notes.append(f"{exc}; falling back to RK4 with dt halved")
 
-    cases = [(scene, name, integ, dt, times, repeat) for integ in integrators for dt in dts]
+    cases = [(scene, name, integ, dt, times, repeat, backend) for integ in integrators for dt in dts]
     if jobs == 1 and scheduler is None:
         runs: list[_Run] = []
         for case in cases:
@@ -427,7 +451,7 @@ def compare(
 
         runs = map_cases(_measure_case, cases, jobs=jobs, scheduler=scheduler, progress=tick)
         for r, case in zip(runs, cases, strict=True):
-            r.compiled = record_at(*case[:4], times)  # compiling is cheap; shipping it back is not
+            r.compiled = record_at(*case[:4], times, backend)  # compiling is cheap; shipping it back is not
 
     moving = None if base.emitters is not None else ~base.system.particle_pinned
     if ref is None:
@@ -444,27 +468,61 @@ def compare(
 
         if progress is not None:
             progress("reference (RK4, halving dt)")
-        ref = rk4_reference(scene, name, times, dts[-1], smallest, distance)
+        # On the rows' backend: numba's RK4 is the same method, several times faster.
+        ref = rk4_reference(scene, name, times, dts[-1], smallest, distance, backend)
     notes.extend(ref.notes)
 
     conservative = base.conservative
     rows = [_row(r, ref, moving, conservative) for r in runs]
     ceiling = ASYMPTOTIC_LIMIT * motion_scale(ref.trajectory, moving)
     orders = _fit_orders(rows, integrators, ref, ceiling)
+    if base.emitters is not None:
+        for fit in orders:
+            # A particle born inside a step is carried to the step's end with
+            # its birth acceleration held constant: an O(dt^2) velocity error
+            # whatever the method, so order min(p, 2) (animsim.emitters,
+            # "The rest of the birth step"; smoke.yaml's rk4 measures 1.98).
+            fit.capped = min(fit.expected, EMITTER_ORDER_CAP)
+            fit.cap_reason = (
+                "particles born inside a step finish it with constant acceleration, "
+                "which limits any method to order 2"
+            )
     return Comparison(name, ref, rows, orders, times, repeat, conservative, notes)
 
 
-def _measure(scene: m.Scene, name: str, integ: str, dt: float, times: np.ndarray, repeat: int) -> _Run:
-    """One accuracy run into memory (also the warm-up), then ``repeat`` timed runs without sinks."""
-    from animsim.engine import run
+def _measure(
+    scene: m.Scene,
+    name: str,
+    integ: str,
+    dt: float,
+    times: np.ndarray,
+    repeat: int,
+    backend: str = "numpy",
+) -> _Run:
+    """One accuracy run into memory (also the warm-up), then ``repeat`` timed runs without sinks.
 
-    compiled = record_at(scene, name, integ, dt, times)
-    traj, _ = run_trajectory(compiled)
-    walls = []
+    With ``repeat`` = 0 the accuracy run's own wall time is the row's seconds.
+    """
+    import dataclasses
+
+    from animsim.engine import run
+    from animsim.record import MemorySink
+
+    compiled = record_at(scene, name, integ, dt, times, backend)
+    sink = MemorySink()
     with np.errstate(all="ignore"):
-        for _ in range(repeat):
-            result = run(compiled, [])
-            walls.append(result.wall_time)
+        result = run(compiled, [sink])
+    traj = Trajectory.from_sink(sink, compiled.emitters is None)
+    walls = [result.wall_time]
+    if repeat > 0:
+        # Timed without record times: the loop would otherwise stop at each of
+        # them (leaving numba's compiled loop) even with no sink to feed. The
+        # watchdog still checks as often; the status is the accuracy run's.
+        bare = dataclasses.replace(compiled, record_steps=np.array([0, compiled.clock.steps], dtype=np.int64))
+        walls = []
+        with np.errstate(all="ignore"):
+            for _ in range(repeat):
+                walls.append(run(bare, []).wall_time)
     return _Run(
         integ,
         dt,
@@ -476,6 +534,65 @@ def _measure(scene: m.Scene, name: str, integ: str, dt: float, times: np.ndarray
         result.force_evals,
         result.failure.describe() if result.failure is not None else None,
     )
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """What a comparison will cost, from a short timed probe of each method."""
+
+    seconds: float  # the rows' runs (accuracy run + repeats), s
+    runs: int
+    steps: int  # steps of every run together
+    backend: str  # what the probe ran on (numba, or numpy when numba cannot run the scene)
+
+    def describe(self) -> str:
+        return (
+            f"{self.runs} runs, {self.steps:,} steps on {self.backend}: "
+            f"about {_duration(self.seconds)} plus the reference"
+        )
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 60:
+        return f"{max(seconds, 0.1):.2g} s" if seconds < 10 else f"{seconds:.0f} s"
+    return f"{seconds / 60:.1f} min"
+
+
+def estimate(
+    scene: m.Scene,
+    name: str,
+    *,
+    integrators: Sequence[str],
+    dts: Sequence[float],
+    repeat: int = DEFAULT_REPEAT,
+    backend: str = "numpy",
+    notice: Callable[[str], None] | None = None,
+) -> Estimate:
+    """Time each method over a few steps at the largest dt and scale to every row's steps.
+
+    Each probe runs twice (the first pays numba's compilation and NumPy's
+    warm-up, the second is timed), so the estimate is of steady stepping.
+    Recording is left out: compare records only at the common times.
+    """
+    from animsim.compile import with_overrides
+    from animsim.engine import run
+
+    dt = max(dts)
+    total_steps = sum(Clock.make(scene.duration, d).steps for d in dts)
+    probe_duration = min(scene.duration, PROBE_STEPS * dt)
+    seconds = 0.0
+    chosen = "numpy"
+    for integ in integrators:
+        probe = with_overrides(scene, integrator=integ, dt=dt, duration=probe_duration)
+        compiled = record_at(probe, name, integ, dt, np.array([0.0, probe.duration]), backend)
+        chosen = compiled.backend if compiled.backend != "numpy" else chosen
+        with np.errstate(all="ignore"):
+            run(compiled, [], notice=notice)
+            result = run(compiled, [])
+        per_step = result.wall_time / max(result.steps_taken, 1)
+        seconds += per_step * total_steps * (1 + repeat)
+    runs = len(integrators) * len(dts) * (1 + repeat)
+    return Estimate(seconds, runs, total_steps * len(integrators) * (1 + repeat), chosen)
 
 
 def _measure_case(case: tuple[Any, ...]) -> _Run:
@@ -551,50 +668,110 @@ def write_csv(comparison: Comparison, path: str | Path) -> None:
     write_text_atomic(path, "\n".join(lines) + "\n")
 
 
-def _sci(v: float | None) -> str:
-    return "—" if v is None else f"{v:.2e}"
+#: table columns by how much they matter when the screen is narrow: the last
+#: ones are left out first (the CSV from -o always has every column)
+_PRIORITY = (
+    "integrator",
+    "dt",
+    "error",
+    "seconds",
+    "status",
+    "energy_error",
+    "steps",
+    "rms_error",
+    "final_error",
+    "force_evals",
+)
 
 
-def table(comparison: Comparison) -> Any:
-    """The rich table printed by ``animsim compare``: one section per integrator."""
+def _cells(comparison: Comparison, r: Row, shown_name: bool) -> dict[str, str]:
+    from animsim.console import sig
+
+    return {
+        "integrator": r.integrator if shown_name else "",
+        "dt": sig(r.dt, 4),
+        "steps": str(r.steps),
+        "seconds": sig(r.seconds),
+        "force_evals": str(r.force_evals),
+        "error": sig(r.error),
+        "final_error": sig(r.final_error),
+        "rms_error": sig(r.rms_error),
+        "energy_error": sig(r.energy_error) if comparison.conservative else "",
+        "status": "ok" if r.status == STATUS_OK else f"[bold red]{r.status}[/]",
+    }
+
+
+def _build_table(comparison: Comparison, columns: Sequence[str]) -> Any:
+    from rich import box
     from rich.table import Table
 
     ref = comparison.reference
-    title = f"{comparison.scene_name}: error against cost"
-    caption = f"reference: {ref.kind}: {ref.description}"
-    t = Table(title=title, caption=caption, caption_justify="left", header_style="bold")
-    for col in COLUMNS:
+    t = Table(
+        title=f"{comparison.scene_name}: error against cost",
+        caption=f"reference: {ref.kind}: {ref.description}",
+        caption_justify="left",
+        header_style="bold",
+        box=box.SIMPLE_HEAD,
+        pad_edge=False,
+    )
+    for col in columns:
         numeric = col not in ("integrator", "status")
-        t.add_column(col, justify="right" if numeric else "left", no_wrap=True)
+        # no_wrap and no ellipsis: a number is shown whole or its column is left out
+        t.add_column(col, justify="right" if numeric else "left", no_wrap=True, overflow="fold")
     current = None
     for r in comparison.rows:
         if current is not None and r.integrator != current:
             t.add_section()
-        status = "ok" if r.status == STATUS_OK else f"[bold red]{r.status}[/]"
-        t.add_row(
-            r.integrator if r.integrator != current else "",
-            f"{r.dt:g}",
-            str(r.steps),
-            f"{r.seconds:.3g}",
-            str(r.force_evals),
-            _sci(r.error),
-            _sci(r.final_error),
-            _sci(r.rms_error),
-            _sci(r.energy_error) if comparison.conservative else "",
-            status,
-        )
+        cells = _cells(comparison, r, r.integrator != current)
+        t.add_row(*(cells[c] for c in columns))
         current = r.integrator
     return t
+
+
+def table_columns(comparison: Comparison, width: int | None) -> list[str]:
+    """The columns that fit in ``width`` characters (all of them when ``width`` is None)."""
+    from rich.console import Console
+
+    keep = [c for c in _PRIORITY if c != "energy_error" or comparison.conservative]
+    if width is None:
+        return [c for c in COLUMNS if c in keep]
+    console = Console(width=10_000)
+    while len(keep) > 3:
+        cols = [c for c in COLUMNS if c in keep]
+        if console.measure(_build_table(comparison, cols)).maximum <= width:
+            return cols
+        keep.pop()
+    return [c for c in COLUMNS if c in keep]
+
+
+def table(comparison: Comparison, width: int | None = None) -> Any:
+    """The rich table printed by ``animsim compare``: one section per integrator.
+
+    ``width``: the screen's columns; the least important columns are left out
+    until every number fits whole (:data:`_PRIORITY`; :func:`left_out` names them).
+    """
+    return _build_table(comparison, table_columns(comparison, width))
+
+
+def left_out(comparison: Comparison, width: int | None) -> list[str]:
+    """Columns :func:`table` leaves out at ``width``."""
+    shown = table_columns(comparison, width)
+    return [c for c in COLUMNS if c not in shown and (c != "energy_error" or comparison.conservative)]
 
 
 def summary_lines(comparison: Comparison) -> list[str]:
     """What ``animsim compare`` prints under the table."""
     times = comparison.times
+    if comparison.repeat == 0:
+        timing = "seconds: the accuracy run itself, recording included (--repeat 0)"
+    else:
+        runs = "1 timed run" if comparison.repeat == 1 else f"the median of {comparison.repeat} timed runs"
+        timing = f"seconds: {runs} of the simulation loop only"
     lines = [
-        f"errors at {len(times)} record times from {times[0]:g} to {times[-1]:g} s; "
-        f"seconds: median of {comparison.repeat} timed runs of the simulation loop only",
-        "observed order: least-squares slope of log error against log dt",
-        "  (over stable points above round-off whose error is below half the distance moved)",
+        f"errors at {len(times)} record times from {times[0]:g} to {times[-1]:g} s",
+        timing,
+        "observed order: least-squares slope of log error against log dt, over stable",
+        "  points above round-off whose error is below half the distance moved:",
     ]
     width = max(len(o.integrator) for o in comparison.orders)
     for o in comparison.orders:

@@ -76,7 +76,9 @@ FINE_TARGET_RATIO = 1e-3
 #: FINE_MAX_FACTOR times the finest compared run's (a scene with collisions
 #: may never converge at fourth order; compare says so instead of running forever)
 FINE_MAX_STEPS = 2_000_000
-FINE_MAX_FACTOR = 16
+FINE_MAX_FACTOR = 8
+#: ... but a short scene may always take this many (they cost little)
+FINE_MIN_STEPS = 20_000
 #: Richardson's estimate of RK4's error at h/2 from the change between h and h/2
 RK4_RICHARDSON = 2**4 - 1
 
@@ -627,9 +629,13 @@ def dop853_reference(compiled: Compiled, times: np.ndarray) -> Reference:
     return Reference("fine", desc, Trajectory(np.asarray(times), list(x), list(v)), accuracy)
 
 
-def record_at(scene: m.Scene, name: str, integrator: str, dt: float, times: np.ndarray) -> Compiled:
-    """Compile ``scene`` with ``integrator`` and ``dt``, recording exactly at ``times``."""
-    return compile_scene(with_overrides(scene, integrator=integrator, dt=dt), name, record_times=times)
+def record_at(
+    scene: m.Scene, name: str, integrator: str, dt: float, times: np.ndarray, backend: str = "numpy"
+) -> Compiled:
+    """Compile ``scene`` with ``integrator`` and ``dt`` for ``backend``, recording exactly at ``times``."""
+    return compile_scene(
+        with_overrides(scene, integrator=integrator, dt=dt), name, backend=backend, record_times=times
+    )
 
 
 def run_trajectory(compiled: Compiled) -> tuple[Trajectory, str]:
@@ -656,6 +662,7 @@ def rk4_reference(
     finest_dt: float,
     smallest_error: Callable[[Trajectory], float],
     distance: Callable[[Trajectory, Trajectory], float],
+    backend: str = "numpy",
 ) -> Reference:
     """RK4 with dt halved until the change is far below the smallest error measured.
 
@@ -667,15 +674,16 @@ def rk4_reference(
     compared run's steps, saying so.
     """
     dt = finest_dt / FINE_START_DIVISOR
-    first = record_at(scene, name, "rk4", dt, times)
-    finest_steps = first.clock.steps * FINE_START_DIVISOR
+    first = record_at(scene, name, "rk4", dt, times, backend)
+    # The finest compared run's steps (the first reference run takes FINE_START_DIVISOR times as many).
+    finest_steps = max(1, first.clock.steps // FINE_START_DIVISOR)
     prev, status = run_trajectory(first)
     if status != "ok":
         raise _unstable_reference(dt, status)
     notes: list[str] = []
     while True:
         dt /= 2
-        compiled = record_at(scene, name, "rk4", dt, times)
+        compiled = record_at(scene, name, "rk4", dt, times, backend)
         cur, status = run_trajectory(compiled)
         if status != "ok":
             raise _unstable_reference(dt, status)
@@ -684,7 +692,7 @@ def rk4_reference(
         prev = cur
         if change <= target or change == 0.0:
             break
-        limit = min(FINE_MAX_STEPS, FINE_MAX_FACTOR * finest_steps)
+        limit = min(FINE_MAX_STEPS, max(FINE_MIN_STEPS, FINE_MAX_FACTOR * finest_steps))
         if compiled.clock.steps * 2 > limit:
             notes.append(
                 f"the RK4 reference did not converge within {limit} steps "

@@ -166,10 +166,9 @@ def integrators_axis(text: str) -> Axis:
         raise UsageError("--integrators: give at least one name")
     for n in names:
         if n not in INTEGRATOR_NAMES:
-            import difflib
+            from animsim.scene.loader import did_you_mean
 
-            close = difflib.get_close_matches(n, INTEGRATOR_NAMES, n=1)
-            hint = f"; did you mean {close[0]!r}?" if close else ""
+            hint = did_you_mean(n, INTEGRATOR_NAMES)
             raise UsageError(
                 f"--integrators: unknown method {n!r}{hint} (valid: {', '.join(INTEGRATOR_NAMES)})"
             )
@@ -624,7 +623,7 @@ def display_cell(value: Any, column: str) -> str:
             return f"{value:+.3g}"
         if column == "wall_time":
             return f"{value:.3f}"
-        return f"{value:.4g}"
+        return f"{value:.3g}"
     return str(value)
 
 
@@ -632,23 +631,60 @@ def display_cell(value: Any, column: str) -> str:
 PRINT_HIDDEN = ("seed", "force_evals")
 
 
-def print_table(table: SweepTable, console: Any) -> None:
+#: printed columns left out first when the screen is narrow (the CSV keeps every one)
+NARROW_DROP_ORDER = ("particle", "at_time", "wall_time", "energy_end", "at_step", "steps", "case")
+
+
+def _table(table: SweepTable, cols: Sequence[str]) -> Any:
+    from rich import box
     from rich.table import Table
 
-    cols = [c for c in table.columns if c not in PRINT_HIDDEN]
-    if not any(r.message for r in table.rows):
-        cols.remove("message")
-    for c in ("at_step", "at_time", "particle"):
-        if all(r.value(c) is None for r in table.rows):
-            cols.remove(c)
-    t = Table(show_edge=False, header_style="bold")
+    t = Table(box=box.SIMPLE_HEAD, show_edge=False, header_style="bold", pad_edge=False)
     numeric = {"case", "steps", "energy_end", "drift", "error", "wall_time", "at_step", "at_time"}
     for c in cols:
-        t.add_column(c, justify="right" if c in numeric else "left", overflow="fold")
+        # no_wrap: a number is whole or its column is left out (see print_table)
+        t.add_column(c, justify="right" if c in numeric else "left", no_wrap=True, overflow="fold")
     style = {"ok": None, "unstable": "red", STATUS_INVALID: "yellow", STATUS_ERROR: "magenta"}
     for r in table.rows:
         t.add_row(*(display_cell(r.value(c), c) for c in cols), style=style.get(r.status))
-    console.print(t)
+    return t
+
+
+def printed_columns(table: SweepTable, width: int | None) -> list[str]:
+    """The table's columns that fit ``width`` (None: all the printable ones).
+
+    ``message`` is never a column (it is printed under the table, one line per
+    case), and the least useful columns go first (:data:`NARROW_DROP_ORDER`).
+    """
+    from rich.console import Console
+
+    cols = [c for c in table.columns if c not in PRINT_HIDDEN and c != "message"]
+    for c in ("at_step", "at_time", "particle"):
+        if all(r.value(c) is None for r in table.rows):
+            cols.remove(c)
+    if width is None:
+        return cols
+    measure = Console(width=10_000)
+    drop = [c for c in NARROW_DROP_ORDER if c in cols]
+    while measure.measure(_table(table, cols)).maximum > width and drop:
+        cols.remove(drop.pop(0))
+    return cols
+
+
+def print_table(table: SweepTable, console: Any) -> None:
+    """The table at the console's width, then each case's message (why it failed) on its own lines."""
+    cols = printed_columns(table, console.width)
+    console.print(_table(table, cols))
+    hidden = [c for c in printed_columns(table, None) if c not in cols]
+    if hidden:
+        console.print(
+            f"(left out at {console.width} columns: {', '.join(hidden)}; a wider window or -o FILE.csv has them)",
+            highlight=False,
+            markup=False,
+        )
+    for r in table.rows:
+        if r.message:
+            console.print(f"case {r.case}: {r.message}", highlight=False, markup=False)
 
 
 # --- plot ----------------------------------------------------------------------------------------

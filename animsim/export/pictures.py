@@ -20,6 +20,10 @@ FIGURE_SUFFIXES = {".png": "png", ".svg": "svg", ".pdf": "pdf"}
 # Trails of more particles than this make a grey smear; draw an even subset.
 MAX_TRAILS = 400
 AXES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}
+#: up to this many paths, each gets its own colour and its particle's name in the legend
+NAMED_PATHS = 10
+#: the part of the sequential colour map used for many paths (its last fifth is too pale on white)
+SEQUENTIAL_RANGE = 0.8
 
 
 def figure_format(path: Path) -> str:
@@ -78,10 +82,27 @@ def plot_trajectory(traj: Any, path: Path, *, view: str | None = None, title: st
     cuts = np.flatnonzero(np.diff(pid)) + 1
     groups = np.split(order, cuts)
     step = max(1, len(groups) // MAX_TRAILS)
-    cmap = plt.get_cmap("viridis")
-    for k, rows in enumerate(groups[::step]):
+    drawn = groups[::step]
+    named = len(drawn) <= NAMED_PATHS
+    if named:
+        # Few paths: each in a distinct colour of a qualitative palette, named in the legend.
+        from matplotlib.colors import is_color_like
+
+        palette = plt.get_cmap("tab10")
+        names = [traj.ids[int(traj.particle[rows[0]])] for rows in drawn]
+        # A particle named after a colour (red, green, blue) is drawn in it.
+        colors = [
+            name if is_color_like(name) and not name.replace(".", "").isdigit() else palette(k % 10)
+            for k, name in enumerate(names)
+        ]
+    else:
+        # Many paths: a sequential map stopped short of its pale end, which vanishes on white.
+        cmap = plt.get_cmap("viridis")
+        colors = [cmap(SEQUENTIAL_RANGE * k / max(1, len(drawn) - 1)) for k in range(len(drawn))]
+    for rows, color in zip(drawn, colors, strict=True):
         pts = traj.position[rows]
-        ax.plot(pts[:, a], pts[:, b], lw=0.8, alpha=0.6, color=cmap(k / max(1, len(groups[::step]) - 1)))
+        label = traj.ids[int(traj.particle[rows[0]])] if named else None
+        ax.plot(pts[:, a], pts[:, b], lw=1.0 if named else 0.8, alpha=0.85, color=color, label=label)
     last = slice(traj.frame_start[-2], traj.frame_start[-1])
     ax.scatter(
         traj.position[last, a], traj.position[last, b], s=6, color="black", zorder=3, label="last frame"
@@ -90,9 +111,12 @@ def plot_trajectory(traj: Any, path: Path, *, view: str | None = None, title: st
     ax.set_ylabel(f"{'xyz'[b]} (m)")
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(True, lw=0.3, alpha=0.5)
-    shown = len(groups[::step])
     ax.set_title(title or "trajectories")
-    ax.legend(loc="best", fontsize=8, title=f"{shown} of {len(groups)} paths", title_fontsize=8)
+    if named:
+        ax.legend(loc="best", fontsize=8)
+    else:
+        every = f", every {step}th" if step > 1 else ""
+        ax.legend(loc="best", fontsize=8, title=f"paths of {len(groups)} particles{every}", title_fontsize=8)
     fig.tight_layout()
     save_figure(fig, path)
     plt.close(fig)

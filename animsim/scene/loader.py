@@ -19,6 +19,7 @@ import hashlib
 import re
 import stat
 import types
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Union, get_args, get_origin
@@ -29,7 +30,7 @@ from yaml.events import AliasEvent
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
 from animsim.errors import Diagnostic, SceneError, UsageError
-from animsim.scene.models import Scene
+from animsim.scene.models import HEX_COLOR_PATTERN, Scene
 
 Path_ = tuple[str | int, ...]
 
@@ -466,9 +467,20 @@ def load_scene_bytes(raw: bytes, file: str, limits: Limits = Limits()) -> Loaded
     text = _decode(raw, file)
     data, marks = parse_yaml(text, file, limits)
     if not isinstance(data, dict):
-        kind = "empty" if data is None else f"a {type(data).__name__}"
+        kind = "empty" if data is None else f"a {_PY_KIND.get(type(data), type(data).__name__)}"
+        # Where the document itself starts (after comments and blank lines), not 1:1.
+        line, col = marks.at(())
         raise SceneError(
-            [Diagnostic(file, 1, 1, "", f"a scene must be a mapping of keys, but this document is {kind}")]
+            [
+                Diagnostic(
+                    file,
+                    line,
+                    col,
+                    "",
+                    f"a scene must be a mapping of keys, but this document is {kind} "
+                    "(a scene starts like 'duration: 2' on its own line, at column 1)",
+                )
+            ]
         )
     # Top-level keys starting with x- are free for anchors (as in Compose files).
     body = {k: v for k, v in data.items() if not (isinstance(k, str) and k.startswith("x-"))}
@@ -558,6 +570,8 @@ def parse_yaml(text: str, file: str, limits: Limits = Limits()) -> tuple[Any, Ma
         ) from None
 
 
+_PY_KIND = {list: "list", str: "string", int: "number", float: "number", bool: "boolean"}
+
 # PyYAML contexts that name where a bracket or quote was opened.
 _OPENED = {
     "while parsing a flow sequence": "the [",
@@ -577,6 +591,9 @@ def _syntax_diagnostic(exc: yaml.MarkedYAMLError, file: str) -> Diagnostic:
         # An unclosed bracket is noticed far from where it was opened: say where that was.
         where = f"started at line {cm.line + 1}, column {cm.column + 1}"
         return Diagnostic(file, line, col, "", f"YAML syntax: {opened} {where} is not closed: {problem}")
+    plain = _plain_syntax(exc)
+    if plain is not None:
+        return Diagnostic(file, line, col, "", f"YAML syntax: {plain}")
     msg = problem
     if exc.context:
         started = (
@@ -588,6 +605,34 @@ def _syntax_diagnostic(exc: yaml.MarkedYAMLError, file: str) -> Diagnostic:
     if "'\\t'" in msg or "\t" in msg:
         msg += " (YAML does not allow tabs for indentation; use spaces)"
     return Diagnostic(file, line, col, "", f"YAML syntax: {msg}")
+
+
+def _plain_syntax(exc: yaml.MarkedYAMLError) -> str | None:
+    """PyYAML's token-level wording (``expected <block end>, but found ...``) in plain words.
+
+    None when the problem is not one of the common indentation mistakes, so
+    the caller keeps PyYAML's own message (with where it started).
+    """
+    problem = exc.problem or ""
+    cm = exc.context_mark
+    started = f"line {cm.line + 1}, column {cm.column + 1}" if cm is not None else "above"
+    if problem.startswith("expected <block end>"):
+        context = exc.context or ""
+        block = "mapping" if "mapping" in context else "list" if "collection" in context else "block"
+        return (
+            f"this line is indented differently from the {block} it belongs to "
+            f"(which starts at {started}); keys of one mapping, and the items of one "
+            "list, must start at the same column"
+        )
+    if problem == "mapping values are not allowed here":
+        return (
+            "a ':' where no mapping can start: is this line indented too far, or does a value "
+            "contain ': '? (put such text in quotes)"
+        )
+    if problem == "could not find expected ':'":
+        where = f"line {cm.line + 1}" if cm is not None else "the line above"
+        return f"expected 'key: value' (is a ':' missing on {where}?)"
+    return None
 
 
 # --- pydantic errors -> diagnostics ---------------------------------------------
@@ -656,11 +701,59 @@ def _tag_of(model: type[BaseModel]) -> str | None:
     return args[0] if args else None
 
 
-def _suggest(word: Any, choices: list[str]) -> str:
+# Names users reach for that the scene language spells differently: a
+# did-you-mean that spelling distance alone would never find.
+TYPE_ALIASES = {
+    "hair": "strand",
+    "rope": "strand",
+    "chain": "strand",
+    "string": "strand",
+    "jello": "soft_box",
+    "jelly": "soft_box",
+    "softbox": "soft_box",
+    "soft_body": "soft_box",
+    "softbody": "soft_box",
+    "cube": "soft_box",
+    "sheet": "cloth",
+    "fabric": "cloth",
+    "flag": "cloth",
+    "ball": "sphere",
+    "circle": "disc",
+    "disk": "disc",
+    "damping": "drag",
+    "air_resistance": "drag",
+    "gravitation": "attractor",
+    "rk": "rk4",
+    "runge_kutta": "rk4",
+    "runge_kutta_4": "rk4",
+    "explicit_euler": "euler",
+    "forward_euler": "euler",
+    "semi_implicit_euler": "symplectic_euler",
+    "symplectic": "symplectic_euler",
+    "backward_euler": "implicit_euler",
+    "velocity_verlet": "verlet",
+    "leapfrog": "verlet",
+}
+
+
+def _normal(word: str) -> str:
+    return word.strip().lower().replace("-", "_").replace(" ", "_")
+
+
+def did_you_mean(word: Any, choices: Sequence[str]) -> str:
+    """``; did you mean 'x'?``: by case and spelling (RK4, Soft-Box), by alias (hair), then by distance."""
     if not isinstance(word, str):
         return ""
-    close = difflib.get_close_matches(word, choices, n=1, cutoff=0.6)
-    return f"; did you mean '{close[0]}'?" if close else ""
+    choices = list(choices)
+    by_case = {_normal(c): c for c in choices}
+    norm = _normal(word)
+    if norm in by_case and by_case[norm] != word:
+        return f"; did you mean '{by_case[norm]}'?"
+    alias = TYPE_ALIASES.get(norm)
+    if alias in choices:
+        return f"; did you mean '{alias}'?"
+    close = difflib.get_close_matches(norm, list(by_case), n=1, cutoff=0.6)
+    return f"; did you mean '{by_case[close[0]]}'?" if close else ""
 
 
 _KIND = {
@@ -744,6 +837,38 @@ def _diagnostics(exc: ValidationError, data: dict[str, Any], marks: Marks, file:
     return out
 
 
+def _mapping_fields(err: dict[str, Any]) -> list[tuple[str, bool]]:
+    """(key, required) of the one model expected where ``err`` found no mapping; [] if unclear."""
+    models = _models_at(err["loc"])
+    if len(models) != 1:
+        return []
+    return [(name, f.is_required()) for name, f in models[0].model_fields.items()]
+
+
+def _mapping_hint(err: dict[str, Any]) -> str:
+    """``lifetime: 2`` -> name the keys the mapping takes, and the likely fix."""
+    fields = _mapping_fields(err)
+    keys = ", ".join(f"{k} (required)" if req else k for k, req in fields)
+    msg = f"expected a mapping with keys {keys}; got {_short(err['input'])}"
+    required = [k for k, req in fields if req]
+    value = err["input"]
+    if len(required) == 1 and isinstance(value, int | float) and not isinstance(value, bool):
+        msg += f" (write {{{required[0]}: {value}}})"
+    return msg
+
+
+# Patterns of the scene language, said in words (pydantic would show the regex).
+_PATTERN_WORDS = {
+    HEX_COLOR_PATTERN: "a colour written #rrggbb or #rrggbbaa in hexadecimal (e.g. #ff8000)",
+}
+
+
+def _pattern_message(err: dict[str, Any]) -> str:
+    pattern = err.get("ctx", {}).get("pattern")
+    words = _PATTERN_WORDS.get(pattern, f"text matching {pattern}")
+    return f"expected {words}, got {_short(err['input'])}"
+
+
 def _message(path: Path_, errs: list[dict[str, Any]], marks: Marks) -> tuple[str, bool]:
     """One message for all errors at one place (a union reports one per branch)."""
     types = [e["type"] for e in errs]
@@ -752,14 +877,14 @@ def _message(path: Path_, errs: list[dict[str, Any]], marks: Marks) -> tuple[str
     if "extra_forbidden" in types:
         e = errs[types.index("extra_forbidden")]
         allowed = sorted({f for m in _models_at(e["loc"][:-1]) for f in m.model_fields})
-        return f"unknown key{_suggest(path[-1], allowed)} (allowed: {', '.join(allowed)})", True
+        return f"unknown key{did_you_mean(path[-1], allowed)} (allowed: {', '.join(allowed)})", True
     if "missing" in types:
         return "required key is missing", False
     if "union_tag_invalid" in types:
         e = errs[types.index("union_tag_invalid")]
         tags = [t.strip(" '") for t in e["ctx"]["expected_tags"].split(",")]
         return (
-            f"unknown type {e['ctx']['tag']!r}{_suggest(e['ctx']['tag'], tags)} (valid: {', '.join(tags)})",
+            f"unknown type {e['ctx']['tag']!r}{did_you_mean(e['ctx']['tag'], tags)} (valid: {', '.join(tags)})",
             False,
         )
     if "union_tag_not_found" in types:
@@ -768,12 +893,16 @@ def _message(path: Path_, errs: list[dict[str, Any]], marks: Marks) -> tuple[str
         e = errs[types.index("literal_error")]
         choices = re.findall(r"'([^']*)'", e["ctx"]["expected"])
         return (
-            f"{_short(e['input'])} is not one of: {', '.join(choices)}{_suggest(e['input'], choices)}",
+            f"{_short(e['input'])} is not one of: {', '.join(choices)}{did_you_mean(e['input'], choices)}",
             False,
         )
     if len(errs) > 1 and all(t in _KIND for t in types):
         kinds = " or ".join(dict.fromkeys(_KIND[t] for t in types))
         msg = f"expected {kinds}, got {_short(first['input'])}"
+    elif first["type"] in ("model_type", "model_attributes_type", "dict_type") and _mapping_fields(first):
+        msg = _mapping_hint(first)
+    elif first["type"] == "string_pattern_mismatch":
+        msg = _pattern_message(first)
     elif first["type"] in _KIND:
         msg = f"expected {_KIND[first['type']]}, got {_short(first['input'])}"
         value = first["input"]

@@ -79,10 +79,11 @@ Id = Annotated[
     AfterValidator(_id_to_str),
     Field(description="a unique string or integer; integers become strings"),
 ]
+HEX_COLOR_PATTERN = r"^#([0-9a-fA-F]{6}|[0-9a-fA-F]{8})$"
 HexColor = Annotated[
     str,
     Field(
-        pattern=r"^#([0-9a-fA-F]{6}|[0-9a-fA-F]{8})$",
+        pattern=HEX_COLOR_PATTERN,
         description="#rrggbb or #rrggbbaa",
     ),
 ]
@@ -858,7 +859,7 @@ class IntegratorSpec(Model):
 
 
 class Record(Model):
-    """Which steps are written to the trajectory."""
+    """Which steps are written to the trajectory; without every or fps, 60 frames per second (every step when dt >= 1/60 s)."""
 
     every: Annotated[StrictInt, Field(ge=1)] | None = Doc(
         None, "record every n-th step (and always the last)", example=10

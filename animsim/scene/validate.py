@@ -20,7 +20,7 @@ from typing import Any, get_args
 from pydantic import TypeAdapter, ValidationError
 
 from animsim.scene.models import QUATERNION_TOLERANCE, Body, BodyPoint, Id, MeshStructure, Particle, Scene
-from animsim.scene.structures import local_index, parse_structure_id
+from animsim.scene.structures import grid_shape, local_index, parse_structure_id
 
 Problem = tuple[tuple[str | int, ...], str, bool]
 
@@ -28,6 +28,20 @@ Problem = tuple[tuple[str | int, ...], str, bool]
 def _suggest(word: str, choices: list[str]) -> str:
     close = difflib.get_close_matches(word, choices, n=1, cutoff=0.6)
     return f"; did you mean '{close[0]}'?" if close else ""
+
+
+def index_range(s: Any) -> str:
+    """The valid ids of a structure, e.g. ``sheet[0..9, 0..9]`` (for messages)."""
+    return f"{s.id}[{', '.join(f'0..{n - 1}' for n in grid_shape(s))}]"
+
+
+def _missing_id_message(pid: str, known: list[str], structures: dict[str, Any]) -> str:
+    """Why ``pid`` names no particle: the valid range of a structure it points into, or a near id."""
+    parsed = parse_structure_id(pid)
+    if parsed is not None and parsed[0] in structures:
+        s = structures[parsed[0]]
+        return f"no particle with id {pid!r}: {s.type} {s.id!r} has {index_range(s)}"
+    return f"no particle with id {pid!r}{_suggest(pid, known)}"
 
 
 @dataclass(frozen=True)
@@ -122,7 +136,11 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
         for k, pid in enumerate(s.pin):
             if local_index(s, pid) is None:
                 out.append(
-                    (("structures", i, "pin", k), f"{pid!r} is not a particle of {s.type} {s.id!r}", False)
+                    (
+                        ("structures", i, "pin", k),
+                        f"{pid!r} is not a particle of {s.type} {s.id!r} (valid: {index_range(s)})",
+                        False,
+                    )
                 )
 
     def structure_of(pid: str):
@@ -179,6 +197,10 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
 
     body_ids = _check_bodies(bodies, first_seen, structure_of, out)
     known = list(first_seen)
+    # A renamed particle breaks every spring that names it: report each
+    # missing id once, at its first use, and list the other places there,
+    # instead of one follow-on error per spring.
+    missing: dict[str, list[tuple[str | int, ...]]] = {}
     for i, sp in enumerate(scene.springs):
         if sp is None:
             continue
@@ -196,13 +218,18 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
                     )
                 )
             elif ids_complete and pid not in first_seen and structure_of(pid) is None:
-                out.append(
-                    (
-                        ("springs", i, "between", k),
-                        f"no particle with id {pid!r}{_suggest(pid, known)}",
-                        False,
-                    )
-                )
+                missing.setdefault(pid, []).append(("springs", i, "between", k))
+    for pid, places in missing.items():
+        msg = _missing_id_message(pid, known, structures)
+        if len(places) > 1:
+            also = ", ".join(".".join(map(str, p)) for p in places[1:4])
+            more = f" and {len(places) - 4} more" if len(places) > 4 else ""
+            msg += f" (also named at {also}{more})"
+        out.append((places[0], msg, False))
+    for i, sp in enumerate(scene.springs):
+        if sp is None:
+            continue
+        a, b = sp.between
         if a == b and not isinstance(a, BodyPoint):
             out.append(
                 (

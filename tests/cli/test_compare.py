@@ -184,8 +184,8 @@ def test_plot_bytes_are_deterministic_for_the_same_comparison(tmp_path):
         (("--dt", "-1"), "> 0"),
         (("--dt", "5"), "longer than the duration"),
         (("--plot", "out.gif"), "unknown image type"),
-        (("--repeat", "0"), "repeat"),
-        (("--max-steps", "1000"), "more than the limit"),  # dt/16 takes 3200 steps
+        (("--repeat", "-1"), "repeat"),
+        (("--max-steps", "500"), "more than the limit"),  # the finest default, dt/4, takes 800 steps
         (("--dt", "1e-9"), "more than the limit"),  # refused before any per-step allocation
     ],
 )
@@ -202,7 +202,10 @@ def test_step_sizes_that_do_not_halve_compare_only_at_shared_times(tmp_path):
     from animsim.scene.loader import load_scene
 
     loaded = load_scene(SCENES / "oscillator.yaml")
-    scene = loaded.scene.model_copy(update={"duration": 0.3})
+    from animsim.scene.models import Record
+
+    # every step recorded (the default would be 60 fps, which these grids do not share)
+    scene = loaded.scene.model_copy(update={"duration": 0.3, "record": Record(every=1)})
     result = compare(scene, loaded.name, integrators=["rk4"], dts=[0.01, 0.003], repeat=1)
     # 0.01 s and 0.003 s grids meet at 0, 0.03, 0.06, ... and at the end, 0.3 s.
     np.testing.assert_allclose(result.times, np.linspace(0.0, 0.3, 11), atol=1e-12)

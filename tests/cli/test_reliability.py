@@ -115,9 +115,11 @@ def test_signal_mid_run_writes_complete_file_and_exits_130(tmp_path: Path, signu
 
 # --- disk full ---------------------------------------------------------------------------
 
+# Every step recorded (not the 60 fps default), so outputs are big enough to fill a tiny disk.
 SMALL_SCENE = """\
 duration: 1
 dt: 0.001
+record: {every: 1}
 particles:
   - {id: a, mass: 1, position: [0, 0, 0], velocity: [1, 2, 0]}
   - {id: b, mass: 1, position: [1, 0, 0]}

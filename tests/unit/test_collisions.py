@@ -76,7 +76,7 @@ def test_bounce_apex_heights_follow_restitution(method, dt, bounces, rel):
     # here); symplectic Euler loses O(dt) per flight.
     h0, e = 1.0, 0.8
     text = (
-        f"duration: 3.0\ndt: {dt}\nintegrator: {method}\nforces: [{{type: gravity}}]\n"
+        f"duration: 3.0\ndt: {dt}\nintegrator: {method}\nrecord: {{every: 1}}\nforces: [{{type: gravity}}]\n"
         + ball(h0, 0.0)
         + FLOOR % (e, 0)
     )

@@ -184,7 +184,7 @@ def test_unstable_run_exits_1_with_the_report(cli, tmp_path):
 
 def test_an_interrupt_writes_the_checked_frames_so_far():
     text = STIFF.replace("integrator: euler", "integrator: symplectic_euler").replace(
-        "dt: 0.01", "dt: 0.0001"
+        "dt: 0.01", "dt: 0.0001\nrecord: {every: 1}"
     )
     calls = iter(range(10**6))
     sink = MemorySink()
