@@ -9,7 +9,6 @@ problem, 2 the input or the usage is wrong, 130 interrupted.
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import signal
 import sys
@@ -572,11 +571,9 @@ def explain(
 
 
 def schema_text() -> str:
-    from animsim.scene.models import Scene
+    from animsim.scene.schema import schema_text as text
 
-    schema = Scene.model_json_schema()
-    schema = {"$schema": schema.pop("$schema"), **schema}
-    return json.dumps(schema, indent=2) + "\n"
+    return text()
 
 
 @app.command()

@@ -164,7 +164,7 @@ def write_starter(path: Path, name: str, force: bool = False) -> list[str]:
     or an existing ``path`` unless ``force``. Returns what was done, one line each.
     """
     from animsim.atomic import write_text_atomic
-    from animsim.cli import schema_text
+    from animsim.scene.schema import schema_text
 
     text = scene_text(name)
     folder = path.parent
