@@ -120,10 +120,19 @@ class Turbulence(ForceElement):
 
     def field(self, x: np.ndarray, t: float) -> np.ndarray:
         """The force (n, 3) in N at positions ``x`` (n, 3) and time ``t`` (s)."""
-        phase = x @ self.kt  # (n, M)
+        # The numba kernel's operations in its order (no BLAS, which may fuse or
+        # reorder the sums): phase ((x0 k0 + x1 k1) + x2 k2) + (omega t + phi), then
+        # the modes summed one after another, so both backends agree to the bit.
+        kt = self.kt
+        phase = x[:, 0:1] * kt[0]  # (n, M)
+        phase += x[:, 1:2] * kt[1]
+        phase += x[:, 2:3] * kt[2]
         phase += self.omega * t + self.phi
         np.cos(phase, out=phase)
-        return phase @ self.direction
+        f = np.zeros((len(x), DIMENSIONS))
+        for j in range(phase.shape[1]):  # modes (32), not particles
+            f += phase[:, j : j + 1] * self.direction[j]
+        return f
 
     #: a random field: its energy input has no bound the watchdog could use
     watch_role = UNKNOWN
