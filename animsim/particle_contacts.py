@@ -98,23 +98,26 @@ def find_pairs_numpy(
     return np.ascontiguousarray(pairs[order])
 
 
-def _scatter(i: np.ndarray, j: np.ndarray, q: np.ndarray, n_rows: int) -> np.ndarray:
+class _Scatter:
     """Per-particle sums (n_rows, 3) of ``-q`` on ``i`` and ``+q`` on ``j``, in pair order.
 
     ``np.bincount`` adds its weights bin by bin in array order from 0.0, so the
-    interleaved index ``[i0, j0, i1, j1, ...]`` gives exactly the numba loop
-    ``dv[i] -= q; dv[j] += q`` over the pairs, to the bit.
+    interleaved bins ``[3 i0 + (0, 1, 2), 3 j0 + (0, 1, 2), 3 i1 + ...]`` give
+    exactly the numba loop ``dv[i] -= q; dv[j] += q`` over the pairs, to the bit.
     """
-    idx = np.empty(2 * i.size, dtype=np.int64)
-    idx[0::2] = i
-    idx[1::2] = j
-    out = np.empty((n_rows, 3))
-    wts = np.empty(2 * i.size)
-    for a in range(3):  # the three axes, not particles
-        wts[0::2] = -q[:, a]
-        wts[1::2] = q[:, a]
-        out[:, a] = np.bincount(idx, weights=wts, minlength=n_rows)
-    return out
+
+    def __init__(self, i: np.ndarray, j: np.ndarray, n_rows: int):
+        axes = np.arange(3)
+        self.bins = np.stack([3 * i[:, None] + axes, 3 * j[:, None] + axes], axis=1).ravel()
+        self.n_rows = n_rows
+        self.weights = np.empty((i.size, 2, 3))
+
+    def __call__(self, q: np.ndarray) -> np.ndarray:
+        np.negative(q, out=self.weights[:, 0])
+        self.weights[:, 1] = q
+        return np.bincount(self.bins, weights=self.weights.ravel(), minlength=3 * self.n_rows).reshape(
+            self.n_rows, 3
+        )
 
 
 def _unit(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -158,6 +161,7 @@ def resolve_pairs_numpy(
     count = np.bincount(np.concatenate([i, j]), minlength=n_rows)
     relax = np.minimum(RELAX / np.maximum(count[i], count[j]), 1.0)
     inv = inv_mass[:, None]
+    scatter = _Scatter(i, j, n_rows)
 
     n, _ = _unit(x[j] - x[i])
     # restitution target from the approach before any pass
@@ -172,25 +176,29 @@ def resolve_pairs_numpy(
         new = np.maximum(lam + dl, 0.0)
         dl = new - lam
         lam = new
-        v += _scatter(i, j, dl[:, None] * n, n_rows) * inv  # +J n on j, -J n on i: momentum kept
+        v += scatter(dl[:, None] * n) * inv  # +J n on j, -J n on i: momentum kept
     if friction > 0:
         dvel = v[j] - v[i]
         vn = dot3(dvel, n)
         vt = dvel - vn[:, None] * n
         speed = np.sqrt(dot3(vt, vt))
-        s = speed > 0
-        jt = np.minimum(speed[s] / w[s] * relax[s], friction * lam[s]) / speed[s]
-        # the numba kernel adds +jt vt on i and -jt vt on j: the same scatter of -(jt vt)
-        v += _scatter(i[s], j[s], -(jt[:, None] * vt[s]), n_rows) * inv
+        with np.errstate(divide="ignore", invalid="ignore"):
+            jt = np.minimum(speed / w * relax, friction * lam) / speed
+        # pairs at no sliding speed add nothing (a 0.0 weight leaves every sum's bits alone);
+        # the numba kernel adds +jt vt on i and -jt vt on j: the scatter of -(jt vt)
+        jt = np.where(speed > 0, jt, 0.0)
+        v += scatter(-(jt[:, None] * vt)) * inv
     reach = radius[i] + radius[j]
     for _ in range(iterations):
         d = x[j] - x[i]
         dist = np.sqrt(dot3(d, d))
         over = reach - dist
-        s = over > 0
-        nn, _ = _unit(d[s])
-        c = over[s] / w[s] * relax[s]
-        x += _scatter(i[s], j[s], c[:, None] * nn, n_rows) * inv  # the pair's centre of mass stays
+        # the numba kernel skips a pair with over <= 0 (so a NaN one is not skipped); a skipped
+        # pair's weight 0.0 leaves every sum's bits alone
+        with np.errstate(divide="ignore", invalid="ignore"):
+            nn = np.where(dist[:, None] > 0, d / dist[:, None], (0.0, 1.0, 0.0))
+            c = np.where(over <= 0, 0.0, over / w * relax)
+        x += scatter(c[:, None] * nn) * inv  # the pair's centre of mass stays
     return True
 
 
