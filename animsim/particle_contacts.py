@@ -7,7 +7,10 @@ sum of their radii are found and resolved:
   the pairs within ``2 * max radius`` (``query_pairs``); numba hashes the
   particles into a uniform grid of cells ``2 * max radius`` wide (Teschner et
   al., "Optimized Spatial Hashing for Collision Detection of Deformable
-  Objects", VMV 2003) and looks in the 27 cells around each one.
+  Objects", VMV 2003) and looks in the 27 cells around each one. Both keep a
+  pair by the same test and sort the pairs by (i, j), and the passes below do
+  the same operations in the same order on both, so the backends agree to the
+  bit (granular flow is chaotic: any last-bit difference would grow).
 * **Velocities**: pairwise normal impulses along the line of centres, mass
   weighted (``J = -(1 + e) v_n / (1/m_i + 1/m_j)``, the textbook two-body
   impact, e.g. Goldstein, "Classical Mechanics", section 3.11), solved by a
