@@ -37,6 +37,7 @@ import numpy as np
 
 from animsim.collisions import RESTING_STEPS, _apply_friction
 from animsim.elements import StepStage
+from animsim.vec import dot3
 
 SPHERE, BOX, CAPSULE = 0, 1, 2
 KIND_NAMES = {SPHERE: "sphere", BOX: "box", CAPSULE: "capsule"}
@@ -109,28 +110,27 @@ def sdf(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Signed distance and outward unit normal of points ``p`` (M, 3), relative to the shape's centre."""
     if kind == SPHERE:
-        length = np.sqrt(np.einsum("ij,ij->i", p, p))
+        length = np.sqrt(dot3(p, p))
         n = np.empty_like(p)
         ok = length > 0
         n[ok] = p[ok] / length[ok, None]
         n[~ok] = (0.0, 1.0, 0.0)  # at the very centre any direction is out; pick up
         return length - radius, n
     if kind == CAPSULE:
-        ss = float(segment @ segment)
-        t = np.clip(p @ segment / ss, -1.0, 1.0) if ss > 0 else np.zeros(len(p))
+        # every sum x, then y, then z, as the numba kernel: the backends agree to the bit
+        ss = float((segment[0] * segment[0] + segment[1] * segment[1]) + segment[2] * segment[2])
+        t = np.clip(dot3(p, segment) / ss, -1.0, 1.0) if ss > 0 else np.zeros(len(p))
         w = p - t[:, None] * segment
-        length = np.sqrt(np.einsum("ij,ij->i", w, w))
+        length = np.sqrt(dot3(w, w))
         n = np.empty_like(p)
         ok = length > 0
         n[ok] = w[ok] / length[ok, None]
         if not ok.all():  # on the axis: any direction perpendicular to it
-            perp = (
-                np.cross(segment, (1.0, 0.0, 0.0))
-                if abs(segment[0]) < 0.9 * np.sqrt(ss)
-                else np.cross(segment, (0.0, 1.0, 0.0))
-            )
-            nrm = np.linalg.norm(perp)
-            n[~ok] = perp / nrm if nrm > 0 else (0.0, 1.0, 0.0)
+            sx, sy, sz = float(segment[0]), float(segment[1]), float(segment[2])
+            # cross(s, x-axis) or cross(s, y-axis), written out as the numba kernel does
+            cx, cy, cz = (0.0, sz, -sy) if abs(sx) < 0.9 * np.sqrt(ss) else (-sz, 0.0, sx)
+            cn = float(np.sqrt(cx * cx + cy * cy + cz * cz))
+            n[~ok] = (cx / cn, cy / cn, cz / cn) if cn > 0 else (0.0, 1.0, 0.0)
         return length - radius, n
     # box: in the box frame. Column by column: (N, 3) @ (3, 3) through matmul costs
     # ten times more than these three multiply-adds at this shape.
@@ -348,9 +348,9 @@ def resolve_numpy(
         # Cheap filter: the relative segment lies in the ball around its midpoint
         # of radius half its length; if that ball misses the shape, so does the segment.
         p0_all = x_old + shift
-        mid = 0.5 * (p0_all + x)
         seg = x - p0_all
-        half_len = 0.5 * np.sqrt(np.einsum("ij,ij->i", seg, seg))
+        mid = p0_all + 0.5 * seg  # the numba kernel's midpoint, to the bit
+        half_len = 0.5 * np.sqrt(dot3(seg, seg))
         d_mid, _ = shape.signed_distance(mid, off1[c])
         cand = np.flatnonzero((d_mid - radius <= half_len * (1 + 1e-12) + 1e-12) & movable)
         if cand.size == 0:
@@ -359,7 +359,7 @@ def resolve_numpy(
         p0 = p0_all[cand]
         p1 = x[cand]
         sg = p1 - p0
-        length = np.sqrt(np.einsum("ij,ij->i", sg, sg))
+        length = np.sqrt(dot3(sg, sg))
         tol = 1e-9 * (1.0 + length)
         s = np.zeros(len(cand))
         hit = np.zeros(len(cand), dtype=bool)
@@ -392,9 +392,9 @@ def resolve_numpy(
             mean_acc = (vh - vo) / dt
             vc = vo + sh * (vh - vo) - u  # relative velocity at the contact
             _, n = sdf(shape.kind, xc - center, shape.radius, shape.half, shape.rotation, shape.segment)
-            vn = np.einsum("ij,ij->i", vc, n)
+            vn = dot3(vc, n)
             approaching = vn < 0
-            an = np.einsum("ij,ij->i", mean_acc, n)
+            an = dot3(mean_acc, n)
             pressing = np.maximum(-an, 0.0)
             resting = approaching & (-vn <= RESTING_STEPS * pressing * dt)
             e = np.where(resting, 0.0, shape.restitution)
@@ -438,7 +438,7 @@ def _project(
         xb[still] += (np.spacing(np.abs(xb[still]).max(axis=1) + 1.0) * 4 - db[still])[:, None] * n[still]
     x[rows] = xb
     vr = v[rows] - u
-    vn = np.einsum("ij,ij->i", vr, n)
+    vn = dot3(vr, n)
     inward = np.minimum(vn, 0.0)
     vt = vr - vn[:, None] * n
     vt = _apply_friction(vt, -inward, shape.friction)

@@ -7,7 +7,10 @@ sum of their radii are found and resolved:
   the pairs within ``2 * max radius`` (``query_pairs``); numba hashes the
   particles into a uniform grid of cells ``2 * max radius`` wide (Teschner et
   al., "Optimized Spatial Hashing for Collision Detection of Deformable
-  Objects", VMV 2003) and looks in the 27 cells around each one.
+  Objects", VMV 2003) and looks in the 27 cells around each one. Both keep a
+  pair by the same test and sort the pairs by (i, j), and the passes below do
+  the same operations in the same order on both, so the backends agree to the
+  bit (granular flow is chaotic: any last-bit difference would grow).
 * **Velocities**: pairwise normal impulses along the line of centres, mass
   weighted (``J = -(1 + e) v_n / (1/m_i + 1/m_j)``, the textbook two-body
   impact, e.g. Goldstein, "Classical Mechanics", section 3.11), solved by a
@@ -43,6 +46,7 @@ from __future__ import annotations
 import numpy as np
 
 from animsim.elements import StepStage
+from animsim.vec import dot3
 
 #: velocity and position passes per step
 ITERATIONS = 6
@@ -64,7 +68,13 @@ def spring_exclusions(index: np.ndarray, rest: np.ndarray, radius: np.ndarray, n
 def find_pairs_numpy(
     x: np.ndarray, radius: np.ndarray, active: np.ndarray, exclude: np.ndarray
 ) -> np.ndarray:
-    """Overlapping pairs (P, 2), i < j, among ``active`` rows (cKDTree)."""
+    """Overlapping pairs (P, 2), i < j, among ``active`` rows (cKDTree), sorted by (i, j).
+
+    The same pairs in the same order as the numba grid: the tree only proposes
+    candidates (within a reach a hair larger than ``2 * max radius``, so its own
+    rounding never drops one), and the test that keeps a pair is the numba one,
+    ``(d0 d0 + d1 d1) + d2 d2 < (r_i + r_j)^2`` with ``d = x_j - x_i``.
+    """
     from scipy.spatial import cKDTree
 
     rows = np.flatnonzero(active)
@@ -74,19 +84,53 @@ def find_pairs_numpy(
     if rmax <= 0:
         return np.zeros((0, 2), dtype=np.int64)
     tree = cKDTree(x[rows])
-    local = tree.query_pairs(2.0 * rmax, output_type="ndarray")
+    local = tree.query_pairs(2.0 * rmax * (1.0 + 1e-9), output_type="ndarray")
     if local.size == 0:
         return np.zeros((0, 2), dtype=np.int64)
-    pairs = rows[local]
+    pairs = rows[local].astype(np.int64)
     pairs.sort(axis=1)
     d = x[pairs[:, 1]] - x[pairs[:, 0]]
-    dist2 = np.einsum("ij,ij->i", d, d)
+    dist2 = dot3(d, d)
     reach = radius[pairs[:, 0]] + radius[pairs[:, 1]]
     keep = dist2 < reach * reach
     if exclude.size:
         keys = pairs[:, 0] * np.int64(len(x)) + pairs[:, 1]
         keep &= ~np.isin(keys, exclude, assume_unique=False)
-    return pairs[keep]
+    pairs = pairs[keep]
+    order = np.lexsort((pairs[:, 1], pairs[:, 0]))
+    return np.ascontiguousarray(pairs[order])
+
+
+class _Scatter:
+    """Per-particle sums (n_rows, 3) of ``-q`` on ``i`` and ``+q`` on ``j``, in pair order.
+
+    ``np.bincount`` adds its weights bin by bin in array order from 0.0, so the
+    interleaved bins ``[3 i0 + (0, 1, 2), 3 j0 + (0, 1, 2), 3 i1 + ...]`` give
+    exactly the numba loop ``dv[i] -= q; dv[j] += q`` over the pairs, to the bit.
+    """
+
+    def __init__(self, i: np.ndarray, j: np.ndarray, n_rows: int):
+        axes = np.arange(3)
+        self.bins = np.stack([3 * i[:, None] + axes, 3 * j[:, None] + axes], axis=1).ravel()
+        self.n_rows = n_rows
+        self.weights = np.empty((i.size, 2, 3))
+
+    def __call__(self, q: np.ndarray) -> np.ndarray:
+        np.negative(q, out=self.weights[:, 0])
+        self.weights[:, 1] = q
+        return np.bincount(self.bins, weights=self.weights.ravel(), minlength=3 * self.n_rows).reshape(
+            self.n_rows, 3
+        )
+
+
+def _unit(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit rows of ``d`` and their lengths; a zero row points up, as in the numba kernel."""
+    dist = np.sqrt(dot3(d, d))
+    ok = dist > 0
+    out = np.empty_like(d)
+    out[ok] = d[ok] / dist[ok, None]
+    out[~ok] = (0.0, 1.0, 0.0)
+    return out, dist
 
 
 def resolve_pairs_numpy(
@@ -104,69 +148,60 @@ def resolve_pairs_numpy(
 ) -> bool:
     """Impulses and overlap removal for ``pairs`` (NumPy kernel), in place.
 
-    The pair-particle incidence D (N x P: +1 at j, -1 at i) is one sparse matrix
-    per step: ``D.T @ v`` gathers every pair's relative velocity and ``D @ f``
-    scatters equal and opposite pair quantities back to the particles, each in
-    one sparse product instead of fancy-index gathers and bincounts.
+    Every operation is the numba kernel's, in its order and association
+    (``(a - b) / w * r`` is not ``(a - b) * (r / w)`` in floating point), and
+    pair quantities reach the particles in pair order (:func:`_scatter`), so
+    both backends give the same bits; granular flow is chaotic and would
+    otherwise part within a fraction of a second.
     """
-    import scipy.sparse as sp
-
     i, j = pairs[:, 0], pairs[:, 1]
-    wi, wj = inv_mass[i], inv_mass[j]
-    w = wi + wj
-    ok = w > 0
-    i, j, w = i[ok], j[ok], w[ok]
+    ok = inv_mass[i] + inv_mass[j] > 0
+    i, j = i[ok], j[ok]
     if i.size == 0:
         return False
     n_rows = len(x)
-    npair = i.size
-    cols = np.arange(npair)
-    dmat = sp.csr_matrix(
-        (
-            np.concatenate([-np.ones(npair), np.ones(npair)]),
-            (np.concatenate([i, j]), np.concatenate([cols, cols])),
-        ),
-        shape=(n_rows, npair),
-    )
-    dmat_t = dmat.T.tocsr()
+    w = inv_mass[i] + inv_mass[j]
     count = np.bincount(np.concatenate([i, j]), minlength=n_rows)
     relax = np.minimum(RELAX / np.maximum(count[i], count[j]), 1.0)
-    scale = relax / w  # per pair: an impulse (N s) per unit of relative velocity
-
-    def unit(d: np.ndarray) -> np.ndarray:
-        dist = np.sqrt(np.einsum("ij,ij->i", d, d))
-        safe = np.where(dist > 0, dist, 1.0)
-        out = d / safe[:, None]
-        out[dist == 0] = (0.0, 1.0, 0.0)
-        return out, dist
-
-    n, _ = unit(dmat_t @ x)
-    # restitution target from the approach before any pass
-    vn0 = np.einsum("ij,ij->i", dmat_t @ v, n)
-    arel = np.einsum("ij,ij->i", dmat_t @ (v - v_old), n) / dt
-    resting = -vn0 <= RESTING_STEPS * np.maximum(-arel, 0.0) * dt
-    target = np.where((vn0 < 0) & ~resting, -restitution * vn0, 0.0)
-    lam = np.zeros(npair)
     inv = inv_mass[:, None]
+    scatter = _Scatter(i, j, n_rows)
+
+    n, _ = _unit(x[j] - x[i])
+    # restitution target from the approach before any pass
+    vn0 = dot3(v[j] - v[i], n)
+    ar = dot3((v[j] - v_old[j]) - (v[i] - v_old[i]), n) / dt
+    resting = -vn0 <= RESTING_STEPS * np.maximum(-ar, 0.0) * dt
+    target = np.where((vn0 < 0) & ~resting, -restitution * vn0, 0.0)
+    lam = np.zeros(i.size)
     for _ in range(iterations):
-        vn = np.einsum("ij,ij->i", dmat_t @ v, n)
-        new = np.maximum(lam + (target - vn) * scale, 0.0)
+        vn = dot3(v[j] - v[i], n)
+        dl = (target - vn) / w * relax
+        new = np.maximum(lam + dl, 0.0)
         dl = new - lam
         lam = new
-        v += (dmat @ (dl[:, None] * n)) * inv  # +J n on j, -J n on i: momentum kept
+        v += scatter(dl[:, None] * n) * inv  # +J n on j, -J n on i: momentum kept
     if friction > 0:
-        dv = dmat_t @ v
-        vt = dv - np.einsum("ij,ij->i", dv, n)[:, None] * n
-        speed = np.sqrt(np.einsum("ij,ij->i", vt, vt))
-        jt = np.minimum(speed * scale, friction * lam)
+        dvel = v[j] - v[i]
+        vn = dot3(dvel, n)
+        vt = dvel - vn[:, None] * n
+        speed = np.sqrt(dot3(vt, vt))
         with np.errstate(divide="ignore", invalid="ignore"):
-            k = np.where(speed > 0, jt / np.where(speed > 0, speed, 1.0), 0.0)
-        v -= (dmat @ (k[:, None] * vt)) * inv
+            jt = np.minimum(speed / w * relax, friction * lam) / speed
+        # pairs at no sliding speed add nothing (a 0.0 weight leaves every sum's bits alone);
+        # the numba kernel adds +jt vt on i and -jt vt on j: the scatter of -(jt vt)
+        jt = np.where(speed > 0, jt, 0.0)
+        v += scatter(-(jt[:, None] * vt)) * inv
     reach = radius[i] + radius[j]
     for _ in range(iterations):
-        nn, dist = unit(dmat_t @ x)
-        over = np.maximum(reach - dist, 0.0)
-        x += (dmat @ ((over * scale)[:, None] * nn)) * inv  # the pair's centre of mass stays
+        d = x[j] - x[i]
+        dist = np.sqrt(dot3(d, d))
+        over = reach - dist
+        # the numba kernel skips a pair with over <= 0 (so a NaN one is not skipped); a skipped
+        # pair's weight 0.0 leaves every sum's bits alone
+        with np.errstate(divide="ignore", invalid="ignore"):
+            nn = np.where(dist[:, None] > 0, d / dist[:, None], (0.0, 1.0, 0.0))
+            c = np.where(over <= 0, 0.0, over / w * relax)
+        x += scatter(c[:, None] * nn) * inv  # the pair's centre of mass stays
     return True
 
 
@@ -324,7 +359,23 @@ def numba_kernels():
         return lo < keys.shape[0] and keys[lo] == key
 
     @numba.njit(cache=True)
+    def sort_pairs(pairs, n):  # pragma: no cover - compiled
+        # by (i, j), as the NumPy kernel's lexsort: both backends then resolve the
+        # same pairs in the same order, which the Jacobi scatter's rounding depends on
+        keys = pairs[:, 0] * n + pairs[:, 1]
+        order = np.argsort(keys)
+        out = np.empty_like(pairs)
+        for k in range(order.shape[0]):
+            out[k, 0] = pairs[order[k], 0]
+            out[k, 1] = pairs[order[k], 1]
+        return out
+
+    @numba.njit(cache=True)
     def find_pairs(x, radius, active, exclude, cell):  # pragma: no cover - compiled
+        return sort_pairs(find_pairs_any(x, radius, active, exclude, cell), x.shape[0])
+
+    @numba.njit(cache=True)
+    def find_pairs_any(x, radius, active, exclude, cell):  # pragma: no cover - compiled
         # a dense grid over the particles' bounding box when it is not much larger than
         # the particle count (the common case: grains in a box), else the spatial hash
         n = x.shape[0]
@@ -409,7 +460,7 @@ def numba_kernels():
                         for a in range(3):
                             t = xs[kb, a] - xs[ka, a]
                             d2 += t * t
-                        if d2 >= r * r:
+                        if not (d2 < r * r):  # the NumPy test, NaN included
                             continue
                         i = order[ka]
                         j = order[kb]
@@ -483,7 +534,7 @@ def numba_kernels():
                             for a in range(3):
                                 t = xs[k, a] - xs[ki, a]
                                 d2 += t * t
-                            if d2 >= r * r:
+                            if not (d2 < r * r):  # the NumPy test, NaN included
                                 continue
                             if exclude.shape[0] and excluded(exclude, i * n + j):
                                 continue
