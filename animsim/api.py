@@ -210,8 +210,16 @@ class Trajectory:
         return viewer.trajectory_html(self)
 
 
+def compile(scene: Scene, backend: str = "auto", *, name: str | None = None) -> Any:
+    """The compiled scene (:class:`animsim.compile.Compiled`) that :func:`simulate` runs:
+    what ``explain`` shows and the stability analysis reads, before any step."""
+    from animsim.compile import compile_scene
+
+    return compile_scene(scene, name or scene.name or "scene", backend=backend)
+
+
 def simulate(
-    scene: Scene,
+    scene: Scene | Any,
     integrator: str | None = None,
     dt: float | None = None,
     duration: float | None = None,
@@ -226,30 +234,38 @@ def simulate(
     observers: Sequence[Callable[[Any], None]] = (),
     limits: Any = None,
     meta: dict[str, Any] | None = None,
+    keep: bool = True,
 ) -> Trajectory:
     """Run ``scene`` (with overrides as on the command line) and return its Trajectory.
 
-    ``output``: stream the frames to a file instead of keeping them in memory
-    (any format ``animsim run`` writes, by suffix); the Trajectory then holds
-    the metadata only. ``sinks``: more frame sinks to feed.
+    ``scene`` may also be what :func:`compile` returned (then the overrides must
+    be None). ``output``: stream the frames to a file instead of keeping them in
+    memory (any format ``animsim run`` writes, by suffix); the Trajectory then
+    holds the metadata only. ``sinks``: more frame sinks to feed; ``keep=False``
+    keeps no frames in memory (the sinks have them).
     """
-    from animsim.compile import compile_scene
     from animsim.engine import run
     from animsim.export.trajectory import TrajectoryCollector
 
-    sc, _ = prepare(scene, integrator=integrator, dt=dt, duration=duration, seed=seed, limits=limits)
-    compiled = compile_scene(sc, sc.name or "scene", backend=backend)
+    if isinstance(scene, Scene):
+        sc, _ = prepare(scene, integrator=integrator, dt=dt, duration=duration, seed=seed, limits=limits)
+        compiled = compile(sc, backend)
+    else:
+        if any(v is not None for v in (integrator, dt, duration, seed)):
+            raise UsageError("overrides go with a Scene, not with an already compiled scene")
+        compiled = scene
+        sc = compiled.scene
     targets = list(sinks)
     collector = None
     if output is not None:
         from animsim.export.sinks import open_sink
 
         targets.append(open_sink(Path(output), None, meta_rate=sc.record.fps))
-    else:
+    elif keep:
         collector = TrajectoryCollector()
         targets.append(collector)
     extra = dict(meta or {})
-    source = getattr(scene, "_source", None)
+    source = getattr(sc, "_source", None)
     if source:
         extra.setdefault("scene_sha256", source["sha256"])
         extra.setdefault("scene_file", source["file"])
@@ -318,4 +334,4 @@ def compare(
     return result if comparison else [asdict(row) for row in result.rows]
 
 
-__all__ = ["Scene", "SceneError", "Trajectory", "compare", "load", "loads", "prepare", "simulate"]
+__all__ = ["Scene", "SceneError", "Trajectory", "compare", "compile", "load", "loads", "prepare", "simulate"]

@@ -391,11 +391,10 @@ def run(
         check_output_path(out, scene)
         check_disk(out, est, fmt.value, sc, limits)
     # Imported only now: a refused scene never pays for NumPy and the stepper.
-    from animsim.compile import compile_scene
+    from animsim import api
     from animsim.engine import STATUS_INTERRUPTED, STATUS_UNSTABLE
-    from animsim.engine import run as simulate
 
-    compiled = compile_scene(sc, loaded.name, backend=_backend(backend))
+    compiled = api.compile(sc, _backend(backend), name=loaded.name)
     from animsim.analysis import stability
 
     report = stability.analyse(compiled)
@@ -415,9 +414,15 @@ def run(
     )
     extra = {"scene_sha256": loaded.sha256, "scene_file": str(scene), META_THRESHOLD_KEY: drift_warn}
     with _graceful_stop() as stop, _progress(compiled.clock.steps, quiet) as progress:
-        result = simulate(
-            compiled, [sink], stop=stop, progress=progress, meta_extra=extra, notice=_notice(quiet)
-        )
+        result = api.simulate(
+            compiled,
+            sinks=[sink],
+            keep=False,
+            stop=stop,
+            progress=progress,
+            meta=extra,
+            notice=_notice(quiet),
+        ).result
     if fmt is Format.ply and sink.written:
         first, last = sink.written[0], sink.written[-1]
         span = f"{first}" if first == last else f"{first} .. {last.name}"
