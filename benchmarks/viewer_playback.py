@@ -37,21 +37,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 CHROMIUM = "/usr/bin/chromium"
+from animsim.export.viewer import HEADLESS_CHROMIUM_FLAGS  # noqa: E402
+
 CHROMEDRIVER = "/usr/bin/chromedriver"
 # Debian's Chromium, headless, with its background traffic off: this machine's
 # network is closed and would refuse those connections.
-CHROMIUM_FLAGS = (
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--enable-unsafe-swiftshader",  # software WebGL for our own local page
-    "--window-size=1280,900",
-)
+CHROMIUM_FLAGS = (*HEADLESS_CHROMIUM_FLAGS, "--window-size=1280,900")
 
 CLOTH_32 = """
 name: cloth32

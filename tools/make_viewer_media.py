@@ -14,21 +14,12 @@ import tempfile
 import time
 from pathlib import Path
 
+from animsim.export.viewer import HEADLESS_CHROMIUM_FLAGS
+
 ROOT = Path(__file__).resolve().parents[1]
 MEDIA = ROOT / "docs" / "media"
 SIDE = ["--integrators", "euler,symplectic_euler,rk4", "--dt", "0.04"]
-FLAGS = (
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--enable-unsafe-swiftshader",
-    "--hide-scrollbars",
-)
+FLAGS = (*HEADLESS_CHROMIUM_FLAGS, "--hide-scrollbars")
 
 
 def animsim(*args: str) -> None:

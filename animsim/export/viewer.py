@@ -51,6 +51,22 @@ ENERGY_DIGITS = 7
 # --------------------------------------------------------------------------
 
 
+#: Flags for opening a viewer page in headless Chromium on a machine without a
+#: network or a GPU (tests, screenshots for docs, benchmarks): background
+#: traffic off, software WebGL for the page's own drawing.
+HEADLESS_CHROMIUM_FLAGS = (
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--enable-unsafe-swiftshader",
+)
+
+
 def _vec(value: Any, width: int, name: str) -> np.ndarray:
     """(width,) or (F, width) float array, finite, else ValueError."""
     arr = np.asarray(value, dtype=np.float64)

@@ -22,20 +22,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from animsim.export.viewer import HEADLESS_CHROMIUM_FLAGS
 from tests.conftest import SCENES, run_cli
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 CHROMEDRIVER = shutil.which("chromedriver") or "/usr/bin/chromedriver"
 FLAGS = (
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--enable-unsafe-swiftshader",  # software WebGL, for our own local page
+    *HEADLESS_CHROMIUM_FLAGS,
     "--window-size=1200,900",
     # No network at all: every host name fails to resolve and every connection goes to a dead
     # proxy, so a page that fetched anything would log errors (and list the resource).
