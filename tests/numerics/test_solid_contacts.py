@@ -219,6 +219,7 @@ def test_a_torn_spring_exerts_no_force(backend: str) -> None:
     text = """
 duration: 1.0
 dt: 0.001
+record: {every: 1}
 particles:
   - {id: top, pinned: true, position: [0, 0, 0]}
   - {id: bob, mass: 1, position: [0, -1, 0]}
