@@ -142,18 +142,7 @@ def plot_energy(
     top.grid(True, lw=0.3, alpha=0.5)
     top.legend(loc="best", fontsize=8)
     top.set_title(title or "energy")
-    scale = max(abs(total[0]), np.abs(total).max() * 1e-12, 1e-300)
-    drift = np.abs(total - total[0]) / scale
-    shown = np.where(drift > 0, drift, np.nan)
-    bottom.semilogy(times, shown, color="tab:red", lw=1.2)
-    bottom.set_ylabel("|E - E0| / |E0|")
-    bottom.set_xlabel("t (s)")
-    bottom.grid(True, which="both", lw=0.3, alpha=0.5)
-    note = "conservative scene: drift is integration error" if conservative else "forces add or remove energy"
-    bottom.set_title(note, fontsize=8)
-    fig.tight_layout()
-    save_figure(fig, path)
-    plt.close(fig)
+    _drift_panel_and_save(plt, fig, bottom, times, total, conservative, path)
 
 
 #: colours of the energy parts (kinetic blue, potential parts warm, total black)
@@ -187,17 +176,7 @@ def plot_energy_parts(
     top.grid(True, lw=0.3, alpha=0.5)
     top.legend(loc="best", fontsize=8)
     top.set_title(title or "energy")
-    scale = max(abs(total[0]), np.abs(total).max() * 1e-12, 1e-300)
-    drift = np.abs(total - total[0]) / scale
-    bottom.semilogy(times, np.where(drift > 0, drift, np.nan), color="tab:red", lw=1.2)
-    bottom.set_ylabel("|E - E0| / |E0|")
-    bottom.set_xlabel("t (s)")
-    bottom.grid(True, which="both", lw=0.3, alpha=0.5)
-    note = "conservative scene: drift is integration error" if conservative else "forces add or remove energy"
-    bottom.set_title(note, fontsize=8)
-    fig.tight_layout()
-    save_figure(fig, path)
-    plt.close(fig)
+    _drift_panel_and_save(plt, fig, bottom, times, total, conservative, path)
 
 
 #: most particles a phase plot shows by default (one row of panels each)
@@ -293,6 +272,23 @@ def plot_phase(
             ax.grid(True, lw=0.3, alpha=0.5)
     grid[0][0].legend(loc="best", fontsize=7)
     fig.suptitle(title or "phase portrait")
+    fig.tight_layout()
+    save_figure(fig, path)
+    plt.close(fig)
+
+
+def _drift_panel_and_save(
+    plt: Any, fig: Any, bottom: Any, times: Any, total: Any, conservative: bool, path: Path
+) -> None:
+    """The energy plots' lower panel, |E - E0| / |E0| on a log axis, then the figure saved and closed."""
+    scale = max(abs(total[0]), np.abs(total).max() * 1e-12, 1e-300)
+    drift = np.abs(total - total[0]) / scale
+    bottom.semilogy(times, np.where(drift > 0, drift, np.nan), color="tab:red", lw=1.2)
+    bottom.set_ylabel("|E - E0| / |E0|")
+    bottom.set_xlabel("t (s)")
+    bottom.grid(True, which="both", lw=0.3, alpha=0.5)
+    note = "conservative scene: drift is integration error" if conservative else "forces add or remove energy"
+    bottom.set_title(note, fontsize=8)
     fig.tight_layout()
     save_figure(fig, path)
     plt.close(fig)
