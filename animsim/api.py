@@ -334,4 +334,486 @@ def compare(
     return result if comparison else [asdict(row) for row in result.rows]
 
 
-__all__ = ["Scene", "SceneError", "Trajectory", "compare", "compile", "load", "loads", "prepare", "simulate"]
+# --- what each command does, as one call ------------------------------------------------
+# The command line parses options, makes one of these calls, prints and sets the exit
+# status; everything between (pre-flight, sinks, compiling, drawing) happens here.
+
+
+def _source_label(source: Any) -> str:
+    return str(source) if isinstance(source, str | Path) else (getattr(source, "name", None) or "scene")
+
+
+def _prepared(source: str | Path | Scene, limits: Any, **overrides: Any) -> tuple[Scene, str, Any, Any]:
+    """(scene with overrides, name, pre-flight estimate, loaded file or None) of a path or a Scene."""
+    if isinstance(source, Scene):
+        sc, est = prepare(source, limits=limits, **overrides)
+        return sc, source.name or "scene", est, None
+    loaded, sc, est = prepare_file(Path(source), limits, **overrides)
+    return sc, loaded.name, est, loaded
+
+
+def _check_output(output: Path, source: Any) -> None:
+    from animsim.preflight import check_output_path
+
+    check_output_path(output, Path(source) if isinstance(source, str | Path) else Path("scene.yaml"))
+
+
+@dataclass
+class RunOutcome:
+    """What :func:`run` did: the compiled scene, the engine's result and the files written."""
+
+    compiled: Any
+    result: Any
+    output: Path
+    #: the files written, as a phrase for a summary; None when the frames went to stdout
+    wrote: str | None
+
+    @property
+    def status(self) -> str:
+        return self.result.status
+
+
+def run(
+    source: str | Path | Scene,
+    output: str | Path | None = None,
+    *,
+    fmt: str | None = None,
+    integrator: str | None = None,
+    dt: float | None = None,
+    duration: float | None = None,
+    seed: int | None = None,
+    backend: str = "auto",
+    extra_columns: bool = False,
+    drift_warn: float | None = None,
+    limits: Any = None,
+    stop: Callable[[], bool] | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    notice: Callable[[str], None] | None = None,
+    warn: Callable[[str], None] | None = None,
+) -> RunOutcome:
+    """Simulate a scene file (or Scene) into a trajectory file and its ``.meta.json``: ``animsim run``.
+
+    ``output`` defaults to ``<scene stem>.<format>`` here; ``"-"`` is CSV on stdout.
+    Everything that can be refused (format, folder, disk space, the step and
+    memory limits) is refused before the first step. ``warn`` receives the
+    stability warning of a step beyond its limit, before the run.
+    """
+    from animsim.analysis import stability
+    from animsim.analysis.drift import DEFAULT_DRIFT_WARN_PERCENT, META_THRESHOLD_KEY, check_threshold
+    from animsim.export.sinks import format_for, open_sink
+    from animsim.preflight import RunLimits, check_disk, check_ply_output
+    from animsim.record import recording_rule
+
+    limits = limits or RunLimits()
+    threshold = check_threshold(DEFAULT_DRIFT_WARN_PERCENT if drift_warn is None else drift_warn)
+    to_stdout = output is not None and str(output) == "-"
+    fmt = format_for(None if output is None else Path(output), fmt)
+    name_of = Path(source).stem if isinstance(source, str | Path) else (source.name or "scene")
+    out = Path(output) if output is not None else Path(f"{name_of}.{fmt}")
+    if to_stdout and fmt != "csv":
+        raise UsageError(f"--format {fmt} cannot go to stdout; give a file with -o")
+    sc, name, est, loaded = _prepared(
+        source, limits, fmt=fmt, integrator=integrator, dt=dt, duration=duration, seed=seed
+    )
+    scene_path = Path(source) if isinstance(source, str | Path) else Path(f"{name}.yaml")
+    if fmt == "ply":
+        check_ply_output(out, scene_path)
+    elif not to_stdout:
+        _check_output(out, scene_path)
+        check_disk(out, est, fmt, sc, limits)
+    compiled = compile(sc, backend, name=name)
+    report = stability.analyse(compiled)
+    if report.dt_exceeds_limit and warn is not None:  # before the first step; the watchdog judges the run
+        warn(f"warning: {report.verdict()}")
+    sink: Any = open_sink(
+        Path("-") if to_stdout else out,
+        fmt,
+        # the frame rate recorded at, when there is one (the scene's, or the 60 fps default)
+        meta_rate=recording_rule(sc.record.every, sc.record.fps, compiled.clock.dt)[1],
+        extra_columns=extra_columns,
+        expected_frames=len(compiled.record_steps),
+    )
+    extra: dict[str, Any] = {META_THRESHOLD_KEY: threshold}
+    if loaded is not None:
+        extra.update(scene_sha256=loaded.sha256, scene_file=str(source))
+    result = simulate(
+        compiled, sinks=[sink], keep=False, stop=stop, progress=progress, meta=extra, notice=notice
+    ).result
+    wrote: str | None = None if to_stdout else f"{out} and {out}.meta.json"
+    if fmt == "ply" and sink.written:
+        first, last = sink.written[0], sink.written[-1]
+        span = f"{first}" if first == last else f"{first} .. {last.name}"
+        wrote = f"{len(sink.written)} PLY frames {span}, {sink.ids_path} and {out}.meta.json"
+    return RunOutcome(compiled, result, out, wrote)
+
+
+def explain(
+    source: str | Path | Scene,
+    *,
+    integrator: str | None = None,
+    backend: str = "auto",
+    limits: Any = None,
+) -> list[str]:
+    """What a scene compiles to, as the lines ``animsim explain`` prints: counts, the
+    stages each step runs, and what was left out because the scene does not need it."""
+    from animsim.analysis.effective import fallback_note
+
+    sc, name, _, _ = _prepared(source, limits, integrator=integrator)
+    c = compile(sc, backend, name=name)
+    s = c.system
+    lines = [
+        f"scene {c.name!r} ({_source_label(source)})",
+        f"  {s.particle_count} particles ({int(s.particle_pinned.sum())} pinned), {s.spring_count} springs, "
+        f"{len(sc.planes)} planes, {len(sc.emitters)} emitters"
+        + (f", {s.body_count} rigid bodies (their centres counted as particles)" if s.body_count else ""),
+        f"  {c.clock.steps} steps of {c.clock.dt:g} s to t = {c.clock.duration:g} s, seed {c.seed}",
+        "each step runs:",
+    ]
+    note = fallback_note(c)
+    for stage in c.stages:
+        if note is not None and stage.startswith("integrator:"):
+            stage = f"integrator: {note}"  # what the step really computes
+        lines.append(f"  + {stage}")
+    lines.append("left out (the scene does not need them):")
+    lines.extend(f"  - {item}" for item in c.left_out)
+    return lines
+
+
+def check(
+    paths: Sequence[str | Path],
+    *,
+    quiet: bool = False,
+    echo: Callable[[str], None] = print,
+    echo_err: Callable[[str], None] = print,
+    limits: Any = None,
+    drift_warn: float | None = None,
+) -> bool:
+    """Validate, analyse and run each scene file, reporting through ``echo``/``echo_err``
+    as ``animsim check`` does; True only if every scene is valid and stable."""
+    from animsim.analysis.check import check_scenes
+    from animsim.analysis.drift import check_threshold
+
+    return check_scenes(
+        [Path(p) for p in paths],
+        quiet=quiet,
+        echo=echo,
+        echo_err=echo_err,
+        limits=limits,
+        drift_warn=None if drift_warn is None else check_threshold(drift_warn),
+    )
+
+
+def render(
+    source: str | Path | Scene | Trajectory,
+    gif: str | Path | None = None,
+    mp4: str | Path | None = None,
+    *,
+    fps: float = 25.0,
+    view: str | None = None,
+    size: str | None = None,
+    azimuth: float | None = None,
+    elevation: float | None = None,
+    distance: float | None = None,
+    dot_radius: float = 3.0,
+    scene: str | Path | None = None,
+    integrator: str | None = None,
+    dt: float | None = None,
+    duration: float | None = None,
+    integrators: str | Sequence[str] | None = None,
+    limits: Any = None,
+    stop: Callable[[], bool] | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> Any:
+    """Draw an animation (GIF and/or MP4): ``animsim render``.
+
+    ``source`` is a scene file or Scene (simulated, recording at ``fps``), a
+    trajectory file (.csv, .npz; ``scene`` adds its springs and planes) or a
+    Trajectory from :func:`simulate`. ``integrators``: the scene once per
+    method, panels side by side. Returns :class:`animsim.render.RenderResult`.
+    """
+    from animsim.export.trajectory import is_trajectory, read_trajectory
+    from animsim.render import RenderOptions, render_scene, render_trajectory, validate
+    from animsim.scene import models as m
+
+    opts = RenderOptions(
+        fps=fps,
+        size=size,
+        view=view,
+        azimuth=azimuth,
+        elevation=elevation,
+        distance=distance,
+        dot_radius=dot_radius,
+    )
+    gif_path = None if gif is None else Path(gif)
+    mp4_path = None if mp4 is None else Path(mp4)
+    validate(gif_path, mp4_path, opts)
+    for out in (gif_path, mp4_path):
+        if out is not None:
+            _check_output(out, source)
+    from_file = isinstance(source, str | Path) and is_trajectory(Path(source))
+    if integrators is not None:
+        if from_file or isinstance(source, Trajectory):
+            raise UsageError(
+                "--integrators simulates the scene once per method: give the scene, not a trajectory"
+            )
+        if integrator is not None:
+            raise UsageError("give --integrator or --integrators, not both")
+        from animsim.export.side_by_side import compile_each, render_side_by_side
+
+        names = _integrator_names(integrators)
+        sc, name, _, _ = _prepared(source, limits, dt=dt, duration=duration)  # type: ignore[arg-type]
+        sc = sc.model_copy(update={"record": m.Record(fps=fps)})
+        result = render_side_by_side(compile_each(sc, name, names), gif_path, mp4_path, opts, stop=stop)
+        result.panels = list(names)
+        return result
+    if isinstance(source, Trajectory):
+        return render_trajectory(source.frames_long, gif_path, mp4_path, opts, compiled=source.compiled)
+    compiled = None
+    scene_source = (Path(scene) if scene is not None else None) if from_file else source
+    if scene_source is not None:
+        sc, name, _, _ = _prepared(scene_source, limits, integrator=integrator, dt=dt, duration=duration)
+        if not from_file:
+            sc = sc.model_copy(update={"record": m.Record(fps=fps)})  # exactly the frames shown
+        from animsim.compile import compile_scene
+
+        compiled = compile_scene(sc, name)
+    if from_file:
+        return render_trajectory(read_trajectory(Path(source)), gif_path, mp4_path, opts, compiled=compiled)
+    total = compiled.record_steps.size
+    tick = None if progress is None else (lambda done: progress(done, total))
+    return render_scene(compiled, gif_path, mp4_path, opts, progress=tick, stop=stop)
+
+
+def _integrator_names(integrators: str | Sequence[str]) -> list[str]:
+    from animsim.analysis.compare import parse_integrators
+
+    text = integrators if isinstance(integrators, str) else ",".join(integrators)
+    return list(parse_integrators(text))
+
+
+def view(
+    source: str | Path,
+    output: str | Path,
+    *,
+    integrators: str | Sequence[str] | None = None,
+    fps: float = 25.0,
+    view: str = "3d",
+    scene: str | Path | None = None,
+    integrator: str | None = None,
+    dt: float | None = None,
+    duration: float | None = None,
+    limits: Any = None,
+    stop: Callable[[], bool] | None = None,
+) -> Any:
+    """Write one self-contained HTML page that plays the animation: ``animsim view``.
+    Returns :class:`animsim.export.viewer_command.ViewSummary` (the summary line and notes)."""
+    import contextlib
+
+    from animsim.export.viewer import VIEWS
+    from animsim.export.viewer_command import write_view
+
+    if view not in VIEWS:
+        raise UsageError(f"--view {view!r}: choose one of {', '.join(VIEWS)}")
+    if not (fps > 0 and fps < float("inf")):
+        raise UsageError(f"--fps {fps}: must be a number > 0")
+    out = Path(output)
+    if out.suffix.lower() not in (".html", ".htm"):
+        raise UsageError(f"-o {out}: the file name must end in .html")
+    _check_output(out, source)
+    return write_view(
+        Path(source),
+        out,
+        prepare=lambda path, **kw: prepare_file(path, limits, **kw),
+        integrators=None if integrators is None else ",".join(_integrator_names(integrators)),
+        fps=fps,
+        view=view,
+        scene=None if scene is None else Path(scene),
+        integrator=integrator,
+        dt=dt,
+        duration=duration,
+        stop_context=lambda: contextlib.nullcontext(stop),
+    )
+
+
+PLOT_KINDS = ("trajectory", "energy", "phase")
+
+
+def plot(
+    source: str | Path,
+    output: str | Path,
+    *,
+    kind: str = "trajectory",
+    scene: str | Path | None = None,
+    view: str | None = None,
+    integrator: str | None = None,
+    dt: float | None = None,
+    duration: float | None = None,
+    integrators: str | Sequence[str] | None = None,
+    particles: str | Sequence[str] | None = None,
+    limits: Any = None,
+) -> Path:
+    """Draw particle paths, the energy split into its parts, or phase portraits (PNG, SVG,
+    PDF): ``animsim plot``. ``source`` is a scene (simulated first) or a trajectory file."""
+    from animsim.export.pictures import figure_format, plot_trajectory
+    from animsim.export.trajectory import is_trajectory, read_trajectory
+
+    out, src = Path(output), Path(source)
+    if kind not in PLOT_KINDS:
+        raise UsageError(f"--kind {kind!r}: choose one of {', '.join(PLOT_KINDS)}")
+    figure_format(out)
+    if view is not None and view not in ("xy", "xz", "yz"):
+        raise UsageError(f"--view {view!r}: plot takes xy, xz or yz")
+    _check_output(out, src)
+    from_file = is_trajectory(src)
+    if kind != "phase" and (integrators is not None or particles is not None):
+        raise UsageError("--integrators and --particles go with --kind phase")
+    prepare_path = lambda path, **kw: prepare_file(path, limits, **kw)  # noqa: E731
+    if kind == "phase":
+        from animsim.export.phase import phase_command
+
+        phase_command(
+            src,
+            out,
+            from_file=from_file,
+            scene=None if scene is None else Path(scene),
+            prepare=prepare_path,
+            integrators=None if integrators is None else ",".join(_integrator_names(integrators)),
+            particles=particles if particles is None or isinstance(particles, str) else ",".join(particles),
+            integrator=integrator,
+            dt=dt,
+            duration=duration,
+        )
+        return out
+    scene_path = (None if scene is None else Path(scene)) if from_file else src
+    compiled = None
+    if scene_path is not None:
+        from animsim.compile import compile_scene
+
+        loaded, sc, _ = prepare_path(scene_path, integrator=integrator, dt=dt, duration=duration)
+        compiled = compile_scene(sc, loaded.name)
+    if kind == "energy":
+        if compiled is None:
+            raise UsageError("--kind energy needs the scene: give a scene, or --scene with the trajectory")
+        from animsim.export.phase import energy_parts_of
+        from animsim.export.pictures import plot_energy_parts
+
+        times, parts = energy_parts_of(compiled, read_trajectory(src) if from_file else None)
+        plot_energy_parts(
+            times,
+            parts,
+            out,
+            title=f"{compiled.name}: {compiled.integrator_name}, dt {compiled.clock.dt:g} s",
+            conservative=compiled.conservative,
+        )
+        return out
+    if from_file:
+        traj, name = read_trajectory(src), src.stem
+    else:
+        assert compiled is not None
+        traj, name = simulate(compiled).frames_long, compiled.name
+    plot_trajectory(traj, out, view=view, title=name)
+    return out
+
+
+def sweep(
+    source: str | Path,
+    sets: Sequence[str] = (),
+    *,
+    integrators: str | Sequence[str] | None = None,
+    reference: str | None = None,
+    output: str | Path | None = None,
+    plot: str | Path | None = None,
+    x: str | None = None,
+    y: str | None = None,
+    jobs: int = 1,
+    scheduler: str | None = None,
+    limits: Any = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> Any:
+    """Run a scene file for every combination of ``sets`` values (``"KEY=V1,V2,..."``) and
+    ``integrators``: ``animsim sweep``. Writes the table as CSV (``output``) and a plot
+    of ``y`` over ``x`` (``plot``) when asked. Returns
+    :class:`animsim.analysis.sweep.SweepTable`; unstable and invalid cases are rows."""
+    from animsim.analysis import sweep as sw
+    from animsim.preflight import RunLimits
+    from animsim.scene.loader import load_scene
+
+    src = Path(source)
+    # The file limits apply here; each case's step and memory pre-flight would need
+    # the sweep's own variants (see docs/limits.md).
+    loaded = load_scene(src, (limits or RunLimits()).loader)
+    axes = [sw.parse_set(text) for text in sets]
+    if integrators is not None:
+        axes.append(
+            sw.integrators_axis(integrators if isinstance(integrators, str) else ",".join(integrators))
+        )
+    if not axes:
+        raise UsageError("sweep: give at least one --set KEY=V1,V2,... or --integrators")
+    sw.check_axes(axes)
+    keys = [a.key for a in axes]
+    x_key = x or keys[0]
+    y_col = y or ("error" if reference is not None else "drift")
+    if plot is not None:
+        if x_key not in keys:
+            raise UsageError(f"--x {x_key}: not a swept key (swept: {', '.join(keys)})")
+        if y_col not in sw.PLOT_COLUMNS or (y_col == "error" and reference is None):
+            cols = [c for c in sw.PLOT_COLUMNS if c != "error" or reference is not None]
+            raise UsageError(f"--y {y_col}: not a plottable column (choose from {', '.join(cols)})")
+        _check_output(Path(plot), src)
+    if output is not None:
+        _check_output(Path(output), src)
+    table = sw.sweep(
+        loaded.data,
+        loaded.name,
+        str(src),
+        axes,
+        reference=reference,
+        jobs=jobs,
+        scheduler=scheduler,
+        progress=progress,
+    )
+    if output is not None:
+        sw.write_csv(table, Path(output))
+    if plot is not None:
+        from animsim.export import sweep_plot
+
+        sweep_plot.plot_table(table, Path(plot), x_key, y_col)
+    return table
+
+
+def schema() -> str:
+    """The scene JSON Schema as text (``animsim schema``; ``schemas/scene.schema.json`` is it)."""
+    from animsim.scene.schema import schema_text
+
+    return schema_text()
+
+
+def init(path: str | Path, template: str = "projectile", *, force: bool = False) -> list[str]:
+    """Write a commented starter scene and ``scene.schema.json`` beside it (``animsim init``);
+    returns the lines the command prints."""
+    from animsim.templates import write_starter
+
+    return list(write_starter(Path(path), template, force=force))
+
+
+__all__ = [
+    "RunOutcome",
+    "Scene",
+    "SceneError",
+    "Trajectory",
+    "check",
+    "compare",
+    "compile",
+    "explain",
+    "init",
+    "load",
+    "loads",
+    "plot",
+    "prepare",
+    "render",
+    "run",
+    "schema",
+    "simulate",
+    "sweep",
+    "view",
+]

@@ -306,33 +306,6 @@ def check_output_path(output: Path, scene_path: Path) -> None:
     check(output, scene_path)
 
 
-def output_format(output: Path | None, requested: Format | None) -> Format:
-    """The trajectory format: as asked, else from the suffix, else PLY for an existing folder, else CSV."""
-    from animsim.export.sinks import format_for
-
-    return Format(format_for(output, None if requested is None else requested.value))
-
-
-def check_ply_output(output: Path, scene_path: Path) -> None:
-    """Pre-flight for a PLY sequence: a pattern ``dir/stem.ply`` or an existing folder.
-
-    As for every format, the folder must already exist (cli.md: "The output
-    folder must exist"); the sink could create it, but a typo in a folder name
-    would then silently scatter frames somewhere new.
-    """
-    from animsim.export.ply import PLY_SUFFIX
-
-    if output.is_dir():
-        if not os.access(output, os.W_OK):
-            raise UsageError(f"{output}: the folder is not writable")
-        return
-    if output.suffix.lower() != PLY_SUFFIX:
-        raise UsageError(
-            f"{output}: the folder does not exist; create it, or name the frames like {output}/frames.ply"
-        )
-    check_output_path(output, scene_path)
-
-
 # --- run ----------------------------------------------------------------------------
 
 
@@ -373,69 +346,36 @@ def run(
     folder gives <folder>/frames_0000.ply, ...); USD ASCII (-o anim.usda).
     The output folder must exist.
     """
-    from animsim.analysis.drift import META_THRESHOLD_KEY, check_threshold
-    from animsim.preflight import check_disk
-
-    drift_warn = check_threshold(drift_warn)
-    to_stdout = output is not None and str(output) == "-"
-    fmt = output_format(output, format)
-    out = output if output is not None else Path(f"{scene.stem}.{fmt.value}")
-    if to_stdout and fmt is not Format.csv:
-        raise UsageError(f"--format {fmt.value} cannot go to stdout; give a file with -o")
-    loaded, sc, est = prepare_scene(
-        scene, limits, fmt=fmt.value, integrator=integrator, dt=dt, duration=duration, seed=seed
-    )
-    if fmt is Format.ply:
-        check_ply_output(out, scene)
-    elif not to_stdout:
-        check_output_path(out, scene)
-        check_disk(out, est, fmt.value, sc, limits)
-    # Imported only now: a refused scene never pays for NumPy and the stepper.
     from animsim import api
-    from animsim.engine import STATUS_INTERRUPTED, STATUS_UNSTABLE
 
-    compiled = api.compile(sc, _backend(backend), name=loaded.name)
-    from animsim.analysis import stability
-
-    report = stability.analyse(compiled)
-    if report.dt_exceeds_limit:  # warn before the first step; the watchdog judges the run
-        _err(f"{scene}: warning: {report.verdict()}")
-    wrote = f"{out} and {out}.meta.json"
-    from animsim.export.sinks import open_sink
-    from animsim.record import recording_rule
-
-    sink: Any = open_sink(
-        Path("-") if to_stdout else out,
-        fmt.value,
-        # the frame rate recorded at, when there is one (the scene's, or the 60 fps default)
-        meta_rate=recording_rule(sc.record.every, sc.record.fps, compiled.clock.dt)[1],
-        extra_columns=extra_columns,
-        expected_frames=len(compiled.record_steps),
-    )
-    extra = {"scene_sha256": loaded.sha256, "scene_file": str(scene), META_THRESHOLD_KEY: drift_warn}
-    with _graceful_stop() as stop, _progress(compiled.clock.steps, quiet) as progress:
-        result = api.simulate(
-            compiled,
-            sinks=[sink],
-            keep=False,
+    with _graceful_stop() as stop, _progress(quiet) as progress:
+        outcome = api.run(
+            scene,
+            output,
+            fmt=None if format is None else format.value,
+            integrator=integrator,
+            dt=dt,
+            duration=duration,
+            seed=seed,
+            backend=_backend(backend),
+            extra_columns=extra_columns,
+            drift_warn=drift_warn,
+            limits=limits,
             stop=stop,
             progress=progress,
-            meta=extra,
             notice=_notice(quiet),
-        ).result
-    if fmt is Format.ply and sink.written:
-        first, last = sink.written[0], sink.written[-1]
-        span = f"{first}" if first == last else f"{first} .. {last.name}"
-        wrote = f"{len(sink.written)} PLY frames {span}, {sink.ids_path} and {out}.meta.json"
+            warn=lambda text: _err(f"{scene}: {text}"),
+        )
+    compiled, result, out = outcome.compiled, outcome.result, outcome.output
     if not quiet:
-        _summary(compiled, result, None if to_stdout else wrote)
+        _summary(compiled, result, outcome.wrote)
     _drift_warning(scene, compiled, result)
-    if result.status == STATUS_UNSTABLE:
+    if result.status == "unstable":
         assert result.failure is not None
         _err(f"{scene}: {result.failure.describe()}")
         _err(f"the frames before the failure are in {out}")
         raise typer.Exit(EXIT_FAILED)
-    if result.status == STATUS_INTERRUPTED:
+    if result.status == "interrupted":
         _err(
             f"{scene}: interrupted at step {result.steps_taken} (t = {result.final_state.time:.6g} s); frames so far in {out}"
         )
@@ -443,29 +383,40 @@ def run(
 
 
 def prepare_scene(scene: Path, limits: Any, **kw: Any) -> tuple[Any, Any, Any]:
-    """:func:`animsim.api.prepare_file`, imported late: a refused scene never pays for NumPy."""
+    """:func:`api.prepare_file`, imported late: a refused scene never pays for NumPy."""
     from animsim.api import prepare_file
 
     return prepare_file(scene, limits, **kw)
 
 
 @contextmanager
-def _progress(total: int, quiet: bool):
-    """A rich progress bar on stderr, only on a terminal and only for long runs."""
-    if quiet or total < 20_000 or not sys.stderr.isatty():
+def _progress(quiet: bool, label: str = "simulating", at_least: int = 20_000):
+    """A rich progress bar on stderr, only on a terminal and only for long runs: the
+    callback gets (done, total) and opens the bar on its first call with a large total."""
+    if quiet or not sys.stderr.isatty():
         yield None
         return
     from rich.progress import Progress
 
-    with Progress(transient=True, console=_stderr_console()) as bar:
-        task = bar.add_task("simulating", total=total)
-        stride = max(1, total // 200)
+    bar: Any = None
+    task: Any = None
 
-        def update(step: int, _total: int) -> None:
-            if step % stride == 0 or step == _total:
-                bar.update(task, completed=step)
+    def update(done: int, total: int) -> None:
+        nonlocal bar, task
+        if bar is None:
+            if total < at_least:
+                return
+            bar = Progress(transient=True, console=_stderr_console())
+            bar.start()
+            task = bar.add_task(label, total=total)
+        if done % max(1, total // 200) == 0 or done == total:
+            bar.update(task, completed=done)
 
+    try:
         yield update
+    finally:
+        if bar is not None:
+            bar.stop()
 
 
 def _notice(quiet: bool):
@@ -544,31 +495,10 @@ def explain(
     limits: Any = None,
 ) -> None:
     """Show what SCENE compiles to: counts, the stages run each step, and what was left out."""
-    from animsim.compile import compile_scene
-
-    loaded, sc, _ = prepare_scene(scene, limits, integrator=integrator)
+    from animsim import api
     from animsim.analysis.check import wrap
 
-    c = compile_scene(sc, loaded.name, backend=_backend(backend))
-    s = c.system
-    lines = [
-        f"scene {c.name!r} ({scene})",
-        f"  {s.particle_count} particles ({int(s.particle_pinned.sum())} pinned), {s.spring_count} springs, "
-        f"{len(sc.planes)} planes, {len(sc.emitters)} emitters"
-        + (f", {s.body_count} rigid bodies (their centres counted as particles)" if s.body_count else ""),
-        f"  {c.clock.steps} steps of {c.clock.dt:g} s to t = {c.clock.duration:g} s, seed {c.seed}",
-        "each step runs:",
-    ]
-    from animsim.analysis.effective import fallback_note
-
-    note = fallback_note(c)
-    for stage in c.stages:
-        if note is not None and stage.startswith("integrator:"):
-            stage = f"integrator: {note}"  # what the step really computes
-        lines.append(f"  + {stage}")
-    lines.append("left out (the scene does not need them):")
-    lines.extend(f"  - {item}" for item in c.left_out)
-    for line in lines:
+    for line in api.explain(scene, integrator=integrator, backend=_backend(backend), limits=limits):
         typer.echo(wrap(line))
 
 
@@ -576,9 +506,9 @@ def explain(
 
 
 def schema_text() -> str:
-    from animsim.scene.schema import schema_text as text
+    from animsim import api
 
-    return text()
+    return api.schema()
 
 
 @app.command()
@@ -605,9 +535,9 @@ def init(
     force: Annotated[bool, typer.Option("--force", help="Replace an existing file.")] = False,
 ) -> None:
     """Write a commented starter scene, and scene.schema.json beside it for editors."""
-    from animsim.templates import write_starter
+    from animsim import api
 
-    for line in write_starter(path, template, force=force):
+    for line in api.init(path, template, force=force):
         typer.echo(line)
 
 
@@ -628,17 +558,9 @@ def check(
     A conservative scene whose energy drifts by more than --drift-warn gets a
     warning; it still counts as stable.
     """
-    from animsim.analysis.check import check_scenes
-    from animsim.analysis.drift import check_threshold
+    from animsim import api
 
-    ok = check_scenes(
-        scenes,
-        quiet=quiet,
-        echo=typer.echo,
-        echo_err=_err,
-        limits=limits,
-        drift_warn=check_threshold(drift_warn),
-    )
+    ok = api.check(scenes, quiet=quiet, echo=typer.echo, echo_err=_err, limits=limits, drift_warn=drift_warn)
     if not ok:
         raise typer.Exit(EXIT_FAILED)
 
@@ -703,48 +625,29 @@ def render(
     limits: Any = None,
 ) -> None:
     """Render an animation: particles as dots (size and colour over life), springs as lines, planes as the ground."""
-    from animsim.export.trajectory import is_trajectory, read_trajectory
-    from animsim.render import RenderOptions, render_scene, render_trajectory, validate
-    from animsim.scene import models as m
+    from animsim import api
 
-    opts = RenderOptions(
-        fps=fps,
-        size=size,
-        view=view,
-        azimuth=azimuth,
-        elevation=elevation,
-        distance=distance,
-        dot_radius=dot_radius,
-    )
-    validate(gif, mp4, opts)
-    for out in (gif, mp4):
-        if out is not None:
-            check_output_path(out, source)
-    from_file = is_trajectory(source)
-    if integrators is not None:
-        _render_side_by_side(
-            source, integrators, gif, mp4, opts, from_file, integrator, dt, duration, quiet, limits
+    with _graceful_stop() as stop, _progress(quiet, "rendering", at_least=50) as progress:
+        result = api.render(
+            source,
+            gif,
+            mp4,
+            fps=fps,
+            view=view,
+            size=size,
+            azimuth=azimuth,
+            elevation=elevation,
+            distance=distance,
+            dot_radius=dot_radius,
+            scene=scene,
+            integrator=integrator,
+            dt=dt,
+            duration=duration,
+            integrators=integrators,
+            limits=limits,
+            stop=stop,
+            progress=progress,
         )
-        return
-    compiled = None
-    scene_path = scene if from_file else source
-    if scene_path is not None:
-        from animsim.compile import compile_scene
-
-        loaded, sc, _ = prepare_scene(scene_path, limits, integrator=integrator, dt=dt, duration=duration)
-        if not from_file:
-            # Record exactly the frames the animation shows.
-            sc = sc.model_copy(update={"record": m.Record(fps=fps)})
-        compiled = compile_scene(sc, loaded.name)
-    total = compiled.record_steps.size if (compiled is not None and not from_file) else None
-    with _frame_progress(total, quiet) as progress:
-        if from_file:
-            result = render_trajectory(
-                read_trajectory(source), gif, mp4, opts, compiled=compiled, progress=progress
-            )
-        else:
-            with _graceful_stop() as stop:
-                result = render_scene(compiled, gif, mp4, opts, progress=progress, stop=stop)
     outs = " and ".join(str(p) for p in result.outputs)
     if result.status == "interrupted":
         if result.outputs:
@@ -753,64 +656,19 @@ def render(
             _err(f"{source}: interrupted before the first frame was drawn; nothing written")
         raise typer.Exit(EXIT_INTERRUPTED)
     if not quiet:
-        typer.echo(f"wrote {outs}: {result.frames} frames at {fps:g} fps, view {result.view}, {result.size}")
+        drawn = (
+            f"{len(result.panels)} panels ({', '.join(result.panels)})"
+            if result.panels
+            else f"view {result.view}, {result.size}"
+        )
+        typer.echo(f"wrote {outs}: {result.frames} frames at {fps:g} fps, {drawn}")
     if result.status == "unstable":
+        if result.panels:
+            # A method that blows up is what the picture is there to show, not a failure of the command.
+            _err(f"{source}: a panel is marked: {result.failure.describe()}")
+            return
         _err(f"{source}: {result.failure.describe()}")
         raise typer.Exit(EXIT_FAILED)
-
-
-def _render_side_by_side(
-    source: Path,
-    integrators: str,
-    gif: Path | None,
-    mp4: Path | None,
-    opts: Any,
-    from_file: bool,
-    integrator: str | None,
-    dt: float | None,
-    duration: float | None,
-    quiet: bool,
-    limits: Any,
-) -> None:
-    """`render --integrators`: one panel per method, side by side, in one animation."""
-    from animsim.analysis.compare import parse_integrators
-    from animsim.export.side_by_side import compile_each, render_side_by_side
-    from animsim.scene import models as m
-
-    if from_file:
-        raise UsageError(
-            "--integrators simulates the scene once per method: give the scene, not a trajectory"
-        )
-    if integrator is not None:
-        raise UsageError("give --integrator or --integrators, not both")
-    names = parse_integrators(integrators)
-    loaded, sc, _ = prepare_scene(source, limits, dt=dt, duration=duration)
-    sc = sc.model_copy(update={"record": m.Record(fps=opts.fps)})
-    compiled = compile_each(sc, loaded.name, names)
-    with _graceful_stop() as stop:
-        result = render_side_by_side(compiled, gif, mp4, opts, stop=stop)
-    if result.status == "interrupted":
-        raise typer.Exit(EXIT_INTERRUPTED)
-    if not quiet:
-        outs = " and ".join(str(p) for p in result.outputs)
-        typer.echo(
-            f"wrote {outs}: {len(names)} panels ({', '.join(names)}), {result.frames} frames at {opts.fps:g} fps"
-        )
-    # A method that blows up is what the picture is there to show, not a failure of the command.
-    if result.status == "unstable":
-        _err(f"{source}: a panel is marked: {result.failure.describe()}")
-
-
-@contextmanager
-def _frame_progress(total: int | None, quiet: bool):
-    if quiet or total is None or total < 50 or not sys.stderr.isatty():
-        yield None
-        return
-    from rich.progress import Progress
-
-    with Progress(transient=True, console=_stderr_console()) as bar:
-        task = bar.add_task("rendering", total=total)
-        yield lambda done: bar.update(task, completed=done)
 
 
 # --- view ---------------------------------------------------------------------------------
@@ -850,30 +708,22 @@ def view(
     size over life, and an energy plot whose cursor follows the time. With
     --integrators the scene runs once per method, the panels side by side.
     """
-    from animsim.export.viewer import VIEWS
+    from animsim import api
 
-    if view not in VIEWS:
-        raise UsageError(f"--view {view!r}: choose one of {', '.join(VIEWS)}")
-    if not (fps > 0 and fps < float("inf")):
-        raise UsageError(f"--fps {fps}: must be a number > 0")
-    if output.suffix.lower() not in (".html", ".htm"):
-        raise UsageError(f"-o {output}: the file name must end in .html")
-    check_output_path(output, source)
-    from animsim.export.viewer_command import write_view
-
-    summary = write_view(
-        source,
-        output,
-        prepare=lambda path, **kw: prepare_scene(path, limits, **kw),
-        integrators=integrators,
-        fps=fps,
-        view=view,
-        scene=scene,
-        integrator=integrator,
-        dt=dt,
-        duration=duration,
-        stop_context=_graceful_stop,
-    )
+    with _graceful_stop() as stop:
+        summary = api.view(
+            source,
+            output,
+            integrators=integrators,
+            fps=fps,
+            view=view,
+            scene=scene,
+            integrator=integrator,
+            dt=dt,
+            duration=duration,
+            limits=limits,
+            stop=stop,
+        )
     if summary.interrupted:
         _err(f"{source}: interrupted; {output} was not written")
         raise typer.Exit(EXIT_INTERRUPTED)
@@ -944,50 +794,26 @@ def sweep(
     cases are rows, not failures: the exit status is 0 once the table is
     made, 1 only if a case crashed (status 'error').
     """
+    from animsim import api
     from animsim.analysis import sweep as sw
-    from animsim.preflight import RunLimits
-    from animsim.scene.loader import load_scene
 
-    # The file limits apply here; each case's step and memory pre-flight
-    # would need the sweep's own variants (not done yet: see docs/limits.md).
-    loaded = load_scene(scene, (limits or RunLimits()).loader)
-    axes = [sw.parse_set(text) for text in set_]
-    if integrators is not None:
-        axes.append(sw.integrators_axis(integrators))
-    if not axes:
-        raise UsageError("sweep: give at least one --set KEY=V1,V2,... or --integrators")
-    sw.check_axes(axes)
-    keys = [a.key for a in axes]
-    x_key = x or keys[0]
-    y_col = y or ("error" if reference is not None else "drift")
-    if plot is not None:
-        if x_key not in keys:
-            raise UsageError(f"--x {x_key}: not a swept key (swept: {', '.join(keys)})")
-        if y_col not in sw.PLOT_COLUMNS or (y_col == "error" and reference is None):
-            cols = [c for c in sw.PLOT_COLUMNS if c != "error" or reference is not None]
-            raise UsageError(f"--y {y_col}: not a plottable column (choose from {', '.join(cols)})")
-        check_output_path(plot, scene)
-    if output is not None:
-        check_output_path(output, scene)
     with _cases_progress(quiet) as progress:
-        table = sw.sweep(
-            loaded.data,
-            loaded.name,
-            str(scene),
-            axes,
+        table = api.sweep(
+            scene,
+            set_,
+            integrators=integrators,
             reference=reference.value if reference is not None else None,
+            output=output,
+            plot=plot,
+            x=x,
+            y=y,
             jobs=jobs,
             scheduler=scheduler,
+            limits=limits,
             progress=progress,
         )
     if not quiet:
         sw.print_table(table, _stdout_console())
-    if output is not None:
-        sw.write_csv(table, output)
-    if plot is not None:
-        from animsim.export import sweep_plot
-
-        sweep_plot.plot_table(table, plot, x_key, y_col)
     counts = table.counts()
     if scheduler is not None:
         where = "Dask LocalCluster" if scheduler == "local" else f"Dask at {scheduler}"
@@ -1251,67 +1077,21 @@ def plot(
     limits: Any = None,
 ) -> None:
     """Draw particle paths, the energy of a run split into its parts (and its drift), or phase portraits."""
-    from animsim.export.pictures import figure_format, plot_trajectory
-    from animsim.export.trajectory import TrajectoryCollector, is_trajectory, read_trajectory
+    from animsim import api
 
-    figure_format(output)
-    if view is not None and view not in ("xy", "xz", "yz"):
-        raise UsageError(f"--view {view!r}: plot takes xy, xz or yz")
-    check_output_path(output, source)
-    from_file = is_trajectory(source)
-    if kind is not PlotKind.phase and (integrators is not None or particles is not None):
-        raise UsageError("--integrators and --particles go with --kind phase")
-    if kind is PlotKind.phase:
-        from animsim.export.phase import phase_command
-
-        phase_command(
-            source,
-            output,
-            from_file=from_file,
-            scene=scene,
-            prepare=lambda path, **kw: prepare_scene(path, limits, **kw),
-            integrators=integrators,
-            particles=particles,
-            integrator=integrator,
-            dt=dt,
-            duration=duration,
-        )
-        typer.echo(f"wrote {output}")
-        return
-    scene_path = scene if from_file else source
-    compiled = None
-    if scene_path is not None:
-        from animsim.compile import compile_scene
-
-        loaded, sc, _ = prepare_scene(scene_path, limits, integrator=integrator, dt=dt, duration=duration)
-        compiled = compile_scene(sc, loaded.name)
-    if kind is PlotKind.energy:
-        if compiled is None:
-            raise UsageError("--kind energy needs the scene: give a scene, or --scene with the trajectory")
-        from animsim.export.phase import energy_parts_of
-        from animsim.export.pictures import plot_energy_parts
-
-        times, parts = energy_parts_of(compiled, read_trajectory(source) if from_file else None)
-        plot_energy_parts(
-            times,
-            parts,
-            output,
-            title=f"{compiled.name}: {compiled.integrator_name}, dt {compiled.clock.dt:g} s",
-            conservative=compiled.conservative,
-        )
-    else:
-        if from_file:
-            traj = read_trajectory(source)
-            name = source.stem
-        else:
-            from animsim.engine import run as simulate
-
-            assert compiled is not None
-            collector = TrajectoryCollector()
-            simulate(compiled, [collector])
-            traj = collector.trajectory()
-            name = compiled.name
-        plot_trajectory(traj, output, view=view, title=name)
+    api.plot(
+        source,
+        output,
+        kind=kind.value,
+        scene=scene,
+        view=view,
+        integrator=integrator,
+        dt=dt,
+        duration=duration,
+        integrators=integrators,
+        particles=particles,
+        limits=limits,
+    )
     typer.echo(f"wrote {output}")
 
 

@@ -385,6 +385,26 @@ def check_output_path(output: Path, scene_path: Path) -> None:
     os.unlink(probe)
 
 
+def check_ply_output(output: Path, scene_path: Path) -> None:
+    """Pre-flight for a PLY sequence: a pattern ``dir/stem.ply`` or an existing folder.
+
+    As for every format, the folder must already exist; the sink could create
+    it, but a typo in a folder name would then silently scatter frames
+    somewhere new.
+    """
+    from animsim.export.ply import PLY_SUFFIX
+
+    if output.is_dir():
+        if not os.access(output, os.W_OK):
+            raise UsageError(f"{output}: the folder is not writable")
+        return
+    if output.suffix.lower() != PLY_SUFFIX:
+        raise UsageError(
+            f"{output}: the folder does not exist; create it, or name the frames like {output}/frames.ply"
+        )
+    check_output_path(output, scene_path)
+
+
 def check_disk(output: Path, est: Estimate, fmt: str, scene: Scene, limits: RunLimits) -> None:
     """Refuse a run whose estimated output does not fit the free disk space."""
     if not limits.disk_check:

@@ -12,7 +12,7 @@ one frame whatever the run's length.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -41,6 +41,7 @@ class RenderResult:
     failure: Any = None
     view: str | None = None  # the view drawn (chosen from the bounds when not given)
     size: str | None = None  # the picture size drawn
+    panels: list[str] = field(default_factory=list)  # the methods side by side, when there are several
 
 
 #: the longer side of the picture, px, when --size is not given

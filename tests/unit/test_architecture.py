@@ -1,0 +1,94 @@
+"""The layering that docs/architecture.md promises, checked on the source itself.
+
+* nothing below the command line imports it;
+* the stepping code (engine, steppers, backends, the model, integrators) never
+  sees the scene language (pydantic models);
+* every command is options, one call into ``animsim.api``, output and exit status.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+from tests.conftest import ROOT
+
+PACKAGE = ROOT / "animsim"
+CLI = PACKAGE / "cli.py"
+STEPPING = [
+    PACKAGE / "engine.py",
+    PACKAGE / "steppers.py",
+    PACKAGE / "system.py",
+    *sorted((PACKAGE / "backends").glob("*.py")),
+    *sorted((PACKAGE / "integrators").glob("*.py")),
+]
+#: what a command may import besides the API: errors, and how to print
+OUTPUT_MODULES = {
+    "animsim",
+    "animsim.api",
+    "animsim.errors",
+    "animsim.analysis.check",
+    "animsim.analysis.sweep",
+}
+
+
+def _imports(tree: ast.AST) -> set[str]:
+    names: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            names.add(node.module)
+    return names
+
+
+def _tree(path: Path) -> ast.Module:
+    return ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+
+
+def test_nothing_below_the_command_line_imports_it():
+    offenders = [
+        str(path.relative_to(ROOT))
+        for path in sorted(PACKAGE.rglob("*.py"))
+        if path not in (CLI, PACKAGE / "__main__.py") and "animsim.cli" in _imports(_tree(path))
+    ]
+    assert offenders == []
+
+
+@pytest.mark.parametrize("path", STEPPING, ids=lambda p: str(p.relative_to(PACKAGE)))
+def test_stepping_code_never_sees_the_scene_language(path: Path):
+    imported = _imports(_tree(path))
+    assert not {m for m in imported if m.startswith("pydantic") or m.startswith("animsim.scene")}
+
+
+def _commands() -> dict[str, ast.FunctionDef]:
+    from animsim.cli import app
+
+    names = {info.callback.__name__ for info in app.registered_commands}
+    found = {node.name: node for node in _tree(CLI).body if isinstance(node, ast.FunctionDef)}
+    assert names <= set(found), names - set(found)
+    return {name: found[name] for name in sorted(names)}
+
+
+def test_every_command_is_one_call_into_the_api():
+    for name, func in _commands().items():
+        calls = [
+            node.func.attr
+            for node in ast.walk(func)
+            if isinstance(node, ast.Call)
+            and isinstance(node.func, ast.Attribute)
+            and isinstance(node.func.value, ast.Name)
+            and node.func.value.id == "api"
+        ]
+        helpers = [
+            node.func.id
+            for node in ast.walk(func)
+            if isinstance(node, ast.Call)
+            and isinstance(node.func, ast.Name)
+            and node.func.id == "schema_text"
+        ]
+        assert len(calls) + len(helpers) == 1, (name, calls)
+        extra = _imports(func) - OUTPUT_MODULES
+        assert not extra, (name, extra)
