@@ -656,12 +656,15 @@ def render(
             _err(f"{source}: interrupted before the first frame was drawn; nothing written")
         raise typer.Exit(EXIT_INTERRUPTED)
     if not quiet:
-        drawn = (
-            f"{len(result.panels)} panels ({', '.join(result.panels)})"
-            if result.panels
-            else f"view {result.view}, {result.size}"
-        )
-        typer.echo(f"wrote {outs}: {result.frames} frames at {fps:g} fps, {drawn}")
+        if result.panels:
+            typer.echo(
+                f"wrote {outs}: {len(result.panels)} panels ({', '.join(result.panels)}), "
+                f"{result.frames} frames at {fps:g} fps"
+            )
+        else:
+            typer.echo(
+                f"wrote {outs}: {result.frames} frames at {fps:g} fps, view {result.view}, {result.size}"
+            )
     if result.status == "unstable":
         if result.panels:
             # A method that blows up is what the picture is there to show, not a failure of the command.
