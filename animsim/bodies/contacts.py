@@ -1123,7 +1123,15 @@ class BodyContacts(StepStage):
         if not moved <= 0.5 * self._skin / math.sqrt(3.0):  # a NaN position rebuilds too
             self._candidates = candidate_pairs(x, self.bound + 0.5 * self._skin)
             self._built_at = x.copy()
-        if self._candidates[0].size == 0:
+        i, j = self._candidates
+        if i.size == 0:
+            return _empty_contacts()
+        # the list holds pairs within a skin of touching; only pairs whose bounding spheres overlap
+        # now can have a contact (every contact sphere lies inside its body's bounding sphere)
+        gap = x[i] - x[j]
+        reach = (self.bound[i] + self.bound[j]) * (1.0 + 1e-9)  # never lose a pair to rounding
+        close = np.einsum("ij,ij->i", gap, gap) <= reach * reach
+        if not close.any():
             return _empty_contacts()
         return pair_contacts(
             x,
@@ -1136,5 +1144,5 @@ class BodyContacts(StepStage):
             self.bound,
             self.restitution,
             self.friction,
-            self._candidates,
+            (i[close], j[close]),
         )
