@@ -276,11 +276,51 @@ def candidate_pairs(x: np.ndarray, bound: np.ndarray) -> tuple[np.ndarray, np.nd
         return empty, empty
     i = np.concatenate(parts_i)
     j = np.concatenate(parts_j)
-    close = np.einsum("ij,ij->i", x[i] - x[j], x[i] - x[j]) <= (bound[i] + bound[j]) ** 2
+    d = x[i] - x[j]
+    reach = bound[i] + bound[j]
+    # summed x, y, z in order, as the numba twin (_sweep_pairs_loop): both find the same pairs
+    close = (d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]) + d[:, 2] * d[:, 2] <= reach * reach
     i, j = i[close], j[close]
     i, j = np.minimum(i, j), np.maximum(i, j)
     keep = np.lexsort((j, i))
     return i[keep], j[keep]
+
+
+def _sweep_pairs_loop(x: np.ndarray, bound: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Twin of :func:`candidate_pairs` for numba: sweep and prune along the axis of the widest
+    spread (every overlapping pair overlaps along it), the same overlap test, the same sorted
+    output."""
+    b = x.shape[0]
+    axis = 0
+    widest = -1.0
+    for k in range(3):
+        spread = x[:, k].max() - x[:, k].min()
+        if spread > widest:
+            widest, axis = spread, k
+    lo = x[:, axis] - bound
+    order = np.argsort(lo)
+    keys = []
+    for s in range(b):
+        i = order[s]
+        hi = x[i, axis] + bound[i]
+        for t in range(s + 1, b):
+            j = order[t]
+            if lo[j] > hi:
+                break
+            d0, d1, d2 = x[i, 0] - x[j, 0], x[i, 1] - x[j, 1], x[i, 2] - x[j, 2]
+            reach = bound[i] + bound[j]
+            if (d0 * d0 + d1 * d1) + d2 * d2 <= reach * reach:
+                keys.append(min(i, j) * b + max(i, j))
+    out = np.sort(np.array(keys, dtype=np.int64))
+    return out // b, out % b
+
+
+@cache
+def numba_candidate_pairs() -> Any:
+    """:func:`_sweep_pairs_loop` compiled by numba."""
+    from numba import njit
+
+    return njit(cache=True)(_sweep_pairs_loop)
 
 
 def pair_contacts(
@@ -981,6 +1021,7 @@ class BodyContacts(StepStage):
         # between bodies (or colliders) runs the NumPy path on both backends, so the two agree
         self.use_numba = backend == "numba" and not colliders
         self._buffers: tuple[np.ndarray, ...] | None = None
+        self.numba_broadphase = backend == "numba"
         kinds = sorted({s.kind for s in shapes})
         parts = []
         if planes.count:
@@ -1121,7 +1162,11 @@ class BodyContacts(StepStage):
             return _empty_contacts()
         moved = np.inf if self._built_at is None else float(np.abs(x - self._built_at).max(initial=0.0))
         if not moved <= 0.5 * self._skin / math.sqrt(3.0):  # a NaN position rebuilds too
-            self._candidates = candidate_pairs(x, self.bound + 0.5 * self._skin)
+            grown = self.bound + 0.5 * self._skin
+            if self.numba_broadphase and self.count > 1 and np.isfinite(x).all():
+                self._candidates = numba_candidate_pairs()(np.ascontiguousarray(x), grown)
+            else:
+                self._candidates = candidate_pairs(x, grown)
             self._built_at = x.copy()
         i, j = self._candidates
         if i.size == 0:
