@@ -407,6 +407,24 @@ def _sym_matvec(m: np.ndarray, u: np.ndarray) -> np.ndarray:
     )
 
 
+def _arm_inertia(m: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """K = [r]x^T M [r]x as (6, k) rows (k00, k01, k02, k11, k12, k22), for symmetric M (6, k) and
+    lever arms r (3, k): K_ij = c_i . M c_j with c_j the columns of [r]x."""
+    zero = np.zeros_like(r[0])
+    cols = (np.stack((zero, r[2], -r[1])), np.stack((-r[2], zero, r[0])), np.stack((r[1], -r[0], zero)))
+    mc = [_sym_matvec(m, c) for c in cols]
+    return np.stack(
+        (
+            _dot3(cols[0], mc[0]),
+            _dot3(cols[0], mc[1]),
+            _dot3(cols[0], mc[2]),
+            _dot3(cols[1], mc[1]),
+            _dot3(cols[1], mc[2]),
+            _dot3(cols[2], mc[2]),
+        )
+    )
+
+
 def inv_world_inertia(q: np.ndarray, inv_inertia: np.ndarray) -> np.ndarray:
     """R diag(I^-1) R^T of every body as (6, B) rows (m00, m01, m02, m11, m12, m22)."""
     qw, qx, qy, qz = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
@@ -520,6 +538,13 @@ def solve(
         kn = np.where(has_b, (ma + mb) + (_dot3(rna, gna) + _dot3(rnb, gnb)), kn)
     # two immovable things (a pinned body on a floor) exchange no impulse
     inv_kn = np.where(kn > 0, 1.0 / np.where(kn > 0, kn, 1.0), 0.0)
+    # tangential response: along a unit direction e the effective mass is 1/(m_t + e . K e) with
+    # K = [r]x^T I^-1 [r]x (the angular part, r x e = [r]x e), summed over both bodies
+    k_t = _arm_inertia(mat_a, ra)
+    m_t = ma
+    if coupled:
+        k_t = np.where(has_b, k_t + _arm_inertia(mat_b, rb), k_t)
+        m_t = np.where(has_b, ma + mb, ma)
     vT, wT = v.T.copy(), w.T.copy()
     vel = vT[:, a] + _cross3(wT[:, a], ra)
     if coupled:
@@ -561,25 +586,19 @@ def solve(
             if hb.size:
                 vel[:, hb] = vel[:, hb] - (vb + _cross3(wb, rb[:, sb]))
             vt = vel - _dot3(vel, ns) * ns
-            speed = np.sqrt(_dot3(vt, vt))
-            moving = speed > 0.0
-            tdir = vt / np.where(moving, speed, 1.0)
-            rea = _cross3(ras, tdir)
-            kt = ma[s] + _dot3(rea, _sym_matvec(mat_a[:, s], rea))
-            if hb.size:
-                reb = _cross3(rb[:, sb], tdir[:, hb])
-                kt[hb] = (ma[sb] + mb[sb]) + (
-                    _dot3(rea[:, hb], _sym_matvec(mat_a[:, sb], rea[:, hb]))
-                    + _dot3(reb, _sym_matvec(mat_b[:, sb], reb))
-                )
-            live = moving & (kt > 0.0)
-            inv_kt = np.where(live, 1.0 / np.where(live, kt, 1.0), 0.0)
+            # the impulse that stops the sliding: -vt / (m_t + e.K e), e = vt/|vt|, written
+            # without the square root as -vt |vt|^2 / (m_t |vt|^2 + vt.K vt)
+            s2 = _dot3(vt, vt)
+            den = m_t[s] * s2 + _dot3(vt, _sym_matvec(k_t[:, s], vt))
+            live = (s2 > 0.0) & (den > 0.0)
+            f = np.where(live, s2 / np.where(live, den, 1.0), 0.0)
             jts = jt[:, s]
-            want = jts - (speed * inv_kt) * tdir
+            want = jts - f * vt
+            # ... within mu * (normal impulse so far)
             cap = friction[s] * jn[s]
-            mag = np.sqrt(_dot3(want, want))
-            over = mag > cap
-            want = np.where(over, want * (cap / np.where(over, mag, 1.0)), want)
+            mag2 = _dot3(want, want)
+            over = mag2 > cap * cap
+            want = np.where(over, want * (cap / np.sqrt(np.where(over, mag2, 1.0))), want)
             imp = want - jts
             jt[:, s] = want
             va += ma[s] * imp
@@ -784,6 +803,10 @@ def _solve_list_loop(
     tgt = np.empty(count)
     jn = np.zeros(count)
     jt = np.zeros((count, 3))
+    kt6 = np.zeros((count, 6))  # K = [r]x^T I^-1 [r]x of both ends (solve's k_t)
+    mt = np.empty(count)
+    cols = np.empty((3, 3))
+    mc = np.empty((3, 3))
     for i in range(count):
         for side in range(2):
             body = a[i] if side == 0 else b[i]
@@ -809,6 +832,30 @@ def _solve_list_loop(
             mat[i, o + 3] = r10 * i0 * r10 + r11 * i1 * r11 + r12 * i2 * r12
             mat[i, o + 4] = r10 * i0 * r20 + r11 * i1 * r21 + r12 * i2 * r22
             mat[i, o + 5] = r20 * i0 * r20 + r21 * i1 * r21 + r22 * i2 * r22
+            # K_ij = c_i . M c_j, c_j the columns of [r]x (as _arm_inertia)
+            if side == 0:
+                rx, ry, rz = ra[i, 0], ra[i, 1], ra[i, 2]
+            else:
+                rx, ry, rz = rb[i, 0], rb[i, 1], rb[i, 2]
+            cols[0, 0], cols[0, 1], cols[0, 2] = 0.0, rz, -ry
+            cols[1, 0], cols[1, 1], cols[1, 2] = -rz, 0.0, rx
+            cols[2, 0], cols[2, 1], cols[2, 2] = ry, -rx, 0.0
+            m0, m1, m2 = mat[i, o + 0], mat[i, o + 1], mat[i, o + 2]
+            m3, m4, m5 = mat[i, o + 3], mat[i, o + 4], mat[i, o + 5]
+            for j in range(3):
+                cx, cy, cz = cols[j, 0], cols[j, 1], cols[j, 2]
+                mc[j, 0] = (m0 * cx + m1 * cy) + m2 * cz
+                mc[j, 1] = (m1 * cx + m3 * cy) + m4 * cz
+                mc[j, 2] = (m2 * cx + m4 * cy) + m5 * cz
+            kk = 0
+            for ci in range(3):
+                for cj in range(ci, 3):
+                    val = (cols[ci, 0] * mc[cj, 0] + cols[ci, 1] * mc[cj, 1]) + cols[ci, 2] * mc[cj, 2]
+                    if side == 0:
+                        kt6[i, kk] = val
+                    else:
+                        kt6[i, kk] = kt6[i, kk] + val
+                    kk += 1
         ai, bi = a[i], b[i]
         nx, ny, nz = n[i, 0], n[i, 1], n[i, 2]
         ax, ay, az = ra[i, 0], ra[i, 1], ra[i, 2]
@@ -836,6 +883,7 @@ def _solve_list_loop(
             g[i, 6], g[i, 7], g[i, 8], g[i, 9], g[i, 10], g[i, 11] = ux, uy, uz, gx, gy, gz
             mb[i] = inv_mass[bi]
             kn = (ma[i] + mb[i]) + (da + ((ux * gx + uy * gy) + uz * gz))
+            mt[i] = ma[i] + mb[i]
             vx = vx - (v[bi, 0] + (w[bi, 1] * bz - w[bi, 2] * by))
             vy = vy - (v[bi, 1] + (w[bi, 2] * bx - w[bi, 0] * bz))
             vz = vz - (v[bi, 2] + (w[bi, 0] * by - w[bi, 1] * bx))
@@ -847,6 +895,7 @@ def _solve_list_loop(
                 g[i, k] = 0.0
             mb[i] = 0.0
             kn = ma[i] + da
+            mt[i] = ma[i]
             rest = rest + 0.0
         inv_kn[i] = 1.0 / kn if kn > 0.0 else 0.0
         vn0 = (vx * nx + vy * ny) + vz * nz
@@ -908,31 +957,21 @@ def _solve_list_loop(
                 vz = vz - (v[bi, 2] + (w[bi, 0] * by - w[bi, 1] * bx))
             vn = (vx * nx + vy * ny) + vz * nz
             tx, ty, tz = vx - vn * nx, vy - vn * ny, vz - vn * nz
-            speed = np.sqrt((tx * tx + ty * ty) + tz * tz)
+            s2 = (tx * tx + ty * ty) + tz * tz
             wx, wy, wz = jt[i, 0], jt[i, 1], jt[i, 2]
-            if speed > 0.0:
-                ex, ey, ez = tx / speed, ty / speed, tz / speed
-                m0, m1, m2, m3, m4, m5 = mat[i, 0], mat[i, 1], mat[i, 2], mat[i, 3], mat[i, 4], mat[i, 5]
-                ux, uy, uz = ay * ez - az * ey, az * ex - ax * ez, ax * ey - ay * ex
-                kt = (ux * ((m0 * ux + m1 * uy) + m2 * uz) + uy * ((m1 * ux + m3 * uy) + m4 * uz)) + uz * (
-                    (m2 * ux + m4 * uy) + m5 * uz
+            if s2 > 0.0:
+                k0, k1, k2, k3, k4, k5 = kt6[i, 0], kt6[i, 1], kt6[i, 2], kt6[i, 3], kt6[i, 4], kt6[i, 5]
+                qf = (tx * ((k0 * tx + k1 * ty) + k2 * tz) + ty * ((k1 * tx + k3 * ty) + k4 * tz)) + tz * (
+                    (k2 * tx + k4 * ty) + k5 * tz
                 )
-                if bi >= 0:
-                    m0, m1, m2, m3, m4, m5 = mat[i, 6], mat[i, 7], mat[i, 8], mat[i, 9], mat[i, 10], mat[i, 11]
-                    ux, uy, uz = by * ez - bz * ey, bz * ex - bx * ez, bx * ey - by * ex
-                    kb = (
-                        ux * ((m0 * ux + m1 * uy) + m2 * uz) + uy * ((m1 * ux + m3 * uy) + m4 * uz)
-                    ) + uz * ((m2 * ux + m4 * uy) + m5 * uz)
-                    kt = (im_a + im_b) + (kt + kb)
-                else:
-                    kt = im_a + kt
-                if kt > 0.0:
-                    f = speed * (1.0 / kt)
-                    wx, wy, wz = wx - f * ex, wy - f * ey, wz - f * ez
+                den = mt[i] * s2 + qf
+                if den > 0.0:
+                    f = s2 / den
+                    wx, wy, wz = wx - f * tx, wy - f * ty, wz - f * tz
             capj = friction[i] * jn[i]
-            mag = np.sqrt((wx * wx + wy * wy) + wz * wz)
-            if mag > capj:
-                s = capj / mag
+            mag2 = (wx * wx + wy * wy) + wz * wz
+            if mag2 > capj * capj:
+                s = capj / np.sqrt(mag2)
                 wx, wy, wz = wx * s, wy * s, wz * s
             ix, iy, iz = wx - jt[i, 0], wy - jt[i, 1], wz - jt[i, 2]
             jt[i, 0], jt[i, 1], jt[i, 2] = wx, wy, wz
