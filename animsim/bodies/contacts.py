@@ -17,10 +17,13 @@ Model (after each integrator step, as a step stage):
    gets no bounce and does not jitter. Accumulated normal impulses stay >= 0
    (contacts push, never pull); the tangential (Coulomb) impulse stops sliding,
    capped at mu times the normal impulse. The contacts are solved one after the
-   other, ``iterations`` times, in batches in which no body appears twice (so a
-   batch is one vectorised update).
-3. **Projection.** Each body is moved out along the normal by its deepest
-   penetration (split between two free bodies by their inverse masses); a
+   other, ``iterations`` times: on NumPy in batches in which no body appears
+   twice (a batch is one vectorised update, and the result is the sequential
+   one), on numba by a kernel that walks the list. Both write every sum in the
+   same order, so the backends agree to the bit.
+3. **Projection.** Each body is moved out of each plane by its deepest
+   penetration there, and out of other bodies along the normal (split between
+   two free bodies by their inverse masses); a
    bouncing contact is moved out by (1 + e) times the depth, the distance the
    reflected motion would have covered after the impact inside the step. The
    projection changes positions only, never velocities.
@@ -751,9 +754,9 @@ def _detect_planes_loop(
                 cy = x[bi, 1] + (py + qw * ty + (qz * tx - qx * tz))
                 cz = x[bi, 2] + (pz + qw * tz + (qx * ty - qy * tx))
                 rr = radii[bi, k]
-                d = (
-                    (cx - plane_point[p, 0]) * nx + (cy - plane_point[p, 1]) * ny
-                ) + (cz - plane_point[p, 2]) * nz
+                d = ((cx - plane_point[p, 0]) * nx + (cy - plane_point[p, 1]) * ny) + (
+                    cz - plane_point[p, 2]
+                ) * nz
                 d = d - rr
                 if d < 0.0:
                     a_out[c] = bi
@@ -1106,7 +1109,9 @@ class BodyContacts(StepStage):
             contacts = self.find(x, q, pairs)
             if contacts.count == 0:
                 return False
-            e_used = solve(contacts, v, w, q, self.inv_mass, self.inv_inertia, resting, self.iterations, dv, dx)
+            e_used = solve(
+                contacts, v, w, q, self.inv_mass, self.inv_inertia, resting, self.iterations, dv, dx
+            )
             project_planes(contacts, e_used, x, self.inv_mass, self.planes)
             project(contacts, e_used, x, self.inv_mass)
             return True
