@@ -193,7 +193,10 @@ def local_sdf(kind: np.ndarray, dims: np.ndarray, p: np.ndarray) -> tuple[np.nda
         pb, h = p[box], dims[box]
         qd = np.abs(pb) - h
         outside = np.maximum(qd, 0.0)
-        out_len = np.linalg.norm(outside, axis=1)
+        # lengths sum x, y, z in order, as the numba twin (_pair_contacts_loop)
+        out_len = np.sqrt(
+            (outside[:, 0] * outside[:, 0] + outside[:, 1] * outside[:, 1]) + outside[:, 2] * outside[:, 2]
+        )
         inside = np.minimum(qd.max(axis=1), 0.0)
         d[box] = out_len + inside
         axis = qd.argmax(axis=1)
@@ -208,7 +211,7 @@ def local_sdf(kind: np.ndarray, dims: np.ndarray, p: np.ndarray) -> tuple[np.nda
         closest = np.zeros_like(pr)
         closest[:, 1] = np.clip(pr[:, 1], -half, half)
         rel = pr - closest
-        dist = np.linalg.norm(rel, axis=1)
+        dist = np.sqrt((rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1]) + rel[:, 2] * rel[:, 2])
         d[round_] = dist - dm[:, 0]
         fallback = np.array([0.0, 1.0, 0.0])  # centre exactly on the axis: any normal will do
         n[round_] = np.where(dist[:, None] > 0, rel / np.where(dist > 0, dist, 1.0)[:, None], fallback)
@@ -377,6 +380,149 @@ def pair_contacts(
         np.sqrt(friction[s_idx] * friction[t_idx]),
         np.full(s_idx.size, -1, dtype=np.int64),
     )
+
+
+def _pair_contacts_loop(
+    x: np.ndarray,
+    q: np.ndarray,
+    points: np.ndarray,
+    radii: np.ndarray,
+    counts: np.ndarray,
+    kind: np.ndarray,
+    dims: np.ndarray,
+    restitution: np.ndarray,
+    friction: np.ndarray,
+    ci: np.ndarray,
+    cj: np.ndarray,
+) -> tuple[np.ndarray, ...]:
+    """Twin of :func:`pair_contacts` (given its candidate pairs) for numba: the same tests in the
+    same order (round sources first, then round targets, then box corners both ways; per pair its
+    spheres in order) and the same arithmetic (:func:`quaternion.rotate`, :func:`local_sdf`)."""
+    kmax = points.shape[1]
+    cap = 2 * ci.shape[0] * kmax
+    a_out = np.empty(cap, dtype=np.int64)
+    b_out = np.empty(cap, dtype=np.int64)
+    ra_out = np.empty((cap, 3))
+    rb_out = np.empty((cap, 3))
+    n_out = np.empty((cap, 3))
+    depth_out = np.empty(cap)
+    e_out = np.empty(cap)
+    mu_out = np.empty(cap)
+    c = 0
+    for stage in range(4):
+        for p in range(ci.shape[0]):
+            i, j = ci[p], cj[p]
+            round_i, round_j = kind[i] != SHAPE_BOX, kind[j] != SHAPE_BOX
+            if stage == 0 and round_i:
+                src, dst = i, j
+            elif stage == 1 and not round_i and round_j:
+                src, dst = j, i
+            elif stage == 2 and not round_i and not round_j:
+                src, dst = i, j
+            elif stage == 3 and not round_i and not round_j:
+                src, dst = j, i
+            else:
+                continue
+            qw, qx, qy, qz = q[src, 0], q[src, 1], q[src, 2], q[src, 3]
+            tw, tx_, ty_, tz_ = q[dst, 0], q[dst, 1], q[dst, 2], q[dst, 3]
+            for k in range(counts[src]):
+                # the sphere's centre in the world: x + R(q) p
+                px, py, pz = points[src, k, 0], points[src, k, 1], points[src, k, 2]
+                t0 = 2.0 * (qy * pz - qz * py)
+                t1 = 2.0 * (qz * px - qx * pz)
+                t2 = 2.0 * (qx * py - qy * px)
+                cx = x[src, 0] + (px + qw * t0 + (qy * t2 - qz * t1))
+                cy = x[src, 1] + (py + qw * t1 + (qz * t0 - qx * t2))
+                cz = x[src, 2] + (pz + qw * t2 + (qx * t1 - qy * t0))
+                # ... in the target's frame: R(q)^T v, the rotation by the conjugate
+                vx, vy, vz = cx - x[dst, 0], cy - x[dst, 1], cz - x[dst, 2]
+                ux, uy, uz = -tx_, -ty_, -tz_
+                t0 = 2.0 * (uy * vz - uz * vy)
+                t1 = 2.0 * (uz * vx - ux * vz)
+                t2 = 2.0 * (ux * vy - uy * vx)
+                lx = vx + tw * t0 + (uy * t2 - uz * t1)
+                ly = vy + tw * t1 + (uz * t0 - ux * t2)
+                lz = vz + tw * t2 + (ux * t1 - uy * t0)
+                # signed distance and outward normal in the target's frame (local_sdf)
+                if kind[dst] == SHAPE_BOX:
+                    q0 = abs(lx) - dims[dst, 0]
+                    q1 = abs(ly) - dims[dst, 1]
+                    q2 = abs(lz) - dims[dst, 2]
+                    o0, o1, o2 = max(q0, 0.0), max(q1, 0.0), max(q2, 0.0)
+                    out_len = np.sqrt((o0 * o0 + o1 * o1) + o2 * o2)
+                    big = q0
+                    axis = 0
+                    if q1 > big:
+                        big, axis = q1, 1
+                    if q2 > big:
+                        big, axis = q2, 2
+                    d = out_len + min(big, 0.0)
+                    if out_len > 0:
+                        nx = (np.sign(lx) * o0) / out_len
+                        ny = (np.sign(ly) * o1) / out_len
+                        nz = (np.sign(lz) * o2) / out_len
+                    else:
+                        nx, ny, nz = 0.0, 0.0, 0.0
+                        pa = lx if axis == 0 else (ly if axis == 1 else lz)
+                        face = 1.0 if pa >= 0 else -1.0
+                        if axis == 0:
+                            nx = face
+                        elif axis == 1:
+                            ny = face
+                        else:
+                            nz = face
+                else:
+                    half = dims[dst, 1] if kind[dst] == SHAPE_CAPSULE else 0.0
+                    r0 = lx - 0.0
+                    r1 = ly - min(max(ly, -half), half)
+                    r2 = lz - 0.0
+                    dist = np.sqrt((r0 * r0 + r1 * r1) + r2 * r2)
+                    d = dist - dims[dst, 0]
+                    if dist > 0:
+                        nx, ny, nz = r0 / dist, r1 / dist, r2 / dist
+                    else:
+                        nx, ny, nz = 0.0, 1.0, 0.0
+                rr = radii[src, k]
+                d = d - rr
+                if not d < 0.0:
+                    continue
+                # the normal in the world: R(q_dst) n
+                t0 = 2.0 * (ty_ * nz - tz_ * ny)
+                t1 = 2.0 * (tz_ * nx - tx_ * nz)
+                t2 = 2.0 * (tx_ * ny - ty_ * nx)
+                wx = nx + tw * t0 + (ty_ * t2 - tz_ * t1)
+                wy = ny + tw * t1 + (tz_ * t0 - tx_ * t2)
+                wz = nz + tw * t2 + (tx_ * t1 - ty_ * t0)
+                half_d = 0.5 * d
+                px_ = (cx - rr * wx) + half_d * wx  # halfway between the two surfaces
+                py_ = (cy - rr * wy) + half_d * wy
+                pz_ = (cz - rr * wz) + half_d * wz
+                a_out[c], b_out[c] = src, dst
+                ra_out[c, 0], ra_out[c, 1], ra_out[c, 2] = px_ - x[src, 0], py_ - x[src, 1], pz_ - x[src, 2]
+                rb_out[c, 0], rb_out[c, 1], rb_out[c, 2] = px_ - x[dst, 0], py_ - x[dst, 1], pz_ - x[dst, 2]
+                n_out[c, 0], n_out[c, 1], n_out[c, 2] = wx, wy, wz
+                depth_out[c] = -d
+                e_out[c] = 0.5 * (restitution[src] + restitution[dst])
+                mu_out[c] = np.sqrt(friction[src] * friction[dst])
+                c += 1
+    return (
+        a_out[:c],
+        b_out[:c],
+        ra_out[:c],
+        rb_out[:c],
+        n_out[:c],
+        depth_out[:c],
+        e_out[:c],
+        mu_out[:c],
+    )
+
+
+@cache
+def numba_pair_contacts() -> Any:
+    """:func:`_pair_contacts_loop` compiled by numba."""
+    from numba import njit
+
+    return njit(cache=True)(_pair_contacts_loop)
 
 
 # --- the solver ---------------------------------------------------------------------
@@ -1222,6 +1368,21 @@ class BodyContacts(StepStage):
         close = np.einsum("ij,ij->i", gap, gap) <= reach * reach
         if not close.any():
             return _empty_contacts()
+        if self.numba_broadphase:
+            found = numba_pair_contacts()(
+                x,
+                q,
+                self.points,
+                self.radii,
+                self.counts,
+                self.kind,
+                self.dims,
+                self.restitution,
+                self.friction,
+                i[close],
+                j[close],
+            )
+            return Contacts(*found, np.full(found[0].size, -1, dtype=np.int64))
         return pair_contacts(
             x,
             q,
