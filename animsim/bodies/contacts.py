@@ -556,9 +556,10 @@ def _sym_matvec(m: np.ndarray, u: np.ndarray) -> np.ndarray:
     )
 
 
-def _arm_inertia(m: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """K = [r]x^T M [r]x as (6, k) rows (k00, k01, k02, k11, k12, k22), for symmetric M (6, k) and
-    lever arms r (3, k): K_ij = c_i . M c_j with c_j the columns of [r]x."""
+def _arm_inertia(m: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+    """(K, G) for symmetric M (6, k) and lever arms r (3, k): K = [r]x^T M [r]x as (6, k) rows
+    (k00, k01, k02, k11, k12, k22), K_ij = c_i . M c_j with c_j the columns of [r]x; and
+    G = M [r]x as its three columns M c_j, (3, k) each, so that M (r x f) = sum_j G_j f_j."""
     zero = np.zeros_like(r[0])
     cols = (np.stack((zero, r[2], -r[1])), np.stack((-r[2], zero, r[0])), np.stack((r[1], -r[0], zero)))
     mc = [_sym_matvec(m, c) for c in cols]
@@ -571,7 +572,7 @@ def _arm_inertia(m: np.ndarray, r: np.ndarray) -> np.ndarray:
             _dot3(cols[1], mc[2]),
             _dot3(cols[2], mc[2]),
         )
-    )
+    ), mc
 
 
 def inv_world_inertia(q: np.ndarray, inv_inertia: np.ndarray) -> np.ndarray:
@@ -689,10 +690,12 @@ def solve(
     inv_kn = np.where(kn > 0, 1.0 / np.where(kn > 0, kn, 1.0), 0.0)
     # tangential response: along a unit direction e the effective mass is 1/(m_t + e . K e) with
     # K = [r]x^T I^-1 [r]x (the angular part, r x e = [r]x e), summed over both bodies
-    k_t = _arm_inertia(mat_a, ra)
+    k_t, ga = _arm_inertia(mat_a, ra)
     m_t = ma
+    gb = ga
     if coupled:
-        k_t = np.where(has_b, k_t + _arm_inertia(mat_b, rb), k_t)
+        k_b, gb = _arm_inertia(mat_b, rb)
+        k_t = np.where(has_b, k_t + k_b, k_t)
         m_t = np.where(has_b, ma + mb, ma)
     vT, wT = v.T.copy(), w.T.copy()
     vel = vT[:, a] + _cross3(wT[:, a], ra)
@@ -751,13 +754,13 @@ def solve(
             imp = want - jts
             jt[:, s] = want
             va += ma[s] * imp
-            wa += _sym_matvec(mat_a[:, s], _cross3(ras, imp))
+            wa += (ga[0][:, s] * imp[0] + ga[1][:, s] * imp[1]) + ga[2][:, s] * imp[2]
             vT[:, ai] = va
             wT[:, ai] = wa
             if hb.size:
                 ib = imp[:, hb]
                 vb -= mb[sb] * ib
-                wb -= _sym_matvec(mat_b[:, sb], _cross3(rb[:, sb], ib))
+                wb -= (gb[0][:, sb] * ib[0] + gb[1][:, sb] * ib[1]) + gb[2][:, sb] * ib[2]
                 vT[:, bi] = vb
                 wT[:, bi] = wb
     v[:] = vT.T
@@ -953,6 +956,7 @@ def _solve_list_loop(
     jn = np.zeros(count)
     jt = np.zeros((count, 3))
     kt6 = np.zeros((count, 6))  # K = [r]x^T I^-1 [r]x of both ends (solve's k_t)
+    gm = np.zeros((count, 18))  # G = I^-1 [r]x of each end, column by column (solve's ga, gb)
     mt = np.empty(count)
     cols = np.empty((3, 3))
     mc = np.empty((3, 3))
@@ -996,6 +1000,9 @@ def _solve_list_loop(
                 mc[j, 0] = (m0 * cx + m1 * cy) + m2 * cz
                 mc[j, 1] = (m1 * cx + m3 * cy) + m4 * cz
                 mc[j, 2] = (m2 * cx + m4 * cy) + m5 * cz
+                gm[i, 9 * side + 3 * j + 0] = mc[j, 0]
+                gm[i, 9 * side + 3 * j + 1] = mc[j, 1]
+                gm[i, 9 * side + 3 * j + 2] = mc[j, 2]
             kk = 0
             for ci in range(3):
                 for cj in range(ci, 3):
@@ -1127,21 +1134,15 @@ def _solve_list_loop(
             v[ai, 0] += im_a * ix
             v[ai, 1] += im_a * iy
             v[ai, 2] += im_a * iz
-            m0, m1, m2, m3, m4, m5 = mat[i, 0], mat[i, 1], mat[i, 2], mat[i, 3], mat[i, 4], mat[i, 5]
-            ux, uy, uz = ay * iz - az * iy, az * ix - ax * iz, ax * iy - ay * ix
-            w[ai, 0] += (m0 * ux + m1 * uy) + m2 * uz
-            w[ai, 1] += (m1 * ux + m3 * uy) + m4 * uz
-            w[ai, 2] += (m2 * ux + m4 * uy) + m5 * uz
+            for k in range(3):  # w += I^-1 (r x imp) = sum_j G_j imp_j
+                w[ai, k] += (gm[i, k] * ix + gm[i, 3 + k] * iy) + gm[i, 6 + k] * iz
             if bi >= 0:
                 bx, by, bz = rb[i, 0], rb[i, 1], rb[i, 2]
                 v[bi, 0] -= im_b * ix
                 v[bi, 1] -= im_b * iy
                 v[bi, 2] -= im_b * iz
-                m0, m1, m2, m3, m4, m5 = mat[i, 6], mat[i, 7], mat[i, 8], mat[i, 9], mat[i, 10], mat[i, 11]
-                ux, uy, uz = by * iz - bz * iy, bz * ix - bx * iz, bx * iy - by * ix
-                w[bi, 0] -= (m0 * ux + m1 * uy) + m2 * uz
-                w[bi, 1] -= (m1 * ux + m3 * uy) + m4 * uz
-                w[bi, 2] -= (m2 * ux + m4 * uy) + m5 * uz
+                for k in range(3):
+                    w[bi, k] -= (gm[i, 9 + k] * ix + gm[i, 12 + k] * iy) + gm[i, 15 + k] * iz
     # pushes out of the planes: per body and plane the deepest, plane by plane (project_planes)
     nplanes = plane_normal.shape[0]
     if nplanes == 0:
