@@ -109,8 +109,7 @@ def _concat(parts: list[Contacts]) -> Contacts:
 
 def world_spheres(x: np.ndarray, q: np.ndarray, points: np.ndarray) -> np.ndarray:
     """World centres of the contact spheres, (B, K, 3)."""
-    k = points.shape[1]
-    return x[:, None, :] + quat.rotate(np.repeat(q[:, None, :], k, axis=1), points)
+    return x[:, None, :] + quat.rotate(q[:, None, :], points)
 
 
 def plane_contacts(

@@ -57,9 +57,21 @@ def normalise(q: np.ndarray) -> np.ndarray:
 
 def rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     """R(q) v for unit q, without building matrices: v + 2 w (u x v) + 2 u x (u x v), u = (x, y, z)."""
-    u = q[..., 1:]
-    t = 2.0 * np.cross(u, v)
-    return v + q[..., :1] * t + np.cross(u, t)
+    # written out (np.cross costs more than the arithmetic on many short rows); the same
+    # operations as the cross products, and q broadcasts against v ((B, 1, 4) with (B, K, 3))
+    qw, ux, uy, uz = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
+    tx = 2.0 * (uy * vz - uz * vy)
+    ty = 2.0 * (uz * vx - ux * vz)
+    tz = 2.0 * (ux * vy - uy * vx)
+    return np.stack(
+        [
+            vx + qw * tx + (uy * tz - uz * ty),
+            vy + qw * ty + (uz * tx - ux * tz),
+            vz + qw * tz + (ux * ty - uy * tx),
+        ],
+        axis=-1,
+    )
 
 
 def rotate_inverse(q: np.ndarray, v: np.ndarray) -> np.ndarray:
