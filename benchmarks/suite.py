@@ -46,7 +46,7 @@ TINY_STEPS = 20_000
 TINY_RECORD_EVERY = 100
 IO_GRID = 64  # 64 x 64 = 4096 rows per frame
 IO_FRAMES = 25
-WORKLOADS = ("cloth", "particles", "fountain", "stiff", "tiny", "io", "render")
+WORKLOADS = ("cloth", "particles", "fountain", "bodies", "stiff", "tiny", "io", "render")
 
 
 @dataclass
@@ -550,6 +550,35 @@ def bench_fountain(settings: Settings) -> Table:
     return table
 
 
+def bench_bodies(settings: Settings) -> Table:
+    """Rigid bodies: 1,000 free bodies with gravity and a floor (benchmarks/bodies.py)."""
+    from benchmarks import bodies as B
+
+    count = B.GRID[0] * B.GRID[1]
+    table = Table(
+        f"Rigid bodies: {count:,} free boxes, spheres and capsules dropped onto a floor with friction "
+        f"(symplectic Euler, dt = {B.DT * 1000:g} ms; goals: 1,000 steps/s on numba, 100 on NumPy)",
+        "steps/s",
+        1.0,
+    )
+    steps = 200 if settings is QUICK else 500
+    backends = ["numpy"] + (["numba"] if numba_ok(table.notes) else [])
+    contenders = []
+    for backend in backends:
+        runs = [B.steps_per_second(backend, steps) for _ in range(max(2, settings.samples // 2))]
+        best_cpu = max(cpu for _, cpu in runs)
+        c = Contender(f"animsim {backend}", lambda: None, 1, f"best {best_cpu:,.0f} steps per CPU second")
+        c.rates = [wall for wall, _ in runs]
+        contenders.append(c)
+    add_rows(table, f"bodies {count}", contenders, None)
+    table.notes.append(
+        f"each sample times {steps} steps after a {B.WARMUP:g} s warm-up (bodies falling, landing and "
+        "resting); rates are per wall-clock second, spread over whole runs, not sub-samples"
+    )
+    print("  bodies done", flush=True)
+    return table
+
+
 def bench_stiff(settings: Settings) -> Table:
     """Simulated seconds per wall second on a stiff cloth, each method at its largest surviving step."""
     from benchmarks import stiff_cloth as S
@@ -640,6 +669,7 @@ def main(argv: list[str] | None = None) -> int:
         "io": bench_io,
         "render": bench_render,
         "fountain": bench_fountain,
+        "bodies": bench_bodies,
         "stiff": bench_stiff,
     }
     tables = []

@@ -58,6 +58,7 @@ from animsim.analysis.references import (
     ReferenceFailed,
     Trajectory,
     analytic_reference,
+    body_point_distances,
     dop853_reference,
     record_at,
     rk4_reference,
@@ -115,6 +116,7 @@ CLOSED_FORM_FAMILIES = (
     "one particle on one spring to a pinned anchor, moving along the spring",
     "two free particles on one spring, moving along it",
     "particles on bound orbits around one attractor",
+    "free rigid bodies with no torque that are axisymmetric or spherical (or pinned)",
 )
 
 
@@ -271,6 +273,9 @@ def _distances(run: Trajectory, ref: Trajectory, moving: np.ndarray | None) -> l
         for xr, xf in zip(run.position, ref.position, strict=True):
             d = np.linalg.norm(xr - xf, axis=1)
             out.append(d if moving is None else d[moving])
+        turned = body_point_distances(run, ref)  # rigid bodies: orientation errors count too
+        if turned is not None:
+            out = [np.concatenate([d, e]) for d, e in zip(out, turned, strict=True)]
         return out
     assert run.ids is not None and ref.ids is not None
     for ir, xr, jf, xf in zip(run.ids, run.position, ref.ids, ref.position, strict=True):

@@ -24,6 +24,14 @@ into independent pieces that each have one. The pieces recognised:
 * one particle (or several, independently) around one attractor on a bound
   orbit: Kepler's equation in the eccentric anomaly difference and Lagrange's
   f and g functions (Vallado, "Fundamentals of Astrodynamics", 2.3 and 2.4).
+* rigid bodies with no torque on them (forces act at their centres, which move
+  as the particles above) whose principal moments make them axisymmetric
+  (I1 = I2, the symmetric top) or spherical: the angular momentum L is fixed
+  in the world, the body turns about L at |L|/I1 while its angular velocity
+  precesses about the symmetry axis s at Omega = omega3 (I3 - I1)/I1 in the
+  body frame, so R(t) = Rot(L, |L| t/I1) R0 Rot(s, -Omega t) (Goldstein,
+  "Classical Mechanics", 5.6; Landau and Lifshitz, "Mechanics", 33); a pinned
+  body keeps its angular velocity, R(t) = Rot(omega0, |omega0| t) R0.
 
 Everything else uses a converged run (:func:`dop853_reference`,
 :func:`rk4_reference`): SciPy's DOP853
@@ -108,16 +116,49 @@ class Trajectory:
     position: list[np.ndarray]
     velocity: list[np.ndarray]
     ids: list[np.ndarray] | None = None
+    #: rigid bodies: F arrays of (B, 4) orientation quaternions, the bodies' rows and bounding
+    #: radii (m), so that errors in orientation count as the distance a body's points moved
+    orientation: list[np.ndarray] | None = None
+    body_rows: np.ndarray | None = None
+    body_radius: np.ndarray | None = None
 
     @classmethod
     def from_sink(cls, sink: MemorySink, fixed_population: bool) -> Trajectory:
         times = sink.times()
         pos = [f.position for f in sink.frames]
         vel = [f.velocity for f in sink.frames]
+        bodies = sink.header.extra.get("bodies") if sink.header is not None else None
+        extra: dict[str, object] = {}
+        if bodies is not None and sink.frames and sink.frames[0].orientation is not None:
+            first, shapes = bodies["first"], bodies["shapes"]
+            extra = {
+                "orientation": [f.orientation for f in sink.frames],
+                "body_rows": np.arange(first, first + len(shapes)),
+                "body_radius": np.array([s.bounding_radius for s in shapes], dtype=float),
+            }
         if fixed_population:
-            return cls(times, pos, vel, None)
+            return cls(times, pos, vel, None, **extra)
         table = np.array(sink.ids, dtype=object)
-        return cls(times, pos, vel, [table[f.index] for f in sink.frames])
+        return cls(times, pos, vel, [table[f.index] for f in sink.frames], **extra)
+
+
+def body_point_distances(run: Trajectory, ref: Trajectory) -> list[np.ndarray] | None:
+    """Per frame, per body, how far apart the run and the reference put the body's points: the
+    largest distance between the two placements of the six points at the body's bounding radius
+    on its principal axes (so a wrong orientation counts in metres, as a wrong position does).
+    None when either trajectory has no orientations."""
+    if run.orientation is None or ref.orientation is None or ref.body_rows is None:
+        return None
+    from animsim.bodies import quaternion as quat
+
+    rows, radius = ref.body_rows, ref.body_radius
+    out = []
+    for xr, qr, xf, qf in zip(run.position, run.orientation, ref.position, ref.orientation, strict=True):
+        shift = (xr[rows] - xf[rows])[:, :, None]  # (B, 3, 1)
+        turn = radius[:, None, None] * (quat.to_matrix(qr) - quat.to_matrix(qf))  # columns: axes
+        far = np.maximum(np.linalg.norm(shift + turn, axis=1), np.linalg.norm(shift - turn, axis=1))
+        out.append(far.max(axis=1))
+    return out
 
 
 @dataclass
@@ -240,15 +281,32 @@ def _parallel(vec: np.ndarray, axis: np.ndarray) -> bool:
 
 @dataclass
 class ClosedForm:
-    """A scene's exact motion as independent pieces; call it with times."""
+    """A scene's exact motion as independent pieces; call it with times.
+
+    ``body_pieces`` fill the bodies' orientations (F, B, 4) and angular velocities
+    (F, B, 3); their centres are rows among the particles' pieces.
+    """
 
     particle_count: int
     pieces: list[tuple[str, Callable[[np.ndarray, np.ndarray, np.ndarray], None]]]
+    body_pieces: list[tuple[str, Callable[[np.ndarray, np.ndarray, np.ndarray], None]]] = field(
+        default_factory=list
+    )
+    body_count: int = 0
+
+    def evaluate_bodies(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Orientations (F, B, 4) and angular velocities (F, B, 3) at ``times`` (s)."""
+        times = np.asarray(times, dtype=float)
+        q = np.zeros((len(times), self.body_count, 4))
+        w = np.zeros((len(times), self.body_count, 3))
+        for _, fill in self.body_pieces:
+            fill(times, q, w)
+        return q, w
 
     @property
     def description(self) -> str:
         counts: dict[str, int] = {}
-        for label, _ in self.pieces:
+        for label, _ in self.pieces + self.body_pieces:
             if label != PINNED_LABEL:  # anchors are not what the comparison is about
                 counts[label] = counts.get(label, 0) + 1
         if not counts:
@@ -276,7 +334,6 @@ class _Attractor:
 
 def closed_form(compiled: Compiled) -> ClosedForm:
     """The scene's closed form, or :class:`NoClosedForm` saying why there is none."""
-    scene = compiled.scene
     # An allow-list: every element must say what it contributes (animsim.elements:
     # closed_form); one that does not, or any post-step stage, means no closed form.
     for stage in compiled.post_step:
@@ -284,6 +341,81 @@ def closed_form(compiled: Compiled) -> ClosedForm:
     bodies = getattr(compiled.dynamics, "bodies", None)
     for term in bodies.terms if bodies is not None else ():
         raise NoClosedForm(term.no_closed_form or "springs to bodies have no closed form here")
+    # Every other force acts at a body's centre of mass (no torque): the centres are rows among
+    # the particles, and the rotations are the torque-free ones below.
+    rotations = _body_rotations(compiled) if compiled.system.body_count else []
+    form = _particle_closed_form(compiled)
+    form.body_pieces = rotations
+    form.body_count = compiled.system.body_count
+    return form
+
+
+#: principal moments equal to this relative tolerance make a body axisymmetric
+AXISYMMETRIC_RTOL = 1e-9
+
+
+def _body_rotations(compiled: Compiled) -> list[tuple[str, Fill]]:
+    """The torque-free rotation of every body (see the module docstring), or NoClosedForm."""
+    from animsim.bodies import quaternion as quat
+
+    system = compiled.system
+    q0_all = compiled.initial.body_orientation
+    w0_all = compiled.initial.body_angular_velocity
+    pieces: list[tuple[str, Fill]] = []
+    for b in range(system.body_count):
+        q0, w0 = q0_all[b].copy(), w0_all[b].copy()
+        if system.particle_pinned[system.body_first + b] or not np.any(system.body_inv_inertia[b] > 0):
+            pieces.append(("pinned body spinning uniformly", _spin_piece(b, q0, w0, w0, np.zeros(3), 0.0)))
+            continue
+        inertia = np.asarray(system.body_inertia[b], dtype=float)
+        close = [
+            abs(inertia[i] - inertia[j]) <= AXISYMMETRIC_RTOL * max(inertia[i], inertia[j])
+            for i, j in ((1, 2), (0, 2), (0, 1))
+        ]  # close[k]: the two moments other than k are equal, so axis k is a symmetry axis
+        if not any(close):
+            raise NoClosedForm(
+                f"body {system.body_ids[b]!r} is not axisymmetric (principal moments "
+                f"{', '.join(f'{i:.6g}' for i in inertia)} kg m^2): its torque-free tumbling needs "
+                "Jacobi's elliptic functions, not covered here"
+            )
+        axis = int(np.argmax(close)) if not all(close) else 2
+        i1 = float(inertia[(axis + 1) % 3])
+        i3 = float(inertia[axis])
+        r0 = quat.to_matrix(q0)
+        body_w = r0.T @ w0
+        ang_mom = r0 @ (inertia * body_w)  # L = R I R^T omega, fixed in the world
+        omega_p = float(body_w[axis]) * (i3 - i1) / i1  # body-frame precession rate
+        sym = np.zeros(3)
+        sym[axis] = 1.0
+        label = "torque-free spherical body" if all(close) else "torque-free symmetric top"
+        pieces.append((label, _spin_piece(b, q0, ang_mom / i1, w0, sym, omega_p)))
+    return pieces
+
+
+def _spin_piece(
+    b: int, q0: np.ndarray, turn: np.ndarray, w0: np.ndarray, sym: np.ndarray, omega_p: float
+) -> Fill:
+    """q(t) = Rot(turn, |turn| t) q0 Rot(sym, -omega_p t) and omega(t) = turn - omega_p R(t) sym
+    (``turn`` = L / I1 in the world; ``sym`` the symmetry axis in the body frame)."""
+    from animsim.bodies import quaternion as quat
+
+    rate = float(np.linalg.norm(turn))
+    axis = turn / rate if rate > 0 else np.array([1.0, 0.0, 0.0])
+
+    def fill(t: np.ndarray, q: np.ndarray, w: np.ndarray) -> None:
+        world = quat.from_axis_angle(axis, rate * t)  # (F, 4)
+        qt = quat.multiply(world, np.broadcast_to(q0, world.shape))
+        if omega_p != 0.0:
+            qt = quat.multiply(qt, quat.from_axis_angle(sym, -omega_p * t))
+        q[:, b] = qt
+        w[:, b] = turn[None] - omega_p * quat.rotate(qt, np.broadcast_to(sym, (len(t), 3)))
+
+    return fill
+
+
+def _particle_closed_form(compiled: Compiled) -> ClosedForm:
+    """The closed form of the particles (and bodies' centres), or NoClosedForm."""
+    scene = compiled.scene
     g = np.zeros(3)
     drag = 0.0  # total linear coefficient, N*s/m (drag k plus wind k)
     push = np.zeros(3)  # sum of wind k*w, N
@@ -559,7 +691,14 @@ def analytic_reference(compiled: Compiled, times: np.ndarray) -> Reference:
     """The closed-form reference at ``times``; raises :class:`NoClosedForm`."""
     form = closed_form(compiled)
     x, v = form.evaluate(times)
-    return Reference("analytic", form.description, Trajectory(np.asarray(times), list(x), list(v)))
+    traj = Trajectory(np.asarray(times), list(x), list(v))
+    if form.body_count:
+        system = compiled.system
+        q, _ = form.evaluate_bodies(times)
+        traj.orientation = list(q)
+        traj.body_rows = np.arange(system.body_first, system.body_first + system.body_count)
+        traj.body_radius = np.array([s.bounding_radius for s in system.body_shape], dtype=float)
+    return Reference("analytic", form.description, traj)
 
 
 # =====================================================================================
@@ -569,8 +708,9 @@ def analytic_reference(compiled: Compiled, times: np.ndarray) -> Reference:
 
 def smooth(compiled: Compiled) -> bool:
     """True when the right-hand side is smooth enough for DOP853 (no stage after the
-    step: no collisions, no births)."""
-    return not compiled.post_step
+    step: no collisions, no births) and is all in ``Dynamics.acceleration`` (rigid bodies
+    add orientations and torques it does not hold: their reference is a converged RK4 run)."""
+    return not compiled.post_step and not compiled.system.body_count
 
 
 def dop853_reference(compiled: Compiled, times: np.ndarray) -> Reference:

@@ -17,10 +17,13 @@ Model (after each integrator step, as a step stage):
    gets no bounce and does not jitter. Accumulated normal impulses stay >= 0
    (contacts push, never pull); the tangential (Coulomb) impulse stops sliding,
    capped at mu times the normal impulse. The contacts are solved one after the
-   other, ``iterations`` times, in batches in which no body appears twice (so a
-   batch is one vectorised update).
-3. **Projection.** Each body is moved out along the normal by its deepest
-   penetration (split between two free bodies by their inverse masses); a
+   other, ``iterations`` times: on NumPy in batches in which no body appears
+   twice (a batch is one vectorised update, and the result is the sequential
+   one), on numba by a kernel that walks the list. Both write every sum in the
+   same order, so the backends agree to the bit.
+3. **Projection.** Each body is moved out of each plane by its deepest
+   penetration there, and out of other bodies along the normal (split between
+   two free bodies by their inverse masses); a
    bouncing contact is moved out by (1 + e) times the depth, the distance the
    reflected motion would have covered after the impact inside the step. The
    projection changes positions only, never velocities.
@@ -82,6 +85,7 @@ class Contacts:
     depth: np.ndarray  # (C,) penetration >= 0
     restitution: np.ndarray
     friction: np.ndarray
+    plane: np.ndarray  # (C,) the plane a contact is behind, -1 for colliders and pairs
 
     @property
     def count(self) -> int:
@@ -91,13 +95,7 @@ class Contacts:
 def _empty_contacts() -> Contacts:
     z3 = np.zeros((0, 3))
     zi = np.zeros(0, dtype=np.int64)
-    return Contacts(zi, zi, z3, z3, z3, np.zeros(0), np.zeros(0), np.zeros(0))
-
-
-def _select(c: Contacts, bodies: np.ndarray) -> Contacts:
-    """The contacts whose first body is flagged in ``bodies`` (B,) bool."""
-    keep = bodies[c.a]
-    return Contacts(*(getattr(c, f)[keep] for f in Contacts.__dataclass_fields__))
+    return Contacts(zi, zi, z3, z3, z3, np.zeros(0), np.zeros(0), np.zeros(0), zi)
 
 
 def _concat(parts: list[Contacts]) -> Contacts:
@@ -111,19 +109,22 @@ def _concat(parts: list[Contacts]) -> Contacts:
 
 def world_spheres(x: np.ndarray, q: np.ndarray, points: np.ndarray) -> np.ndarray:
     """World centres of the contact spheres, (B, K, 3)."""
-    k = points.shape[1]
-    return x[:, None, :] + quat.rotate(np.repeat(q[:, None, :], k, axis=1), points)
+    return x[:, None, :] + quat.rotate(q[:, None, :], points)
 
 
 def plane_contacts(
     x: np.ndarray, q: np.ndarray, points: np.ndarray, radii: np.ndarray, valid: np.ndarray, planes: PlaneTable
 ) -> Contacts:
-    """Contact spheres behind each plane: ordered by plane, then body, then sphere."""
+    """Contact spheres behind each plane: ordered by plane, then body, then sphere. Vectorised over
+    every body's spheres; the signed distance sums x, y, z in order (as the numba twin)."""
     centres = world_spheres(x, q, points)
     parts = []
-    for p in range(planes.count):
-        n = planes.normal[p]
-        dist = (centres - planes.point[p]) @ n - radii
+    for p in range(planes.count):  # planes are a scene's few walls, not per-body work
+        n, o = planes.normal[p], planes.point[p]
+        dist = ((centres[..., 0] - o[0]) * n[0] + (centres[..., 1] - o[1]) * n[1]) + (
+            centres[..., 2] - o[2]
+        ) * n[2]
+        dist = dist - radii
         body, k = np.nonzero((dist < 0.0) & valid)
         if body.size == 0:
             continue
@@ -139,6 +140,7 @@ def plane_contacts(
                 -dist[body, k],
                 np.full(c, planes.restitution[p]),
                 np.full(c, planes.friction[p]),
+                np.full(c, p, dtype=np.int64),
             )
         )
     return _concat(parts)
@@ -173,6 +175,7 @@ def sdf_contacts(
         -d,
         np.full(c, restitution),
         np.full(c, friction),
+        np.full(c, -1, dtype=np.int64),
     )
 
 
@@ -189,7 +192,10 @@ def local_sdf(kind: np.ndarray, dims: np.ndarray, p: np.ndarray) -> tuple[np.nda
         pb, h = p[box], dims[box]
         qd = np.abs(pb) - h
         outside = np.maximum(qd, 0.0)
-        out_len = np.linalg.norm(outside, axis=1)
+        # lengths sum x, y, z in order, as the numba twin (_pair_contacts_loop)
+        out_len = np.sqrt(
+            (outside[:, 0] * outside[:, 0] + outside[:, 1] * outside[:, 1]) + outside[:, 2] * outside[:, 2]
+        )
         inside = np.minimum(qd.max(axis=1), 0.0)
         d[box] = out_len + inside
         axis = qd.argmax(axis=1)
@@ -204,7 +210,7 @@ def local_sdf(kind: np.ndarray, dims: np.ndarray, p: np.ndarray) -> tuple[np.nda
         closest = np.zeros_like(pr)
         closest[:, 1] = np.clip(pr[:, 1], -half, half)
         rel = pr - closest
-        dist = np.linalg.norm(rel, axis=1)
+        dist = np.sqrt((rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1]) + rel[:, 2] * rel[:, 2])
         d[round_] = dist - dm[:, 0]
         fallback = np.array([0.0, 1.0, 0.0])  # centre exactly on the axis: any normal will do
         n[round_] = np.where(dist[:, None] > 0, rel / np.where(dist > 0, dist, 1.0)[:, None], fallback)
@@ -275,11 +281,51 @@ def candidate_pairs(x: np.ndarray, bound: np.ndarray) -> tuple[np.ndarray, np.nd
         return empty, empty
     i = np.concatenate(parts_i)
     j = np.concatenate(parts_j)
-    close = np.einsum("ij,ij->i", x[i] - x[j], x[i] - x[j]) <= (bound[i] + bound[j]) ** 2
+    d = x[i] - x[j]
+    reach = bound[i] + bound[j]
+    # summed x, y, z in order, as the numba twin (_sweep_pairs_loop): both find the same pairs
+    close = (d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]) + d[:, 2] * d[:, 2] <= reach * reach
     i, j = i[close], j[close]
     i, j = np.minimum(i, j), np.maximum(i, j)
     keep = np.lexsort((j, i))
     return i[keep], j[keep]
+
+
+def _sweep_pairs_loop(x: np.ndarray, bound: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Twin of :func:`candidate_pairs` for numba: sweep and prune along the axis of the widest
+    spread (every overlapping pair overlaps along it), the same overlap test, the same sorted
+    output."""
+    b = x.shape[0]
+    axis = 0
+    widest = -1.0
+    for k in range(3):
+        spread = x[:, k].max() - x[:, k].min()
+        if spread > widest:
+            widest, axis = spread, k
+    lo = x[:, axis] - bound
+    order = np.argsort(lo)
+    keys = []
+    for s in range(b):
+        i = order[s]
+        hi = x[i, axis] + bound[i]
+        for t in range(s + 1, b):
+            j = order[t]
+            if lo[j] > hi:
+                break
+            d0, d1, d2 = x[i, 0] - x[j, 0], x[i, 1] - x[j, 1], x[i, 2] - x[j, 2]
+            reach = bound[i] + bound[j]
+            if (d0 * d0 + d1 * d1) + d2 * d2 <= reach * reach:
+                keys.append(min(i, j) * b + max(i, j))
+    out = np.sort(np.array(keys, dtype=np.int64))
+    return out // b, out % b
+
+
+@cache
+def numba_candidate_pairs() -> Any:
+    """:func:`_sweep_pairs_loop` compiled by numba."""
+    from numba import njit
+
+    return njit(cache=True)(_sweep_pairs_loop)
 
 
 def pair_contacts(
@@ -331,10 +377,226 @@ def pair_contacts(
         -d,
         0.5 * (restitution[s_idx] + restitution[t_idx]),
         np.sqrt(friction[s_idx] * friction[t_idx]),
+        np.full(s_idx.size, -1, dtype=np.int64),
     )
 
 
+def _pair_contacts_loop(
+    x: np.ndarray,
+    q: np.ndarray,
+    points: np.ndarray,
+    radii: np.ndarray,
+    counts: np.ndarray,
+    kind: np.ndarray,
+    dims: np.ndarray,
+    restitution: np.ndarray,
+    friction: np.ndarray,
+    ci: np.ndarray,
+    cj: np.ndarray,
+) -> tuple[np.ndarray, ...]:
+    """Twin of :func:`pair_contacts` (given its candidate pairs) for numba: the same tests in the
+    same order (round sources first, then round targets, then box corners both ways; per pair its
+    spheres in order) and the same arithmetic (:func:`quaternion.rotate`, :func:`local_sdf`)."""
+    kmax = points.shape[1]
+    cap = 2 * ci.shape[0] * kmax
+    a_out = np.empty(cap, dtype=np.int64)
+    b_out = np.empty(cap, dtype=np.int64)
+    ra_out = np.empty((cap, 3))
+    rb_out = np.empty((cap, 3))
+    n_out = np.empty((cap, 3))
+    depth_out = np.empty(cap)
+    e_out = np.empty(cap)
+    mu_out = np.empty(cap)
+    c = 0
+    for stage in range(4):
+        for p in range(ci.shape[0]):
+            i, j = ci[p], cj[p]
+            round_i, round_j = kind[i] != SHAPE_BOX, kind[j] != SHAPE_BOX
+            if stage == 0 and round_i:
+                src, dst = i, j
+            elif stage == 1 and not round_i and round_j:
+                src, dst = j, i
+            elif stage == 2 and not round_i and not round_j:
+                src, dst = i, j
+            elif stage == 3 and not round_i and not round_j:
+                src, dst = j, i
+            else:
+                continue
+            qw, qx, qy, qz = q[src, 0], q[src, 1], q[src, 2], q[src, 3]
+            tw, tx_, ty_, tz_ = q[dst, 0], q[dst, 1], q[dst, 2], q[dst, 3]
+            for k in range(counts[src]):
+                # the sphere's centre in the world: x + R(q) p
+                px, py, pz = points[src, k, 0], points[src, k, 1], points[src, k, 2]
+                t0 = 2.0 * (qy * pz - qz * py)
+                t1 = 2.0 * (qz * px - qx * pz)
+                t2 = 2.0 * (qx * py - qy * px)
+                cx = x[src, 0] + (px + qw * t0 + (qy * t2 - qz * t1))
+                cy = x[src, 1] + (py + qw * t1 + (qz * t0 - qx * t2))
+                cz = x[src, 2] + (pz + qw * t2 + (qx * t1 - qy * t0))
+                # ... in the target's frame: R(q)^T v, the rotation by the conjugate
+                vx, vy, vz = cx - x[dst, 0], cy - x[dst, 1], cz - x[dst, 2]
+                ux, uy, uz = -tx_, -ty_, -tz_
+                t0 = 2.0 * (uy * vz - uz * vy)
+                t1 = 2.0 * (uz * vx - ux * vz)
+                t2 = 2.0 * (ux * vy - uy * vx)
+                lx = vx + tw * t0 + (uy * t2 - uz * t1)
+                ly = vy + tw * t1 + (uz * t0 - ux * t2)
+                lz = vz + tw * t2 + (ux * t1 - uy * t0)
+                # signed distance and outward normal in the target's frame (local_sdf)
+                if kind[dst] == SHAPE_BOX:
+                    q0 = abs(lx) - dims[dst, 0]
+                    q1 = abs(ly) - dims[dst, 1]
+                    q2 = abs(lz) - dims[dst, 2]
+                    o0, o1, o2 = max(q0, 0.0), max(q1, 0.0), max(q2, 0.0)
+                    out_len = np.sqrt((o0 * o0 + o1 * o1) + o2 * o2)
+                    big = q0
+                    axis = 0
+                    if q1 > big:
+                        big, axis = q1, 1
+                    if q2 > big:
+                        big, axis = q2, 2
+                    d = out_len + min(big, 0.0)
+                    if out_len > 0:
+                        nx = (np.sign(lx) * o0) / out_len
+                        ny = (np.sign(ly) * o1) / out_len
+                        nz = (np.sign(lz) * o2) / out_len
+                    else:
+                        nx, ny, nz = 0.0, 0.0, 0.0
+                        pa = lx if axis == 0 else (ly if axis == 1 else lz)
+                        face = 1.0 if pa >= 0 else -1.0
+                        if axis == 0:
+                            nx = face
+                        elif axis == 1:
+                            ny = face
+                        else:
+                            nz = face
+                else:
+                    half = dims[dst, 1] if kind[dst] == SHAPE_CAPSULE else 0.0
+                    r0 = lx - 0.0
+                    r1 = ly - min(max(ly, -half), half)
+                    r2 = lz - 0.0
+                    dist = np.sqrt((r0 * r0 + r1 * r1) + r2 * r2)
+                    d = dist - dims[dst, 0]
+                    if dist > 0:
+                        nx, ny, nz = r0 / dist, r1 / dist, r2 / dist
+                    else:
+                        nx, ny, nz = 0.0, 1.0, 0.0
+                rr = radii[src, k]
+                d = d - rr
+                if not d < 0.0:
+                    continue
+                # the normal in the world: R(q_dst) n
+                t0 = 2.0 * (ty_ * nz - tz_ * ny)
+                t1 = 2.0 * (tz_ * nx - tx_ * nz)
+                t2 = 2.0 * (tx_ * ny - ty_ * nx)
+                wx = nx + tw * t0 + (ty_ * t2 - tz_ * t1)
+                wy = ny + tw * t1 + (tz_ * t0 - tx_ * t2)
+                wz = nz + tw * t2 + (tx_ * t1 - ty_ * t0)
+                half_d = 0.5 * d
+                px_ = (cx - rr * wx) + half_d * wx  # halfway between the two surfaces
+                py_ = (cy - rr * wy) + half_d * wy
+                pz_ = (cz - rr * wz) + half_d * wz
+                a_out[c], b_out[c] = src, dst
+                ra_out[c, 0], ra_out[c, 1], ra_out[c, 2] = px_ - x[src, 0], py_ - x[src, 1], pz_ - x[src, 2]
+                rb_out[c, 0], rb_out[c, 1], rb_out[c, 2] = px_ - x[dst, 0], py_ - x[dst, 1], pz_ - x[dst, 2]
+                n_out[c, 0], n_out[c, 1], n_out[c, 2] = wx, wy, wz
+                depth_out[c] = -d
+                e_out[c] = 0.5 * (restitution[src] + restitution[dst])
+                mu_out[c] = np.sqrt(friction[src] * friction[dst])
+                c += 1
+    return (
+        a_out[:c],
+        b_out[:c],
+        ra_out[:c],
+        rb_out[:c],
+        n_out[:c],
+        depth_out[:c],
+        e_out[:c],
+        mu_out[:c],
+    )
+
+
+@cache
+def numba_pair_contacts() -> Any:
+    """:func:`_pair_contacts_loop` compiled by numba."""
+    from numba import njit
+
+    return njit(cache=True)(_pair_contacts_loop)
+
+
 # --- the solver ---------------------------------------------------------------------
+
+
+# --- fixed-order arithmetic shared by the NumPy solver and its numba twins ---------------
+#
+# Vectors of the NumPy solver are (3, k) arrays, one row per component, and every sum is
+# written out in the order the numba kernels use (x, then y, then z; a matrix row as
+# (m0 u0 + m1 u1) + m2 u2): the two backends then round alike, contact by contact.
+
+
+def _cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b of (3, k) arrays."""
+    return np.stack((a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]))
+
+
+def _dot3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a . b of (3, k) arrays, (k,): (a0 b0 + a1 b1) + a2 b2."""
+    return (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2]
+
+
+def _sym_matvec(m: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """M u for symmetric M given as (6, k) rows (m00, m01, m02, m11, m12, m22) and u (3, k)."""
+    return np.stack(
+        (
+            (m[0] * u[0] + m[1] * u[1]) + m[2] * u[2],
+            (m[1] * u[0] + m[3] * u[1]) + m[4] * u[2],
+            (m[2] * u[0] + m[4] * u[1]) + m[5] * u[2],
+        )
+    )
+
+
+def _arm_inertia(m: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+    """(K, G) for symmetric M (6, k) and lever arms r (3, k): K = [r]x^T M [r]x as (6, k) rows
+    (k00, k01, k02, k11, k12, k22), K_ij = c_i . M c_j with c_j the columns of [r]x; and
+    G = M [r]x as its three columns M c_j, (3, k) each, so that M (r x f) = sum_j G_j f_j."""
+    zero = np.zeros_like(r[0])
+    cols = (np.stack((zero, r[2], -r[1])), np.stack((-r[2], zero, r[0])), np.stack((r[1], -r[0], zero)))
+    mc = [_sym_matvec(m, c) for c in cols]
+    return np.stack(
+        (
+            _dot3(cols[0], mc[0]),
+            _dot3(cols[0], mc[1]),
+            _dot3(cols[0], mc[2]),
+            _dot3(cols[1], mc[1]),
+            _dot3(cols[1], mc[2]),
+            _dot3(cols[2], mc[2]),
+        )
+    ), mc
+
+
+def inv_world_inertia(q: np.ndarray, inv_inertia: np.ndarray) -> np.ndarray:
+    """R diag(I^-1) R^T of every body as (6, B) rows (m00, m01, m02, m11, m12, m22)."""
+    qw, qx, qy, qz = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    r00 = 1 - 2 * (qy * qy + qz * qz)
+    r01 = 2 * (qx * qy - qw * qz)
+    r02 = 2 * (qx * qz + qw * qy)
+    r10 = 2 * (qx * qy + qw * qz)
+    r11 = 1 - 2 * (qx * qx + qz * qz)
+    r12 = 2 * (qy * qz - qw * qx)
+    r20 = 2 * (qx * qz - qw * qy)
+    r21 = 2 * (qy * qz + qw * qx)
+    r22 = 1 - 2 * (qx * qx + qy * qy)
+    i0, i1, i2 = inv_inertia[:, 0], inv_inertia[:, 1], inv_inertia[:, 2]
+    return np.stack(
+        (
+            r00 * i0 * r00 + r01 * i1 * r01 + r02 * i2 * r02,
+            r00 * i0 * r10 + r01 * i1 * r11 + r02 * i2 * r12,
+            r00 * i0 * r20 + r01 * i1 * r21 + r02 * i2 * r22,
+            r10 * i0 * r10 + r11 * i1 * r11 + r12 * i2 * r12,
+            r10 * i0 * r20 + r11 * i1 * r21 + r12 * i2 * r22,
+            r20 * i0 * r20 + r21 * i1 * r21 + r22 * i2 * r22,
+        )
+    )
 
 
 def batches(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -361,16 +623,16 @@ def batches(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return batch
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a x b of (..., 3) arrays, written out (np.cross is slow on many short rows)."""
-    return np.stack(
-        [
-            a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
-            a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
-            a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0],
-        ],
-        axis=-1,
-    )
+def _slot_batches(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`batches` for lists in which no contact joins two bodies (planes, colliders): the
+    batch of a contact is how many contacts of its body come before it (one sort, no rounds)."""
+    order = np.argsort(a, kind="stable")
+    sa = a[order]
+    start = np.flatnonzero(np.r_[True, sa[1:] != sa[:-1]])
+    rank = np.arange(a.size) - np.repeat(start, np.diff(np.r_[start, a.size]))
+    batch = np.empty(a.size, dtype=np.int64)
+    batch[order] = rank
+    return batch
 
 
 def solve(
@@ -385,95 +647,137 @@ def solve(
     dv: np.ndarray | None = None,
     dx: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Sequential impulses on v (B,3), w (B,3) in place; returns the restitution applied per contact."""
+    """Sequential impulses on v (B,3), w (B,3) in place; returns the restitution applied per contact.
+
+    The contacts are solved one after the other in list order, ``iterations`` times
+    (Catto 2005). Contacts that share no body commute, so the list is cut into
+    batches in which no body appears twice and that keep each body's contacts in
+    order (:func:`batches`); a batch is one vectorised update and the result is the
+    sequential one, operation for operation (the numba twin, ``_solve_list``, walks
+    the list itself).
+    """
     c = contacts
-    a, b = c.a, c.b
+    count = c.count
+    e_out = np.zeros(count)
+    if count == 0:
+        return e_out
+    coupled = bool((c.b >= 0).any())
+    batch = batches(c.a, c.b) if coupled else _slot_batches(c.a, c.b)
+    order = np.argsort(batch, kind="stable")
+    cuts = np.searchsorted(batch[order], np.arange(int(batch.max()) + 2))
+    a, b = c.a[order], c.b[order]
     has_b = b >= 0
     bb = np.where(has_b, b, 0)
-    # world inverse inertia matrices, once per step (orientations do not change while solving)
-    rot = quat.to_matrix(q)
-    inv_iw = np.einsum("bij,bj,bkj->bik", rot, inv_inertia, rot)
-    ia = inv_iw[a]
-    ib = np.where(has_b[:, None, None], inv_iw[bb], 0.0)
+    n, ra, rb = c.n[order].T, c.ra[order].T, c.rb[order].T
+    restitution, friction, depth = c.restitution[order], c.friction[order], c.depth[order]
+    # per contact, once per step: the world inverse inertias, the angular response to a unit
+    # normal impulse g = I^-1 (r x n), and the effective mass along n (Baraff 1997, sec. 8):
+    # 1/K = 1/m_a + (r_a x n) . I_a^-1 (r_a x n) (+ the same for b)
+    m_body = inv_world_inertia(q, inv_inertia)
     ma = inv_mass[a]
+    mat_a = m_body[:, a]
+    rna = _cross3(ra, n)
+    gna = _sym_matvec(mat_a, rna)
+    kn = ma + _dot3(rna, gna)
     mb = np.where(has_b, inv_mass[bb], 0.0)
-    n, ra, rb = c.n, c.ra, c.rb
-
-    def point_velocity() -> np.ndarray:
-        va = v[a] + _cross(w[a], ra)
-        vb = np.where(has_b[:, None], v[bb] + _cross(w[bb], rb), 0.0)
-        return va - vb
-
-    def eff_mass(d: np.ndarray) -> np.ndarray:
-        ta = np.einsum("cij,cj->ci", ia, _cross(ra, d))
-        tb = np.einsum("cij,cj->ci", ib, _cross(rb, d))
-        return ma + mb + np.einsum("ci,ci->c", _cross(ta, ra) + _cross(tb, rb), d)
-
-    kn = eff_mass(n)
+    mat_b = np.where(has_b, m_body[:, bb], 0.0)
+    rnb = _cross3(rb, n)
+    gnb = _sym_matvec(mat_b, rnb)
+    if coupled:
+        kn = np.where(has_b, (ma + mb) + (_dot3(rna, gna) + _dot3(rnb, gnb)), kn)
     # two immovable things (a pinned body on a floor) exchange no impulse
     inv_kn = np.where(kn > 0, 1.0 / np.where(kn > 0, kn, 1.0), 0.0)
-    vn0 = np.einsum("ci,ci->c", point_velocity(), n)
-    rest_a = resting_speed[a]
+    # tangential response: along a unit direction e the effective mass is 1/(m_t + e . K e) with
+    # K = [r]x^T I^-1 [r]x (the angular part, r x e = [r]x e), summed over both bodies
+    k_t, ga = _arm_inertia(mat_a, ra)
+    m_t = ma
+    gb = ga
+    if coupled:
+        k_b, gb = _arm_inertia(mat_b, rb)
+        k_t = np.where(has_b, k_t + k_b, k_t)
+        m_t = np.where(has_b, ma + mb, ma)
+    vT, wT = v.T.copy(), w.T.copy()
+    vel = vT[:, a] + _cross3(wT[:, a], ra)
+    if coupled:
+        vel = np.where(has_b, vel - (vT[:, bb] + _cross3(wT[:, bb], rb)), vel)
+    vn0 = _dot3(vel, n)
     rest_b = np.where(has_b, resting_speed[bb], 0.0)
-    bounce = vn0 < -(rest_a + rest_b + RESTING_FLOOR)
-    e_used = np.where(bounce, c.restitution, 0.0)
-    target = np.where(bounce, -c.restitution * vn0, 0.0)
+    bounce = vn0 < -(resting_speed[a] + rest_b + RESTING_FLOOR)
+    e_used = np.where(bounce, restitution, 0.0)
+    target = np.where(bounce, -restitution * vn0, 0.0)
     if dv is not None and dx is not None and bounce.any():
-        target = np.where(bounce, _impact_target(c, vn0, dv, dx, has_b, bb), target)
-    jn = np.zeros(c.count)
-    jt = np.zeros((c.count, 3))
-    batch = batches(a, b)
-    groups = [np.nonzero(batch == k)[0] for k in range(int(batch.max()) + 1)] if c.count else []
-
-    def apply(idx: np.ndarray, imp: np.ndarray) -> None:
-        ai = a[idx]
-        v[ai] += ma[idx, None] * imp
-        w[ai] += np.einsum("cij,cj->ci", ia[idx], _cross(ra[idx], imp))
-        withb = idx[has_b[idx]]
-        if withb.size:
-            imp_b = imp[has_b[idx]]
-            bi = b[withb]
-            v[bi] -= mb[withb, None] * imp_b
-            w[bi] -= np.einsum("cij,cj->ci", ib[withb], _cross(rb[withb], imp_b))
-
-    def rel_velocity(idx: np.ndarray) -> np.ndarray:
-        ai = a[idx]
-        vel = v[ai] + _cross(w[ai], ra[idx])
-        hb = has_b[idx]
-        bi = bb[idx]
-        vel -= np.where(hb[:, None], v[bi] + _cross(w[bi], rb[idx]), 0.0)
-        return vel
+        target = np.where(bounce, _impact_target(a, bb, has_b, n, depth, restitution, vn0, dv, dx), target)
+    jn = np.zeros(count)
+    jt = np.zeros((3, count))
+    groups = []
+    for k in range(cuts.size - 1):
+        s = slice(int(cuts[k]), int(cuts[k + 1]))
+        hb = np.flatnonzero(has_b[s])
+        groups.append((s, a[s], hb, b[s][hb], cuts[k] + hb))
 
     for _ in range(iterations):
-        for idx in groups:
-            nn = n[idx]
-            vel = rel_velocity(idx)
-            vn = np.einsum("ci,ci->c", vel, nn)
-            new = np.maximum(jn[idx] + (target[idx] - vn) * inv_kn[idx], 0.0)
-            dj = new - jn[idx]
-            jn[idx] = new
-            apply(idx, dj[:, None] * nn)
+        for s, ai, hb, bi, sb in groups:
+            ns, ras = n[:, s], ra[:, s]
+            va, wa = vT[:, ai], wT[:, ai]
+            # normal: push (never pull) toward the target approach speed
+            vn = _dot3(va, ns) + _dot3(wa, rna[:, s])
+            if hb.size:
+                vb, wb = vT[:, bi], wT[:, bi]
+                vn[hb] = vn[hb] - (_dot3(vb, n[:, sb]) + _dot3(wb, rnb[:, sb]))
+            new = np.maximum(jn[s] + (target[s] - vn) * inv_kn[s], 0.0)
+            dj = new - jn[s]
+            jn[s] = new
+            va += (ma[s] * dj) * ns
+            wa += dj * gna[:, s]
+            if hb.size:
+                vb -= (mb[sb] * dj[hb]) * n[:, sb]
+                wb -= dj[hb] * gnb[:, sb]
             # Coulomb friction: stop the sliding, within mu * (normal impulse so far)
-            vel = rel_velocity(idx)
-            vt = vel - np.einsum("ci,ci->c", vel, nn)[:, None] * nn
-            speed = np.linalg.norm(vt, axis=1)
-            moving = speed > 0
-            tdir = vt / np.where(moving, speed, 1.0)[:, None]
-            kt = np.where(moving, eff_mass_sub(idx, tdir, ia, ib, ma, mb, ra, rb), 0.0)
-            inv_kt = np.where(kt > 0, 1.0 / np.where(kt > 0, kt, 1.0), 0.0)
-            want = jt[idx] - (speed * inv_kt)[:, None] * tdir
-            cap = c.friction[idx] * jn[idx]
-            mag = np.linalg.norm(want, axis=1)
-            scale = np.where(mag > cap, cap / np.where(mag > 0, mag, 1.0), 1.0)
-            want = want * scale[:, None]
-            djt = want - jt[idx]
-            jt[idx] = want
-            apply(idx, djt)
-    return e_used
+            vel = va + _cross3(wa, ras)
+            if hb.size:
+                vel[:, hb] = vel[:, hb] - (vb + _cross3(wb, rb[:, sb]))
+            vt = vel - _dot3(vel, ns) * ns
+            # the impulse that stops the sliding: -vt / (m_t + e.K e), e = vt/|vt|, written
+            # without the square root as -vt |vt|^2 / (m_t |vt|^2 + vt.K vt)
+            s2 = _dot3(vt, vt)
+            den = m_t[s] * s2 + _dot3(vt, _sym_matvec(k_t[:, s], vt))
+            live = (s2 > 0.0) & (den > 0.0)
+            f = np.where(live, s2 / np.where(live, den, 1.0), 0.0)
+            jts = jt[:, s]
+            want = jts - f * vt
+            # ... within mu * (normal impulse so far)
+            cap = friction[s] * jn[s]
+            mag2 = _dot3(want, want)
+            over = mag2 > cap * cap
+            want = np.where(over, want * (cap / np.sqrt(np.where(over, mag2, 1.0))), want)
+            imp = want - jts
+            jt[:, s] = want
+            va += ma[s] * imp
+            wa += (ga[0][:, s] * imp[0] + ga[1][:, s] * imp[1]) + ga[2][:, s] * imp[2]
+            vT[:, ai] = va
+            wT[:, ai] = wa
+            if hb.size:
+                ib = imp[:, hb]
+                vb -= mb[sb] * ib
+                wb -= (gb[0][:, sb] * ib[0] + gb[1][:, sb] * ib[1]) + gb[2][:, sb] * ib[2]
+                vT[:, bi] = vb
+                wT[:, bi] = wb
+    v[:] = vT.T
+    w[:] = wT.T
+    e_out[order] = e_used
+    return e_out
 
 
 def _impact_target(
-    c: Contacts, vn0: np.ndarray, dv: np.ndarray, dx: np.ndarray, has_b: np.ndarray, bb: np.ndarray
+    a: np.ndarray,
+    bb: np.ndarray,
+    has_b: np.ndarray,
+    n: np.ndarray,
+    depth: np.ndarray,
+    restitution: np.ndarray,
+    vn0: np.ndarray,
+    dv: np.ndarray,
+    dx: np.ndarray,
 ) -> np.ndarray:
     """Bounce targets corrected for the time of impact inside the step.
 
@@ -486,45 +790,49 @@ def _impact_target(
     forces of the part of the step after the impact would be reflected too: a
     ball would gain height at every bounce.)
     """
-    rel_dv = dv[c.a] - np.where(has_b[:, None], dv[bb], 0.0)
-    rel_dx = dx[c.a] - np.where(has_b[:, None], dx[bb], 0.0)
-    dvn = np.einsum("ci,ci->c", rel_dv, c.n)
-    dxn = np.einsum("ci,ci->c", rel_dx, c.n)
-    d0 = -dxn - c.depth
-    span = d0 + c.depth
+    rel_dv = dv[a].T - np.where(has_b, dv[bb].T, 0.0)
+    rel_dx = dx[a].T - np.where(has_b, dx[bb].T, 0.0)
+    dvn = _dot3(rel_dv, n)
+    dxn = _dot3(rel_dx, n)
+    d0 = -dxn - depth
+    span = d0 + depth
     s = np.clip(np.divide(d0, span, out=np.zeros_like(d0), where=span > 0), 0.0, 1.0)
     vn_imp = vn0 - (1.0 - s) * dvn
-    return np.maximum(-c.restitution * vn_imp + (1.0 - s) * dvn, 0.0)
+    return np.maximum(-restitution * vn_imp + (1.0 - s) * dvn, 0.0)
 
 
-def eff_mass_sub(
-    idx: np.ndarray,
-    d: np.ndarray,
-    ia: np.ndarray,
-    ib: np.ndarray,
-    ma: np.ndarray,
-    mb: np.ndarray,
-    ra: np.ndarray,
-    rb: np.ndarray,
-) -> np.ndarray:
-    """1 / (effective mass) along unit directions d for contacts idx."""
-    ta = np.einsum("cij,cj->ci", ia[idx], _cross(ra[idx], d))
-    tb = np.einsum("cij,cj->ci", ib[idx], _cross(rb[idx], d))
-    return ma[idx] + mb[idx] + np.einsum("ci,ci->c", _cross(ta, ra[idx]) + _cross(tb, rb[idx]), d)
+def project_planes(
+    contacts: Contacts, e_used: np.ndarray, x: np.ndarray, inv_mass: np.ndarray, planes: PlaneTable
+) -> None:
+    """Move bodies out of the planes they are behind (positions only), in place: per body and
+    plane, the deepest contact's depth times (1 + e), along the plane's normal, plane by plane
+    (several corners of one box behind one plane need one push, not the sum)."""
+    on = contacts.plane >= 0
+    if not on.any():
+        return
+    a, p = contacts.a[on], contacts.plane[on]
+    push = contacts.depth[on] * (1.0 + e_used[on])
+    deepest = np.zeros((x.shape[0], planes.count))
+    np.maximum.at(deepest, (a, p), push)
+    movable = inv_mass > 0.0
+    for k in range(planes.count):
+        sel = np.flatnonzero((deepest[:, k] > 0.0) & movable)
+        if sel.size:
+            x[sel] += deepest[sel, k, None] * planes.normal[k]
 
 
 def project(contacts: Contacts, e_used: np.ndarray, x: np.ndarray, inv_mass: np.ndarray) -> None:
-    """Move bodies out of what they penetrate (positions only), in place.
+    """Move bodies out of colliders and each other (positions only), in place.
 
     Against static things: per body and normal direction the deepest contact
-    wins (several corners of one box behind one plane need one push, not the sum).
-    Between bodies: the push is shared by inverse mass.
+    wins. Between bodies: the push is shared by inverse mass. Plane contacts are
+    left to :func:`project_planes`.
     """
     c = contacts
     if c.count == 0:
         return
     push = c.depth * (1.0 + e_used)
-    static = c.b < 0
+    static = (c.b < 0) & (c.plane < 0)
     if static.any():
         a, n, d = c.a[static], c.n[static], push[static]
         # group contacts by (body, normal): the deepest of each group
@@ -536,7 +844,7 @@ def project(contacts: Contacts, e_used: np.ndarray, x: np.ndarray, inv_mass: np.
         bodies = uniq[:, 0].astype(np.int64)
         movable = inv_mass[bodies] > 0
         np.add.at(x, bodies[movable], deepest[movable, None] * uniq[movable, 1:])
-    pairs = ~static
+    pairs = c.b >= 0
     if pairs.any():
         a, b, n, d = c.a[pairs], c.b[pairs], c.n[pairs], push[pairs]
         wa, wb = inv_mass[a], inv_mass[b]
@@ -546,22 +854,22 @@ def project(contacts: Contacts, e_used: np.ndarray, x: np.ndarray, inv_mass: np.
         np.add.at(x, b, -(d * wb * share)[:, None] * n)
 
 
+# --- numba twins (compiled on first use; same operations in the same order) ---------------
+
+
 @cache
-def numba_plane_solver() -> Any:
-    """The numba kernel of plane contacts (detection, solve, projection) for scenes whose bodies
-    touch nothing but planes; same operations and order as the NumPy path."""
+def numba_kernels() -> tuple[Any, Any]:
+    """(plane detection, list solver) compiled by numba."""
     from numba import njit
 
-    return njit(cache=True)(_plane_solver_loop)
+    detect = njit(cache=True)(_detect_planes_loop)
+    solver = njit(cache=True)(_solve_list_loop)
+    return detect, solver
 
 
-def _plane_solver_loop(
+def _detect_planes_loop(
     x: np.ndarray,
-    v: np.ndarray,
     q: np.ndarray,
-    w: np.ndarray,
-    inv_mass: np.ndarray,
-    inv_inertia: np.ndarray,
     points: np.ndarray,
     radii: np.ndarray,
     counts: np.ndarray,
@@ -569,179 +877,289 @@ def _plane_solver_loop(
     plane_normal: np.ndarray,
     plane_e: np.ndarray,
     plane_mu: np.ndarray,
-    resting_speed: np.ndarray,
-    iterations: int,
-    dv: np.ndarray,
-    dx: np.ndarray,
-    skip: np.ndarray,
+    a_out: np.ndarray,
+    ra_out: np.ndarray,
+    n_out: np.ndarray,
+    depth_out: np.ndarray,
+    e_out: np.ndarray,
+    mu_out: np.ndarray,
+    plane_out: np.ndarray,
 ) -> int:
-    """Each body on its own (bodies touching only planes are independent): its contacts in order
-    plane, sphere; sequential impulses; then the push out of each plane. Returns the contact count."""
-    total = 0
-    kmax = points.shape[1]
-    nplanes = plane_point.shape[0]
-    cap = nplanes * kmax
-    ra = np.empty((cap, 3))
-    nrm = np.empty((cap, 3))
-    dep = np.empty(cap)
-    ee = np.empty(cap)
-    mu = np.empty(cap)
-    pid = np.empty(cap, dtype=np.int64)
-    jn = np.empty(cap)
-    jt = np.empty((cap, 3))
-    kn = np.empty(cap)
-    tgt = np.empty(cap)
-    eu = np.empty(cap)
+    """Twin of :func:`plane_contacts`, body by body (each body's contacts in the same order:
+    plane, then sphere). Writes the contacts into the outs; returns how many."""
+    c = 0
     for bi in range(x.shape[0]):
-        if skip[bi]:  # touching another body this step: solved with it on the NumPy path
-            continue
         qw, qx, qy, qz = q[bi, 0], q[bi, 1], q[bi, 2], q[bi, 3]
-        # world inverse inertia R diag(I^-1) R^T
-        r00 = 1 - 2 * (qy * qy + qz * qz)
-        r01 = 2 * (qx * qy - qw * qz)
-        r02 = 2 * (qx * qz + qw * qy)
-        r10 = 2 * (qx * qy + qw * qz)
-        r11 = 1 - 2 * (qx * qx + qz * qz)
-        r12 = 2 * (qy * qz - qw * qx)
-        r20 = 2 * (qx * qz - qw * qy)
-        r21 = 2 * (qy * qz + qw * qx)
-        r22 = 1 - 2 * (qx * qx + qy * qy)
-        i0, i1, i2 = inv_inertia[bi, 0], inv_inertia[bi, 1], inv_inertia[bi, 2]
-        m00 = r00 * i0 * r00 + r01 * i1 * r01 + r02 * i2 * r02
-        m01 = r00 * i0 * r10 + r01 * i1 * r11 + r02 * i2 * r12
-        m02 = r00 * i0 * r20 + r01 * i1 * r21 + r02 * i2 * r22
-        m11 = r10 * i0 * r10 + r11 * i1 * r11 + r12 * i2 * r12
-        m12 = r10 * i0 * r20 + r11 * i1 * r21 + r12 * i2 * r22
-        m22 = r20 * i0 * r20 + r21 * i1 * r21 + r22 * i2 * r22
-        im = inv_mass[bi]
-        c = 0
-        for p in range(nplanes):
+        for p in range(plane_point.shape[0]):
             nx, ny, nz = plane_normal[p, 0], plane_normal[p, 1], plane_normal[p, 2]
             for k in range(counts[bi]):
                 px, py, pz = points[bi, k, 0], points[bi, k, 1], points[bi, k, 2]
+                # R(q) p = p + w t + u x t, t = 2 u x p (quaternion.rotate)
                 tx = 2.0 * (qy * pz - qz * py)
                 ty = 2.0 * (qz * px - qx * pz)
                 tz = 2.0 * (qx * py - qy * px)
-                wx_ = px + qw * tx + (qy * tz - qz * ty)
-                wy_ = py + qw * ty + (qz * tx - qx * tz)
-                wz_ = pz + qw * tz + (qx * ty - qy * tx)
-                cx, cy, cz = x[bi, 0] + wx_, x[bi, 1] + wy_, x[bi, 2] + wz_
-                d = (
-                    (cx - plane_point[p, 0]) * nx
-                    + (cy - plane_point[p, 1]) * ny
-                    + (cz - plane_point[p, 2]) * nz
-                ) - radii[bi, k]
+                cx = x[bi, 0] + (px + qw * tx + (qy * tz - qz * ty))
+                cy = x[bi, 1] + (py + qw * ty + (qz * tx - qx * tz))
+                cz = x[bi, 2] + (pz + qw * tz + (qx * ty - qy * tx))
+                rr = radii[bi, k]
+                d = ((cx - plane_point[p, 0]) * nx + (cy - plane_point[p, 1]) * ny) + (
+                    cz - plane_point[p, 2]
+                ) * nz
+                d = d - rr
                 if d < 0.0:
-                    rr = radii[bi, k]
-                    ra[c, 0] = cx - rr * nx - x[bi, 0]
-                    ra[c, 1] = cy - rr * ny - x[bi, 1]
-                    ra[c, 2] = cz - rr * nz - x[bi, 2]
-                    nrm[c, 0], nrm[c, 1], nrm[c, 2] = nx, ny, nz
-                    dep[c] = -d
-                    ee[c] = plane_e[p]
-                    mu[c] = plane_mu[p]
-                    pid[c] = p
+                    a_out[c] = bi
+                    ra_out[c, 0] = cx - rr * nx - x[bi, 0]
+                    ra_out[c, 1] = cy - rr * ny - x[bi, 1]
+                    ra_out[c, 2] = cz - rr * nz - x[bi, 2]
+                    n_out[c, 0], n_out[c, 1], n_out[c, 2] = nx, ny, nz
+                    depth_out[c] = -d
+                    e_out[c] = plane_e[p]
+                    mu_out[c] = plane_mu[p]
+                    plane_out[c] = p
                     c += 1
-        if c == 0:
-            continue
-        total += c
-        for i in range(c):
-            ax, ay, az = ra[i, 0], ra[i, 1], ra[i, 2]
-            nx, ny, nz = nrm[i, 0], nrm[i, 1], nrm[i, 2]
-            # K along n: im + n . ((I^-1 (r x n)) x r)
-            cxn, cyn, czn = ay * nz - az * ny, az * nx - ax * nz, ax * ny - ay * nx
-            tx = m00 * cxn + m01 * cyn + m02 * czn
-            ty = m01 * cxn + m11 * cyn + m12 * czn
-            tz = m02 * cxn + m12 * cyn + m22 * czn
-            kn[i] = im + ((ty * az - tz * ay) * nx + (tz * ax - tx * az) * ny + (tx * ay - ty * ax) * nz)
-            vx = v[bi, 0] + (w[bi, 1] * az - w[bi, 2] * ay)
-            vy = v[bi, 1] + (w[bi, 2] * ax - w[bi, 0] * az)
-            vz = v[bi, 2] + (w[bi, 0] * ay - w[bi, 1] * ax)
-            vn0 = vx * nx + vy * ny + vz * nz
-            if vn0 < -(resting_speed[bi] + 0.0 + 1e-6):
-                eu[i] = ee[i]
-                # time of impact inside the step (as _impact_target)
-                dvn = dv[bi, 0] * nx + dv[bi, 1] * ny + dv[bi, 2] * nz
-                dxn = dx[bi, 0] * nx + dx[bi, 1] * ny + dx[bi, 2] * nz
-                d0 = -dxn - dep[i]
-                span = d0 + dep[i]
-                s = d0 / span if span > 0 else 0.0
-                s = min(max(s, 0.0), 1.0)
-                vn_imp = vn0 - (1.0 - s) * dvn
-                tgt[i] = max(-ee[i] * vn_imp + (1.0 - s) * dvn, 0.0)
+    return c
+
+
+def _solve_list_loop(
+    count: int,
+    a: np.ndarray,
+    b: np.ndarray,
+    ra: np.ndarray,
+    rb: np.ndarray,
+    n: np.ndarray,
+    depth: np.ndarray,
+    restitution: np.ndarray,
+    friction: np.ndarray,
+    plane: np.ndarray,
+    x: np.ndarray,
+    v: np.ndarray,
+    w: np.ndarray,
+    q: np.ndarray,
+    inv_mass: np.ndarray,
+    inv_inertia: np.ndarray,
+    resting_speed: np.ndarray,
+    dv: np.ndarray,
+    dx: np.ndarray,
+    iterations: int,
+    plane_normal: np.ndarray,
+    e_used: np.ndarray,
+) -> None:
+    """Twin of :func:`solve` then :func:`project_planes`: the first ``count`` contacts one after
+    the other, ``iterations`` times; then the pushes out of the planes."""
+    mat = np.empty((count, 12))  # per contact: I_a^-1 (6), I_b^-1 (6)
+    g = np.empty((count, 12))  # r_a x n, I_a^-1 (r_a x n), r_b x n, I_b^-1 (r_b x n)
+    inv_kn = np.empty(count)
+    ma = np.empty(count)
+    mb = np.empty(count)
+    tgt = np.empty(count)
+    jn = np.zeros(count)
+    jt = np.zeros((count, 3))
+    kt6 = np.zeros((count, 6))  # K = [r]x^T I^-1 [r]x of both ends (solve's k_t)
+    gm = np.zeros((count, 18))  # G = I^-1 [r]x of each end, column by column (solve's ga, gb)
+    mt = np.empty(count)
+    cols = np.empty((3, 3))
+    mc = np.empty((3, 3))
+    for i in range(count):
+        for side in range(2):
+            body = a[i] if side == 0 else b[i]
+            o = 6 * side
+            if body < 0:
+                for k in range(6):
+                    mat[i, o + k] = 0.0
+                continue
+            qw, qx, qy, qz = q[body, 0], q[body, 1], q[body, 2], q[body, 3]
+            r00 = 1 - 2 * (qy * qy + qz * qz)
+            r01 = 2 * (qx * qy - qw * qz)
+            r02 = 2 * (qx * qz + qw * qy)
+            r10 = 2 * (qx * qy + qw * qz)
+            r11 = 1 - 2 * (qx * qx + qz * qz)
+            r12 = 2 * (qy * qz - qw * qx)
+            r20 = 2 * (qx * qz - qw * qy)
+            r21 = 2 * (qy * qz + qw * qx)
+            r22 = 1 - 2 * (qx * qx + qy * qy)
+            i0, i1, i2 = inv_inertia[body, 0], inv_inertia[body, 1], inv_inertia[body, 2]
+            mat[i, o + 0] = r00 * i0 * r00 + r01 * i1 * r01 + r02 * i2 * r02
+            mat[i, o + 1] = r00 * i0 * r10 + r01 * i1 * r11 + r02 * i2 * r12
+            mat[i, o + 2] = r00 * i0 * r20 + r01 * i1 * r21 + r02 * i2 * r22
+            mat[i, o + 3] = r10 * i0 * r10 + r11 * i1 * r11 + r12 * i2 * r12
+            mat[i, o + 4] = r10 * i0 * r20 + r11 * i1 * r21 + r12 * i2 * r22
+            mat[i, o + 5] = r20 * i0 * r20 + r21 * i1 * r21 + r22 * i2 * r22
+            # K_ij = c_i . M c_j, c_j the columns of [r]x (as _arm_inertia)
+            if side == 0:
+                rx, ry, rz = ra[i, 0], ra[i, 1], ra[i, 2]
             else:
-                eu[i] = 0.0
-                tgt[i] = 0.0
-            jn[i] = 0.0
-            jt[i, 0], jt[i, 1], jt[i, 2] = 0.0, 0.0, 0.0
-        for _ in range(iterations):
-            for i in range(c):
-                ax, ay, az = ra[i, 0], ra[i, 1], ra[i, 2]
-                nx, ny, nz = nrm[i, 0], nrm[i, 1], nrm[i, 2]
-                vx = v[bi, 0] + (w[bi, 1] * az - w[bi, 2] * ay)
-                vy = v[bi, 1] + (w[bi, 2] * ax - w[bi, 0] * az)
-                vz = v[bi, 2] + (w[bi, 0] * ay - w[bi, 1] * ax)
-                vn = vx * nx + vy * ny + vz * nz
-                inv_kn = 1.0 / kn[i] if kn[i] > 0.0 else 0.0
-                new = jn[i] + (tgt[i] - vn) * inv_kn
-                if new < 0.0:
-                    new = 0.0
-                dj = new - jn[i]
-                jn[i] = new
-                ix, iy, iz = dj * nx, dj * ny, dj * nz
-                v[bi, 0] += im * ix
-                v[bi, 1] += im * iy
-                v[bi, 2] += im * iz
-                cx_, cy_, cz_ = ay * iz - az * iy, az * ix - ax * iz, ax * iy - ay * ix
-                w[bi, 0] += m00 * cx_ + m01 * cy_ + m02 * cz_
-                w[bi, 1] += m01 * cx_ + m11 * cy_ + m12 * cz_
-                w[bi, 2] += m02 * cx_ + m12 * cy_ + m22 * cz_
-                # friction
-                vx = v[bi, 0] + (w[bi, 1] * az - w[bi, 2] * ay)
-                vy = v[bi, 1] + (w[bi, 2] * ax - w[bi, 0] * az)
-                vz = v[bi, 2] + (w[bi, 0] * ay - w[bi, 1] * ax)
-                vn = vx * nx + vy * ny + vz * nz
-                tx_, ty_, tz_ = vx - vn * nx, vy - vn * ny, vz - vn * nz
-                speed = np.sqrt(tx_ * tx_ + ty_ * ty_ + tz_ * tz_)
-                if speed > 0.0:
-                    ex, ey, ez = tx_ / speed, ty_ / speed, tz_ / speed
-                    cxd, cyd, czd = ay * ez - az * ey, az * ex - ax * ez, ax * ey - ay * ex
-                    ux = m00 * cxd + m01 * cyd + m02 * czd
-                    uy = m01 * cxd + m11 * cyd + m12 * czd
-                    uz = m02 * cxd + m12 * cyd + m22 * czd
-                    kt = im + ((uy * az - uz * ay) * ex + (uz * ax - ux * az) * ey + (ux * ay - uy * ax) * ez)
-                    inv_kt = 1.0 / kt if kt > 0.0 else 0.0
-                    wx_ = jt[i, 0] - (speed * inv_kt) * ex
-                    wy_ = jt[i, 1] - (speed * inv_kt) * ey
-                    wz_ = jt[i, 2] - (speed * inv_kt) * ez
-                else:
-                    wx_, wy_, wz_ = jt[i, 0], jt[i, 1], jt[i, 2]
-                capj = mu[i] * jn[i]
-                mag = np.sqrt(wx_ * wx_ + wy_ * wy_ + wz_ * wz_)
-                if mag > capj:
-                    s = capj / (mag if mag > 0 else 1.0)
-                    wx_, wy_, wz_ = wx_ * s, wy_ * s, wz_ * s
-                ix, iy, iz = wx_ - jt[i, 0], wy_ - jt[i, 1], wz_ - jt[i, 2]
-                jt[i, 0], jt[i, 1], jt[i, 2] = wx_, wy_, wz_
-                v[bi, 0] += im * ix
-                v[bi, 1] += im * iy
-                v[bi, 2] += im * iz
-                cx_, cy_, cz_ = ay * iz - az * iy, az * ix - ax * iz, ax * iy - ay * ix
-                w[bi, 0] += m00 * cx_ + m01 * cy_ + m02 * cz_
-                w[bi, 1] += m01 * cx_ + m11 * cy_ + m12 * cz_
-                w[bi, 2] += m02 * cx_ + m12 * cy_ + m22 * cz_
-        if im > 0.0:
-            for p in range(nplanes):
-                deepest = 0.0
-                for i in range(c):
-                    if pid[i] == p:
-                        push = dep[i] * (1.0 + eu[i])
-                        if push > deepest:
-                            deepest = push
-                x[bi, 0] += deepest * plane_normal[p, 0]
-                x[bi, 1] += deepest * plane_normal[p, 1]
-                x[bi, 2] += deepest * plane_normal[p, 2]
-    return total
+                rx, ry, rz = rb[i, 0], rb[i, 1], rb[i, 2]
+            cols[0, 0], cols[0, 1], cols[0, 2] = 0.0, rz, -ry
+            cols[1, 0], cols[1, 1], cols[1, 2] = -rz, 0.0, rx
+            cols[2, 0], cols[2, 1], cols[2, 2] = ry, -rx, 0.0
+            m0, m1, m2 = mat[i, o + 0], mat[i, o + 1], mat[i, o + 2]
+            m3, m4, m5 = mat[i, o + 3], mat[i, o + 4], mat[i, o + 5]
+            for j in range(3):
+                cx, cy, cz = cols[j, 0], cols[j, 1], cols[j, 2]
+                mc[j, 0] = (m0 * cx + m1 * cy) + m2 * cz
+                mc[j, 1] = (m1 * cx + m3 * cy) + m4 * cz
+                mc[j, 2] = (m2 * cx + m4 * cy) + m5 * cz
+                gm[i, 9 * side + 3 * j + 0] = mc[j, 0]
+                gm[i, 9 * side + 3 * j + 1] = mc[j, 1]
+                gm[i, 9 * side + 3 * j + 2] = mc[j, 2]
+            kk = 0
+            for ci in range(3):
+                for cj in range(ci, 3):
+                    val = (cols[ci, 0] * mc[cj, 0] + cols[ci, 1] * mc[cj, 1]) + cols[ci, 2] * mc[cj, 2]
+                    if side == 0:
+                        kt6[i, kk] = val
+                    else:
+                        kt6[i, kk] = kt6[i, kk] + val
+                    kk += 1
+        ai, bi = a[i], b[i]
+        nx, ny, nz = n[i, 0], n[i, 1], n[i, 2]
+        ax, ay, az = ra[i, 0], ra[i, 1], ra[i, 2]
+        bx, by, bz = rb[i, 0], rb[i, 1], rb[i, 2]
+        m0, m1, m2, m3, m4, m5 = mat[i, 0], mat[i, 1], mat[i, 2], mat[i, 3], mat[i, 4], mat[i, 5]
+        ux, uy, uz = ay * nz - az * ny, az * nx - ax * nz, ax * ny - ay * nx
+        gx = (m0 * ux + m1 * uy) + m2 * uz
+        gy = (m1 * ux + m3 * uy) + m4 * uz
+        gz = (m2 * ux + m4 * uy) + m5 * uz
+        g[i, 0], g[i, 1], g[i, 2], g[i, 3], g[i, 4], g[i, 5] = ux, uy, uz, gx, gy, gz
+        ma[i] = inv_mass[ai]
+        da = (ux * gx + uy * gy) + uz * gz
+        vx = v[ai, 0] + (w[ai, 1] * az - w[ai, 2] * ay)
+        vy = v[ai, 1] + (w[ai, 2] * ax - w[ai, 0] * az)
+        vz = v[ai, 2] + (w[ai, 0] * ay - w[ai, 1] * ax)
+        rest = resting_speed[ai]
+        dvx, dvy, dvz = dv[ai, 0], dv[ai, 1], dv[ai, 2]
+        dxx, dxy, dxz = dx[ai, 0], dx[ai, 1], dx[ai, 2]
+        if bi >= 0:
+            m0, m1, m2, m3, m4, m5 = mat[i, 6], mat[i, 7], mat[i, 8], mat[i, 9], mat[i, 10], mat[i, 11]
+            ux, uy, uz = by * nz - bz * ny, bz * nx - bx * nz, bx * ny - by * nx
+            gx = (m0 * ux + m1 * uy) + m2 * uz
+            gy = (m1 * ux + m3 * uy) + m4 * uz
+            gz = (m2 * ux + m4 * uy) + m5 * uz
+            g[i, 6], g[i, 7], g[i, 8], g[i, 9], g[i, 10], g[i, 11] = ux, uy, uz, gx, gy, gz
+            mb[i] = inv_mass[bi]
+            kn = (ma[i] + mb[i]) + (da + ((ux * gx + uy * gy) + uz * gz))
+            mt[i] = ma[i] + mb[i]
+            vx = vx - (v[bi, 0] + (w[bi, 1] * bz - w[bi, 2] * by))
+            vy = vy - (v[bi, 1] + (w[bi, 2] * bx - w[bi, 0] * bz))
+            vz = vz - (v[bi, 2] + (w[bi, 0] * by - w[bi, 1] * bx))
+            rest = rest + resting_speed[bi]
+            dvx, dvy, dvz = dvx - dv[bi, 0], dvy - dv[bi, 1], dvz - dv[bi, 2]
+            dxx, dxy, dxz = dxx - dx[bi, 0], dxy - dx[bi, 1], dxz - dx[bi, 2]
+        else:
+            for k in range(6, 12):
+                g[i, k] = 0.0
+            mb[i] = 0.0
+            kn = ma[i] + da
+            mt[i] = ma[i]
+            rest = rest + 0.0
+        inv_kn[i] = 1.0 / kn if kn > 0.0 else 0.0
+        vn0 = (vx * nx + vy * ny) + vz * nz
+        if vn0 < -(rest + RESTING_FLOOR):
+            e = restitution[i]
+            e_used[i] = e
+            # time of impact inside the step (as _impact_target)
+            dvn = (dvx * nx + dvy * ny) + dvz * nz
+            dxn = (dxx * nx + dxy * ny) + dxz * nz
+            d0 = -dxn - depth[i]
+            span = d0 + depth[i]
+            s = d0 / span if span > 0 else 0.0
+            s = min(max(s, 0.0), 1.0)
+            vn_imp = vn0 - (1.0 - s) * dvn
+            tgt[i] = max(-e * vn_imp + (1.0 - s) * dvn, 0.0)
+        else:
+            e_used[i] = 0.0
+            tgt[i] = 0.0
+    for _ in range(iterations):
+        for i in range(count):
+            ai, bi = a[i], b[i]
+            nx, ny, nz = n[i, 0], n[i, 1], n[i, 2]
+            ax, ay, az = ra[i, 0], ra[i, 1], ra[i, 2]
+            im_a, im_b = ma[i], mb[i]
+            vn = (v[ai, 0] * nx + v[ai, 1] * ny) + v[ai, 2] * nz
+            vn = vn + ((w[ai, 0] * g[i, 0] + w[ai, 1] * g[i, 1]) + w[ai, 2] * g[i, 2])
+            if bi >= 0:
+                vnb = (v[bi, 0] * nx + v[bi, 1] * ny) + v[bi, 2] * nz
+                vnb = vnb + ((w[bi, 0] * g[i, 6] + w[bi, 1] * g[i, 7]) + w[bi, 2] * g[i, 8])
+                vn = vn - vnb
+            new = jn[i] + (tgt[i] - vn) * inv_kn[i]
+            if new < 0.0:
+                new = 0.0
+            dj = new - jn[i]
+            jn[i] = new
+            s = im_a * dj
+            v[ai, 0] += s * nx
+            v[ai, 1] += s * ny
+            v[ai, 2] += s * nz
+            w[ai, 0] += dj * g[i, 3]
+            w[ai, 1] += dj * g[i, 4]
+            w[ai, 2] += dj * g[i, 5]
+            if bi >= 0:
+                s = im_b * dj
+                v[bi, 0] -= s * nx
+                v[bi, 1] -= s * ny
+                v[bi, 2] -= s * nz
+                w[bi, 0] -= dj * g[i, 9]
+                w[bi, 1] -= dj * g[i, 10]
+                w[bi, 2] -= dj * g[i, 11]
+            # friction
+            vx = v[ai, 0] + (w[ai, 1] * az - w[ai, 2] * ay)
+            vy = v[ai, 1] + (w[ai, 2] * ax - w[ai, 0] * az)
+            vz = v[ai, 2] + (w[ai, 0] * ay - w[ai, 1] * ax)
+            if bi >= 0:
+                bx, by, bz = rb[i, 0], rb[i, 1], rb[i, 2]
+                vx = vx - (v[bi, 0] + (w[bi, 1] * bz - w[bi, 2] * by))
+                vy = vy - (v[bi, 1] + (w[bi, 2] * bx - w[bi, 0] * bz))
+                vz = vz - (v[bi, 2] + (w[bi, 0] * by - w[bi, 1] * bx))
+            vn = (vx * nx + vy * ny) + vz * nz
+            tx, ty, tz = vx - vn * nx, vy - vn * ny, vz - vn * nz
+            s2 = (tx * tx + ty * ty) + tz * tz
+            wx, wy, wz = jt[i, 0], jt[i, 1], jt[i, 2]
+            if s2 > 0.0:
+                k0, k1, k2, k3, k4, k5 = kt6[i, 0], kt6[i, 1], kt6[i, 2], kt6[i, 3], kt6[i, 4], kt6[i, 5]
+                qf = (tx * ((k0 * tx + k1 * ty) + k2 * tz) + ty * ((k1 * tx + k3 * ty) + k4 * tz)) + tz * (
+                    (k2 * tx + k4 * ty) + k5 * tz
+                )
+                den = mt[i] * s2 + qf
+                if den > 0.0:
+                    f = s2 / den
+                    wx, wy, wz = wx - f * tx, wy - f * ty, wz - f * tz
+            capj = friction[i] * jn[i]
+            mag2 = (wx * wx + wy * wy) + wz * wz
+            if mag2 > capj * capj:
+                s = capj / np.sqrt(mag2)
+                wx, wy, wz = wx * s, wy * s, wz * s
+            ix, iy, iz = wx - jt[i, 0], wy - jt[i, 1], wz - jt[i, 2]
+            jt[i, 0], jt[i, 1], jt[i, 2] = wx, wy, wz
+            v[ai, 0] += im_a * ix
+            v[ai, 1] += im_a * iy
+            v[ai, 2] += im_a * iz
+            for k in range(3):  # w += I^-1 (r x imp) = sum_j G_j imp_j
+                w[ai, k] += (gm[i, k] * ix + gm[i, 3 + k] * iy) + gm[i, 6 + k] * iz
+            if bi >= 0:
+                bx, by, bz = rb[i, 0], rb[i, 1], rb[i, 2]
+                v[bi, 0] -= im_b * ix
+                v[bi, 1] -= im_b * iy
+                v[bi, 2] -= im_b * iz
+                for k in range(3):
+                    w[bi, k] -= (gm[i, 9 + k] * ix + gm[i, 12 + k] * iy) + gm[i, 15 + k] * iz
+    # pushes out of the planes: per body and plane the deepest, plane by plane (project_planes)
+    nplanes = plane_normal.shape[0]
+    if nplanes == 0:
+        return
+    deepest = np.zeros((x.shape[0], nplanes))
+    for i in range(count):
+        p = plane[i]
+        if p >= 0:
+            push = depth[i] * (1.0 + e_used[i])
+            if push > deepest[a[i], p]:
+                deepest[a[i], p] = push
+    for p in range(nplanes):
+        for bi in range(x.shape[0]):
+            d = deepest[bi, p]
+            if d > 0.0 and inv_mass[bi] > 0.0:
+                x[bi, 0] += d * plane_normal[p, 0]
+                x[bi, 1] += d * plane_normal[p, 1]
+                x[bi, 2] += d * plane_normal[p, 2]
 
 
 # --- the step stage -------------------------------------------------------------------
@@ -790,6 +1208,8 @@ class BodyContacts(StepStage):
         # the numba kernel covers steps in which bodies touch only planes; a step with contacts
         # between bodies (or colliders) runs the NumPy path on both backends, so the two agree
         self.use_numba = backend == "numba" and not colliders
+        self._buffers: tuple[np.ndarray, ...] | None = None
+        self.numba_broadphase = backend == "numba"
         kinds = sorted({s.kind for s in shapes})
         parts = []
         if planes.count:
@@ -822,6 +1242,7 @@ class BodyContacts(StepStage):
         self, state: Any, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, dt: float = 0.0
     ) -> bool:
         rows = slice(self.first, self.first + self.count)
+        # views: the solver and the projection change the state in place
         x = state.particle_position[rows]
         v = state.particle_velocity[rows]
         q = state.body_orientation
@@ -830,52 +1251,90 @@ class BodyContacts(StepStage):
         dx = x - x_old[rows]
         resting = RESTING_FACTOR * np.linalg.norm(dv, axis=1)
         pairs = self.find_pairs(x, q)
-        if self.use_numba:
-            # bodies touching each other are solved together on the NumPy path (as on the NumPy
-            # backend); every other body on its own in the numba kernel
-            skip = np.zeros(self.count, dtype=bool)
-            skip[pairs.a] = True
-            skip[pairs.b] = True
-            kernel = numba_plane_solver()
-            xc, vc = np.ascontiguousarray(x), np.ascontiguousarray(v)
-            n = kernel(
-                xc,
-                vc,
-                q,
-                w,
-                self.inv_mass,
-                self.inv_inertia,
-                self.points,
-                self.radii,
-                self.counts,
-                self.planes.point,
-                self.planes.normal,
-                self.planes.restitution,
-                self.planes.friction,
-                resting,
-                self.iterations,
-                np.ascontiguousarray(dv),
-                np.ascontiguousarray(dx),
-                skip,
-            )
-            if n:
-                state.particle_position[rows] = xc
-                state.particle_velocity[rows] = vc
-            if pairs.count == 0:
-                return bool(n)
-            x, v = state.particle_position[rows], state.particle_velocity[rows]
-            contacts = _select(self.find(x, q, pairs), skip)
-            changed = bool(n)
-        else:
+        if not self.use_numba:
             contacts = self.find(x, q, pairs)
-            changed = False
-        if contacts.count == 0:
-            return changed
-        e_used = solve(contacts, v, w, q, self.inv_mass, self.inv_inertia, resting, self.iterations, dv, dx)
-        project(contacts, e_used, x, self.inv_mass)
-        state.particle_position[rows] = x
-        state.particle_velocity[rows] = v
+            if contacts.count == 0:
+                return False
+            e_used = solve(
+                contacts, v, w, q, self.inv_mass, self.inv_inertia, resting, self.iterations, dv, dx
+            )
+            project_planes(contacts, e_used, x, self.inv_mass, self.planes)
+            project(contacts, e_used, x, self.inv_mass)
+            return True
+        # numba: plane contacts found body by body, then the whole list (pairs after the planes,
+        # as on the NumPy path) solved in list order by one kernel call
+        detect, solver = numba_kernels()
+        buf = self._plane_buffers()
+        found = detect(
+            x,
+            q,
+            self.points,
+            self.radii,
+            self.counts,
+            self.planes.point,
+            self.planes.normal,
+            self.planes.restitution,
+            self.planes.friction,
+            *buf,
+        )
+        if found == 0 and pairs.count == 0:
+            return False
+        if pairs.count:
+            planes_found = Contacts(
+                buf[0][:found],
+                self._no_body[:found],
+                buf[1][:found],
+                self._zero3[:found],
+                buf[2][:found],
+                buf[3][:found],
+                buf[4][:found],
+                buf[5][:found],
+                buf[6][:found],
+            )
+            contacts = _concat([planes_found, pairs])
+            arrays = [np.ascontiguousarray(getattr(contacts, f)) for f in Contacts.__dataclass_fields__]
+        else:
+            contacts = None
+            a, ra, n, depth, e, mu, plane = buf
+            arrays = [a, self._no_body, ra, self._zero3, n, depth, e, mu, plane]
+        count = found + pairs.count
+        e_used = np.empty(count)
+        solver(
+            count,
+            *arrays,
+            x,
+            v,
+            w,
+            q,
+            self.inv_mass,
+            self.inv_inertia,
+            resting,
+            dv,
+            dx,
+            self.iterations,
+            self.planes.normal,
+            e_used,
+        )
+        if contacts is not None:
+            project(contacts, e_used, x, self.inv_mass)
         return True
+
+    def _plane_buffers(self) -> tuple[np.ndarray, ...]:
+        """Output arrays of the numba plane detection (capacity: every sphere behind every plane)."""
+        if self._buffers is None:
+            cap = self.count * self.points.shape[1] * max(self.planes.count, 1)
+            self._buffers = (
+                np.zeros(cap, dtype=np.int64),
+                np.zeros((cap, 3)),
+                np.zeros((cap, 3)),
+                np.zeros(cap),
+                np.zeros(cap),
+                np.zeros(cap),
+                np.zeros(cap, dtype=np.int64),
+            )
+            self._no_body = np.full(cap, -1, dtype=np.int64)
+            self._zero3 = np.zeros((cap, 3))
+        return self._buffers
 
     def find(self, x: np.ndarray, q: np.ndarray, pairs: Contacts | None = None) -> Contacts:
         """Every contact of the bodies at x, q: planes, then colliders, then pairs."""
@@ -893,10 +1352,37 @@ class BodyContacts(StepStage):
             return _empty_contacts()
         moved = np.inf if self._built_at is None else float(np.abs(x - self._built_at).max(initial=0.0))
         if not moved <= 0.5 * self._skin / math.sqrt(3.0):  # a NaN position rebuilds too
-            self._candidates = candidate_pairs(x, self.bound + 0.5 * self._skin)
+            grown = self.bound + 0.5 * self._skin
+            if self.numba_broadphase and self.count > 1 and np.isfinite(x).all():
+                self._candidates = numba_candidate_pairs()(np.ascontiguousarray(x), grown)
+            else:
+                self._candidates = candidate_pairs(x, grown)
             self._built_at = x.copy()
-        if self._candidates[0].size == 0:
+        i, j = self._candidates
+        if i.size == 0:
             return _empty_contacts()
+        # the list holds pairs within a skin of touching; only pairs whose bounding spheres overlap
+        # now can have a contact (every contact sphere lies inside its body's bounding sphere)
+        gap = x[i] - x[j]
+        reach = (self.bound[i] + self.bound[j]) * (1.0 + 1e-9)  # never lose a pair to rounding
+        close = np.einsum("ij,ij->i", gap, gap) <= reach * reach
+        if not close.any():
+            return _empty_contacts()
+        if self.numba_broadphase:
+            found = numba_pair_contacts()(
+                x,
+                q,
+                self.points,
+                self.radii,
+                self.counts,
+                self.kind,
+                self.dims,
+                self.restitution,
+                self.friction,
+                i[close],
+                j[close],
+            )
+            return Contacts(*found, np.full(found[0].size, -1, dtype=np.int64))
         return pair_contacts(
             x,
             q,
@@ -908,5 +1394,5 @@ class BodyContacts(StepStage):
             self.bound,
             self.restitution,
             self.friction,
-            self._candidates,
+            (i[close], j[close]),
         )

@@ -32,7 +32,7 @@ class BodyDynamics:
         self.terms = tuple(terms)
         self._force = np.zeros((system.particle_count, 3))
         self._torque = np.zeros((self.count, 3))
-        self._numba = backend == "numba"
+        self.numba = backend == "numba"
 
     def accelerations(
         self,
@@ -59,7 +59,7 @@ class BodyDynamics:
             for term in self.terms:
                 term.accumulate_bodies(x, v, q, w, t, f, torque)
             a_out += f * dynamics.inv_mass[:, None]
-        if self._numba:
+        if self.numba:
             quat.numba_angular_acceleration()(
                 np.ascontiguousarray(q),
                 np.ascontiguousarray(w),

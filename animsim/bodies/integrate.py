@@ -60,6 +60,7 @@ def step(integ: Any, state: Any, dt: float) -> None:
         _runge_kutta(integ, state, dt)
     elif name == "symplectic_euler":
         _symplectic_euler(integ, state, dt)
+        return  # q normalised by advance_orientation
     elif name == "euler_average":
         _euler_average(integ, state, dt)
     elif name == "verlet":
@@ -113,8 +114,10 @@ def _symplectic_euler(integ: Any, state: Any, dt: float) -> None:
     dyn.bodies.accelerations(dyn, x, v, q, w, state.time, a, alpha)
     v += dt * a
     x += dt * v
-    w += dt * alpha
-    q += dt * quat.derivative(q, w)
+    if dyn.bodies.numba:
+        quat.numba_advance_orientation()(q, w, alpha, dt)
+    else:
+        quat.advance_orientation(q, w, alpha, dt)
 
 
 def _euler_average(integ: Any, state: Any, dt: float) -> None:

@@ -293,3 +293,75 @@ bodies:
     # the spring holds the weight: its length is rest + m g / ks
     length = np.linalg.norm(corner - np.array([0.0, 2.0, 0.0]))
     np.testing.assert_allclose(length, 0.3 + G / 200, rtol=2e-3)
+
+
+# --- compare's closed form for torque-free bodies ------------------------------------------
+
+TOP = """
+duration: 2.0
+dt: {dt}
+integrator: rk4
+record: {{every: {every}}}
+forces: [{{type: gravity}}]
+bodies:
+  - {{id: top, shape: {{type: box, size: [0.2, {height}, 0.2]}}, mass: 1.5, position: [0, 2, 0],
+     velocity: [1, 3, 0], orientation: {{axis: [1, 0.3, 0.2], angle: 25}}, angular_velocity: [2.0, 9.0, -1.0]}}
+"""
+
+
+def _closed_form_of(text: str):
+    from animsim.analysis.references import closed_form
+    from animsim.compile import compile_scene
+    from animsim.scene.loader import load_scene_text
+
+    return closed_form(compile_scene(load_scene_text(text, "top.yaml").scene, "top"))
+
+
+def test_torque_free_symmetric_top_closed_form_matches_a_fine_rk4_run() -> None:
+    # A square box (I1 = I2 about x and z, I3 about y) tumbling in flight: the reference is the
+    # parabola for the centre and R(t) = Rot(L, |L| t / I1) R0 Rot(y, -Omega t) for the turning.
+    text = TOP.format(dt=0.0005, every=20, height=0.5)
+    traj = _run(text)
+    form = _closed_form_of(text)
+    assert form.description == "free flight under gravity; torque-free symmetric top"
+    x, v = form.evaluate(traj.times)
+    q, w = form.evaluate_bodies(traj.times)
+    run_q = traj.body_orientations[:, 0]
+    same_sign = np.sign(np.sum(q[:, 0] * run_q, axis=1))[:, None]  # q and -q are one rotation
+    np.testing.assert_allclose(q[:, 0] * same_sign, run_q, atol=1e-10)
+    np.testing.assert_allclose(w[:, 0], traj.body_angular_velocities[:, 0], atol=1e-9)
+    np.testing.assert_allclose(x, traj.positions, atol=1e-10)
+    np.testing.assert_allclose(v, traj.velocities, atol=1e-10)
+    # and the closed form is the physics, not a copy of the run: L = I_w omega stays put, and the
+    # body-frame omega turns about the symmetry axis (y) at omega_y (I3 - I1) / I1
+    inertia = np.repeat([[1.5 / 12 * (0.25 + 0.04), 1.5 / 12 * 0.08, 1.5 / 12 * (0.25 + 0.04)]], len(q), 0)
+    big_l = quat.angular_momentum(q[:, 0], w[:, 0], inertia)
+    np.testing.assert_allclose(big_l, np.repeat(big_l[:1], len(q), 0), atol=1e-12)
+    wb = quat.rotate_inverse(q[:, 0], w[:, 0])
+    phase = np.unwrap(np.arctan2(wb[:, 0], wb[:, 2]))  # angle of (z, x) about +y
+    rate = np.polyfit(traj.times, phase, 1)[0]
+    i1, i3 = inertia[0, 0], inertia[0, 1]
+    assert abs(rate - wb[0, 1] * (i3 - i1) / i1) < 1e-9 * abs(rate)
+
+
+def test_asymmetric_body_has_no_closed_form_and_says_why() -> None:
+    from animsim.analysis.references import NoClosedForm
+
+    with pytest.raises(NoClosedForm, match="'top' is not axisymmetric"):
+        _closed_form_of(
+            TOP.format(dt=0.01, every=1, height=0.5).replace("[0.2, 0.5, 0.2]", "[0.2, 0.5, 0.3]")
+        )
+
+
+def test_compare_on_a_torque_free_top_uses_the_closed_form_and_sees_orientation_errors() -> None:
+    from animsim.analysis.compare import compare
+    from animsim.scene.loader import load_scene_text
+
+    scene = load_scene_text(TOP.format(dt=0.01, every=1, height=0.5), "top.yaml").scene
+    result = compare(scene, "top", integrators=["rk4", "symplectic_euler"], dts=[0.02, 0.01, 0.005], repeat=0)
+    assert result.reference.kind == "analytic"
+    assert "torque-free symmetric top" in result.reference.description
+    # the centre's parabola is exact for rk4; only the orientation's error can give order 4
+    rk4 = [r for r in result.rows if r.integrator == "rk4"]
+    assert all(r.error > 1e-9 for r in rk4)
+    assert rk4[0].error / rk4[-1].error > 2**4 * 0.8 * 2**3  # two halvings at order ~4
