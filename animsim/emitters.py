@@ -346,6 +346,22 @@ class BirthStream:
         lifetime = _positive_gaussian(ra, k, self.life_mean, self.life_spread)
         return Births(t, position, velocity, lifetime)
 
+    def snapshot(self) -> tuple[Any, ...]:
+        """Everything a later draw depends on (the generators' states, the chunk counter, the rate
+        noise and the events drawn but not taken), so :meth:`restore` repeats the same births."""
+        return (
+            self.rng_birth.bit_generator.state,
+            self.rng_attr.bit_generator.state,
+            self.next_chunk,
+            self.noise,
+            self.pending,
+        )
+
+    def restore(self, snap: tuple[Any, ...]) -> None:
+        birth, attr, self.next_chunk, self.noise, self.pending = snap
+        self.rng_birth.bit_generator.state = birth
+        self.rng_attr.bit_generator.state = attr
+
     def take(self, t1: float) -> Births:
         """Every birth event with time < t1 not taken yet, in time order."""
         parts = [self.pending]
@@ -408,6 +424,34 @@ class Pool:
         self.slot_table[:] = -1
         self.stream.reset()
         self.reset_counters()
+
+    #: the per-slot and counting fields a replay restores (the slots' alive flags and masses
+    #: are the state's, restored with it; the id-table rows belong to recording and stay)
+    _SLOT_FIELDS = ("slot_birth", "slot_death", "slot_lifetime", "slot_serial")
+    _COUNTERS = (
+        "born",
+        "dropped",
+        "died_age",
+        "died_kill_box",
+        "alive_count",
+        "peak_alive",
+        "kinetic_energy_born",
+    )
+
+    def snapshot(self) -> tuple[Any, ...]:
+        return (
+            [getattr(self, f).copy() for f in self._SLOT_FIELDS],
+            [getattr(self, f) for f in self._COUNTERS],
+            self.stream.snapshot(),
+        )
+
+    def restore(self, snap: tuple[Any, ...]) -> None:
+        slots, counters, stream = snap
+        for f, a in zip(self._SLOT_FIELDS, slots, strict=True):
+            np.copyto(getattr(self, f), a)
+        for f, value in zip(self._COUNTERS, counters, strict=True):
+            setattr(self, f, value)
+        self.stream.restore(stream)
 
     def _kill(self, slots: np.ndarray) -> None:
         self.alive[slots] = False
@@ -548,6 +592,19 @@ class Emitters(StepStage):
             p.bind(state)
         self._accel = np.zeros_like(state.particle_position)
         self._next_table = self.first_index
+
+    def snapshot(self) -> list[tuple[Any, ...]]:
+        """The pools' bookkeeping and random streams, for a replay from a checked state.
+
+        With it the births are not a reason to check the watchdog at every step: a
+        replay from the last good check restores this and the state, and draws the
+        same births again (:func:`animsim.engine.run`).
+        """
+        return [p.snapshot() for p in self.pools]
+
+    def restore(self, snap: list[tuple[Any, ...]]) -> None:
+        for p, s in zip(self.pools, snap, strict=True):
+            p.restore(s)
 
     def attach(self, dynamics: Any, colliders: list[Any]) -> None:
         """The force sum newborns fly on with, and the stages they collide with (compile time)."""

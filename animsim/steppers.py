@@ -110,9 +110,10 @@ class _Base:
         self.largest_dt = compiled.clock.dt
         self.numba = numba
         self.stages = compiled.post_step
-        # A stage that draws random numbers (births) makes a replay a different run:
-        # such runs are checked at every step instead of replayed.
-        self.replayable = not any(st.random for st in compiled.post_step)
+        # A stage that draws random numbers (births) can be replayed when it snapshots its
+        # streams (``snapshot``/``restore``, restored with the state); else such runs are
+        # checked at every step instead of replayed.
+        self.replayable = all(not st.random or hasattr(st, "snapshot") for st in compiled.post_step)
         n = compiled.system.particle_count
         # Not sparser for small scenes: the watchdog judges energy at its checks, and a run
         # whose energy spikes between two far-apart checks and falls back would pass unseen.
@@ -293,6 +294,9 @@ class StepDoubling(_Base):
         self.largest_dt = max(self.dt_max, compiled.clock.dt)
         # Steps grow past the nominal clock: run to each record time, check there (and replay).
         self.check_stride = self.end
+        # The controller's step size is not restored for a replay, so births (drawn once per
+        # accepted step) keep the check at every step here.
+        self.replayable = not any(st.random for st in compiled.post_step)
         self.grow_below = self.tolerance / DOUBLING_BASE ** (compiled.integrator.order + 1)
         self._movable = compiled.system.particle_inv_mass > 0
         self._big: State | None = None

@@ -139,19 +139,43 @@ class EnergyWatch:
         stretch = np.sqrt(np.einsum("ij,ij->i", d, d)) - springs.rest
         return 0.5 * float(np.dot(springs.ks, stretch * stretch))
 
+    def book_births(self, state: Any) -> None:
+        """Book the particles alive now and not at the last booking: their kinetic energy joins
+        the budget and their released energy is measured from here. The loop calls this after
+        every step of a run with births (and each check does), so the books are those of a
+        check at every step while the full checks keep their stride."""
+        if self.alive_prev is None or state.particle_alive is None:
+            return
+        born = state.particle_alive & ~self.alive_prev
+        if born.any():
+            x = state.particle_position
+            idx = np.flatnonzero(born)
+            vb = state.particle_velocity[idx]
+            self.born_energy += float(0.5 * np.dot(self.mass[idx], np.einsum("ij,ij->i", vb, vb)))
+            self.x_ref[idx] = x[idx]
+            for t, u in zip(self.releasing, self.u_ref, strict=True):
+                u[idx] = t.per_particle_potential(x[idx], idx)
+        np.copyto(self.alive_prev, state.particle_alive)
+
+    def snapshot(self) -> tuple[Any, ...] | None:
+        """The books a replay from a checked state restores (None: they never change)."""
+        if self.alive_prev is None:
+            return None
+        return self.born_energy, self.x_ref.copy(), [u.copy() for u in self.u_ref], self.alive_prev.copy()
+
+    def restore(self, snap: tuple[Any, ...] | None) -> None:
+        if snap is None:
+            return
+        self.born_energy = snap[0]
+        np.copyto(self.x_ref, snap[1])
+        for u, saved in zip(self.u_ref, snap[2], strict=True):
+            np.copyto(u, saved)
+        np.copyto(self.alive_prev, snap[3])
+
     def budget(self, state: Any) -> float:
         """B: the most energy H may hold at ``state`` without the integrator making any."""
         x = state.particle_position
-        if self.alive_prev is not None and state.particle_alive is not None:
-            born = state.particle_alive & ~self.alive_prev
-            if born.any():
-                idx = np.flatnonzero(born)
-                vb = state.particle_velocity[idx]
-                self.born_energy += float(0.5 * np.dot(self.mass[idx], np.einsum("ij,ij->i", vb, vb)))
-                self.x_ref[idx] = x[idx]
-                for t, u in zip(self.releasing, self.u_ref, strict=True):
-                    u[idx] = t.per_particle_potential(x[idx], idx)
-            np.copyto(self.alive_prev, state.particle_alive)
+        self.book_births(state)
         released = 0.0
         for t, u in zip(self.releasing, self.u_ref, strict=True):
             released += t.released(x, self.x_ref, u)
