@@ -556,6 +556,8 @@ class Emitters(StepStage):
     #: births bring kinetic energy in (the watchdog books it separately)
     injects = True
     random = True
+    #: runs in Python after each step of the numba backend's fused kernel (no kernel of its own)
+    fused_between_steps = True
     no_closed_form = "it has emitters (particles are born and die at random)"
 
     def __init__(self, pools: list[Pool], first_index: int):
@@ -639,9 +641,13 @@ class Emitters(StepStage):
         """x += r v0 + r^2/2 a0, v += r a0 for the rest r of the birth step; then planes."""
         x, v = state.particle_position, state.particle_velocity
         assert self._accel is not None
-        # One evaluation over every slot: force terms hold per-particle arrays
-        # (mass) of the full system, so they cannot be evaluated on a subset.
-        a = self.dynamics.acceleration(x, v, t_mid, self._accel)[idx]
+        rows = getattr(self.dynamics, "acceleration_rows", None)
+        if rows is not None:  # numba: the newborns' rows only, where every force allows it
+            a = rows(x, v, t_mid, idx)
+        else:
+            # One evaluation over every slot: the NumPy force terms hold per-particle arrays
+            # (mass) of the full system, so they cannot be evaluated on a subset.
+            a = self.dynamics.acceleration(x, v, t_mid, self._accel)[idx]
         x0, v0 = x[idx], v[idx]
         r = rest[:, None]
         x1 = x0 + r * v0 + (0.5 * r * r) * a

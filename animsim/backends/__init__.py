@@ -66,7 +66,8 @@ def fused_unsupported(compiled: Any) -> list[str]:
         if term.numba_source is None:
             why.append(f"force {term.label!r}")
     for stage in compiled.post_step:
-        if stage.numba_stage_source is None:
+        # births run in Python between one-step chunks (animsim.steppers.Fused)
+        if stage.numba_stage_source is None and not getattr(stage, "fused_between_steps", False):
             why.append(stage.label.split(":")[0])
     return why
 

@@ -33,6 +33,8 @@ def _quadratic_kernel(x, v, t, out, mass, fp, ip):
 
 
 class Drag(ForceElement):
+    #: row i of its force reads only row i (the numba backend may evaluate it on a few rows)
+    pointwise = True
     watch_role = DISSIPATIVE
     has_damping = True
 
@@ -58,6 +60,8 @@ class Drag(ForceElement):
 
 
 class QuadraticDrag(ForceElement):
+    #: row i of its force reads only row i (the numba backend may evaluate it on a few rows)
+    pointwise = True
     watch_role = DISSIPATIVE
     has_damping = True
 
