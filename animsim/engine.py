@@ -10,6 +10,7 @@ they are made.
 
 from __future__ import annotations
 
+import math
 import time as _time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -105,7 +106,7 @@ class Guard:
         x, v = state.particle_position, state.particle_velocity
         # One reduction each instead of an (N, 3) boolean array: a NaN or inf
         # anywhere makes the sum non-finite.
-        if not (np.isfinite(x.sum()) and np.isfinite(v.sum())):
+        if not (math.isfinite(x.sum()) and math.isfinite(v.sum())):
             bad = ~(np.isfinite(x).all(axis=1) & np.isfinite(v).all(axis=1))
             if bad.any():  # else the sum overflowed on huge but finite values
                 i = int(np.flatnonzero(bad)[0])

@@ -68,6 +68,7 @@ class EnergyWatch:
         self.dynamics = compiled.dynamics
         terms = self.dynamics.terms
         self.mass = system.particle_mass  # rebound to the run's live masses by bind()
+        self._movable = float(np.count_nonzero(self.mass))
         self.inv_mass = system.particle_inv_mass
         self.elastic = [t for t in terms if t.watch_role == ELASTIC]
         self.releasing = [t for t in terms if t.watch_role == RELEASING]
@@ -95,6 +96,7 @@ class EnergyWatch:
         """Book the run's live masses (pool births change them)."""
         self.mass = state.particle_mass
         self.inv_mass = state.particle_inv_mass
+        self._movable = float(np.count_nonzero(self.mass))  # fixed populations: counted once
 
     def _external_floor(self, x: np.ndarray, v: np.ndarray) -> float:
         if not self.releasing:
@@ -179,7 +181,7 @@ class EnergyWatch:
         released = 0.0
         for t, u in zip(self.releasing, self.u_ref, strict=True):
             released += t.released(x, self.x_ref, u)
-        movable = float(np.count_nonzero(self.mass))
+        movable = self._movable if self.alive_prev is None else float(np.count_nonzero(self.mass))
         return (
             self.h0
             + max(released, 0.0)

@@ -23,6 +23,8 @@ def _kernel(x, v, t, out, mass, fp, ip):  # numba: KERNEL_SIGNATURE
 class Gravity(ForceElement):
     #: row i of its force reads only row i (the numba backend may evaluate it on a few rows)
     pointwise = True
+    #: its force reads neither positions, velocities nor time (only the masses)
+    constant_force = True
     watch_role = RELEASING
     energy_part = "gravitational"
 
