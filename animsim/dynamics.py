@@ -87,7 +87,7 @@ class Dynamics:
         if f0 is None:
             out.fill(0.0)
         else:
-            np.copyto(out, f0)
+            out[...] = f0
         for term in self._rest:
             term.accumulate(x, v, t, out)
         return out
@@ -99,7 +99,7 @@ class Dynamics:
             drive.drive(t, x, v)
         a0 = self._a0
         if a0 is not None:  # every force constant: a = F/m was computed once
-            np.copyto(out, a0)
+            out[...] = a0  # (a plain copy; cheaper to call than np.copyto)
             return out
         self.force(x, v, t, out)
         inv3 = self._inv3
