@@ -25,7 +25,7 @@ import numpy as np
 
 from animsim.elements import BuildContext, StepStage, numba_helper, register
 from animsim.scene import models as m
-from animsim.vec import dot3
+from animsim.vec import dot3, outer3, put_rows, rep3, take_rows
 
 #: penalty stiffness when a penalty plane names none, N/m
 DEFAULT_PENALTY_STIFFNESS = 1e4
@@ -56,7 +56,7 @@ def _apply_friction(vt: np.ndarray, dvn: np.ndarray, mu: float) -> np.ndarray:
     speed = np.sqrt(dot3(vt, vt))
     with np.errstate(divide="ignore", invalid="ignore"):
         keep = np.where(speed > 0, np.maximum(speed - mu * dvn, 0.0) / speed, 0.0)
-    return vt * keep[:, None]
+    return vt * rep3(keep)
 
 
 class PlaneColliders(StepStage):
@@ -121,6 +121,7 @@ class PlaneColliders(StepStage):
         comparison); everything else works on the few that reached a plane.
         """
         touched: list[np.ndarray] = []
+        single = len(self.planes) == 1
         for pl in self.planes:
             n = pl.normal
             # Signed distance as x.n - p.n: no (N, 3) temporary.
@@ -132,21 +133,35 @@ class PlaneColliders(StepStage):
             # that would cross next step: Lander's "colliding contact"); never
             # pinned particles or dead pool slots.
             d1 = d_new[cand]
-            keep = ((d1 < 0) | (dot3(v[cand], n) < 0)) & (self.inv_mass[cand] > 0)
+            keep = ((d1 < 0) | (dot3(take_rows(v, cand), n) < 0)) & (self.inv_mass[cand] > 0)
             hit = cand[keep]
             if hit.size == 0:
                 continue
             touched.append(hit)
             d1 = d1[keep]
-            xo, vo, xh, vh = x_old[hit], v_old[hit], x[hit], v[hit]
+            # rows gathered with np.take and written back with put_rows: the same values as
+            # fancy indexing, a third of its cost (these gathers were most of the stage)
+            xo, vo, xh, vh = (
+                take_rows(x_old, hit),
+                take_rows(v_old, hit),
+                take_rows(x, hit),
+                take_rows(v, hit),
+            )
             d0 = np.maximum(dot3(xo, n) - pl.offset, 0.0)
             gap = d0 - d1
             # fraction of the step at impact; a particle ending exactly on the plane touched it at the end
-            s = np.divide(d0, gap, out=np.ones_like(d0), where=gap > 0)[:, None]
-            dt_hit = dt if np.ndim(dt) == 0 else np.asarray(dt)[hit][:, None]
-            mean_acc = (vh - vo) / dt_hit
-            xc = xo + s * (xh - xo)
-            vc = vo + s * (vh - vo)
+            s = np.divide(d0, gap, out=np.ones_like(d0), where=gap > 0)
+            # (k, 3) copies of per-row factors (rep3, outer3): the products of the
+            # broadcast forms, without NumPy's slow inner loop of three
+            s3 = rep3(s)
+            dt_row = dt if np.ndim(dt) == 0 else np.asarray(dt)[hit]
+            dv = vh - vo
+            mean_acc = dv / (dt_row if np.ndim(dt_row) == 0 else dt_row[:, None])
+            xh -= xo
+            xh *= s3
+            xc = np.add(xo, xh, out=xh)  # xo + s (xh - xo)
+            dv *= s3
+            vc = np.add(vo, dv, out=dv)  # vo + s (vh - vo)
             # Reflect the approaching ones (Lander Eq. 3) with Coulomb friction.
             # An approach slower than what the pressing acceleration adds in
             # RESTING_STEPS steps is a resting contact: it stops instead of
@@ -154,33 +169,46 @@ class PlaneColliders(StepStage):
             vn = dot3(vc, n)
             approaching = vn < 0
             pressing = np.maximum(-dot3(mean_acc, n), 0.0)
-            resting = approaching & (-vn <= RESTING_STEPS * pressing * np.ravel(dt_hit))
+            resting = approaching & (-vn <= RESTING_STEPS * pressing * dt_row)
             e = np.where(resting, 0.0, pl.restitution)
             vn_new = np.where(approaching, -e * vn, vn)
-            vt = vc - vn[:, None] * n
+            vt = vc - outer3(vn, n)
             vt = _apply_friction(vt, np.abs(vn_new - vn), pl.friction)
-            vr = vt + vn_new[:, None] * n
+            vr = vt + outer3(vn_new, n)
             # Fly on for the rest of the step.
-            r = (1.0 - s) * dt_hit
-            x[hit] = xc + r * vr + 0.5 * r * r * mean_acc
-            v[hit] = vr + r * mean_acc
+            r = (1.0 - s) * dt_row
+            r3 = rep3(r)
+            x_hit = xc + r3 * vr + rep3(0.5 * r * r) * mean_acc
+            v_hit = vr + r3 * mean_acc
+            if single:  # one plane: settle the rows before writing them back, once
+                self._project_rows(x_hit, v_hit)
+            put_rows(x, hit, x_hit)
+            put_rows(v, hit, v_hit)
         if not touched:
             return False
-        # Only particles moved above can be behind a plane now: every other
-        # one ended its step in front of all of them.
-        self._project(x, v, touched[0] if len(touched) == 1 else np.unique(np.concatenate(touched)))
+        if not single:
+            # Only particles moved above can be behind a plane now: every other
+            # one ended its step in front of all of them.
+            self._project(x, v, np.unique(np.concatenate(touched)))
         return True
 
     def _project(self, x: np.ndarray, v: np.ndarray, idx: np.ndarray) -> None:
         """Put any of ``idx`` still behind a plane onto it and stop its inward motion."""
+        xs, vs = take_rows(x, idx), take_rows(v, idx)
+        self._project_rows(xs, vs)
+        put_rows(x, idx, xs)
+        put_rows(v, idx, vs)
+
+    def _project_rows(self, x: np.ndarray, v: np.ndarray) -> None:
+        """:meth:`_project` on gathered rows (k, 3), in place."""
         for pl in self.planes:
             n = pl.normal
-            d = dot3(x[idx], n) - pl.offset
+            d = dot3(x, n) - pl.offset
             sel = d < 0
             if not sel.any():
                 continue
-            behind = idx[sel]
-            xb = x[behind] - d[sel, None] * n
+            behind = np.flatnonzero(sel)
+            xb = take_rows(x, behind) - outer3(d[behind], n)
             # Rounding can leave the projected point 1 ulp behind; nudge until it is not.
             for _ in range(4):
                 db = dot3(xb, n) - pl.offset
@@ -188,13 +216,13 @@ class PlaneColliders(StepStage):
                 if not still.any():
                     break
                 xb[still] -= (2.0 * db[still])[:, None] * n + np.spacing(np.abs(xb[still])) * np.sign(n)
-            x[behind] = xb
-            vb = v[behind]
+            put_rows(x, behind, xb)
+            vb = take_rows(v, behind)
             vn = dot3(vb, n)
             inward = np.minimum(vn, 0.0)
-            vt = vb - vn[:, None] * n
+            vt = vb - outer3(vn, n)
             vt = _apply_friction(vt, -inward, pl.friction)
-            v[behind] = vt + (vn - inward)[:, None] * n
+            put_rows(v, behind, vt + outer3(vn - inward, n))
 
 
 # --- the numba kernel: the same rule, particle by particle ---------------------------------

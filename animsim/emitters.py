@@ -346,6 +346,22 @@ class BirthStream:
         lifetime = _positive_gaussian(ra, k, self.life_mean, self.life_spread)
         return Births(t, position, velocity, lifetime)
 
+    def snapshot(self) -> tuple[Any, ...]:
+        """Everything a later draw depends on (the generators' states, the chunk counter, the rate
+        noise and the events drawn but not taken), so :meth:`restore` repeats the same births."""
+        return (
+            self.rng_birth.bit_generator.state,
+            self.rng_attr.bit_generator.state,
+            self.next_chunk,
+            self.noise,
+            self.pending,
+        )
+
+    def restore(self, snap: tuple[Any, ...]) -> None:
+        birth, attr, self.next_chunk, self.noise, self.pending = snap
+        self.rng_birth.bit_generator.state = birth
+        self.rng_attr.bit_generator.state = attr
+
     def take(self, t1: float) -> Births:
         """Every birth event with time < t1 not taken yet, in time order."""
         parts = [self.pending]
@@ -408,6 +424,34 @@ class Pool:
         self.slot_table[:] = -1
         self.stream.reset()
         self.reset_counters()
+
+    #: the per-slot and counting fields a replay restores (the slots' alive flags and masses
+    #: are the state's, restored with it; the id-table rows belong to recording and stay)
+    _SLOT_FIELDS = ("slot_birth", "slot_death", "slot_lifetime", "slot_serial")
+    _COUNTERS = (
+        "born",
+        "dropped",
+        "died_age",
+        "died_kill_box",
+        "alive_count",
+        "peak_alive",
+        "kinetic_energy_born",
+    )
+
+    def snapshot(self) -> tuple[Any, ...]:
+        return (
+            [getattr(self, f).copy() for f in self._SLOT_FIELDS],
+            [getattr(self, f) for f in self._COUNTERS],
+            self.stream.snapshot(),
+        )
+
+    def restore(self, snap: tuple[Any, ...]) -> None:
+        slots, counters, stream = snap
+        for f, a in zip(self._SLOT_FIELDS, slots, strict=True):
+            np.copyto(getattr(self, f), a)
+        for f, value in zip(self._COUNTERS, counters, strict=True):
+            setattr(self, f, value)
+        self.stream.restore(stream)
 
     def _kill(self, slots: np.ndarray) -> None:
         self.alive[slots] = False
@@ -512,6 +556,8 @@ class Emitters(StepStage):
     #: births bring kinetic energy in (the watchdog books it separately)
     injects = True
     random = True
+    #: runs in Python after each step of the numba backend's fused kernel (no kernel of its own)
+    fused_between_steps = True
     no_closed_form = "it has emitters (particles are born and die at random)"
 
     def __init__(self, pools: list[Pool], first_index: int):
@@ -549,6 +595,19 @@ class Emitters(StepStage):
         self._accel = np.zeros_like(state.particle_position)
         self._next_table = self.first_index
 
+    def snapshot(self) -> list[tuple[Any, ...]]:
+        """The pools' bookkeeping and random streams, for a replay from a checked state.
+
+        With it the births are not a reason to check the watchdog at every step: a
+        replay from the last good check restores this and the state, and draws the
+        same births again (:func:`animsim.engine.run`).
+        """
+        return [p.snapshot() for p in self.pools]
+
+    def restore(self, snap: list[tuple[Any, ...]]) -> None:
+        for p, s in zip(self.pools, snap, strict=True):
+            p.restore(s)
+
     def attach(self, dynamics: Any, colliders: list[Any]) -> None:
         """The force sum newborns fly on with, and the stages they collide with (compile time)."""
         self.dynamics = dynamics
@@ -582,9 +641,13 @@ class Emitters(StepStage):
         """x += r v0 + r^2/2 a0, v += r a0 for the rest r of the birth step; then planes."""
         x, v = state.particle_position, state.particle_velocity
         assert self._accel is not None
-        # One evaluation over every slot: force terms hold per-particle arrays
-        # (mass) of the full system, so they cannot be evaluated on a subset.
-        a = self.dynamics.acceleration(x, v, t_mid, self._accel)[idx]
+        rows = getattr(self.dynamics, "acceleration_rows", None)
+        if rows is not None:  # numba: the newborns' rows only, where every force allows it
+            a = rows(x, v, t_mid, idx)
+        else:
+            # One evaluation over every slot: the NumPy force terms hold per-particle arrays
+            # (mass) of the full system, so they cannot be evaluated on a subset.
+            a = self.dynamics.acceleration(x, v, t_mid, self._accel)[idx]
         x0, v0 = x[idx], v[idx]
         r = rest[:, None]
         x1 = x0 + r * v0 + (0.5 * r * r) * a

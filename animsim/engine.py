@@ -10,6 +10,7 @@ they are made.
 
 from __future__ import annotations
 
+import math
 import time as _time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -90,11 +91,22 @@ class Guard:
         self.watch.bind(state)
         self.watch.reset(state)
 
+    def book(self, state: State) -> None:
+        """After a step of a run with births: book the newborns as a check would (cheap)."""
+        self.watch.book_births(state)
+
+    def snapshot(self) -> Any:
+        """The watchdog's books at a checked state, for a replay from it."""
+        return self.watch.snapshot()
+
+    def restore(self, snap: Any) -> None:
+        self.watch.restore(snap)
+
     def check(self, state: State) -> Failure | None:
         x, v = state.particle_position, state.particle_velocity
         # One reduction each instead of an (N, 3) boolean array: a NaN or inf
         # anywhere makes the sum non-finite.
-        if not (np.isfinite(x.sum()) and np.isfinite(v.sum())):
+        if not (math.isfinite(x.sum()) and math.isfinite(v.sum())):
             bad = ~(np.isfinite(x).all(axis=1) & np.isfinite(v).all(axis=1))
             if bad.any():  # else the sum overflowed on huge but finite values
                 i = int(np.flatnonzero(bad)[0])
@@ -228,9 +240,15 @@ def run(
         # reaches a sink; a failure is traced back to its first step by replaying
         # from the last good check, one step at a time.
         stride = stepper.check_stride
-        last_good = state.copy() if stepper.replayable else None
-        # A run that cannot be replayed (births draw random numbers) is checked after every step.
-        one = None if stepper.replayable else 1
+        replayable = stepper.replayable
+        last_good = state.copy() if replayable else None
+        books = _snapshot(compiled, guard) if replayable else None
+        # A run that cannot be replayed is checked after every step. A run with births is
+        # stepped one step at a time so that the watchdog books every newborn at its birth
+        # step (as a check at every step would); its full checks keep the stride, and the
+        # emitters' streams are restored with the state for a replay.
+        births = state.particle_alive is not None
+        one = 1 if (births or not replayable) else None
         pending: list[tuple[int, Frame | None, State | None]] = []
         k = 0  # position on the nominal clock (== steps taken, except with adaptive steps)
         checked = 0
@@ -240,6 +258,8 @@ def run(
                     next_rec += 1
                 goal = min(int(record[next_rec]) if next_rec < len(record) else steps, checked + stride)
                 k, failure, nonfinite = stepper.advance(state, k, goal, max_steps=one)
+                if births:
+                    guard.book(state)
                 if failure is not None:  # the stepper itself gave up (adaptive: below dt_min)
                     status = STATUS_UNSTABLE
                     frames += _flush(pending, sinks, observers, None)
@@ -250,7 +270,7 @@ def run(
                 interrupted = stop is not None and stop()
                 check_now = (
                     k - checked >= stride
-                    or one is not None
+                    or not replayable
                     or k == steps
                     or nonfinite
                     or interrupted
@@ -267,7 +287,7 @@ def run(
                 if check_now:
                     failure = guard.check(state)
                     if failure is not None and last_good is not None and state.step - last_good.step > 1:
-                        failure = _first_failure(state, last_good, failure, stepper, guard, dyn)
+                        failure = _first_failure(state, last_good, books, failure, stepper, guard, dyn)
                     frames += _flush(pending, sinks, observers, failure)
                     checked = k
                     if failure is not None:
@@ -278,6 +298,7 @@ def run(
                         frames += 1
                     if last_good is not None:
                         last_good.assign(state)
+                        books = _snapshot(compiled, guard)
                 if progress is not None:
                     progress(k, steps)
                 if interrupted:
@@ -335,19 +356,40 @@ def _flush(
     return count
 
 
+def _snapshot(compiled: Compiled, guard: Guard) -> tuple[Any, list[tuple[Any, Any]]]:
+    """What a replay restores besides the state: the watchdog's books and the stages' own
+    bookkeeping (the emitters' random streams and pools)."""
+    stages = [(st, st.snapshot()) for st in compiled.post_step if hasattr(st, "snapshot")]
+    return guard.snapshot(), stages
+
+
+def _restore(books: tuple[Any, list[tuple[Any, Any]]], guard: Guard) -> None:
+    watch, stages = books
+    guard.restore(watch)
+    for st, snap in stages:
+        st.restore(snap)
+
+
 def _first_failure(
-    state: State, last_good: State, failure: Failure, stepper: Any, guard: Guard, dyn: Any
+    state: State,
+    last_good: State,
+    books: Any,
+    failure: Failure,
+    stepper: Any,
+    guard: Guard,
+    dyn: Any,
 ) -> Failure:
     """Replay from the last state that passed a check, checking every step, so
     the report names the first failing step; ``state`` ends there.
 
-    The replay is the same computation (no randomness: runs with emitters are
-    checked every step), except that Verlet re-evaluates its first force.
-    Its force evaluations are not counted.
+    The replay is the same computation (the emitters' random streams are
+    restored with the state, so the same births are drawn again), except that
+    Verlet re-evaluates its first force. Its force evaluations are not counted.
     """
     failed_at = state.step
     evaluations = dyn.evaluations
     state.assign(last_good)
+    _restore(books, guard)
     stepper.forget()
     k = stepper.position(last_good)
     first = failure
@@ -362,7 +404,15 @@ def _first_failure(
 
 
 def _frame_copy(compiled: Compiled, state: State) -> Frame:
-    """A frame that owns its arrays (fixed population: no emitters)."""
+    """A frame that owns its arrays, held until a check passes."""
+    if compiled.emitters is not None:
+        # the alive rows, gathered (so copies); ids are given in recording order, as _emit does
+        frame = compiled.emitters.frame(compiled, state)
+        if state.spring_intact is not None:
+            import dataclasses
+
+            frame = dataclasses.replace(frame, spring_intact=state.spring_intact.copy())
+        return _with_bodies(frame, state, copy=True)
     return _with_bodies(
         Frame(
             step=state.step,

@@ -110,9 +110,10 @@ class _Base:
         self.largest_dt = compiled.clock.dt
         self.numba = numba
         self.stages = compiled.post_step
-        # A stage that draws random numbers (births) makes a replay a different run:
-        # such runs are checked at every step instead of replayed.
-        self.replayable = not any(st.random for st in compiled.post_step)
+        # A stage that draws random numbers (births) can be replayed when it snapshots its
+        # streams (``snapshot``/``restore``, restored with the state); else such runs are
+        # checked at every step instead of replayed.
+        self.replayable = all(not st.random or hasattr(st, "snapshot") for st in compiled.post_step)
         n = compiled.system.particle_count
         # Not sparser for small scenes: the watchdog judges energy at its checks, and a run
         # whose energy spikes between two far-apart checks and falls back would pass unseen.
@@ -185,6 +186,7 @@ class _NumbaDynamics:
     def __init__(self, dynamics: Any, forces: Any):
         self._dynamics = dynamics
         self.acceleration = forces.acceleration
+        self.acceleration_rows = forces.acceleration_rows
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._dynamics, name)
@@ -219,7 +221,12 @@ class StepByStep(_Base):
 
 
 class Fused(_Base):
-    """The numba backend's fused chunks (:class:`animsim.backends.fused.FusedStepper`)."""
+    """The numba backend's fused chunks (:class:`animsim.backends.fused.FusedStepper`).
+
+    Stages without a numba kernel that may run between fused steps (births,
+    ``fused_between_steps``) run after every step, in Python: the chunks are then
+    one step long, still one numba call for the forces, the integrator and the
+    collisions."""
 
     def __init__(self, compiled: Any):
         super().__init__(compiled, numba=True)
@@ -227,6 +234,7 @@ class Fused(_Base):
         self.times = np.array([clock.time(i) for i in range(clock.steps + 1)])
         self.dts = np.array([clock.step_size(i) for i in range(clock.steps)])
         self.fused: Any = None
+        self.between = tuple(st for st in self.stages if st.numba_stage_source is None)
 
     def prepare(self, state: State, notice: Callable[[str], None] | None) -> float:
         import time
@@ -238,7 +246,21 @@ class Fused(_Base):
             notice("compiling numba kernels (first run only, cached afterwards)...")
         self.fused = FusedStepper(self.compiled)
         # the same watchdog rhythm as step by step, so both backends report the same failures
-        self.check_stride = CHECK_STRIDE
+        self.check_stride = CHECK_STRIDE if self.replayable else 1
+        emitters = getattr(self.compiled, "emitters", None)
+        if emitters is not None:  # newborns fly on with the numba force sum, as step by step
+            from animsim.backends.fused import NumbaForces
+
+            dyn = self.compiled.dynamics
+            forces = NumbaForces(dyn)
+            emitters.dynamics = _NumbaDynamics(dyn, forces)
+            forces.acceleration(
+                state.particle_position,
+                state.particle_velocity,
+                state.time,
+                np.zeros_like(state.particle_position),
+            )  # compile or load
+            dyn.evaluations -= 1
         self.fused.warm_up(state)
         self.fused.reset()
         return time.perf_counter() - t0
@@ -250,6 +272,8 @@ class Fused(_Base):
     def advance(self, state: State, k: int, goal: int, max_steps: int | None = None) -> tuple[int, Any, bool]:
         stop = goal if max_steps is None else min(goal, k + max_steps)
         failed = False
+        if self.between:
+            return self._advance_between(state, k, stop)
         while k < stop and not failed:
             end = min(stop, k + self.fused.max_steps_per_call)
             taken, evals, failed = self.fused.advance(state, self.times[k:end], self.dts[k:end])
@@ -257,6 +281,26 @@ class Fused(_Base):
             k += taken
             state.step = k
             state.time = self.clock.time(k)
+        return k, None, failed
+
+    def _advance_between(self, state: State, k: int, stop: int) -> tuple[int, Any, bool]:
+        """One fused step at a time, each followed by the stages that run in Python (as _one)."""
+        failed = False
+        while k < stop and not failed:
+            t0 = state.time
+            taken, evals, failed = self.fused.advance(state, self.times[k : k + 1], self.dts[k : k + 1])
+            self.compiled.dynamics.evaluations += evals
+            dt = self.dts[k]
+            k += taken
+            state.step = k
+            t1 = self.clock.time(k)
+            revision = state.revision
+            for stage in self.between:
+                if stage.apply(state, self._x_old, self._v_old, t0, t1, dt):
+                    state.revision += 1
+            if state.revision != revision:
+                self.fused.reset()  # Verlet's force is stale after births and deaths
+            state.time = t1
         return k, None, failed
 
 
@@ -293,6 +337,9 @@ class StepDoubling(_Base):
         self.largest_dt = max(self.dt_max, compiled.clock.dt)
         # Steps grow past the nominal clock: run to each record time, check there (and replay).
         self.check_stride = self.end
+        # The controller's step size is not restored for a replay, so births (drawn once per
+        # accepted step) keep the check at every step here.
+        self.replayable = not any(st.random for st in compiled.post_step)
         self.grow_below = self.tolerance / DOUBLING_BASE ** (compiled.integrator.order + 1)
         self._movable = compiled.system.particle_inv_mass > 0
         self._big: State | None = None

@@ -25,3 +25,39 @@ def dot3(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> np.ndar
     r = np.add(p[..., 0], p[..., 1], out=out)
     r += p[..., 2]
     return r
+
+
+def take_rows(a: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """``a[idx]`` for an (N, 3) array, as a new array: ``np.take`` along the rows is about
+    three times faster than fancy indexing for many rows (the same values: a copy)."""
+    return np.take(a, idx, axis=0)
+
+
+_ROW = np.dtype((np.void, 24))
+
+
+def put_rows(a: np.ndarray, idx: np.ndarray, values: np.ndarray) -> None:
+    """``a[idx] = values`` for (N, 3) float64 rows: each row moved as one 24-byte item
+    (``np.put`` on a row view), about three times faster than fancy assignment for
+    many rows; the bytes written are the same."""
+    if a.dtype == np.float64 and a.flags.c_contiguous and a.ndim == 2 and a.shape[1] == 3:
+        vals = np.ascontiguousarray(values, dtype=np.float64)
+        np.put(a.view(_ROW).reshape(-1), idx, vals.view(_ROW).reshape(-1))
+    else:
+        a[idx] = values
+
+
+def outer3(s: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """``s[:, None] * n`` for (k,) s and a vector n (3,), column by column: broadcasting
+    with an inner axis of 3 runs NumPy's loop 3 elements at a time, several times slower;
+    the products are the same."""
+    out = np.empty((len(s), 3))
+    for j in range(3):
+        np.multiply(s, n[j], out=out[:, j])
+    return out
+
+
+def rep3(s: np.ndarray) -> np.ndarray:
+    """(k,) -> (k, 3) with s on every column, so ``rep3(s) * a`` multiplies an (k, 3) array
+    row by row at full speed (the same products as ``s[:, None] * a``)."""
+    return np.repeat(s[:, None], 3, axis=1)

@@ -12,7 +12,8 @@ half the drops rest on the ground, and each is collided every step) from that
 of the emitter, forces and integrator. Each is the best of ``--repeat`` runs,
 because a shared machine's load only ever makes a run slower.
 
-Run from the project root: ``python benchmarks/fountain.py [--steps N]``.
+Run from the project root: ``python benchmarks/fountain.py [--steps N] [--backend numba] [--cpu]``
+(``NUMBA_NUM_THREADS=1`` for one thread).
 Target (issue 3): >= 200 steps/s.
 """
 
@@ -59,20 +60,24 @@ GROUND = """planes:
 """
 
 
-def steps_per_second(steps: int, ground: bool, backend: str = "numpy") -> tuple[float, dict]:
-    """Steady-state steps/s of the fountain on ``backend``, and the run's emitter summary."""
+def steps_per_second(
+    steps: int, ground: bool, backend: str = "numpy", cpu: bool = False
+) -> tuple[float, dict]:
+    """Steady-state steps/s of the fountain on ``backend`` (wall clock, or this process's CPU
+    time with ``cpu``), and the run's emitter summary."""
     warm_steps = round(WARMUP / DT)
     loaded = load_scene_text(SCENE.replace("PLANES_HERE", GROUND if ground else ""))
     scene = with_overrides(loaded.scene, duration=(warm_steps + steps) * DT)
     compiled = compile_scene(scene, loaded.name, backend=backend)
+    clock = time.process_time if cpu else time.perf_counter
     marks: dict[int, float] = {}
 
     def progress(step: int, _total: int) -> None:
         if step == warm_steps:
-            marks[step] = time.perf_counter()
+            marks[step] = clock()
 
     result = run(compiled, [], progress=progress)
-    end = time.perf_counter()
+    end = clock()
     return steps / (end - marks[warm_steps]), result.meta["emitters"]
 
 
@@ -80,15 +85,20 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=400, help="timed steps after the warm-up")
     ap.add_argument("--repeat", type=int, default=3, help="runs per configuration; the best counts")
+    ap.add_argument("--backend", default="numpy", choices=("numpy", "numba"))
+    ap.add_argument(
+        "--cpu", action="store_true", help="CPU time of this process instead of wall time (a shared machine)"
+    )
     args = ap.parse_args()
     for ground, label in ((True, "with ground plane"), (False, "without ground plane")):
-        runs = [steps_per_second(args.steps, ground) for _ in range(args.repeat)]
+        runs = [steps_per_second(args.steps, ground, args.backend, args.cpu) for _ in range(args.repeat)]
         best, summary = max(runs, key=lambda r: r[0])
         alive = summary["per_emitter"]["fountain"]["alive"]
         print(
             f"fountain {label}: {best:.0f} steps/s (best of {args.repeat}; all: "
             f"{', '.join(f'{r[0]:.0f}' for r in runs)}), {alive} alive of {PARTICLES} slots, "
-            f"symplectic_euler, dt {DT}, {args.steps} steps timed after {round(WARMUP / DT)} warm-up steps"
+            f"symplectic_euler, dt {DT}, {args.steps} steps timed after {round(WARMUP / DT)} warm-up steps, "
+            f"{args.backend}, {'CPU' if args.cpu else 'wall'} time"
         )
 
 

@@ -68,6 +68,7 @@ class EnergyWatch:
         self.dynamics = compiled.dynamics
         terms = self.dynamics.terms
         self.mass = system.particle_mass  # rebound to the run's live masses by bind()
+        self._movable = float(np.count_nonzero(self.mass))
         self.inv_mass = system.particle_inv_mass
         self.elastic = [t for t in terms if t.watch_role == ELASTIC]
         self.releasing = [t for t in terms if t.watch_role == RELEASING]
@@ -95,6 +96,7 @@ class EnergyWatch:
         """Book the run's live masses (pool births change them)."""
         self.mass = state.particle_mass
         self.inv_mass = state.particle_inv_mass
+        self._movable = float(np.count_nonzero(self.mass))  # fixed populations: counted once
 
     def _external_floor(self, x: np.ndarray, v: np.ndarray) -> float:
         if not self.releasing:
@@ -139,23 +141,47 @@ class EnergyWatch:
         stretch = np.sqrt(np.einsum("ij,ij->i", d, d)) - springs.rest
         return 0.5 * float(np.dot(springs.ks, stretch * stretch))
 
+    def book_births(self, state: Any) -> None:
+        """Book the particles alive now and not at the last booking: their kinetic energy joins
+        the budget and their released energy is measured from here. The loop calls this after
+        every step of a run with births (and each check does), so the books are those of a
+        check at every step while the full checks keep their stride."""
+        if self.alive_prev is None or state.particle_alive is None:
+            return
+        born = state.particle_alive & ~self.alive_prev
+        if born.any():
+            x = state.particle_position
+            idx = np.flatnonzero(born)
+            vb = state.particle_velocity[idx]
+            self.born_energy += float(0.5 * np.dot(self.mass[idx], np.einsum("ij,ij->i", vb, vb)))
+            self.x_ref[idx] = x[idx]
+            for t, u in zip(self.releasing, self.u_ref, strict=True):
+                u[idx] = t.per_particle_potential(x[idx], idx)
+        np.copyto(self.alive_prev, state.particle_alive)
+
+    def snapshot(self) -> tuple[Any, ...] | None:
+        """The books a replay from a checked state restores (None: they never change)."""
+        if self.alive_prev is None:
+            return None
+        return self.born_energy, self.x_ref.copy(), [u.copy() for u in self.u_ref], self.alive_prev.copy()
+
+    def restore(self, snap: tuple[Any, ...] | None) -> None:
+        if snap is None:
+            return
+        self.born_energy = snap[0]
+        np.copyto(self.x_ref, snap[1])
+        for u, saved in zip(self.u_ref, snap[2], strict=True):
+            np.copyto(u, saved)
+        np.copyto(self.alive_prev, snap[3])
+
     def budget(self, state: Any) -> float:
         """B: the most energy H may hold at ``state`` without the integrator making any."""
         x = state.particle_position
-        if self.alive_prev is not None and state.particle_alive is not None:
-            born = state.particle_alive & ~self.alive_prev
-            if born.any():
-                idx = np.flatnonzero(born)
-                vb = state.particle_velocity[idx]
-                self.born_energy += float(0.5 * np.dot(self.mass[idx], np.einsum("ij,ij->i", vb, vb)))
-                self.x_ref[idx] = x[idx]
-                for t, u in zip(self.releasing, self.u_ref, strict=True):
-                    u[idx] = t.per_particle_potential(x[idx], idx)
-            np.copyto(self.alive_prev, state.particle_alive)
+        self.book_births(state)
         released = 0.0
         for t, u in zip(self.releasing, self.u_ref, strict=True):
             released += t.released(x, self.x_ref, u)
-        movable = float(np.count_nonzero(self.mass))
+        movable = self._movable if self.alive_prev is None else float(np.count_nonzero(self.mass))
         return (
             self.h0
             + max(released, 0.0)

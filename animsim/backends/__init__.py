@@ -4,10 +4,11 @@
   array slices (:mod:`animsim.forces.grid_springs`).
 * ``numba``: every element's numba kernel (each element module holds both).
   A scene whose elements all have numba kernels and whose method has a fused
-  kernel runs many steps per call (:mod:`animsim.backends.fused`); any other
-  scene (emitters, adaptive steps, implicit Euler, an element without a numba
-  kernel) runs step by step through the same loop with the numba kernels of the
-  elements that have one. Needs the ``fast`` extra.
+  kernel runs many steps per call (:mod:`animsim.backends.fused`), or one step
+  per call with births (emitters) in Python between calls; any other scene
+  (adaptive steps, implicit Euler, an element without a numba kernel) runs step
+  by step through the same loop with the numba kernels of the elements that have
+  one. Needs the ``fast`` extra.
 * ``auto`` (the default of the command line and ``animsim.simulate``): numba when
   it is importable, else numpy; ``explain`` says which and why.
 * ``reference`` (not offered on the command line): the generic bincount
@@ -66,7 +67,8 @@ def fused_unsupported(compiled: Any) -> list[str]:
         if term.numba_source is None:
             why.append(f"force {term.label!r}")
     for stage in compiled.post_step:
-        if stage.numba_stage_source is None:
+        # births run in Python between one-step chunks (animsim.steppers.Fused)
+        if stage.numba_stage_source is None and not getattr(stage, "fused_between_steps", False):
             why.append(stage.label.split(":")[0])
     return why
 
@@ -75,8 +77,10 @@ def backend_line(compiled: Any, chosen: str, note: str) -> str:
     """The ``backend:`` line ``explain`` shows."""
     if chosen == BACKEND_NUMBA:
         why = fused_unsupported(compiled)
+        between = any(getattr(st, "fused_between_steps", False) for st in compiled.post_step)
         how = (
-            "element kernels fused with the integrator, many steps per call"
+            "element kernels fused with the integrator, "
+            + ("one step per call, births between calls" if between else "many steps per call")
             if not why
             else f"element kernels step by step ({', '.join(why)} need the step-by-step loop)"
         )

@@ -290,6 +290,7 @@ class NumbaForces:
         self.pinned = np.ascontiguousarray(np.flatnonzero(dynamics.system.particle_pinned), dtype=np.int64)
         self._copies: dict[int, np.ndarray] = {}
         self._acc: Any = None
+        self._pointwise = all(getattr(t, "pointwise", False) for t in dynamics.terms)
 
     def acceleration(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> np.ndarray:
         d = self.dynamics
@@ -317,6 +318,39 @@ class NumbaForces:
         if len(self.pinned):
             out[self.pinned] = 0.0
         return out
+
+    def acceleration_rows(self, x: np.ndarray, v: np.ndarray, t: float, rows: np.ndarray) -> np.ndarray:
+        """a = F/m on ``rows`` only, (len(rows), 3): the same numbers as those rows of a full
+        evaluation when every force is pointwise (row i reads only row i) and no row is driven
+        or pinned (an emitter's newborns); else a full evaluation, gathered."""
+        d = self.dynamics
+        if self.others or getattr(d, "drivers", ()) or not self._pointwise:
+            full = np.zeros_like(x)
+            return self.acceleration(x, v, t, full)[rows]
+        d.evaluations += 1
+        out = np.zeros((len(rows), 3))
+        args = (
+            np.ascontiguousarray(x[rows]),
+            np.ascontiguousarray(v[rows]),
+            float(t),
+            out,
+            self.kernels,
+            self.fps,
+            self.ips,
+            np.ascontiguousarray(d.mass[rows]),
+            np.ascontiguousarray(d.inv_mass[rows]),
+            _NO_ROWS,
+        )
+        if self._acc is None:
+            _acc(*args)
+            self._acc = _FastCall(_acc, args)
+        else:
+            self._acc(*args)
+        return out
+
+
+#: no pinned rows (newborns are pool slots, never pinned)
+_NO_ROWS = np.zeros(0, dtype=np.int64)
 
 
 class FusedStepper:

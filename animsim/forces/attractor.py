@@ -30,6 +30,8 @@ def _kernel(x, v, t, out, mass, fp, ip):
 
 
 class Attractor(ForceElement):
+    #: row i of its force reads only row i (the numba backend may evaluate it on a few rows)
+    pointwise = True
     watch_role = RELEASING
     energy_part = "gravitational"
 

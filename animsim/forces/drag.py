@@ -33,6 +33,8 @@ def _quadratic_kernel(x, v, t, out, mass, fp, ip):
 
 
 class Drag(ForceElement):
+    #: row i of its force reads only row i (the numba backend may evaluate it on a few rows)
+    pointwise = True
     watch_role = DISSIPATIVE
     has_damping = True
 
@@ -41,8 +43,14 @@ class Drag(ForceElement):
         self.label = f"viscous drag k = {self.k} N*s/m"
         self.closed_form = {"drag": self.k}
 
+    _scratch: np.ndarray | None = None
+
     def accumulate(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None:
-        out -= self.k * v
+        buf = self._scratch  # k v into a buffer of our own: no (N, 3) temporary per evaluation
+        if buf is None or buf.shape != v.shape:
+            buf = self._scratch = np.empty(v.shape)
+        np.multiply(v, self.k, out=buf)
+        out -= buf
 
     def stiffness_rows(self, inv_mass: np.ndarray, k_rows: np.ndarray, c_rows: np.ndarray) -> None:
         c_rows += self.k * inv_mass
@@ -58,6 +66,8 @@ class Drag(ForceElement):
 
 
 class QuadraticDrag(ForceElement):
+    #: row i of its force reads only row i (the numba backend may evaluate it on a few rows)
+    pointwise = True
     watch_role = DISSIPATIVE
     has_damping = True
 

@@ -37,6 +37,9 @@ def _kernel(x, v, t, out, mass, fp, ip):
 class PenaltyPlane(ForceElement):
     """Built by the plane module (:mod:`animsim.collisions`) for planes with ``response: penalty``."""
 
+    #: row i of its force reads only row i (the numba backend may evaluate it on a few rows)
+    pointwise = True
+
     watch_role = ELASTIC
     no_closed_form = "it has planes (collisions have no closed form here)"
 

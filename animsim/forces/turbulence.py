@@ -81,6 +81,9 @@ class Turbulence(ForceElement):
     matters when an emitter pool is much larger than its alive population.
     """
 
+    #: row i of its force reads only row i (the numba backend may evaluate it on a few rows)
+    pointwise = True
+
     def __init__(
         self,
         sigma: float,

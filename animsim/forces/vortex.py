@@ -34,6 +34,8 @@ def _kernel(x, v, t, out, mass, fp, ip):
 
 
 class Vortex(ForceElement):
+    #: row i of its force reads only row i (the numba backend may evaluate it on a few rows)
+    pointwise = True
     watch_role = UNKNOWN  # not conservative, and no bound on the power it puts in
     no_closed_form = "a vortex has no closed form here"
     numba_source = staticmethod(_kernel)

@@ -24,7 +24,13 @@ def _kernel(x, v, t, out, mass, fp, ip):
         out[i, 2] += k * (w2 - v[i, 2])
 
 
+#: particles from which the wind is summed column by column into a buffer (below: one expression)
+COLUMNS_FROM = 256
+
+
 class Wind(ForceElement):
+    #: row i of its force reads only row i (the numba backend may evaluate it on a few rows)
+    pointwise = True
     watch_role = INJECTING
     has_damping = True
 
@@ -37,8 +43,22 @@ class Wind(ForceElement):
         #: the most power the wind can put into one particle: max over v of k (w - v).v = k |w|^2 / 4
         self.max_power_per_particle = 0.25 * self.k * float(np.dot(self.w, self.w))
 
+    _scratch: np.ndarray | None = None
+
     def accumulate(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None:
-        out += self.k * (self.w - v)
+        # out += k (w - v), without temporaries: w - v column by column (a (3,) vector
+        # broadcast against (N, 3) runs NumPy's inner loop three elements at a time),
+        # then the same products and sums in place
+        if len(v) < COLUMNS_FROM:  # a small scene: fewer NumPy calls matter more
+            out += self.k * (self.w - v)
+            return
+        buf = self._scratch
+        if buf is None or buf.shape != v.shape:
+            buf = self._scratch = np.empty(v.shape)
+        for j in range(3):
+            np.subtract(self.w[j], v[:, j], out=buf[:, j])
+        buf *= self.k
+        out += buf
 
     def stiffness_rows(self, inv_mass: np.ndarray, k_rows: np.ndarray, c_rows: np.ndarray) -> None:
         c_rows += self.k * inv_mass

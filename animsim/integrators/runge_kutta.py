@@ -53,15 +53,19 @@ class RungeKutta(Integrator):
         self._kv = np.zeros((s, n, 3))  # stage accelerations K_i
         self._x = np.zeros((n, 3))
         self._v = np.zeros((n, 3))
+        self._tmp = np.zeros((n, 3))
         # The tableau read once: per stage its c_i and nonzero (A_ij, j); the
         # nonzero (b_i, i); the stage arrays as views. A tiny scene's step is
-        # mostly Python calls, and these would otherwise be rebuilt every step.
+        # mostly NumPy calls, so each is counted: V_i is summed straight into its
+        # own K row (no copy of V_i), and X_i = x + dt A_i1 V_1 + ... starts from the
+        # first product (x + p and p + x are the same number).
         kx, kv = list(self._kx), list(self._kv)
+        self._kx0 = kx[0]  # the view the stage rows hold (V_1 is read from v instead)
         self._stages = [
             (ci, [(aij, kx[j], kv[j]) for j, aij in enumerate(tab.a[i]) if aij != 0.0], kx[i], kv[i])
             for i, ci in enumerate(tab.c)
         ]
-        self._weights = [(bi, kx[i], kv[i]) for i, bi in enumerate(tab.b) if bi != 0.0]
+        self._weights = [(bi, i, kx[i], kv[i]) for i, bi in enumerate(tab.b) if bi != 0.0]
 
     def numba_chunk_kind(self) -> tuple[int, Tableau]:
         return FUSED_RUNGE_KUTTA, self.tableau
@@ -69,6 +73,47 @@ class RungeKutta(Integrator):
     def step(self, state: State, dt: float) -> None:
         if state.body_orientation is not None:  # rigid bodies: (q, omega) advance too
             return body_step(self, state, dt)
+        if self.dynamics.drivers:  # keyframed rows are moved inside each evaluation
+            return self._step_driven(state, dt)
+        x, v = state.particle_position, state.particle_velocity
+        t = state.time
+        acceleration = self.dynamics.acceleration
+        xi, tmp, kx0 = self._x, self._tmp, self._kx0
+        multiply = np.multiply
+        for i, (ci, row, kxi, kvi) in enumerate(self._stages):
+            if i == 0:
+                # V_1 = v, read from v itself: v changes only after its last use
+                # (the first weight's position update, below)
+                acceleration(x, v, t + ci * dt, kvi)
+                continue
+            if not row:  # X_i = x, V_i = v
+                np.copyto(xi, x)
+                np.copyto(kxi, v)
+            for m, (aij, kxj, kvj) in enumerate(row):
+                c = dt * aij
+                if kxj is kx0:
+                    kxj = v
+                if m == 0:
+                    multiply(kxj, c, out=xi)
+                    xi += x
+                    multiply(kvj, c, out=kxi)
+                    kxi += v
+                else:
+                    multiply(kxj, c, out=tmp)
+                    xi += tmp
+                    multiply(kvj, c, out=tmp)
+                    kxi += tmp
+            acceleration(xi, kxi, t + ci * dt, kvi)
+        for bi, i, kxi, kvi in self._weights:
+            c = dt * bi
+            multiply(v if i == 0 else kxi, c, out=tmp)
+            x += tmp
+            multiply(kvi, c, out=tmp)
+            v += tmp
+
+    def _step_driven(self, state: State, dt: float) -> None:
+        """The step with keyframe drives, which move driven rows of the arrays an evaluation
+        is given: each stage's V_i is kept as it was before its evaluation."""
         x, v = state.particle_position, state.particle_velocity
         t = state.time
         acceleration = self.dynamics.acceleration
@@ -85,7 +130,7 @@ class RungeKutta(Integrator):
                 vi += (dt * aij) * kvj
             np.copyto(kxi, vi)
             acceleration(xi, vi, t + ci * dt, kvi)
-        for bi, kxi, kvi in self._weights:
+        for bi, _i, kxi, kvi in self._weights:
             x += (dt * bi) * kxi
             v += (dt * bi) * kvi
 

@@ -103,3 +103,29 @@ def test_elastic_bounce_conserves_speed():
     _, _, sink = simulate_text(text)
     f = sink.frames[-1]
     assert np.linalg.norm(f.velocity[0]) == pytest.approx(np.hypot(3.0, 1.0), rel=1e-12)
+
+
+def test_row_helpers_move_the_same_bytes_as_fancy_indexing():
+    """The plane stage's gathers, scatters and per-row products (animsim.vec) are faster
+    spellings of fancy indexing and broadcasting: the same bits, NaN, inf and -0.0 included."""
+    from animsim.vec import outer3, put_rows, rep3, take_rows
+
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(50, 3))
+    a[3, 1], a[7, 0], a[9, 2] = np.nan, -np.inf, -0.0
+    idx = np.array([9, 3, 7, 0, 49, 12])
+    assert np.array_equal(take_rows(a, idx).view(np.int64), a[idx].view(np.int64))
+    values = rng.normal(size=(len(idx), 3))
+    values[0, 0] = -0.0
+    b, c = a.copy(), a.copy()
+    b[idx] = values
+    put_rows(c, idx, values)
+    assert np.array_equal(b.view(np.int64), c.view(np.int64))
+    strided = np.zeros((50, 6))[:, ::2]  # not contiguous: the plain assignment
+    put_rows(strided, idx, values)
+    assert np.array_equal(strided[idx], values)
+    s = rng.normal(size=len(idx))
+    s[1] = -0.0
+    n = np.array([0.0, -1.0, 0.5])
+    assert np.array_equal(outer3(s, n).view(np.int64), (s[:, None] * n).view(np.int64))
+    assert np.array_equal((rep3(s) * values).view(np.int64), (s[:, None] * values).view(np.int64))

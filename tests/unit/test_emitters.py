@@ -499,3 +499,42 @@ def test_births_inside_a_step_keep_second_order():
         )
     observed = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
     assert np.all(observed > 1.7), (errors, observed)
+
+
+def test_a_restored_snapshot_draws_the_same_births_again():
+    """The watchdog's replay restores the emitters with the state: the same births follow."""
+    from animsim.compile import compile_scene
+    from animsim.scene.loader import load_scene_text
+
+    # a full pool (deaths free slots for births), rate noise and a spread of lifetimes
+    text = scene(rate=400, spread=50, life=0.05, life_spread=0.01, cap=15, extra="forces: [{type: gravity}]")
+    loaded = load_scene_text(text)
+    compiled = compile_scene(loaded.scene, loaded.name, backend="numpy")
+    em = compiled.emitters
+    state = compiled.fresh_state()
+    compiled.dynamics.bind(state)
+    for stage in compiled.post_step:
+        stage.reset(state)
+    dt = compiled.clock.dt
+
+    def go(steps: int) -> None:
+        for _ in range(steps):
+            t0 = state.time
+            compiled.integrator.step(state, dt)
+            em.apply(state, state.particle_position, state.particle_velocity, t0, t0 + dt, dt)
+            state.time = t0 + dt
+            state.step += 1
+
+    go(7)
+    saved, snap = state.copy(), em.snapshot()
+    go(9)
+    first = (state.copy(), em.summary(), [p.slot_serial.copy() for p in em.pools])
+    assert first[1]["per_emitter"][em.names[0]]["born"] > 0
+    state.assign(saved)
+    em.restore(snap)
+    go(9)
+    np.testing.assert_array_equal(state.particle_position, first[0].particle_position)
+    np.testing.assert_array_equal(state.particle_alive, first[0].particle_alive)
+    assert em.summary() == first[1]
+    for p, serial in zip(em.pools, first[2], strict=True):
+        np.testing.assert_array_equal(p.slot_serial, serial)

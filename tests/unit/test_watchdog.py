@@ -216,22 +216,50 @@ def test_births_feed_the_budget_of_an_emitter_scene():
     assert simulate_text(EMITTER)[1].status == STATUS_OK
 
 
+#: a penalty plane 1e9 N/m stiff below the emitter's sphere: drops that reach it blow up at once.
+#: (Below the sphere, not through it: a birth inside the plane is given its huge push as born
+#: energy, which the budget books, and would hide a blow-up until the next check.)
+STIFF_FLOOR = "planes:\n  - {point: [0, -0.3, 0], normal: [0, 1, 0], response: penalty, stiffness: 1.0e9}\n"
+
+
 def test_a_blow_up_among_emitted_particles_is_caught():
-    text = (
-        EMITTER
-        + "planes:\n  - {point: [0, -0.05, 0], normal: [0, 1, 0], response: penalty, stiffness: 1.0e9}\n"
-    )
-    _, r, _ = simulate_text(text)
+    _, r, _ = simulate_text(EMITTER + STIFF_FLOOR)
     assert r.status == STATUS_UNSTABLE
     assert r.failure.particle.startswith("stars#")
 
 
 def test_an_emitter_scene_never_writes_the_failing_frame():
-    """Emitter runs are checked every step, before the frame is written."""
-    text = EMITTER.replace("record: {fps: 10}", "") + (
-        "planes:\n  - {point: [0, -0.05, 0], normal: [0, 1, 0], response: penalty, stiffness: 1.0e9}\n"
-    )
+    """Frames of an emitter run wait for a passing check, as any other run's."""
+    text = EMITTER.replace("record: {fps: 10}", "") + STIFF_FLOOR
     sink = MemorySink()
-    r = run(compiled_from(text), [sink])
+    compiled = compiled_from(text)
+    r = run(compiled, [sink])
     assert r.status == STATUS_UNSTABLE
-    assert sink.frames[-1].step == r.failure.step - 1
+    recorded = [int(k) for k in compiled.record_steps]
+    assert [f.step for f in sink.frames] == [k for k in recorded if k < r.failure.step]
+    assert r.failure.step in recorded  # the failing step's own frame was due, and is not written
+
+
+def test_an_emitter_run_checked_every_stride_fails_where_one_checked_every_step_does(monkeypatch):
+    """Births no longer force a check at every step: the emitters' streams are restored with
+    the state, so the replay draws the same births, and newborns are booked at their birth
+    step. The first failing step, its particle, its numbers and the frames written are those
+    of a run checked at every step."""
+    import animsim.steppers as steppers
+
+    text = EMITTER.replace("record: {fps: 10}", "") + STIFF_FLOOR
+    strided_sink = MemorySink()
+    strided = run(compiled_from(text), [strided_sink])
+    monkeypatch.setattr(steppers, "CHECK_STRIDE", 1)
+    every_sink = MemorySink()
+    every = run(compiled_from(text), [every_sink])
+    assert strided.status == every.status == STATUS_UNSTABLE
+    assert strided.failure.step % CHECK_STRIDE != 0  # found by the replay, inside a stride
+    assert strided.failure == every.failure
+    assert strided.meta["emitters"] == every.meta["emitters"]  # the pools' counts, restored too
+    assert len(strided_sink.frames) == len(every_sink.frames) > 0
+    for a, b in zip(strided_sink.frames, every_sink.frames, strict=True):
+        assert a.step == b.step and a.new_ids == b.new_ids
+        np.testing.assert_array_equal(a.index, b.index)
+        np.testing.assert_array_equal(a.position, b.position)
+    np.testing.assert_array_equal(strided.final_state.particle_position, every.final_state.particle_position)
