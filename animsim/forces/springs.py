@@ -108,7 +108,7 @@ class Springs(ForceElement):
         self._weights = np.empty((2 * s, 3))
         self._flat_ends = (3 * self.ends[:, None] + np.arange(3)).ravel()
         # CSR structure of the Jacobians, built on first use (explicit methods never need it).
-        self._jac: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._jac: tuple[sp.csr_matrix, np.ndarray, np.ndarray] | None = None
         self.label = label or f"springs: {s} (Hooke + damping, Lander Eq. 2)"
         self.numba_parallel = s >= PARALLEL_MIN_SPRINGS
         # tearing (animsim.tearing): the unbroken ks and kd, and the numba parameters in use
@@ -206,19 +206,22 @@ class Springs(ForceElement):
         ratio = np.where(
             length > 0, np.maximum(1.0 - self.rest * inv, 0.0), np.where(self.rest == 0, 1.0, 0.0)
         )
-        eye = np.eye(3)[None]
-        jx = -self.ks[:, None, None] * (ratio[:, None, None] * eye + (1.0 - ratio)[:, None, None] * uu)
+        # -ks [ratio I + (1 - ratio) u u^T], written as a scaled u u^T plus a diagonal
+        jx = uu * (-self.ks * (1.0 - ratio))[:, None, None]
+        jx.reshape(-1, 9)[:, ::4] -= (self.ks * ratio)[:, None]
         kx = self._assemble(jx)
         if not self.has_damping:
             return kx, None
-        return kx, self._assemble(-self.kd[:, None, None] * uu)
+        uu *= -self.kd[:, None, None]
+        return kx, self._assemble(uu)
 
     def _assemble(self, block: np.ndarray) -> sp.csr_matrix:
         """The (3N, 3N) matrix with +block at (a,a) and (b,b) and -block at (a,b) and (b,a).
 
-        The CSR structure is computed once; each call only sums the entries
-        into it with one bincount (duplicates, such as two springs on one
-        pair, add up as the derivative of a sum should).
+        The CSR structure is computed once, with a sparse (entries x 9 S) matrix of
+        +1 and -1 that sums each spring's block into its four places; each call is
+        then one sparse product (duplicates, such as two springs on one pair, add
+        up as the derivative of a sum should).
         """
         size = 3 * self.n
         if self._jac is None:
@@ -227,8 +230,12 @@ class Springs(ForceElement):
             cols = np.concatenate([block_pattern(p, q)[1].ravel() for p, q in blocks])
             keys, slot = np.unique(rows * size + cols, return_inverse=True)
             indptr = np.searchsorted(keys // size, np.arange(size + 1)).astype(np.int64)
-            self._jac = (slot, (keys % size).astype(np.int64), indptr)
-        slot, indices, indptr = self._jac
-        values = np.concatenate([block, -block, -block, block]).ravel()
-        data = np.bincount(slot, weights=values, minlength=len(indices))
+            nine = 9 * len(self.a)
+            sign = np.repeat([1.0, -1.0, -1.0, 1.0], nine)
+            gather = sp.csr_matrix(
+                (sign, (slot.ravel(), np.tile(np.arange(nine), 4))), shape=(len(keys), nine)
+            )
+            self._jac = (gather, (keys % size).astype(np.int64), indptr)
+        gather, indices, indptr = self._jac
+        data = gather @ block.reshape(-1)
         return sp.csr_matrix((data, indices, indptr), shape=(size, size))

@@ -112,8 +112,8 @@ def test_stiff_implicit_switches_to_factors_and_agrees_with_conjugate_gradients(
     compiled, result = _stiff(8, 1 / 30, 6)
     assert result.status == STATUS_OK
     assert compiled.integrator.factorizations >= 1
-    if banded:
-        assert compiled.integrator._band[2] is not None
+    plan = compiled.integrator._plan
+    assert (plan.band() is not None) == banded
 
     # The reference: Jacobi CG to convergence on every step, as before the switch.
     monkeypatch.setattr(implicit, "JACOBI_ITERATIONS", 10**9)
@@ -124,18 +124,44 @@ def test_stiff_implicit_switches_to_factors_and_agrees_with_conjugate_gradients(
     assert np.abs(x - x_ref).max() < 1e-7 * np.abs(x_ref).max()
 
 
-def test_banded_cholesky_solves_the_system():
+@pytest.mark.parametrize(("dtype", "tol"), [(np.float64, 1e-12), (np.float32, 1e-4)])
+def test_banded_cholesky_solves_the_system(dtype, tol):
     rng = np.random.default_rng(1)
     import scipy.sparse as sp
 
     n = 60
     b = sp.random(n, n, density=0.05, random_state=2)
     a = (b @ b.T + sp.identity(n) * 5).tocsr()
-    integ = implicit.ImplicitEuler.__new__(implicit.ImplicitEuler)
-    perm, slot, width = integ._band_layout(a)
+    a.sum_duplicates()
+    plan = implicit._Assembly(a, None, np.ones(n, dtype=bool), np.ones(n))
+    assert np.array_equal(plan.matrix.indices, a.indices)  # a holds its diagonal: the same pattern
     rhs = rng.normal(size=n)
-    got = implicit._BandedCholesky(a, perm, slot, width).solve(rhs)
-    assert np.allclose(got, spla.spsolve(a.tocsc(), rhs), rtol=1e-12, atol=1e-12)
+    want = spla.spsolve(a.tocsc(), rhs)
+    for _ in range(2):  # the second factorisation reuses (and first clears) the band buffer
+        got = implicit._BandedCholesky(a.data, plan.band(), dtype).solve(rhs)
+        assert np.allclose(got, want, rtol=tol, atol=tol)
+
+
+def test_stiff_implicit_steps_meet_the_cg_tolerance_on_one_fixed_pattern(monkeypatch):
+    """Every step's dv solves its system to CG_RTOL (single-precision factors only precondition),
+    on one sparsity pattern for the whole run (a flat cloth's zero entries do not change it)."""
+    residuals: list[float] = []
+    plans: set[int] = set()
+    solve = implicit.ImplicitEuler._solve
+
+    def checked(self, a_mat, rhs, free):
+        dv = solve(self, a_mat, rhs, free)
+        residuals.append(float(np.linalg.norm(a_mat @ dv - rhs) / np.linalg.norm(rhs)))
+        plans.add(id(self._plan))
+        return dv
+
+    monkeypatch.setattr(implicit.ImplicitEuler, "_solve", checked)
+    compiled, result = _stiff(12, 1 / 30, 8)
+    assert result.status == STATUS_OK
+    assert compiled.integrator.factorizations >= 1
+    assert compiled.integrator.cg_iterations > 0  # the preconditioned CG ran
+    assert len(residuals) == 8 and max(residuals) < implicit.CG_RTOL
+    assert len(plans) == 1
 
 
 @pytest.mark.skipif(not HAS_NUMBA, reason="numba is not installed")
