@@ -182,7 +182,13 @@ class ImplicitEuler(Integrator):
         return lu
 
     def _cg(
-        self, a_mat: sp.csr_matrix, rhs: np.ndarray, precond: Any, maxiter: int, probe: bool = False
+        self,
+        a_mat: sp.csr_matrix,
+        rhs: np.ndarray,
+        precond: Any,
+        maxiter: int,
+        probe: bool = False,
+        warm: bool = True,
     ) -> tuple[np.ndarray, int]:
         """Preconditioned conjugate gradients from the last step's dv, as SciPy's ``cg`` (the same
         operations and stopping test, ||r|| < CG_RTOL ||rhs||), on the matrix and the
@@ -191,7 +197,7 @@ class ImplicitEuler(Integrator):
 
         Returns (dv, 0) when converged, else (the last iterate, iterations done).
         """
-        x = self._dv.copy()
+        x = self._dv.copy() if warm else np.zeros_like(rhs)
         tol = CG_RTOL * float(np.linalg.norm(rhs))
         if tol == 0.0:
             return rhs.copy(), 0
@@ -257,7 +263,7 @@ class ImplicitEuler(Integrator):
         # half the work of double precision, and CG still stops at CG_RTOL in double.
         lu32 = self._factor(a_mat, free, np.float32)
         if lu32 is not None:
-            dv, info = self._cg(a_mat, rhs, lu32, FRESH_ITERATIONS)
+            dv, info = self._cg(a_mat, rhs, lu32, FRESH_ITERATIONS, warm=False)
             if info == 0:
                 return dv
         try:
@@ -348,36 +354,47 @@ class _Assembly:
         m_dof: np.ndarray,
     ):
         n = len(free)
-        ones = [
-            sp.csr_matrix((np.ones(m.nnz), m.indices, m.indptr), shape=(n, n))
-            for m in (kx, kv)
-            if m is not None
-        ]
-        union = _diagonal(np.ones(n))
-        for m in ones:
-            union = union + m  # all entries positive: nothing cancels, nothing dropped
-        union.sum_duplicates()
-        union.sort_indices()
         self.n = n
-        self.indptr = union.indptr.astype(np.int64)
-        self.indices = union.indices.astype(np.int64)
-        rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(self.indptr))
-        keys = rows * n + self.indices
-        self.rows = rows
         self.patterns = tuple(None if m is None else (m.indptr.copy(), m.indices.copy()) for m in (kx, kv))
-        slots = []
-        for m in (kx, kv):
-            slot = None if m is None else np.searchsorted(keys, _keys(m, n))
-            if slot is not None and len(slot) == len(keys):
-                slot = None  # the same pattern (the union holds all of m's places)
-            slots.append(slot)
-        self.slots = tuple(slots)
+        diagonal = np.arange(n, dtype=np.int64) * (n + 1)
+        given = [m for m in (kx, kv) if m is not None]
+        keys = _keys(given[0], n)
+        where = np.minimum(np.searchsorted(keys, diagonal), max(len(keys) - 1, 0))
+        if (
+            len(keys)
+            and all(_same_pattern(m, given[0]) for m in given[1:])
+            and np.array_equal(keys[where], diagonal)
+        ):
+            # the common case (springs): Kx and Kv share one pattern holding the diagonal
+            self.indptr = given[0].indptr.astype(np.int64)
+            self.indices = given[0].indices.astype(np.int64)
+            self.slots: tuple[np.ndarray | None, ...] = (None, None)
+        else:
+            union = _diagonal(np.ones(n))
+            for m in given:
+                # all entries positive: nothing cancels, nothing dropped
+                union = union + sp.csr_matrix((np.ones(m.nnz), m.indices, m.indptr), shape=(n, n))
+            union.sum_duplicates()
+            union.sort_indices()
+            self.indptr = union.indptr.astype(np.int64)
+            self.indices = union.indices.astype(np.int64)
+            keys = _keys(union, n)
+            slots = []
+            for m in (kx, kv):
+                slot = None if m is None else np.searchsorted(keys, _keys(m, n))
+                if slot is not None and len(slot) == len(keys):
+                    slot = None  # the same pattern (the union holds all of m's places)
+                slots.append(slot)
+            self.slots = tuple(slots)
+            where = np.searchsorted(keys, diagonal)
+        rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(self.indptr))
+        self.rows = rows
         self.free = free.copy()
         self.m_dof = m_dof.copy()
         # stiffness entries kept: both ends unknowns (pinned rows and columns drop out)
         self.keep = (free[rows] & free[self.indices]).astype(np.float64)
         self.base = np.zeros(len(keys))
-        self.base[np.searchsorted(keys, np.arange(n, dtype=np.int64) * (n + 1))] = np.where(free, m_dof, 1.0)
+        self.base[where] = np.where(free, m_dof, 1.0)
         self.work = np.zeros(len(keys))
         self.matrix = sp.csr_matrix((np.zeros(len(keys)), self.indices, self.indptr), shape=(n, n))
         self._band: _BandLayout | bool | None = False  # False: not computed yet
@@ -440,6 +457,10 @@ def _diagonal_ratio(a_mat: sp.csr_matrix, plan: _Assembly | None) -> float:
     if plan is None:
         return 1.0
     return float(np.max(a_mat.diagonal() / np.where(plan.free, plan.m_dof, 1.0)))
+
+
+def _same_pattern(m: sp.csr_matrix, other: sp.csr_matrix) -> bool:
+    return np.array_equal(m.indptr, other.indptr) and np.array_equal(m.indices, other.indices)
 
 
 def _keys(m: sp.csr_matrix, n: int) -> np.ndarray:

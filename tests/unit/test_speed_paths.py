@@ -196,3 +196,50 @@ planes: [{point: [0, -0.5, 0], normal: [0, 1, 0], restitution: 0.5}]
     s2.advance(st2, 0, c2.clock.steps)
     assert np.array_equal(st2.particle_position, fast.final_state.particle_position)
     assert np.array_equal(st2.particle_velocity, fast.final_state.particle_velocity)
+
+
+ASSEMBLY_SCENES = {
+    # Kx and Kv share the springs' pattern, which holds every diagonal entry: no scatter
+    "springs": STIFF_CLOTH.format(duration=0.1, dt=0.01, n=4, last=3),
+    # a particle without springs (its diagonal only in Kv, from drag) and a penalty plane:
+    # the union of differing patterns
+    "union": """
+duration: 0.1
+dt: 0.01
+integrator: implicit_euler
+forces: [{type: gravity}, {type: drag, k: 0.3}]
+planes: [{point: [0, -0.5, 0], normal: [0, 1, 0], response: penalty, stiffness: 2000}]
+particles:
+  - {id: a, pinned: true, position: [0, 1, 0]}
+  - {id: b, mass: 1, position: [0.5, 0.2, 0.1]}
+  - {id: c, mass: 2, position: [1, -0.45, 0]}
+  - {id: lone, mass: 0.5, position: [3, 0, 0]}
+springs: [{between: [a, b], ks: 100, kd: 0.5, rest: 0.5}, {between: [b, c], ks: 30, rest: 1}]
+""",
+}
+
+
+@pytest.mark.parametrize("name", sorted(ASSEMBLY_SCENES))
+def test_assembled_matrix_is_the_scaled_sum_of_the_jacobians(name):
+    """A written into the fixed pattern equals M - dt^2 Kx - dt Kv built by SciPy's own sums,
+    pinned rows and columns replaced by identity ones."""
+    compiled = compile_scene(load_scene_text(ASSEMBLY_SCENES[name]).scene, "t", backend="numpy")
+    integ = compiled.integrator
+    state = compiled.fresh_state()
+    compiled.dynamics.bind(state)
+    rng = np.random.default_rng(5)
+    x = state.particle_position + rng.normal(scale=0.05, size=state.particle_position.shape)
+    v = rng.normal(size=x.shape)
+    free = np.repeat(compiled.system.particle_inv_mass > 0, 3)
+    m_dof = np.repeat(compiled.system.particle_mass, 3)
+    kx, kv = integ.jacobians(x, v)
+    plan = implicit._Assembly(kx, kv, free, m_dof)
+    assert (plan.slots[0] is None and plan.slots[1] is None) == (name == "springs")
+    dt = 0.01
+    got = plan.fill(kx, kv, dt).toarray()
+    keep = np.outer(free, free)
+    want = np.where(keep, -dt * dt * kx.toarray() - dt * kv.toarray(), 0.0) + np.diag(
+        np.where(free, m_dof, 1.0)
+    )
+    assert np.allclose(got, want, rtol=1e-13, atol=1e-12 * np.abs(want).max())
+    assert plan.matches(kx, kv, free, m_dof) and not plan.matches(kx, None, free, m_dof)
