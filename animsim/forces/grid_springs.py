@@ -193,7 +193,8 @@ def _grid_kernel(x, v, t, out, mass, fp, ip):
     forces so far, then block after block the lo ends' -f before the hi ends' +f,
     written back once. That is the order in which the NumPy slices add to a particle
     (block after block: every lo end, then every hi end), with the same products, so
-    the backends agree to the bit; and the forces are gathered while still in cache.
+    the backends agree to the bit; and the forces are gathered while still in cache
+    (only the last ``depth`` rows of each block's forces are kept, in a ring).
     Then the other springs as springs.Springs' bincount (per particle, in the order
     of the ends, from 0).
 
@@ -215,15 +216,19 @@ def _grid_kernel(x, v, t, out, mass, fp, ip):
         n2 = ip[h + 3]
         count = n0 * n1 * n2
         e = k + 1
-        total = 0
         lag = 0
+        ahead = 0
         for m in range(k, nblocks):
             g = 1 + BLOCK_INTS * m
             if ip[g] != first:
                 break
             e = m + 1
-            total += ip[g + 7] * ip[g + 8] * ip[g + 9]
-            lag = max(lag, -(ip[g + 10] * n1 + ip[g + 11]))  # rows from a hi end back to its lo end
+            rows_off = ip[g + 10] * n1 + ip[g + 11]  # rows from a lo end to its hi end
+            lag = max(lag, -rows_off)
+            ahead = max(ahead, rows_off)
+        # The forces of the last `depth` rows of springs (by their lo ends' row), per
+        # block: all that a row's gather reads, so they stay in cache.
+        depth = lag + ahead + 1
         xs = x[first : first + count]
         vs = v[first : first + count]
         xv = np.empty((6, count))
@@ -237,7 +242,7 @@ def _grid_kernel(x, v, t, out, mass, fp, ip):
         v0 = xv[3]
         v1 = xv[4]
         v2 = xv[5]
-        fs = np.empty((3, total))
+        fs = np.empty((3, (e - k) * depth * n2))
         f0 = fs[0]
         f1 = fs[1]
         f2 = fs[2]
@@ -250,7 +255,6 @@ def _grid_kernel(x, v, t, out, mass, fp, ip):
             if row < rows:  # the springs whose lo end is in this row
                 c0 = row // n1
                 c1 = row - c0 * n1
-                sb = 0
                 qb = q
                 for m in range(k, e):
                     g = 1 + BLOCK_INTS * m
@@ -272,9 +276,10 @@ def _grid_kernel(x, v, t, out, mass, fp, ip):
                         xb2 = x2[b : b + b2]
                         rest = fp[qb + j : qb + j + b2]
                         ks = fp[qb + nb + j : qb + nb + j + b2]
-                        g0 = f0[sb + j : sb + j + b2]
-                        g1 = f1[sb + j : sb + j + b2]
-                        g2 = f2[sb + j : sb + j + b2]
+                        ring = ((m - k) * depth + row % depth) * n2
+                        g0 = f0[ring : ring + b2]
+                        g1 = f1[ring : ring + b2]
+                        g2 = f2[ring : ring + b2]
                         if damped:
                             kd = fp[qb + 2 * nb + j : qb + 2 * nb + j + b2]
                             va0 = v0[a : a + b2]
@@ -308,7 +313,6 @@ def _grid_kernel(x, v, t, out, mass, fp, ip):
                                 g0[i] = d0 * mag
                                 g1[i] = d1 * mag
                                 g2[i] = d2 * mag
-                    sb += nb
                     qb += 3 * nb
             done = row - lag  # the row to gather: all its springs are computed
             if done < 0:
@@ -320,7 +324,6 @@ def _grid_kernel(x, v, t, out, mass, fp, ip):
                 a0[i] = orow[i, 0]
                 a1[i] = orow[i, 1]
                 a2[i] = orow[i, 2]
-            sb = 0
             for m in range(k, e):
                 g = 1 + BLOCK_INTS * m
                 b0 = ip[g + 7]
@@ -329,7 +332,7 @@ def _grid_kernel(x, v, t, out, mass, fp, ip):
                 r0 = c0 - ip[g + 4]
                 r1 = c1 - ip[g + 5]
                 if 0 <= r0 < b0 and 0 <= r1 < b1:  # lo ends of the block in this row: -f
-                    src = sb + (r0 * b1 + r1) * b2
+                    src = ((m - k) * depth + done % depth) * n2
                     dst = ip[g + 6]
                     t0 = a0[dst : dst + b2]
                     t1 = a1[dst : dst + b2]
@@ -343,8 +346,9 @@ def _grid_kernel(x, v, t, out, mass, fp, ip):
                         t2[i] -= e2[i]
                 r0 -= ip[g + 10]
                 r1 -= ip[g + 11]
-                if 0 <= r0 < b0 and 0 <= r1 < b1:  # hi ends: +f
-                    src = sb + (r0 * b1 + r1) * b2
+                if 0 <= r0 < b0 and 0 <= r1 < b1:  # hi ends: +f, of springs whose lo ends are in row `back`
+                    back = done - (ip[g + 10] * n1 + ip[g + 11])
+                    src = ((m - k) * depth + back % depth) * n2
                     dst = ip[g + 6] + ip[g + 12]
                     t0 = a0[dst : dst + b2]
                     t1 = a1[dst : dst + b2]
@@ -356,7 +360,6 @@ def _grid_kernel(x, v, t, out, mass, fp, ip):
                         t0[i] += e0[i]
                         t1[i] += e1[i]
                         t2[i] += e2[i]
-                sb += b0 * b1 * b2
             for i in range(n2):
                 orow[i, 0] = a0[i]
                 orow[i, 1] = a1[i]

@@ -24,12 +24,21 @@ from the last step's dv.
 Conjugate gradients use a Jacobi (diagonal) preconditioner while it
 converges within ``JACOBI_ITERATIONS`` iterations (small steps: the matrix is
 close to M). A stiff system at animation-sized steps needs hundreds or
-thousands; from then on the run uses a sparse LU factorisation (SuperLU,
-minimum degree ordering on A + A^T) instead: its direct solve, and its factors
-as the preconditioner of the following steps while they keep conjugate
-gradients within ``REUSE_ITERATIONS`` iterations (a cloth coming to rest
-changes its matrix little). Measured on a stiff cloth in
-``benchmarks/stiff_cloth.py``.
+thousands (a diagonal over ``JACOBI_MAX_DIAGONAL_RATIO`` times the mass says so
+before trying); from then on each step is factored: a banded Cholesky
+factorisation (LAPACK ``?pbtrf``) after a reverse Cuthill-McKee ordering when
+the band is narrow, else SuperLU. The banded factors are made in single
+precision, half the work of double, and serve as the preconditioner of
+conjugate gradients, which still stop at ``CG_RTOL`` in double precision (two or
+three iterations on a stiff cloth); double-precision factors and their direct
+solve are the fallback. Before factoring, the last factors are tried as the
+preconditioner while they keep conjugate gradients within ``REUSE_ITERATIONS``
+(a cloth coming to rest changes its matrix little; a falling one changes it too
+much at a frame-sized step, and the attempt is given up after
+``PROBE_ITERATIONS`` and tried again later and later). A is written into one
+sparsity pattern fixed for the run (:class:`_Assembly`), so the ordering and the
+band layout are computed once. Measured on a stiff cloth in
+``benchmarks/stiff_cloth.py`` (``benchmarks/optimisation_log.md``).
 """
 
 from __future__ import annotations
