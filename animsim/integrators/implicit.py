@@ -213,31 +213,38 @@ class ImplicitEuler(Integrator):
         psolve = precond.solve
         r = rhs - a_mat @ x if x.any() else rhs.copy()
         start = float(np.linalg.norm(r))
-        rho_prev = 1.0
+        rho_prev = np.float64(1.0)
         p = np.empty_like(r)
-        for iteration in range(maxiter):
-            rnorm = float(np.linalg.norm(r))
-            if rnorm < tol:
-                self.cg_iterations += iteration
-                return x, 0
-            if probe and iteration == PROBE_ITERATIONS and start > 0.0 and rnorm > 0.0:
-                # at this rate, iterations to fall from start to tol
-                needed = iteration * math.log(tol / start) / math.log(rnorm / start)
-                if needed > maxiter:
+        # NumPy scalars, as in SciPy: a zero denominator (a singular system) gives inf or NaN
+        # (reported by the watchdog), not an exception
+        with np.errstate(divide="ignore", invalid="ignore"):
+            for iteration in range(maxiter):
+                rnorm = float(np.linalg.norm(r))
+                if rnorm < tol:
                     self.cg_iterations += iteration
-                    return x, iteration
-            z = psolve(r)
-            rho = float(np.dot(r, z))
-            if iteration > 0:
-                p *= rho / rho_prev
-                p += z
-            else:
-                p[:] = z
-            q = a_mat @ p
-            alpha = rho / float(np.dot(p, q))
-            x += alpha * p
-            r -= alpha * q
-            rho_prev = rho
+                    return x, 0
+                if not math.isfinite(rnorm):  # a breakdown (p.Ap = 0 on a singular system): give up
+                    self.cg_iterations += iteration
+                    return x, max(iteration, 1)
+                if probe and iteration == PROBE_ITERATIONS and start > 0.0 and rnorm > 0.0:
+                    # at this rate, iterations to fall from start to tol (no fall: never)
+                    fall = rnorm / start
+                    needed = iteration * math.log(tol / start) / math.log(fall) if fall < 1.0 else math.inf
+                    if needed > maxiter:
+                        self.cg_iterations += iteration
+                        return x, iteration
+                z = psolve(r)
+                rho = np.dot(r, z)
+                if iteration > 0:
+                    p *= rho / rho_prev
+                    p += z
+                else:
+                    p[:] = z
+                q = a_mat @ p
+                alpha = rho / np.dot(p, q)
+                x += alpha * p
+                r -= alpha * q
+                rho_prev = rho
         self.cg_iterations += maxiter
         return x, maxiter
 

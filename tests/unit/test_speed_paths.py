@@ -243,3 +243,30 @@ def test_assembled_matrix_is_the_scaled_sum_of_the_jacobians(name):
     )
     assert np.allclose(got, want, rtol=1e-13, atol=1e-12 * np.abs(want).max())
     assert plan.matches(kx, kv, free, m_dof) and not plan.matches(kx, None, free, m_dof)
+
+
+class _Identity:
+    @staticmethod
+    def solve(b: np.ndarray) -> np.ndarray:
+        return b.copy()
+
+
+def test_cg_converges_gives_up_on_poor_factors_and_survives_a_breakdown():
+    import scipy.sparse as sp
+
+    integ = implicit.ImplicitEuler.__new__(implicit.ImplicitEuler)
+    integ.cg_iterations = 0
+    n = 50
+    integ._dv = np.zeros(n)
+    a = sp.diags(np.linspace(1.0, 1e6, n)).tocsr()
+    rhs = np.random.default_rng(4).normal(size=n)
+    dv, info = integ._cg(a, rhs, implicit._Jacobi(a.diagonal()), 5)
+    assert info == 0 and np.linalg.norm(a @ dv - rhs) < implicit.CG_RTOL * np.linalg.norm(rhs)
+    # no preconditioning on a condition number of 1e6: the probe gives up after a few
+    # iterations instead of spending the whole allowance
+    before = integ.cg_iterations
+    _dv, info = integ._cg(a, rhs, _Identity(), 12, probe=True)
+    assert info == implicit.PROBE_ITERATIONS and integ.cg_iterations - before == implicit.PROBE_ITERATIONS
+    # a singular system (p.Ap = 0): a nonzero status and no exception
+    _dv, info = integ._cg(sp.csr_matrix((n, n)), rhs, _Identity(), 10)
+    assert info != 0
