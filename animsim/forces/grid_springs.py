@@ -175,58 +175,213 @@ def find_blocks(system: System) -> list[GridBlock]:
     return blocks
 
 
-def _grid_kernel(x, v, t, out, mass, fp, ip):
-    """The numba twin of GridSprings.accumulate, summing in the same order as the NumPy
-    slices (block after block: every lo end, then every hi end), so the backends agree
-    to the bit; then the other springs as springs.Springs' bincount (per particle, in
-    the order of the ends, from 0).
+#: ints per block in the numba kernel's parameters: first particle, grid shape (3), the block's
+#: first lo point (3), block shape (3), offset (3), offset in flat particle numbers
+BLOCK_INTS = 14
 
-    ip = [blocks, (count, lo (count), hi (count)) per block, S_o, N, a (S_o), b (S_o),
-    ptr (N+1), inc (2 S_o)]; fp = [damped, (rest, ks, kd) (count each) per block,
-    rest, ks, kd (S_o each)].
+
+def _grid_kernel(x, v, t, out, mass, fp, ip):
+    """The numba twin of GridSprings.accumulate, on the grids themselves (no index arrays).
+
+    One structure (a run of blocks on one grid) at a time, grid row by grid row (a
+    row: the points along the grid's last axis). Its positions and velocities are
+    first copied to one array per axis, so the row loops below read and write
+    consecutive numbers and compile to SIMD code. Then, for each row: the forces of
+    every block's springs whose lo end lies in the row; and the gather of a row
+    whose springs are all done by then (``lag`` rows behind, 0 for the generated
+    structures, whose hi ends never lie in an earlier row than their lo ends): its
+    forces so far, then block after block the lo ends' -f before the hi ends' +f,
+    written back once. That is the order in which the NumPy slices add to a particle
+    (block after block: every lo end, then every hi end), with the same products, so
+    the backends agree to the bit; and the forces are gathered while still in cache
+    (only the last ``depth`` rows of each block's forces are kept, in a ring).
+    Then the other springs as springs.Springs' bincount (per particle, in the order
+    of the ends, from 0).
+
+    Grids are padded to three dimensions (a strand is 1 x 1 x n).
+    ip = [blocks, BLOCK_INTS per block, S_o, N, a (S_o), b (S_o), ptr (N+1), inc (2 S_o)];
+    fp = [damped, (rest, ks, kd) (count each) per block, rest, ks, kd (S_o each)].
+    (Loops index slices from 0: numba then knows no index is negative and drops its
+    wraparound test, which would keep LLVM from vectorising them.)
     """
     damped = fp[0] > 0
     nblocks = ip[0]
-    p = 1
+    k = 0
     q = 1
-    for _ in range(nblocks):
-        count = ip[p]
-        lo = ip[p + 1 : p + 1 + count]
-        hi = ip[p + 1 + count : p + 1 + 2 * count]
-        rest = fp[q : q + count]
-        ks = fp[q + count : q + 2 * count]
-        kd = fp[q + 2 * count : q + 3 * count]
-        p += 1 + 2 * count
-        q += 3 * count
-        fs = np.empty((count, 3))
-        for s in range(count):
-            a = lo[s]
-            b = hi[s]
-            d0 = x[a, 0] - x[b, 0]
-            d1 = x[a, 1] - x[b, 1]
-            d2 = x[a, 2] - x[b, 2]
-            length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-            inv = 1.0 / length if length > 0.0 else 0.0
-            mag = (length - rest[s]) * ks[s]
-            if damped:
-                dot = (v[a, 0] - v[b, 0]) * d0 + (v[a, 1] - v[b, 1]) * d1 + (v[a, 2] - v[b, 2]) * d2
-                mag += dot * kd[s] * inv
-            mag *= inv
-            fs[s, 0] = d0 * mag
-            fs[s, 1] = d1 * mag
-            fs[s, 2] = d2 * mag
-        for s in range(count):
-            a = lo[s]
-            out[a, 0] -= fs[s, 0]
-            out[a, 1] -= fs[s, 1]
-            out[a, 2] -= fs[s, 2]
-        for s in range(count):
-            b = hi[s]
-            out[b, 0] += fs[s, 0]
-            out[b, 1] += fs[s, 1]
-            out[b, 2] += fs[s, 2]
+    while k < nblocks:
+        h = 1 + BLOCK_INTS * k
+        first = ip[h]
+        n0 = ip[h + 1]
+        n1 = ip[h + 2]
+        n2 = ip[h + 3]
+        count = n0 * n1 * n2
+        e = k + 1
+        lag = 0
+        ahead = 0
+        for m in range(k, nblocks):
+            g = 1 + BLOCK_INTS * m
+            if ip[g] != first:
+                break
+            e = m + 1
+            rows_off = ip[g + 10] * n1 + ip[g + 11]  # rows from a lo end to its hi end
+            lag = max(lag, -rows_off)
+            ahead = max(ahead, rows_off)
+        # The forces of the last `depth` rows of springs (by their lo ends' row), per
+        # block: all that a row's gather reads, so they stay in cache.
+        depth = lag + ahead + 1
+        xs = x[first : first + count]
+        vs = v[first : first + count]
+        xv = np.empty((6, count))
+        for i in range(count):
+            for c in range(3):
+                xv[c, i] = xs[i, c]
+                xv[3 + c, i] = vs[i, c]
+        x0 = xv[0]
+        x1 = xv[1]
+        x2 = xv[2]
+        v0 = xv[3]
+        v1 = xv[4]
+        v2 = xv[5]
+        fs = np.empty((3, (e - k) * depth * n2))
+        f0 = fs[0]
+        f1 = fs[1]
+        f2 = fs[2]
+        acc = np.empty((3, n2))
+        a0 = acc[0]
+        a1 = acc[1]
+        a2 = acc[2]
+        rows = n0 * n1
+        for row in range(rows + lag):
+            if row < rows:  # the springs whose lo end is in this row
+                c0 = row // n1
+                c1 = row - c0 * n1
+                qb = q
+                for m in range(k, e):
+                    g = 1 + BLOCK_INTS * m
+                    b0 = ip[g + 7]
+                    b1 = ip[g + 8]
+                    b2 = ip[g + 9]
+                    nb = b0 * b1 * b2
+                    r0 = c0 - ip[g + 4]
+                    r1 = c1 - ip[g + 5]
+                    if 0 <= r0 < b0 and 0 <= r1 < b1:
+                        j = (r0 * b1 + r1) * b2
+                        a = row * n2 + ip[g + 6]
+                        b = a + ip[g + 13]
+                        xa0 = x0[a : a + b2]
+                        xa1 = x1[a : a + b2]
+                        xa2 = x2[a : a + b2]
+                        xb0 = x0[b : b + b2]
+                        xb1 = x1[b : b + b2]
+                        xb2 = x2[b : b + b2]
+                        rest = fp[qb + j : qb + j + b2]
+                        ks = fp[qb + nb + j : qb + nb + j + b2]
+                        ring = ((m - k) * depth + row % depth) * n2
+                        g0 = f0[ring : ring + b2]
+                        g1 = f1[ring : ring + b2]
+                        g2 = f2[ring : ring + b2]
+                        if damped:
+                            kd = fp[qb + 2 * nb + j : qb + 2 * nb + j + b2]
+                            va0 = v0[a : a + b2]
+                            va1 = v1[a : a + b2]
+                            va2 = v2[a : a + b2]
+                            vb0 = v0[b : b + b2]
+                            vb1 = v1[b : b + b2]
+                            vb2 = v2[b : b + b2]
+                            for i in range(b2):
+                                d0 = xa0[i] - xb0[i]
+                                d1 = xa1[i] - xb1[i]
+                                d2 = xa2[i] - xb2[i]
+                                length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+                                inv = 1.0 / length if length > 0.0 else 0.0
+                                mag = (length - rest[i]) * ks[i]
+                                dot = (va0[i] - vb0[i]) * d0 + (va1[i] - vb1[i]) * d1 + (va2[i] - vb2[i]) * d2
+                                mag += dot * kd[i] * inv
+                                mag *= inv
+                                g0[i] = d0 * mag
+                                g1[i] = d1 * mag
+                                g2[i] = d2 * mag
+                        else:  # the same without the damping terms
+                            for i in range(b2):
+                                d0 = xa0[i] - xb0[i]
+                                d1 = xa1[i] - xb1[i]
+                                d2 = xa2[i] - xb2[i]
+                                length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+                                inv = 1.0 / length if length > 0.0 else 0.0
+                                mag = (length - rest[i]) * ks[i]
+                                mag *= inv
+                                g0[i] = d0 * mag
+                                g1[i] = d1 * mag
+                                g2[i] = d2 * mag
+                    qb += 3 * nb
+            done = row - lag  # the row to gather: all its springs are computed
+            if done < 0:
+                continue
+            c0 = done // n1
+            c1 = done - c0 * n1
+            orow = out[first + done * n2 : first + (done + 1) * n2]
+            for i in range(n2):
+                a0[i] = orow[i, 0]
+                a1[i] = orow[i, 1]
+                a2[i] = orow[i, 2]
+            for m in range(k, e):
+                g = 1 + BLOCK_INTS * m
+                b0 = ip[g + 7]
+                b1 = ip[g + 8]
+                b2 = ip[g + 9]
+                r0 = c0 - ip[g + 4]
+                r1 = c1 - ip[g + 5]
+                if 0 <= r0 < b0 and 0 <= r1 < b1:  # lo ends of the block in this row: -f
+                    src = ((m - k) * depth + done % depth) * n2
+                    dst = ip[g + 6]
+                    t0 = a0[dst : dst + b2]
+                    t1 = a1[dst : dst + b2]
+                    t2 = a2[dst : dst + b2]
+                    e0 = f0[src : src + b2]
+                    e1 = f1[src : src + b2]
+                    e2 = f2[src : src + b2]
+                    for i in range(b2):
+                        t0[i] -= e0[i]
+                        t1[i] -= e1[i]
+                        t2[i] -= e2[i]
+                r0 -= ip[g + 10]
+                r1 -= ip[g + 11]
+                if 0 <= r0 < b0 and 0 <= r1 < b1:  # hi ends: +f, of springs whose lo ends are in row `back`
+                    back = done - (ip[g + 10] * n1 + ip[g + 11])
+                    src = ((m - k) * depth + back % depth) * n2
+                    dst = ip[g + 6] + ip[g + 12]
+                    t0 = a0[dst : dst + b2]
+                    t1 = a1[dst : dst + b2]
+                    t2 = a2[dst : dst + b2]
+                    e0 = f0[src : src + b2]
+                    e1 = f1[src : src + b2]
+                    e2 = f2[src : src + b2]
+                    for i in range(b2):
+                        t0[i] += e0[i]
+                        t1[i] += e1[i]
+                        t2[i] += e2[i]
+            for i in range(n2):
+                orow[i, 0] = a0[i]
+                orow[i, 1] = a1[i]
+                orow[i, 2] = a2[i]
+        for m in range(k, e):
+            g = 1 + BLOCK_INTS * m
+            q += 3 * ip[g + 7] * ip[g + 8] * ip[g + 9]
+        k = e
+    p = 1 + BLOCK_INTS * nblocks
     if ip[p] > 0:
         springs_kernel(x, v, t, out, mass, fp[q:], ip[p:])
+
+
+def _block_ints(blk: GridBlock) -> list[int]:
+    """The block's BLOCK_INTS numbers for the numba kernel (its grid padded to 3 dimensions)."""
+    pad = 3 - len(blk.shape)
+    shape = [1] * pad + list(blk.shape)
+    lo = [0] * pad + [sl.start for sl in blk.lo]
+    bshape = [1] * pad + [sl.stop - sl.start for sl in blk.lo]
+    offset = [0] * pad + [h.start - sl.start for sl, h in zip(blk.lo, blk.hi, strict=True)]
+    flat = (offset[0] * shape[1] + offset[1]) * shape[2] + offset[2]
+    return [blk.first, *shape, *lo, *bshape, *offset, flat]
 
 
 class GridSprings(Springs):
@@ -271,9 +426,7 @@ class GridSprings(Springs):
         fps: list[np.ndarray] = [np.array([1.0 if self.has_damping else 0.0])]
         ips: list[np.ndarray] = [np.array([len(self.blocks)])]
         for blk in self.blocks:
-            pairs = _block_pairs(blk.shape, blk.lo, blk.hi) + blk.first
-            count = len(pairs)
-            ips += [np.array([count]), pairs[:, 0], pairs[:, 1]]
+            ips.append(np.array(_block_ints(blk)))
             fps += [blk.rest.ravel(), np.broadcast_to(blk.ks, blk.rest.shape).ravel()]
             fps += [np.broadcast_to(blk.kd, blk.rest.shape).ravel()]
         if self.others is not None:

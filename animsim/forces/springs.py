@@ -20,7 +20,6 @@ import numpy as np
 import scipy.sparse as sp
 
 from animsim.elements import ELASTIC, ForceElement
-from animsim.forces.jacobian import block_pattern
 from animsim.vec import dot3
 
 prange = range  # numba's prange once the kernel is compiled (see animsim.elements.jit_kernel)
@@ -108,7 +107,7 @@ class Springs(ForceElement):
         self._weights = np.empty((2 * s, 3))
         self._flat_ends = (3 * self.ends[:, None] + np.arange(3)).ravel()
         # CSR structure of the Jacobians, built on first use (explicit methods never need it).
-        self._jac: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._jac: tuple[sp.csr_matrix, np.ndarray, np.ndarray] | None = None
         self.label = label or f"springs: {s} (Hooke + damping, Lander Eq. 2)"
         self.numba_parallel = s >= PARALLEL_MIN_SPRINGS
         # tearing (animsim.tearing): the unbroken ks and kd, and the numba parameters in use
@@ -201,34 +200,79 @@ class Springs(ForceElement):
         particles is the linear force -ks L, so its block is -ks I.
         """
         d, length, inv = self._geometry(x)
-        u = d * inv[:, None]
-        uu = u[:, :, None] * u[:, None, :]
+        u = np.ascontiguousarray((d * inv[:, None]).T)  # (3, S): one row per axis
         ratio = np.where(
             length > 0, np.maximum(1.0 - self.rest * inv, 0.0), np.where(self.rest == 0, 1.0, 0.0)
         )
-        eye = np.eye(3)[None]
-        jx = -self.ks[:, None, None] * (ratio[:, None, None] * eye + (1.0 - ratio)[:, None, None] * uu)
+        # -ks [ratio I + (1 - ratio) u u^T], as a scaled u u^T plus a diagonal; blocks are
+        # stored entry by entry, (9, S), so every product below runs over contiguous rows
+        scale = -self.ks * (1.0 - ratio)
+        diagonal = self.ks * ratio
+        jx = np.empty((9, len(ratio)))
+        jv = np.empty((9, len(ratio))) if self.has_damping else None
+        for i in range(3):
+            for j in range(i, 3):
+                uu = u[i] * u[j]
+                np.multiply(uu, scale, out=jx[3 * i + j])
+                if i == j:
+                    jx[3 * i + j] -= diagonal
+                else:
+                    jx[3 * j + i] = jx[3 * i + j]
+                if jv is not None:
+                    np.multiply(uu, -self.kd, out=jv[3 * i + j])
+                    jv[3 * j + i] = jv[3 * i + j]
         kx = self._assemble(jx)
-        if not self.has_damping:
+        if jv is None:
             return kx, None
-        return kx, self._assemble(-self.kd[:, None, None] * uu)
+        return kx, self._assemble(jv)
 
     def _assemble(self, block: np.ndarray) -> sp.csr_matrix:
         """The (3N, 3N) matrix with +block at (a,a) and (b,b) and -block at (a,b) and (b,a).
 
-        The CSR structure is computed once; each call only sums the entries
-        into it with one bincount (duplicates, such as two springs on one
-        pair, add up as the derivative of a sum should).
+        The CSR structure is computed once (:meth:`_jacobian_layout`); each call is
+        then one sparse product that sums every spring's block into its four places
+        (duplicates, such as two springs on one pair, add up as the derivative of a
+        sum should).
         """
         size = 3 * self.n
         if self._jac is None:
-            blocks = ((self.a, self.a), (self.a, self.b), (self.b, self.a), (self.b, self.b))
-            rows = np.concatenate([block_pattern(p, q)[0].ravel() for p, q in blocks])
-            cols = np.concatenate([block_pattern(p, q)[1].ravel() for p, q in blocks])
-            keys, slot = np.unique(rows * size + cols, return_inverse=True)
-            indptr = np.searchsorted(keys // size, np.arange(size + 1)).astype(np.int64)
-            self._jac = (slot, (keys % size).astype(np.int64), indptr)
-        slot, indices, indptr = self._jac
-        values = np.concatenate([block, -block, -block, block]).ravel()
-        data = np.bincount(slot, weights=values, minlength=len(indices))
-        return sp.csr_matrix((data, indices, indptr), shape=(size, size))
+            self._jac = self._jacobian_layout()
+        gather, indices, indptr = self._jac
+        data = gather @ block.reshape(-1)  # block: (9, S), entry 3 i + j of spring s at [3 i + j, s]
+        mat = sp.csr_matrix((data, indices, indptr), shape=(size, size))
+        mat.has_canonical_format = True  # sorted, one entry per place: spare SciPy the check
+        return mat
+
+    def _jacobian_layout(self) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray]:
+        """(gather, indices, indptr): the Jacobians' CSR structure, and the (entries x 9 S)
+        matrix of +1 and -1 taking each spring's block (stored (9, S)) to its four places.
+
+        Built from the particle pairs (a 3 x 3 block per distinct pair, its rows in
+        column order), so the only sort is of 4 S pairs, not of 36 S entries.
+        """
+        n, ns = self.n, len(self.a)
+        first = np.concatenate([self.a, self.a, self.b, self.b])
+        second = np.concatenate([self.a, self.b, self.a, self.b])
+        pairs, which = np.unique(first * n + second, return_inverse=True)
+        prow, pcol = pairs // n, pairs % n
+        per_row = np.bincount(prow, minlength=n)  # distinct pairs (3 x 3 blocks) in a particle's row
+        start = np.zeros(n + 1, dtype=np.int64)
+        np.cumsum(per_row, out=start[1:])
+        # entry (3 r + i, 3 c + j) of pair u = (r, c), the m-th pair of row r, is at
+        # 9 start[r] + 3 i per_row[r] + 3 m + j
+        r = prow[:, None, None]
+        i, j = np.arange(3)[None, :, None], np.arange(3)[None, None, :]
+        place = 9 * start[r] + 3 * i * per_row[r] + 3 * (np.arange(len(pairs))[:, None, None] - start[r]) + j
+        nnz = 9 * len(pairs)
+        itype = np.int32 if max(nnz, 3 * n) < np.iinfo(np.int32).max else np.int64
+        indices = np.empty(nnz, dtype=itype)
+        indices[place.ravel()] = np.broadcast_to(3 * pcol[:, None, None] + j, place.shape).ravel()
+        indptr = np.empty(3 * n + 1, dtype=itype)
+        indptr[:-1] = (9 * start[:-1, None] + 3 * np.arange(3)[None, :] * per_row[:, None]).ravel()
+        indptr[-1] = nnz
+        # gather^T: block entry e = (3 i + j) S + s has its four places, signs + - - +
+        places = place[which.reshape(4, ns)]  # (4, S, 3, 3)
+        rows_t = np.ascontiguousarray(places.transpose(2, 3, 1, 0)).reshape(-1)
+        signs = np.tile([1.0, -1.0, -1.0, 1.0], 9 * ns)
+        gather_t = sp.csr_matrix((signs, rows_t, np.arange(0, 36 * ns + 1, 4)), shape=(9 * ns, nnz))
+        return gather_t.T.tocsr(), indices, indptr  # CSR: a product gathers, it does not scatter

@@ -24,16 +24,26 @@ from the last step's dv.
 Conjugate gradients use a Jacobi (diagonal) preconditioner while it
 converges within ``JACOBI_ITERATIONS`` iterations (small steps: the matrix is
 close to M). A stiff system at animation-sized steps needs hundreds or
-thousands; from then on the run uses a sparse LU factorisation (SuperLU,
-minimum degree ordering on A + A^T) instead: its direct solve, and its factors
-as the preconditioner of the following steps while they keep conjugate
-gradients within ``REUSE_ITERATIONS`` iterations (a cloth coming to rest
-changes its matrix little). Measured on a stiff cloth in
-``benchmarks/stiff_cloth.py``.
+thousands (a diagonal over ``JACOBI_MAX_DIAGONAL_RATIO`` times the mass says so
+before trying); from then on each step is factored: a banded Cholesky
+factorisation (LAPACK ``?pbtrf``) after a reverse Cuthill-McKee ordering when
+the band is narrow, else SuperLU. The banded factors are made in single
+precision, half the work of double, and serve as the preconditioner of
+conjugate gradients, which still stop at ``CG_RTOL`` in double precision (two or
+three iterations on a stiff cloth); double-precision factors and their direct
+solve are the fallback. Before factoring, the last factors are tried as the
+preconditioner while they keep conjugate gradients within ``REUSE_ITERATIONS``
+(a cloth coming to rest changes its matrix little; a falling one changes it too
+much at a frame-sized step, and the attempt is given up after
+``PROBE_ITERATIONS`` and tried again later and later). A is written into one
+sparsity pattern fixed for the run (:class:`_Assembly`), so the ordering and the
+band layout are computed once. Measured on a stiff cloth in
+``benchmarks/stiff_cloth.py`` (``benchmarks/optimisation_log.md``).
 """
 
 from __future__ import annotations
 
+import math
 import warnings
 from typing import Any
 
@@ -51,9 +61,18 @@ CG_RTOL = 1e-10
 CG_MAXITER_FACTOR = 10
 #: Jacobi-preconditioned iterations after which a system counts as stiff (LU from then on)
 JACOBI_ITERATIONS = 100
+#: largest diagonal of A over the mass (1 + dt^2 k / m for one spring) at which Jacobi CG is
+#: tried first: beyond it the Jacobi-preconditioned matrix's condition number (about twice the
+#: ratio) needs hundreds of iterations, more than JACOBI_ITERATIONS
+JACOBI_MAX_DIAGONAL_RATIO = 1e3
 #: iterations with an old factorisation as preconditioner before it is replaced by a new one
 REUSE_ITERATIONS = 12
-#: steps a failed reuse of old factors makes the solver factor directly, at most
+#: iterations with this step's single-precision factors as preconditioner before the step is
+#: factored again in double precision and solved directly
+FRESH_ITERATIONS = 30
+#: iterations after which CG with old factors is given up if its rate so far is too slow
+PROBE_ITERATIONS = 3
+#: steps a failed reuse of old factors makes the solver factor afresh, at most
 REUSE_BACKOFF_MAX = 16
 #: banded Cholesky (LAPACK) instead of SuperLU when unknowns x bandwidth^2 (after a reverse
 #: Cuthill-McKee ordering) is below this: 1.1e8 for a 32 x 32 cloth, factored in 8 ms
@@ -86,6 +105,7 @@ class ImplicitEuler(Integrator):
         self._stiff = False  # Jacobi CG was too slow once: LU from then on
         self._skip = 0  # steps left that factor directly instead of trying old factors
         self._backoff = 0
+        self._plan: _Assembly | None = None  # A's sparsity pattern and where the terms' entries go
 
     def reset(self) -> None:
         self._dv.fill(0.0)
@@ -102,6 +122,9 @@ class ImplicitEuler(Integrator):
                 kx = jx if kx is None else kx + jx
             if jv is not None:
                 kv = jv if kv is None else kv + jv
+        for m in (kx, kv):
+            if m is not None:
+                m.sum_duplicates()  # one entry per place (a no-op on the terms' canonical matrices)
         return kx, kv
 
     def step(self, state: State, dt: float) -> None:
@@ -121,39 +144,39 @@ class ImplicitEuler(Integrator):
         if kx is not None:
             rhs += dt * (kx @ v.ravel())  # the anchors' prescribed velocities enter here too
         rhs *= dt
-        # -dt^2 Kx - dt Kv, scaled in place (the terms built these matrices for this step)
-        parts = []
-        for mat, scale in ((kx, -dt * dt), (kv, -dt)):
-            if mat is not None:
-                mat.data *= scale
-                parts.append(mat)
-        stiff = parts[0] if len(parts) == 1 else parts[0] + parts[1]
         pinned = ~free
         if pinned.any():
             # Pinned particles and dead slots are not unknowns: their rows and columns
             # drop out (identity rows with a zero right-hand side), so dv = 0 there.
-            rows = np.repeat(np.arange(stiff.shape[0]), np.diff(stiff.indptr))
-            stiff.data *= free[rows] & free[stiff.indices]
             rhs[pinned] = 0.0
-        a_mat = (stiff + _diagonal(np.where(free, m_dof, 1.0))).tocsr()
+        plan = self._plan
+        if plan is None or not plan.matches(kx, kv, free, m_dof):
+            plan = self._plan = _Assembly(kx, kv, free, m_dof)
+        a_mat = plan.fill(kx, kv, dt)
         dv = self._solve(a_mat, rhs, free)
         dv[pinned] = 0.0
         self._dv[:] = dv
         v += self._dv.reshape(-1, 3)
         x += dt * v
 
-    def _factor(self, a_mat: sp.csr_matrix, free: np.ndarray) -> Any:
-        """Factors of A with a ``solve(b)``: banded Cholesky when the band is narrow, else SuperLU."""
-        band = self._band_layout(a_mat)
+    def _factor(self, a_mat: sp.csr_matrix, free: np.ndarray, dtype: type = np.float64) -> Any:
+        """Factors of A with a ``solve(b)``: banded Cholesky (in ``dtype``) when the band is narrow,
+        else SuperLU (float64 only: None for float32, the caller then factors in float64)."""
+        plan = self._plan
+        assert plan is not None
+        self._lu = None  # the band buffers are reused: old factors are gone from here on
+        band = plan.band()
         if band is not None:
             try:
-                lu: Any = _BandedCholesky(a_mat, *band)
-            except np.linalg.LinAlgError:  # not positive definite after all: SuperLU pivots
+                lu: Any = _BandedCholesky(a_mat.data, band, dtype)
+            except np.linalg.LinAlgError:  # not positive definite (in this precision): SuperLU pivots
                 lu = None
             if lu is not None:
                 self._lu = (free.copy(), lu)
                 self.factorizations += 1
                 return lu
+        if dtype is not np.float64:
+            return None
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", spla.MatrixRankWarning)
             # A is symmetric: order A + A^T and pivot on the diagonal (SuperLU's symmetric mode).
@@ -168,56 +191,73 @@ class ImplicitEuler(Integrator):
         return lu
 
     def _cg(
-        self, a_mat: sp.csr_matrix, rhs: np.ndarray, precond: Any, maxiter: int
+        self,
+        a_mat: sp.csr_matrix,
+        rhs: np.ndarray,
+        precond: Any,
+        maxiter: int,
+        probe: bool = False,
+        warm: bool = True,
     ) -> tuple[np.ndarray, int]:
-        iterations = 0
+        """Preconditioned conjugate gradients from the last step's dv, as SciPy's ``cg`` (the same
+        operations and stopping test, ||r|| < CG_RTOL ||rhs||), on the matrix and the
+        preconditioner's ``solve`` directly. ``probe``: give up after PROBE_ITERATIONS when the
+        residual's fall so far says ``maxiter`` will not be enough (old factors far off).
 
-        def count(_xk: np.ndarray) -> None:
-            nonlocal iterations
-            iterations += 1
-
-        dv, info = spla.cg(
-            a_mat, rhs, x0=self._dv, rtol=CG_RTOL, atol=0.0, maxiter=maxiter, M=precond, callback=count
-        )
-        self.cg_iterations += iterations
-        return dv, info
-
-    def _band_layout(self, a_mat: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray, int] | None:
-        """(RCM permutation, each stored entry's place in the upper band or -1, bandwidth), or
-        None when the band is too wide; computed once per sparsity pattern."""
-        cached = getattr(self, "_band", None)
-        if (
-            cached is not None
-            and np.array_equal(cached[0], a_mat.indptr)
-            and np.array_equal(cached[1], a_mat.indices)
-        ):
-            return cached[2]
-        from scipy.sparse.csgraph import reverse_cuthill_mckee
-
-        n = a_mat.shape[0]
-        perm = reverse_cuthill_mckee(a_mat, symmetric_mode=True)
-        where = np.empty(n, dtype=np.int64)
-        where[perm] = np.arange(n)
-        rows = where[np.repeat(np.arange(n), np.diff(a_mat.indptr))]
-        cols = where[a_mat.indices]
-        width = int(np.max(np.abs(rows - cols))) if len(rows) else 0
-        layout = None
-        if n * width * width <= BANDED_MAX_WORK:
-            # LAPACK's upper band storage: ab[width + i - j, j] = A[i, j] for i <= j
-            upper = rows <= cols
-            slot = np.where(upper, (width + rows - cols) * n + cols, -1)
-            layout = (perm, slot, width)
-        self._band = (a_mat.indptr.copy(), a_mat.indices.copy(), layout)
-        return layout
+        Returns (dv, 0) when converged, else (the last iterate, iterations done).
+        """
+        x = self._dv.copy() if warm else np.zeros_like(rhs)
+        tol = CG_RTOL * float(np.linalg.norm(rhs))
+        if tol == 0.0:
+            return rhs.copy(), 0
+        psolve = precond.solve
+        r = rhs - a_mat @ x if x.any() else rhs.copy()
+        start = float(np.linalg.norm(r))
+        rho_prev = np.float64(1.0)
+        p = np.empty_like(r)
+        # NumPy scalars, as in SciPy: a zero denominator (a singular system) gives inf or NaN
+        # (reported by the watchdog), not an exception
+        with np.errstate(divide="ignore", invalid="ignore"):
+            for iteration in range(maxiter):
+                rnorm = float(np.linalg.norm(r))
+                if rnorm < tol:
+                    self.cg_iterations += iteration
+                    return x, 0
+                if not math.isfinite(rnorm):  # a breakdown (p.Ap = 0 on a singular system): give up
+                    self.cg_iterations += iteration
+                    return x, max(iteration, 1)
+                if probe and iteration == PROBE_ITERATIONS and start > 0.0 and rnorm > 0.0:
+                    # at this rate, iterations to fall from start to tol (no fall: never)
+                    fall = rnorm / start
+                    needed = iteration * math.log(tol / start) / math.log(fall) if fall < 1.0 else math.inf
+                    if needed > maxiter:
+                        self.cg_iterations += iteration
+                        return x, iteration
+                z = psolve(r)
+                rho = np.dot(r, z)
+                if iteration > 0:
+                    p *= rho / rho_prev
+                    p += z
+                else:
+                    p[:] = z
+                q = a_mat @ p
+                alpha = rho / np.dot(p, q)
+                x += alpha * p
+                r -= alpha * q
+                rho_prev = rho
+        self.cg_iterations += maxiter
+        return x, maxiter
 
     def _solve(self, a_mat: sp.csr_matrix, rhs: np.ndarray, free: np.ndarray) -> np.ndarray:
         """dv with A dv = rhs (see the module docstring for the choice of solver)."""
         unknowns = int(free.sum())
         lu_ok = unknowns <= LU_MAX_DOF
+        if not self._stiff and lu_ok and _diagonal_ratio(a_mat, self._plan) > JACOBI_MAX_DIAGONAL_RATIO:
+            self._stiff = True  # Jacobi CG would need hundreds of iterations: factor at once
         if not (self._stiff and lu_ok):
             cap = CG_MAXITER_FACTOR * unknowns
             dv, info = self._cg(
-                a_mat, rhs, _diagonal(1.0 / a_mat.diagonal()), min(cap, JACOBI_ITERATIONS) if lu_ok else cap
+                a_mat, rhs, _Jacobi(a_mat.diagonal()), min(cap, JACOBI_ITERATIONS) if lu_ok else cap
             )
             if info == 0:
                 return dv
@@ -226,16 +266,22 @@ class ImplicitEuler(Integrator):
             self._stiff = True
         old = self._lu
         if self._skip == 0 and old is not None and np.array_equal(old[0], free):
-            precond = spla.LinearOperator(a_mat.shape, matvec=old[1].solve, dtype=np.float64)  # type: ignore[attr-defined]
-            dv, info = self._cg(a_mat, rhs, precond, REUSE_ITERATIONS)
+            dv, info = self._cg(a_mat, rhs, old[1], REUSE_ITERATIONS, probe=True)
             if info == 0:
                 self._backoff = 0
                 return dv
-            # The old factors are too far from this matrix: factor directly for a while.
+            # The old factors are too far from this matrix: factor afresh for a while.
             self._backoff = min(2 * self._backoff + 1, REUSE_BACKOFF_MAX)
             self._skip = self._backoff
         elif self._skip:
             self._skip -= 1
+        # This step's own factors in single precision, as conjugate gradients' preconditioner:
+        # half the work of double precision, and CG still stops at CG_RTOL in double.
+        lu32 = self._factor(a_mat, free, np.float32)
+        if lu32 is not None:
+            dv, info = self._cg(a_mat, rhs, lu32, FRESH_ITERATIONS, warm=False)
+            if info == 0:
+                return dv
         try:
             lu = self._factor(a_mat, free)
         except RuntimeError:  # exactly singular: the step is meaningless (see _fallback)
@@ -259,24 +305,193 @@ class ImplicitEuler(Integrator):
         return np.asarray(dv, dtype=np.float64)
 
 
-class _BandedCholesky:
-    """A = L L^T in LAPACK band storage (``scipy.linalg.cholesky_banded``), in RCM order."""
+class _BandLayout:
+    """Where A's entries go in LAPACK's upper band storage after a reverse Cuthill-McKee
+    ordering, and the band buffers (one per precision), reused by every factorisation."""
 
-    def __init__(self, a_mat: sp.csr_matrix, perm: np.ndarray, slot: np.ndarray, width: int):
-        import scipy.linalg as sl
-
-        n = a_mat.shape[0]
-        ab = np.zeros((width + 1) * n)
-        keep = slot >= 0
-        np.add.at(ab, slot[keep], a_mat.data[keep])  # duplicates (none after tocsr) would add
-        self._solve = sl.cho_solve_banded
-        self.factor = sl.cholesky_banded(ab.reshape(width + 1, n), lower=False, check_finite=False)
+    def __init__(self, perm: np.ndarray, upper: np.ndarray, slot: np.ndarray, width: int, n: int):
         self.perm = perm
+        self.upper = upper  # A's stored entries on or above the diagonal (in RCM order)
+        self.slot = slot  # their flat places in a Fortran-ordered (width + 1, n) band
+        self.width = width
+        self.n = n
+        self.buffers: dict[type, np.ndarray] = {}
+
+    def buffer(self, dtype: type) -> np.ndarray:
+        ab = self.buffers.get(dtype)
+        if ab is None:
+            ab = self.buffers[dtype] = np.zeros((self.width + 1, self.n), dtype=dtype, order="F")
+        return ab
+
+
+class _BandedCholesky:
+    """A = U^T U in LAPACK band storage (``?pbtrf``), in RCM order, in single or double precision.
+
+    The factors overwrite the layout's band buffer of their precision, so only the
+    latest factors of a precision are valid (the integrator keeps one at a time)."""
+
+    def __init__(self, data: np.ndarray, layout: _BandLayout, dtype: type = np.float64):
+        from scipy.linalg import get_lapack_funcs
+
+        ab = layout.buffer(dtype)
+        ab.fill(0.0)  # the last factors' fill-in
+        ab.T.reshape(-1)[layout.slot] = data[layout.upper]  # ab.T is C-ordered: a view
+        trf, self._trs = get_lapack_funcs(("pbtrf", "pbtrs"), dtype=dtype)
+        factor, info = trf(ab, lower=0, overwrite_ab=1)
+        if info != 0:
+            raise np.linalg.LinAlgError(f"band matrix not positive definite (pbtrf info {info})")
+        self.factor = factor
+        self.perm = layout.perm
+        self.dtype = dtype
 
     def solve(self, b: np.ndarray) -> np.ndarray:
-        x = np.empty_like(b)
-        x[self.perm] = self._solve((self.factor, False), b[self.perm], check_finite=False)
+        x = np.empty(len(b))
+        y, _info = self._trs(self.factor, b[self.perm].astype(self.dtype), lower=0)
+        x[self.perm] = y
         return x
+
+
+class _Assembly:
+    """A = M - dt^2 Kx - dt Kv on one sparsity pattern fixed for the run.
+
+    The pattern is the union of the terms' Jacobian patterns and the diagonal,
+    kept whatever values the entries take (SciPy's sparse sum drops zeros, so a
+    flat cloth's axis-aligned springs made the pattern, and with it the band
+    ordering, change from step to step). Built when the terms' patterns or the
+    unknowns change; every step then only writes the values into it: the
+    same sums and products, in the same order, as adding the scaled matrices.
+    """
+
+    def __init__(
+        self,
+        kx: sp.csr_matrix | None,
+        kv: sp.csr_matrix | None,
+        free: np.ndarray,
+        m_dof: np.ndarray,
+    ):
+        n = len(free)
+        self.n = n
+        self.patterns = tuple(None if m is None else (m.indptr.copy(), m.indices.copy()) for m in (kx, kv))
+        diagonal = np.arange(n, dtype=np.int64) * (n + 1)
+        given = [m for m in (kx, kv) if m is not None]
+        keys = _keys(given[0], n)
+        where = np.minimum(np.searchsorted(keys, diagonal), max(len(keys) - 1, 0))
+        if (
+            len(keys)
+            and all(_same_pattern(m, given[0]) for m in given[1:])
+            and np.array_equal(keys[where], diagonal)
+        ):
+            # the common case (springs): Kx and Kv share one pattern holding the diagonal
+            self.indptr = given[0].indptr.astype(np.int64)
+            self.indices = given[0].indices.astype(np.int64)
+            self.slots: tuple[np.ndarray | None, ...] = (None, None)
+        else:
+            union = _diagonal(np.ones(n))
+            for m in given:
+                # all entries positive: nothing cancels, nothing dropped
+                union = union + sp.csr_matrix((np.ones(m.nnz), m.indices, m.indptr), shape=(n, n))
+            union.sum_duplicates()
+            union.sort_indices()
+            self.indptr = union.indptr.astype(np.int64)
+            self.indices = union.indices.astype(np.int64)
+            keys = _keys(union, n)
+            slots = []
+            for m in (kx, kv):
+                slot = None if m is None else np.searchsorted(keys, _keys(m, n))
+                if slot is not None and len(slot) == len(keys):
+                    slot = None  # the same pattern (the union holds all of m's places)
+                slots.append(slot)
+            self.slots = tuple(slots)
+            where = np.searchsorted(keys, diagonal)
+        rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(self.indptr))
+        self.rows = rows
+        self.free = free.copy()
+        self.m_dof = m_dof.copy()
+        # stiffness entries kept: both ends unknowns (pinned rows and columns drop out)
+        self.keep = (free[rows] & free[self.indices]).astype(np.float64)
+        self.base = np.zeros(len(keys))
+        self.base[where] = np.where(free, m_dof, 1.0)
+        self.work = np.zeros(len(keys))
+        self.matrix = sp.csr_matrix((np.zeros(len(keys)), self.indices, self.indptr), shape=(n, n))
+        self._band: _BandLayout | bool | None = False  # False: not computed yet
+
+    def matches(
+        self, kx: sp.csr_matrix | None, kv: sp.csr_matrix | None, free: np.ndarray, m_dof: np.ndarray
+    ) -> bool:
+        for m, pattern in zip((kx, kv), self.patterns, strict=True):
+            if (m is None) != (pattern is None):
+                return False
+            if m is not None and not (
+                np.array_equal(m.indptr, pattern[0]) and np.array_equal(m.indices, pattern[1])
+            ):
+                return False
+        return np.array_equal(free, self.free) and np.array_equal(m_dof, self.m_dof)
+
+    def fill(self, kx: sp.csr_matrix | None, kv: sp.csr_matrix | None, dt: float) -> sp.csr_matrix:
+        """The matrix A of this step (the pattern's one CSR matrix, its values rewritten)."""
+        data = self.matrix.data
+        data.fill(0.0)
+        work = self.work
+        for m, slot, scale in ((kx, self.slots[0], -dt * dt), (kv, self.slots[1], -dt)):
+            if m is None:
+                continue
+            if slot is None:  # the term's pattern is the union's: no scatter
+                np.multiply(m.data, scale, out=work)
+            else:
+                work.fill(0.0)
+                work[slot] = m.data
+                work *= scale
+            data += work
+        data *= self.keep
+        data += self.base
+        return self.matrix
+
+    def band(self) -> _BandLayout | None:
+        """The band layout of this pattern, or None when the band is too wide (computed once)."""
+        if self._band is False:
+            from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+            n = self.n
+            perm = reverse_cuthill_mckee(self.matrix, symmetric_mode=True)
+            where = np.empty(n, dtype=np.int64)
+            where[perm] = np.arange(n)
+            rows = where[self.rows]
+            cols = where[self.indices]
+            width = int(np.max(np.abs(rows - cols))) if len(rows) else 0
+            self._band = None
+            if n * width * width <= BANDED_MAX_WORK:
+                # LAPACK's upper band storage: ab[width + i - j, j] = A[i, j] for i <= j,
+                # at flat place j (width + 1) + width + i - j of the Fortran-ordered band
+                upper = np.flatnonzero(rows <= cols)
+                slot = cols[upper] * (width + 1) + width + rows[upper] - cols[upper]
+                self._band = _BandLayout(perm, upper, slot, width, n)
+        return self._band  # type: ignore[return-value]
+
+
+def _diagonal_ratio(a_mat: sp.csr_matrix, plan: _Assembly | None) -> float:
+    """max over the unknowns of A_ii / m_i (1 for the pinned identity rows)."""
+    if plan is None:
+        return 1.0
+    return float(np.max(a_mat.diagonal() / np.where(plan.free, plan.m_dof, 1.0)))
+
+
+def _same_pattern(m: sp.csr_matrix, other: sp.csr_matrix) -> bool:
+    return np.array_equal(m.indptr, other.indptr) and np.array_equal(m.indices, other.indices)
+
+
+def _keys(m: sp.csr_matrix, n: int) -> np.ndarray:
+    rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(m.indptr))
+    return rows * n + m.indices
+
+
+class _Jacobi:
+    """The diagonal preconditioner, with the factors' ``solve`` interface."""
+
+    def __init__(self, diagonal: np.ndarray):
+        self.inverse = 1.0 / diagonal
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        return self.inverse * b
 
 
 def _diagonal(values: np.ndarray) -> sp.csr_matrix:

@@ -112,8 +112,8 @@ def test_stiff_implicit_switches_to_factors_and_agrees_with_conjugate_gradients(
     compiled, result = _stiff(8, 1 / 30, 6)
     assert result.status == STATUS_OK
     assert compiled.integrator.factorizations >= 1
-    if banded:
-        assert compiled.integrator._band[2] is not None
+    plan = compiled.integrator._plan
+    assert (plan.band() is not None) == banded
 
     # The reference: Jacobi CG to convergence on every step, as before the switch.
     monkeypatch.setattr(implicit, "JACOBI_ITERATIONS", 10**9)
@@ -124,18 +124,44 @@ def test_stiff_implicit_switches_to_factors_and_agrees_with_conjugate_gradients(
     assert np.abs(x - x_ref).max() < 1e-7 * np.abs(x_ref).max()
 
 
-def test_banded_cholesky_solves_the_system():
+@pytest.mark.parametrize(("dtype", "tol"), [(np.float64, 1e-12), (np.float32, 1e-4)])
+def test_banded_cholesky_solves_the_system(dtype, tol):
     rng = np.random.default_rng(1)
     import scipy.sparse as sp
 
     n = 60
     b = sp.random(n, n, density=0.05, random_state=2)
     a = (b @ b.T + sp.identity(n) * 5).tocsr()
-    integ = implicit.ImplicitEuler.__new__(implicit.ImplicitEuler)
-    perm, slot, width = integ._band_layout(a)
+    a.sum_duplicates()
+    plan = implicit._Assembly(a, None, np.ones(n, dtype=bool), np.ones(n))
+    assert np.array_equal(plan.matrix.indices, a.indices)  # a holds its diagonal: the same pattern
     rhs = rng.normal(size=n)
-    got = implicit._BandedCholesky(a, perm, slot, width).solve(rhs)
-    assert np.allclose(got, spla.spsolve(a.tocsc(), rhs), rtol=1e-12, atol=1e-12)
+    want = spla.spsolve(a.tocsc(), rhs)
+    for _ in range(2):  # the second factorisation reuses (and first clears) the band buffer
+        got = implicit._BandedCholesky(a.data, plan.band(), dtype).solve(rhs)
+        assert np.allclose(got, want, rtol=tol, atol=tol)
+
+
+def test_stiff_implicit_steps_meet_the_cg_tolerance_on_one_fixed_pattern(monkeypatch):
+    """Every step's dv solves its system to CG_RTOL (single-precision factors only precondition),
+    on one sparsity pattern for the whole run (a flat cloth's zero entries do not change it)."""
+    residuals: list[float] = []
+    plans: set[int] = set()
+    solve = implicit.ImplicitEuler._solve
+
+    def checked(self, a_mat, rhs, free):
+        dv = solve(self, a_mat, rhs, free)
+        residuals.append(float(np.linalg.norm(a_mat @ dv - rhs) / np.linalg.norm(rhs)))
+        plans.add(id(self._plan))
+        return dv
+
+    monkeypatch.setattr(implicit.ImplicitEuler, "_solve", checked)
+    compiled, result = _stiff(12, 1 / 30, 8)
+    assert result.status == STATUS_OK
+    assert compiled.integrator.factorizations >= 1
+    assert compiled.integrator.cg_iterations > 0  # the preconditioned CG ran
+    assert len(residuals) == 8 and max(residuals) < implicit.CG_RTOL
+    assert len(plans) == 1
 
 
 @pytest.mark.skipif(not HAS_NUMBA, reason="numba is not installed")
@@ -170,3 +196,77 @@ planes: [{point: [0, -0.5, 0], normal: [0, 1, 0], restitution: 0.5}]
     s2.advance(st2, 0, c2.clock.steps)
     assert np.array_equal(st2.particle_position, fast.final_state.particle_position)
     assert np.array_equal(st2.particle_velocity, fast.final_state.particle_velocity)
+
+
+ASSEMBLY_SCENES = {
+    # Kx and Kv share the springs' pattern, which holds every diagonal entry: no scatter
+    "springs": STIFF_CLOTH.format(duration=0.1, dt=0.01, n=4, last=3),
+    # a particle without springs (its diagonal only in Kv, from drag) and a penalty plane:
+    # the union of differing patterns
+    "union": """
+duration: 0.1
+dt: 0.01
+integrator: implicit_euler
+forces: [{type: gravity}, {type: drag, k: 0.3}]
+planes: [{point: [0, -0.5, 0], normal: [0, 1, 0], response: penalty, stiffness: 2000}]
+particles:
+  - {id: a, pinned: true, position: [0, 1, 0]}
+  - {id: b, mass: 1, position: [0.5, 0.2, 0.1]}
+  - {id: c, mass: 2, position: [1, -0.45, 0]}
+  - {id: lone, mass: 0.5, position: [3, 0, 0]}
+springs: [{between: [a, b], ks: 100, kd: 0.5, rest: 0.5}, {between: [b, c], ks: 30, rest: 1}]
+""",
+}
+
+
+@pytest.mark.parametrize("name", sorted(ASSEMBLY_SCENES))
+def test_assembled_matrix_is_the_scaled_sum_of_the_jacobians(name):
+    """A written into the fixed pattern equals M - dt^2 Kx - dt Kv built by SciPy's own sums,
+    pinned rows and columns replaced by identity ones."""
+    compiled = compile_scene(load_scene_text(ASSEMBLY_SCENES[name]).scene, "t", backend="numpy")
+    integ = compiled.integrator
+    state = compiled.fresh_state()
+    compiled.dynamics.bind(state)
+    rng = np.random.default_rng(5)
+    x = state.particle_position + rng.normal(scale=0.05, size=state.particle_position.shape)
+    v = rng.normal(size=x.shape)
+    free = np.repeat(compiled.system.particle_inv_mass > 0, 3)
+    m_dof = np.repeat(compiled.system.particle_mass, 3)
+    kx, kv = integ.jacobians(x, v)
+    plan = implicit._Assembly(kx, kv, free, m_dof)
+    assert (plan.slots[0] is None and plan.slots[1] is None) == (name == "springs")
+    dt = 0.01
+    got = plan.fill(kx, kv, dt).toarray()
+    keep = np.outer(free, free)
+    want = np.where(keep, -dt * dt * kx.toarray() - dt * kv.toarray(), 0.0) + np.diag(
+        np.where(free, m_dof, 1.0)
+    )
+    assert np.allclose(got, want, rtol=1e-13, atol=1e-12 * np.abs(want).max())
+    assert plan.matches(kx, kv, free, m_dof) and not plan.matches(kx, None, free, m_dof)
+
+
+class _Identity:
+    @staticmethod
+    def solve(b: np.ndarray) -> np.ndarray:
+        return b.copy()
+
+
+def test_cg_converges_gives_up_on_poor_factors_and_survives_a_breakdown():
+    import scipy.sparse as sp
+
+    integ = implicit.ImplicitEuler.__new__(implicit.ImplicitEuler)
+    integ.cg_iterations = 0
+    n = 50
+    integ._dv = np.zeros(n)
+    a = sp.diags(np.linspace(1.0, 1e6, n)).tocsr()
+    rhs = np.random.default_rng(4).normal(size=n)
+    dv, info = integ._cg(a, rhs, implicit._Jacobi(a.diagonal()), 5)
+    assert info == 0 and np.linalg.norm(a @ dv - rhs) < implicit.CG_RTOL * np.linalg.norm(rhs)
+    # no preconditioning on a condition number of 1e6: the probe gives up after a few
+    # iterations instead of spending the whole allowance
+    before = integ.cg_iterations
+    _dv, info = integ._cg(a, rhs, _Identity(), 12, probe=True)
+    assert info == implicit.PROBE_ITERATIONS and integ.cg_iterations - before == implicit.PROBE_ITERATIONS
+    # a singular system (p.Ap = 0): a nonzero status and no exception
+    _dv, info = integ._cg(sp.csr_matrix((n, n)), rhs, _Identity(), 10)
+    assert info != 0
