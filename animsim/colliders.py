@@ -362,27 +362,56 @@ def shape_bounds(params: np.ndarray) -> np.ndarray:
     return out
 
 
-#: slack of the broad phase: relative, on a particle's ball and a collider's box
+#: slack of the broad phase: relative, on a particle's radius and a collider's box
 #: (far more than rounding in the exact tests that follow it)
 BROAD_RELATIVE = 1e-6
 
 
-def _grown_box(bounds: np.ndarray, off0: np.ndarray, off1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A collider's box where it ends the step, grown by how far it moved and a margin."""
+def _grown_box(
+    bounds: np.ndarray, off0: np.ndarray, off1: np.ndarray, longest: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """A collider's box where it ends the step, grown by how far it moved and a margin
+    (``longest``: the longest extent of a particle's step, for the tracing's tolerance)."""
     shift = off1 - off0
-    grow = float(np.sqrt(dot3(shift, shift))) + BROAD_RELATIVE * (1.0 + float(np.abs(bounds).max()))
+    grow = (
+        float(np.sqrt(dot3(shift, shift)))
+        + BROAD_RELATIVE * (1.0 + float(np.abs(bounds).max()))
+        + 1e-8 * (1.0 + longest)
+    )
     return bounds[:3] + off1 - grow, bounds[3:] + off1 + grow
 
 
-def _balls(
+def _boxes(
     x_old: np.ndarray, x: np.ndarray, radius: np.ndarray, rows: np.ndarray, project_only: bool
-) -> tuple[np.ndarray, np.ndarray]:
-    """Centres (k, 3) and radii (k,) of balls holding each row's step segment grown by its radius."""
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Boxes (3, k) lo and hi around each row's step (its end alone when ``project_only``), grown by
+    its radius, and the longest extent of a step.
+
+    A particle that touches a shape during its step has its segment within its
+    radius of the shape, so within its radius of the shape's box: one that
+    misses the box is left alone by the exact tests too (they only change
+    particles whose segment reaches the shape).
+    """
+    xs, r = x[rows], radius[rows] * (1.0 + BROAD_RELATIVE) + 1e-12
     if project_only:
-        return x[rows], radius[rows] * (1.0 + BROAD_RELATIVE) + 1e-12
-    seg = x[rows] - x_old[rows]
-    centre = x_old[rows] + 0.5 * seg
-    return centre, (0.5 * np.sqrt(dot3(seg, seg)) + radius[rows]) * (1.0 + BROAD_RELATIVE) + 1e-12
+        lo, hi, longest = xs - r[:, None], xs + r[:, None], 0.0
+    else:
+        xo = x_old[rows]
+        lo, hi = np.minimum(xo, xs), np.maximum(xo, xs)
+        longest = float((hi - lo).max(initial=0.0))
+        lo -= r[:, None]
+        hi += r[:, None]
+    return np.ascontiguousarray(lo.T), np.ascontiguousarray(hi.T), longest
+
+
+def _overlap(lo: np.ndarray, hi: np.ndarray, box_lo: np.ndarray, box_hi: np.ndarray) -> np.ndarray:
+    """Indices of the boxes (3, k) that overlap the box [box_lo, box_hi]."""
+    m = hi[0] >= box_lo[0]
+    for a in range(3):
+        if a:
+            m &= hi[a] >= box_lo[a]
+        m &= lo[a] <= box_hi[a]
+    return np.flatnonzero(m)
 
 
 def resolve_numpy(
@@ -411,23 +440,20 @@ def resolve_numpy(
     mov = np.flatnonzero(movable)
     if mov.size == 0:
         return False
-    centre, rho = _balls(x_old, x, radius, mov, project_only)
+    lo_p, hi_p, longest = _boxes(x_old, x, radius, mov, project_only)
     changed = False
     for c in range(params.shape[0]):  # colliders, not particles
         shape = _shape_of(params[c], float(friction[c]))
         center = shape.center + off1[c]
         u = (off1[c] - off0[c]) / dt  # the collider's velocity over the step
-        lo, hi = _grown_box(bounds[c], off0[c], off1[c])
-        near = np.flatnonzero(
-            ((centre + rho[:, None]) >= lo).all(axis=1) & ((centre - rho[:, None]) <= hi).all(axis=1)
-        )
+        near = _overlap(lo_p, hi_p, *_grown_box(bounds[c], off0[c], off1[c], longest))
         if near.size == 0:
             continue
         rows = mov[near]
         if project_only:
             if _project(shape, center, u, x, v, rows, radius):
                 changed = True
-                centre[near], rho[near] = _balls(x_old, x, radius, rows, True)
+                lo_p[:, near], hi_p[:, near], _ = _boxes(x_old, x, radius, rows, True)
             continue
         shift = off1[c] - off0[c]
         # Exact filter: the relative segment lies in the ball around its midpoint
@@ -493,8 +519,9 @@ def resolve_numpy(
             v[rows_hit] = vr + u + rest * mean_acc
         if _project(shape, center, u, x, v, cand, radius):
             changed = True
-        # the rows looked at may have moved: their balls follow them
-        centre[near], rho[near] = _balls(x_old, x, radius, rows, False)
+        # the rows looked at may have moved: their boxes follow them
+        lo_p[:, near], hi_p[:, near], moved = _boxes(x_old, x, radius, rows, False)
+        longest = max(longest, moved)
     return changed
 
 
@@ -655,7 +682,7 @@ def _collide(
         d0 = off1[c, 0] - off0[c, 0]
         d1 = off1[c, 1] - off0[c, 1]
         d2 = off1[c, 2] - off0[c, 2]
-        grow = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2) + 1e-6 * (1.0 + big)
+        grow = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2) + 1e-6 * (1.0 + big) + 1e-8
         for a in range(3):
             lo[c, a] = bounds[c, a] + off1[c, a] - grow
             hi[c, a] = bounds[c, 3 + a] + off1[c, a] + grow
@@ -671,28 +698,33 @@ def _collide(
             continue
         r = radius[i]
         stale = True
-        mx = my = mz = rho = 0.0
+        lx = ly = lz = hx = hy = hz = 0.0
         for c in range(n_col):
-            if stale:  # the ball of _balls
+            if stale:  # the box of _boxes
+                rr = r * (1.0 + 1e-6) + 1e-12
                 if project_only:
-                    mx, my, mz = x[i, 0], x[i, 1], x[i, 2]
-                    rho = r * (1.0 + 1e-6) + 1e-12
+                    lx, ly, lz = x[i, 0], x[i, 1], x[i, 2]
+                    hx, hy, hz = lx, ly, lz
                 else:
-                    g0 = x[i, 0] - x_old[i, 0]
-                    g1 = x[i, 1] - x_old[i, 1]
-                    g2 = x[i, 2] - x_old[i, 2]
-                    mx = x_old[i, 0] + 0.5 * g0
-                    my = x_old[i, 1] + 0.5 * g1
-                    mz = x_old[i, 2] + 0.5 * g2
-                    rho = (0.5 * np.sqrt(g0 * g0 + g1 * g1 + g2 * g2) + r) * (1.0 + 1e-6) + 1e-12
+                    lx, hx = min(x_old[i, 0], x[i, 0]), max(x_old[i, 0], x[i, 0])
+                    ly, hy = min(x_old[i, 1], x[i, 1]), max(x_old[i, 1], x[i, 1])
+                    lz, hz = min(x_old[i, 2], x[i, 2]), max(x_old[i, 2], x[i, 2])
+                    # the tracing's tolerance grows with the step's length
+                    rr += 1e-8 * max(hx - lx, max(hy - ly, hz - lz))
+                lx -= rr
+                ly -= rr
+                lz -= rr
+                hx += rr
+                hy += rr
+                hz += rr
                 stale = False
             if not (
-                mx + rho >= lo[c, 0]
-                and my + rho >= lo[c, 1]
-                and mz + rho >= lo[c, 2]
-                and mx - rho <= hi[c, 0]
-                and my - rho <= hi[c, 1]
-                and mz - rho <= hi[c, 2]
+                hx >= lo[c, 0]
+                and hy >= lo[c, 1]
+                and hz >= lo[c, 2]
+                and lx <= hi[c, 0]
+                and ly <= hi[c, 1]
+                and lz <= hi[c, 2]
             ):
                 continue
             pr = params[c]
