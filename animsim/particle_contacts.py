@@ -404,10 +404,10 @@ class ParticleContacts(StepStage):
                 d = d[active]
             if d.shape[0] == 0:
                 return False
-            half = 0.5 * (d.max(axis=0) - d.min(axis=0))
-            spread = float(np.sqrt(half @ half))
-        # every displacement lies within ``spread`` of one common shift, so any two
-        # particles have closed by at most 2 spread
+            d -= 0.5 * (d.max(axis=0) + d.min(axis=0))
+            spread = float(np.sqrt(dot3(d, d).max()))
+        # every displacement lies within ``spread`` of one common shift c (the centre of
+        # their box), so any two particles have closed by at most |d_i - c| + |d_j - c| <= 2 spread
         return not (2.0 * spread <= SKIN_USE * self._skin)
 
     def _rebuild(self, x: np.ndarray, active: np.ndarray) -> None:
@@ -554,9 +554,10 @@ def numba_kernels() -> NumbaKernels:
 
         Cells ``reach`` wide: a dense grid over the particles' box when it has not
         many more cells than particles (grains in a box), else a spatial hash.
-        Rows are counting-sorted by cell; each row then looks in the 27 cells
-        around its own and keeps the later rows, sorted: the list comes out in
-        (i, j) order without a global sort.
+        Rows are counting-sorted by cell; each one looks at the later rows of its
+        own cell and at the rows of the 13 cells after its own (half of the 26
+        around it: every pair of cells once), and the pairs found are put in
+        (i, j) order by a counting sort on i.
         """
         n = x.shape[0]
         lo = np.full(3, np.inf)
@@ -617,65 +618,74 @@ def numba_kernels() -> NumbaKernels:
             if active[i]:
                 order[fill[key[i]]] = i
                 fill[key[i]] += 1
+        # copies in cell order: the scan below reads memory in sequence
+        xs = np.empty((m, 3))
+        cs = np.empty((m, 3), dtype=np.int64)
+        for k in range(m):
+            for a in range(3):
+                xs[k, a] = x[order[k], a]
+                cs[k, a] = cc[order[k], a]
         r2 = reach * reach
-        out_i = np.empty(max(16, 8 * m), dtype=np.int64)
-        out_j = np.empty(max(16, 8 * m), dtype=np.int64)
-        near = np.empty(64, dtype=np.int64)
+        raw_i = np.empty(max(16, 8 * m), dtype=np.int64)
+        raw_j = np.empty(max(16, 8 * m), dtype=np.int64)
         npairs = 0
+        for ka in range(m):
+            # the own cell and the 13 cells after it in (x, y, z) order: each pair of cells once
+            for q in range(13, 27):
+                gx = cs[ka, 0] + q // 9 - 1
+                gy = cs[ka, 1] + (q // 3) % 3 - 1
+                gz = cs[ka, 2] + q % 3 - 1
+                if dense:
+                    if gx < 0 or gy < 0 or gz < 0 or gx >= dims[0] or gy >= dims[1] or gz >= dims[2]:
+                        continue
+                    b = (gx * dims[1] + gy) * dims[2] + gz
+                else:
+                    b = cell_hash(gx, gy, gz, size)
+                first = ka + 1 if q == 13 else start[b]
+                for kb in range(first, start[b + 1]):
+                    if not dense and (cs[kb, 0] != gx or cs[kb, 1] != gy or cs[kb, 2] != gz):
+                        continue
+                    t0 = xs[kb, 0] - xs[ka, 0]
+                    t1 = xs[kb, 1] - xs[ka, 1]
+                    t2 = xs[kb, 2] - xs[ka, 2]
+                    if not (t0 * t0 + t1 * t1 + t2 * t2 <= r2):  # NaN too
+                        continue
+                    i = min(order[ka], order[kb])
+                    j = max(order[ka], order[kb])
+                    if exclude.shape[0] and excluded(exclude, i * n + j):
+                        continue
+                    if npairs == raw_i.shape[0]:
+                        gi = np.empty(2 * npairs, dtype=np.int64)
+                        gj = np.empty(2 * npairs, dtype=np.int64)
+                        gi[:npairs] = raw_i[:npairs]
+                        gj[:npairs] = raw_j[:npairs]
+                        raw_i, raw_j = gi, gj
+                    raw_i[npairs] = i
+                    raw_j[npairs] = j
+                    npairs += 1
+        # (i, j) order: a counting sort by i, then each i's handful of j by insertion
+        ptr = np.zeros(n + 1, dtype=np.int64)
+        for k in range(npairs):
+            ptr[raw_i[k] + 1] += 1
         for i in range(n):
-            if not active[i]:
-                continue
-            cnt = 0
-            for dx in range(-1, 2):
-                gx = cc[i, 0] + dx
-                for dy in range(-1, 2):
-                    gy = cc[i, 1] + dy
-                    for dz in range(-1, 2):
-                        gz = cc[i, 2] + dz
-                        if dense:
-                            if gx < 0 or gy < 0 or gz < 0 or gx >= dims[0] or gy >= dims[1] or gz >= dims[2]:
-                                continue
-                            b = (gx * dims[1] + gy) * dims[2] + gz
-                        else:
-                            b = cell_hash(gx, gy, gz, size)
-                        for s in range(start[b], start[b + 1]):
-                            j = order[s]
-                            if j <= i:
-                                continue
-                            if not dense and (cc[j, 0] != gx or cc[j, 1] != gy or cc[j, 2] != gz):
-                                continue
-                            t0 = x[j, 0] - x[i, 0]
-                            t1 = x[j, 1] - x[i, 1]
-                            t2 = x[j, 2] - x[i, 2]
-                            if not (t0 * t0 + t1 * t1 + t2 * t2 <= r2):  # NaN too
-                                continue
-                            if exclude.shape[0] and excluded(exclude, i * n + j):
-                                continue
-                            if cnt == near.shape[0]:
-                                grown = np.empty(2 * cnt, dtype=np.int64)
-                                grown[:cnt] = near[:cnt]
-                                near = grown
-                            near[cnt] = j
-                            cnt += 1
-            for a in range(1, cnt):  # insertion sort: a handful of neighbours
-                t = near[a]
+            ptr[i + 1] += ptr[i]
+        at = ptr[:-1].copy()
+        out_i = np.empty(npairs, dtype=np.int64)
+        out_j = np.empty(npairs, dtype=np.int64)
+        for k in range(npairs):
+            i = raw_i[k]
+            out_i[at[i]] = i
+            out_j[at[i]] = raw_j[k]
+            at[i] += 1
+        for i in range(n):
+            for a in range(ptr[i] + 1, ptr[i + 1]):
+                t = out_j[a]
                 b2 = a - 1
-                while b2 >= 0 and near[b2] > t:
-                    near[b2 + 1] = near[b2]
+                while b2 >= ptr[i] and out_j[b2] > t:
+                    out_j[b2 + 1] = out_j[b2]
                     b2 -= 1
-                near[b2 + 1] = t
-            if npairs + cnt > out_i.shape[0]:
-                cap = 2 * (npairs + cnt)
-                gi = np.empty(cap, dtype=np.int64)
-                gj = np.empty(cap, dtype=np.int64)
-                gi[:npairs] = out_i[:npairs]
-                gj[:npairs] = out_j[:npairs]
-                out_i, out_j = gi, gj
-            for a in range(cnt):
-                out_i[npairs] = i
-                out_j[npairs] = near[a]
-                npairs += 1
-        return out_i[:npairs].copy(), out_j[:npairs].copy()
+                out_j[b2 + 1] = t
+        return out_i, out_j
 
     @numba.njit(cache=True)
     def find_pairs(x, radius, active, exclude, cell):  # pragma: no cover - compiled
@@ -697,7 +707,7 @@ def numba_kernels() -> NumbaKernels:
 
     @numba.njit(cache=True)
     def spread(x, x_built, active):  # pragma: no cover - compiled
-        """Half the diagonal of the box of every active row's displacement (inf if not finite)."""
+        """The farthest active row's displacement from the centre of all their box (inf if not finite)."""
         lo = np.full(3, np.inf)
         hi = np.full(3, -np.inf)
         for i in range(x.shape[0]):
@@ -708,11 +718,18 @@ def numba_kernels() -> NumbaKernels:
                         return np.inf
                     lo[a] = min(lo[a], d)
                     hi[a] = max(hi[a], d)
+        if not hi[0] >= lo[0]:
+            return 0.0
+        c0 = 0.5 * (hi[0] + lo[0])
+        c1 = 0.5 * (hi[1] + lo[1])
+        c2 = 0.5 * (hi[2] + lo[2])
         s = 0.0
-        for a in range(3):
-            if hi[a] >= lo[a]:
-                h = 0.5 * (hi[a] - lo[a])
-                s += h * h
+        for i in range(x.shape[0]):
+            if active[i]:
+                e0 = (x[i, 0] - x_built[i, 0]) - c0
+                e1 = (x[i, 1] - x_built[i, 1]) - c1
+                e2 = (x[i, 2] - x_built[i, 2]) - c2
+                s = max(s, e0 * e0 + e1 * e1 + e2 * e2)
         return np.sqrt(s)
 
     @numba.njit(cache=True)
