@@ -165,8 +165,8 @@ def _dot3_into(a: np.ndarray, b: np.ndarray, out: np.ndarray, tmp: np.ndarray) -
 
 def _gather_diff(a: np.ndarray, i: np.ndarray, j: np.ndarray, out: np.ndarray, tmp: np.ndarray) -> np.ndarray:
     """``a[j] - a[i]`` into ``out``."""
-    np.take(a, j, axis=0, out=out)
-    np.take(a, i, axis=0, out=tmp)
+    np.take(a, j, axis=0, out=out, mode="clip")  # "raise" would buffer the output
+    np.take(a, i, axis=0, out=tmp, mode="clip")
     out -= tmp
     return out
 
@@ -236,8 +236,9 @@ def resolve_pairs_numpy(
         """source[j] - source[i] as (3, P)."""
         np.copyto(state_t, source.T)
         for a in range(3):
-            np.take(state_t[a], j, out=d[a])
-            np.take(state_t[a], i, out=t1)
+            # mode "clip": with "raise" (the default) take buffers its output; the rows are valid
+            np.take(state_t[a], j, out=d[a], mode="clip")
+            np.take(state_t[a], i, out=t1, mode="clip")
             d[a] -= t1
         return d
 
@@ -421,7 +422,11 @@ class ParticleContacts(StepStage):
                 d = d[active]
             if d.shape[0] == 0:
                 return False
-            d -= 0.5 * (d.max(axis=0) + d.min(axis=0))
+            hi, lo = d.max(axis=0), d.min(axis=0)
+            half = 0.5 * (hi - lo)
+            if 2.0 * float(np.sqrt(half @ half)) <= SKIN_USE * self._skin:
+                return False  # even the corners of the displacements' box are near enough
+            d -= 0.5 * (hi + lo)
             spread = float(np.sqrt(dot3(d, d).max()))
         # every displacement lies within ``spread`` of one common shift c (the centre of
         # their box), so any two particles have closed by at most |d_i - c| + |d_j - c| <= 2 spread
