@@ -40,12 +40,10 @@ that touch and fall together) ends its iterations: the passes after it would
 change nothing either.
 
 Both backends do the same operations in the same order: every particle's
-corrections are summed in pair order, the pairs where it is the second
-particle first (they come earlier in (i, j) order), so the backends agree to
-the bit (granular flow is chaotic: any last-bit difference would grow). The
-numba kernel sums each particle's corrections in its own loop over the
-particles rather than scattering them pair by pair, which is what lets it run
-those loops on several threads and still give the same bits.
+corrections are summed from 0.0 in pair order (the numba kernel scatters pair
+by pair, NumPy adds with ``np.add.at``, which is unbuffered and in index
+order), so the backends agree to the bit (granular flow is chaotic: any
+last-bit difference would grow).
 
 Pinned particles act as infinitely heavy; dead emitter slots and rigid-body
 rows take no part. Two particles joined by a spring whose rest length is
@@ -494,12 +492,8 @@ class ParticleContacts(StepStage):
                 b.get("nrm", (p, 3)),
                 b.get("tgt", (p,)),
                 b.get("lam", (p,)),
-                b.get("q", (p,)),
-                b.get("q3", (p, 3)),
-                b.get("jk", (p,), np.int64),
-                b.get("jptr", (n_rows + 1,), np.int64),
-                b.get("istart", (n_rows + 1,), np.int64),
-                b.get("cursor", (n_rows,), np.int64),
+                b.get("dv", (n_rows, 3)),
+                b.get("count", (n_rows,), np.int64),
             )
             self.pairs_last = int(found)
             return bool(changed)
@@ -777,19 +771,14 @@ def numba_kernels() -> NumbaKernels:
         nrm,
         tgt,
         lam,
-        q,
-        q3,
-        jk,
-        jptr,
-        istart,
-        cursor,
+        dv,
+        count,
     ):  # pragma: no cover - compiled
         """Keep the candidates that overlap, then the passes of :func:`resolve_pairs_numpy`.
 
-        Each particle's corrections are summed in pair order in a loop over the
-        particles: first the pairs where it is j (``jk``, by a counting sort on j,
-        stable), then those where it is i (a run of the list, sorted by i).
-        Returns (overlapping pairs, whether any pair was resolved).
+        ``pi`` .. ``lam``: buffers of at least the candidates' length; ``dv`` (N, 3)
+        and ``count`` (N,): per particle. Returns (overlapping pairs, whether any
+        pair was resolved).
         """
         n_rows = x.shape[0]
         found = 0
@@ -809,26 +798,16 @@ def numba_kernels() -> NumbaKernels:
                 p += 1
         if p == 0:
             return found, False
-        jptr[:] = 0
-        istart[:] = 0
+        # contacts per particle (the relaxation's averaging)
+        count[:] = 0
         for k in range(p):
-            jptr[pj[k] + 1] += 1
-            istart[pi[k] + 1] += 1
-        for r in range(n_rows):
-            jptr[r + 1] += jptr[r]
-            istart[r + 1] += istart[r]
-        for r in range(n_rows):
-            cursor[r] = jptr[r]
-        for k in range(p):
-            jk[cursor[pj[k]]] = k
-            cursor[pj[k]] += 1
+            count[pi[k]] += 1
+            count[pj[k]] += 1
         for k in range(p):
             i = pi[k]
             j = pj[k]
             w[k] = inv_mass[i] + inv_mass[j]
-            ni = (jptr[i + 1] - jptr[i]) + (istart[i + 1] - istart[i])
-            nj = (jptr[j + 1] - jptr[j]) + (istart[j + 1] - istart[j])
-            rel[k] = min(relax_factor / max(ni, nj), 1.0)
+            rel[k] = min(relax_factor / max(count[i], count[j]), 1.0)
             d2 = 0.0
             for a in range(3):
                 t = x[j, a] - x[i, a]
@@ -849,7 +828,10 @@ def numba_kernels() -> NumbaKernels:
             resting = -vn0 <= 2.0 * max(-ar, 0.0) * dt
             tgt[k] = -e * vn0 if (vn0 < 0 and not resting) else 0.0
             lam[k] = 0.0
+        # each pass scatters pair by pair into dv (every particle's sum in pair order, from
+        # 0.0), then adds dv / m; a pass that changed nothing adds nothing
         for _ in range(iterations):
+            dv[:] = 0.0
             moved = False
             for k in range(p):
                 i = pi[k]
@@ -861,29 +843,19 @@ def numba_kernels() -> NumbaKernels:
                 new = max(lam[k] + dl, 0.0)
                 dl = new - lam[k]
                 lam[k] = new
-                q[k] = dl
                 if dl != 0.0:
                     moved = True
+                for a in range(3):
+                    dv[i, a] -= dl * nrm[k, a]
+                    dv[j, a] += dl * nrm[k, a]
             if not moved:
                 break
             for r in range(n_rows):
-                a0 = 0.0
-                a1 = 0.0
-                a2 = 0.0
-                for s in range(jptr[r], jptr[r + 1]):
-                    k = jk[s]
-                    a0 += q[k] * nrm[k, 0]
-                    a1 += q[k] * nrm[k, 1]
-                    a2 += q[k] * nrm[k, 2]
-                for k in range(istart[r], istart[r + 1]):
-                    a0 -= q[k] * nrm[k, 0]
-                    a1 -= q[k] * nrm[k, 1]
-                    a2 -= q[k] * nrm[k, 2]
                 w_r = inv_mass[r]
-                v[r, 0] += a0 * w_r
-                v[r, 1] += a1 * w_r
-                v[r, 2] += a2 * w_r
+                for a in range(3):
+                    v[r, a] += dv[r, a] * w_r
         if mu > 0:
+            dv[:] = 0.0
             for k in range(p):
                 i = pi[k]
                 j = pj[k]
@@ -894,33 +866,20 @@ def numba_kernels() -> NumbaKernels:
                 t1 = v[j, 1] - v[i, 1] - vn * nrm[k, 1]
                 t2 = v[j, 2] - v[i, 2] - vn * nrm[k, 2]
                 speed = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
-                if speed > 0:
+                if speed > 0:  # else it adds nothing
                     jt = min(speed / w[k] * rel[k], mu * lam[k]) / speed
-                    q3[k, 0] = jt * t0
-                    q3[k, 1] = jt * t1
-                    q3[k, 2] = jt * t2
-                else:  # adds nothing: a sum that starts at 0.0 is never -0.0, so +-0.0 changes no bit
-                    q3[k, 0] = 0.0
-                    q3[k, 1] = 0.0
-                    q3[k, 2] = 0.0
+                    dv[i, 0] += jt * t0
+                    dv[i, 1] += jt * t1
+                    dv[i, 2] += jt * t2
+                    dv[j, 0] -= jt * t0
+                    dv[j, 1] -= jt * t1
+                    dv[j, 2] -= jt * t2
             for r in range(n_rows):
-                a0 = 0.0
-                a1 = 0.0
-                a2 = 0.0
-                for s in range(jptr[r], jptr[r + 1]):
-                    k = jk[s]
-                    a0 -= q3[k, 0]
-                    a1 -= q3[k, 1]
-                    a2 -= q3[k, 2]
-                for k in range(istart[r], istart[r + 1]):
-                    a0 += q3[k, 0]
-                    a1 += q3[k, 1]
-                    a2 += q3[k, 2]
                 w_r = inv_mass[r]
-                v[r, 0] += a0 * w_r
-                v[r, 1] += a1 * w_r
-                v[r, 2] += a2 * w_r
+                for a in range(3):
+                    v[r, a] += dv[r, a] * w_r
         for _ in range(iterations):
+            dv[:] = 0.0
             moved = False
             for k in range(p):
                 i = pi[k]
@@ -931,9 +890,6 @@ def numba_kernels() -> NumbaKernels:
                 dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
                 over = radius[i] + radius[j] - dist
                 if over <= 0:
-                    q3[k, 0] = 0.0
-                    q3[k, 1] = 0.0
-                    q3[k, 2] = 0.0
                     continue
                 if dist > 0:
                     d0, d1, d2 = d0 / dist, d1 / dist, d2 / dist
@@ -942,28 +898,18 @@ def numba_kernels() -> NumbaKernels:
                 c = over / w[k] * rel[k]
                 if c != 0.0:
                     moved = True
-                q3[k, 0] = c * d0
-                q3[k, 1] = c * d1
-                q3[k, 2] = c * d2
+                dv[i, 0] -= c * d0
+                dv[i, 1] -= c * d1
+                dv[i, 2] -= c * d2
+                dv[j, 0] += c * d0
+                dv[j, 1] += c * d1
+                dv[j, 2] += c * d2
             if not moved:
                 break
             for r in range(n_rows):
-                a0 = 0.0
-                a1 = 0.0
-                a2 = 0.0
-                for s in range(jptr[r], jptr[r + 1]):
-                    k = jk[s]
-                    a0 += q3[k, 0]
-                    a1 += q3[k, 1]
-                    a2 += q3[k, 2]
-                for k in range(istart[r], istart[r + 1]):
-                    a0 -= q3[k, 0]
-                    a1 -= q3[k, 1]
-                    a2 -= q3[k, 2]
                 w_r = inv_mass[r]
-                x[r, 0] += a0 * w_r
-                x[r, 1] += a1 * w_r
-                x[r, 2] += a2 * w_r
+                for a in range(3):
+                    x[r, a] += dv[r, a] * w_r
         return found, True
 
     _KERNELS = NumbaKernels(candidates, contact_step, find_pairs, spread)
