@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from animsim.collisions import RESTING_STEPS, _apply_friction
-from animsim.elements import StepStage
+from animsim.elements import StepStage, numba_helper
 from animsim.vec import dot3
 
 SPHERE, BOX, CAPSULE = 0, 1, 2
@@ -198,6 +198,7 @@ class Colliders(StepStage):
         self.params = np.array([s.packed() for s in shapes]).reshape(-1, PARAMS)
         self.params[:, 20] = [s.restitution for s in shapes]
         self.friction = np.array([s.friction for s in shapes], dtype=np.float64)
+        self.bounds = shape_bounds(self.params)
         self._kernel = numba_kernel() if backend == "numba" else None
         self.no_closed_form = "solid colliders"
         self.injects = bool((self.moving >= 0).any())
@@ -209,6 +210,9 @@ class Colliders(StepStage):
             f"{v} {k}{('es' if k == 'box' else 's') if v > 1 else ''}" for k, v in counts.items()
         )
         n_moving = int((self.moving >= 0).sum())
+        if n_moving == 0:
+            # static shapes need no clock: the numba backend can run them inside its fused chunks
+            self.numba_stage_source = _stage_kernel
         self.label = (
             f"colliders: {what}"
             + (f" ({n_moving} keyframed)" if n_moving else " (static)")
@@ -281,6 +285,7 @@ class Colliders(StepStage):
                 self._kernel(
                     self.params,
                     self.friction,
+                    self.bounds,
                     off0,
                     off1,
                     x_old,
@@ -290,12 +295,32 @@ class Colliders(StepStage):
                     dt,
                     self.radius,
                     movable,
+                    inv_mass,
                     project_only,
                 )
             )
         return resolve_numpy(
-            self.params, self.friction, off0, off1, x_old, v_old, x, v, dt, self.radius, movable, project_only
+            self.params,
+            self.friction,
+            off0,
+            off1,
+            x_old,
+            v_old,
+            x,
+            v,
+            dt,
+            self.radius,
+            movable,
+            project_only,
+            self.bounds,
         )
+
+    def numba_stage_params(self) -> tuple[np.ndarray, np.ndarray]:
+        """The fused stage's numbers (static colliders only): see :func:`_stage_kernel`."""
+        fp = np.concatenate(
+            [[len(self.shapes)], self.params.ravel(), self.friction, self.bounds.ravel(), self.radius]
+        )
+        return np.ascontiguousarray(fp, dtype=np.float64), self.active.astype(np.int64)
 
     def project(self, state, t0: float, t1: float) -> bool:
         """Push out of every collider whatever another stage (particle contacts) pushed in."""
@@ -316,6 +341,79 @@ def _shape_of(params: np.ndarray, friction: float) -> Shape:
     )
 
 
+def shape_bounds(params: np.ndarray) -> np.ndarray:
+    """(C, 6): each collider's axis-aligned box [lo (3), hi (3)] at its reference position.
+
+    The broad phase of both kernels: a particle whose ball (its step's segment
+    and its radius) misses a collider's box, grown by how far the collider moved
+    in the step, cannot touch the collider, so neither kernel looks further.
+    """
+    out = np.zeros((params.shape[0], 6))
+    for c, pr in enumerate(params):  # colliders, not particles
+        kind, center = int(pr[0]), pr[1:4]
+        if kind == SPHERE:
+            ext = np.full(3, pr[4])
+        elif kind == CAPSULE:
+            ext = np.abs(pr[17:20]) + pr[4]
+        else:
+            ext = np.abs(pr[8:17].reshape(3, 3)) @ pr[5:8]
+        out[c, :3] = center - ext
+        out[c, 3:] = center + ext
+    return out
+
+
+#: slack of the broad phase: relative, on a particle's radius and a collider's box
+#: (far more than rounding in the exact tests that follow it)
+BROAD_RELATIVE = 1e-6
+
+
+def _grown_box(
+    bounds: np.ndarray, off0: np.ndarray, off1: np.ndarray, longest: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """A collider's box where it ends the step, grown by how far it moved and a margin
+    (``longest``: the longest extent of a particle's step, for the tracing's tolerance)."""
+    shift = off1 - off0
+    grow = (
+        float(np.sqrt(dot3(shift, shift)))
+        + BROAD_RELATIVE * (1.0 + float(np.abs(bounds).max()))
+        + 1e-8 * (1.0 + longest)
+    )
+    return bounds[:3] + off1 - grow, bounds[3:] + off1 + grow
+
+
+def _boxes(
+    x_old: np.ndarray, x: np.ndarray, radius: np.ndarray, rows: np.ndarray, project_only: bool
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Boxes (3, k) lo and hi around each row's step (its end alone when ``project_only``), grown by
+    its radius, and the longest extent of a step.
+
+    A particle that touches a shape during its step has its segment within its
+    radius of the shape, so within its radius of the shape's box: one that
+    misses the box is left alone by the exact tests too (they only change
+    particles whose segment reaches the shape).
+    """
+    xs, r = x[rows], radius[rows] * (1.0 + BROAD_RELATIVE) + 1e-12
+    if project_only:
+        lo, hi, longest = xs - r[:, None], xs + r[:, None], 0.0
+    else:
+        xo = x_old[rows]
+        lo, hi = np.minimum(xo, xs), np.maximum(xo, xs)
+        longest = float((hi - lo).max(initial=0.0))
+        lo -= r[:, None]
+        hi += r[:, None]
+    return np.ascontiguousarray(lo.T), np.ascontiguousarray(hi.T), longest
+
+
+def _overlap(lo: np.ndarray, hi: np.ndarray, box_lo: np.ndarray, box_hi: np.ndarray) -> np.ndarray:
+    """Indices of the boxes (3, k) that overlap the box [box_lo, box_hi]."""
+    m = hi[0] >= box_lo[0]
+    for a in range(3):
+        if a:
+            m &= hi[a] >= box_lo[a]
+        m &= lo[a] <= box_hi[a]
+    return np.flatnonzero(m)
+
+
 def resolve_numpy(
     params: np.ndarray,
     friction: np.ndarray,
@@ -329,34 +427,48 @@ def resolve_numpy(
     radius: np.ndarray,
     movable: np.ndarray,
     project_only: bool = False,
+    bounds: np.ndarray | None = None,
 ) -> bool:
     """Resolve the step x_old -> x against every collider, in place (NumPy kernel).
 
     ``project_only``: no time of impact, only push out whatever is inside
-    (after particle contacts moved particles).
+    (after particle contacts moved particles). ``bounds``: :func:`shape_bounds`
+    of ``params`` (computed when not given).
     """
+    if bounds is None:
+        bounds = shape_bounds(params)
+    mov = np.flatnonzero(movable)
+    if mov.size == 0:
+        return False
+    lo_p, hi_p, longest = _boxes(x_old, x, radius, mov, project_only)
     changed = False
     for c in range(params.shape[0]):  # colliders, not particles
         shape = _shape_of(params[c], float(friction[c]))
         center = shape.center + off1[c]
         u = (off1[c] - off0[c]) / dt  # the collider's velocity over the step
+        near = _overlap(lo_p, hi_p, *_grown_box(bounds[c], off0[c], off1[c], longest))
+        if near.size == 0:
+            continue
+        rows = mov[near]
         if project_only:
-            if _project(shape, center, u, x, v, np.flatnonzero(movable), radius):
+            if _project(shape, center, u, x, v, rows, radius):
                 changed = True
+                lo_p[:, near], hi_p[:, near], _ = _boxes(x_old, x, radius, rows, True)
             continue
         shift = off1[c] - off0[c]
-        # Cheap filter: the relative segment lies in the ball around its midpoint
+        # Exact filter: the relative segment lies in the ball around its midpoint
         # of radius half its length; if that ball misses the shape, so does the segment.
-        p0_all = x_old + shift
-        seg = x - p0_all
+        p0_all = x_old[rows] + shift
+        seg = x[rows] - p0_all
         mid = p0_all + 0.5 * seg  # the numba kernel's midpoint, to the bit
         half_len = 0.5 * np.sqrt(dot3(seg, seg))
         d_mid, _ = shape.signed_distance(mid, off1[c])
-        cand = np.flatnonzero((d_mid - radius <= half_len * (1 + 1e-12) + 1e-12) & movable)
+        keep = d_mid - radius[rows] <= half_len * (1 + 1e-12) + 1e-12
+        cand = rows[keep]
         if cand.size == 0:
             continue
         r = radius[cand]
-        p0 = p0_all[cand]
+        p0 = p0_all[keep]
         p1 = x[cand]
         sg = p1 - p0
         length = np.sqrt(dot3(sg, sg))
@@ -385,10 +497,10 @@ def resolve_numpy(
         h = np.flatnonzero(hit)
         if h.size:
             changed = True
-            rows = cand[h]
+            rows_hit = cand[h]
             sh = np.minimum(s[h], 1.0)[:, None]
             xc = p0[h] + sh * sg[h]
-            vo, vh = v_old[rows], v[rows]
+            vo, vh = v_old[rows_hit], v[rows_hit]
             mean_acc = (vh - vo) / dt
             vc = vo + sh * (vh - vo) - u  # relative velocity at the contact
             _, n = sdf(shape.kind, xc - center, shape.radius, shape.half, shape.rotation, shape.segment)
@@ -403,10 +515,13 @@ def resolve_numpy(
             vt = _apply_friction(vt, np.abs(vn_new - vn), shape.friction)
             vr = vt + vn_new[:, None] * n
             rest = (1.0 - sh) * dt
-            x[rows] = xc + rest * vr + 0.5 * rest * rest * mean_acc
-            v[rows] = vr + u + rest * mean_acc
+            x[rows_hit] = xc + rest * vr + 0.5 * rest * rest * mean_acc
+            v[rows_hit] = vr + u + rest * mean_acc
         if _project(shape, center, u, x, v, cand, radius):
             changed = True
+        # the rows looked at may have moved: their boxes follow them
+        lo_p[:, near], hi_p[:, near], moved = _boxes(x_old, x, radius, rows, False)
+        longest = max(longest, moved)
     return changed
 
 
@@ -447,211 +562,285 @@ def _project(
 
 
 # --- numba twin ------------------------------------------------------------------------------
+# Module-level helpers (compiled with the kernels that call them, animsim.elements.numba_helper):
+# the step-by-step kernel and the fused stage kernel run the same code.
 
-_NUMBA_KERNEL = None
 
-
-def numba_kernel():
-    """The numba kernel: the same algorithm as :func:`resolve_numpy`, one particle at a time."""
-    global _NUMBA_KERNEL
-    if _NUMBA_KERNEL is not None:
-        return _NUMBA_KERNEL
-    import numba
-
-    @numba.njit(cache=True, inline="always")
-    def sdf1(pr, px, py, pz, out_n):  # pragma: no cover - compiled
-        kind = int(pr[0])
-        if kind == 0:
-            ln = np.sqrt(px * px + py * py + pz * pz)
-            if ln > 0:
-                out_n[0] = px / ln
-                out_n[1] = py / ln
-                out_n[2] = pz / ln
+@numba_helper
+def _sdf1(pr, px, py, pz, out_n):  # pragma: no cover - compiled
+    """Signed distance of one point p (relative to the centre) and its normal (into ``out_n``)."""
+    kind = int(pr[0])
+    if kind == 0:
+        ln = np.sqrt(px * px + py * py + pz * pz)
+        if ln > 0:
+            out_n[0] = px / ln
+            out_n[1] = py / ln
+            out_n[2] = pz / ln
+        else:
+            out_n[0] = 0.0
+            out_n[1] = 1.0
+            out_n[2] = 0.0
+        return ln - pr[4]
+    if kind == 2:
+        sx, sy, sz = pr[17], pr[18], pr[19]
+        ss = sx * sx + sy * sy + sz * sz
+        t = 0.0
+        if ss > 0:
+            t = (px * sx + py * sy + pz * sz) / ss
+            if t < -1.0:
+                t = -1.0
+            elif t > 1.0:
+                t = 1.0
+        wx, wy, wz = px - t * sx, py - t * sy, pz - t * sz
+        ln = np.sqrt(wx * wx + wy * wy + wz * wz)
+        if ln > 0:
+            out_n[0] = wx / ln
+            out_n[1] = wy / ln
+            out_n[2] = wz / ln
+        else:
+            sn = np.sqrt(ss)
+            if abs(sx) < 0.9 * sn:  # cross(s, x-axis)
+                cx, cy, cz = 0.0, sz, -sy
+            else:  # cross(s, y-axis)
+                cx, cy, cz = -sz, 0.0, sx
+            cn = np.sqrt(cx * cx + cy * cy + cz * cz)
+            if cn > 0:
+                out_n[0] = cx / cn
+                out_n[1] = cy / cn
+                out_n[2] = cz / cn
             else:
                 out_n[0] = 0.0
                 out_n[1] = 1.0
                 out_n[2] = 0.0
-            return ln - pr[4]
-        if kind == 2:
-            sx, sy, sz = pr[17], pr[18], pr[19]
-            ss = sx * sx + sy * sy + sz * sz
-            t = 0.0
-            if ss > 0:
-                t = (px * sx + py * sy + pz * sz) / ss
-                if t < -1.0:
-                    t = -1.0
-                elif t > 1.0:
-                    t = 1.0
-            wx, wy, wz = px - t * sx, py - t * sy, pz - t * sz
-            ln = np.sqrt(wx * wx + wy * wy + wz * wz)
-            if ln > 0:
-                out_n[0] = wx / ln
-                out_n[1] = wy / ln
-                out_n[2] = wz / ln
-            else:
-                sn = np.sqrt(ss)
-                if abs(sx) < 0.9 * sn:  # cross(s, x-axis)
-                    cx, cy, cz = 0.0, sz, -sy
-                else:  # cross(s, y-axis)
-                    cx, cy, cz = -sz, 0.0, sx
-                cn = np.sqrt(cx * cx + cy * cy + cz * cz)
-                if cn > 0:
-                    out_n[0] = cx / cn
-                    out_n[1] = cy / cn
-                    out_n[2] = cz / cn
-                else:
-                    out_n[0] = 0.0
-                    out_n[1] = 1.0
-                    out_n[2] = 0.0
-            return ln - pr[4]
-        # box: q = R^T p, R row major at pr[8:17]
-        q0 = pr[8] * px + pr[11] * py + pr[14] * pz
-        q1 = pr[9] * px + pr[12] * py + pr[15] * pz
-        q2 = pr[10] * px + pr[13] * py + pr[16] * pz
-        e0 = abs(q0) - pr[5]
-        e1 = abs(q1) - pr[6]
-        e2 = abs(q2) - pr[7]
-        s0 = -1.0 if q0 < 0 else 1.0
-        s1 = -1.0 if q1 < 0 else 1.0
-        s2 = -1.0 if q2 < 0 else 1.0
-        o0 = max(e0, 0.0)
-        o1 = max(e1, 0.0)
-        o2 = max(e2, 0.0)
-        ol = np.sqrt(o0 * o0 + o1 * o1 + o2 * o2)
-        if ol > 0:
-            n0, n1, n2 = s0 * o0 / ol, s1 * o1 / ol, s2 * o2 / ol
-            d = ol
+        return ln - pr[4]
+    # box: q = R^T p, R row major at pr[8:17]
+    q0 = pr[8] * px + pr[11] * py + pr[14] * pz
+    q1 = pr[9] * px + pr[12] * py + pr[15] * pz
+    q2 = pr[10] * px + pr[13] * py + pr[16] * pz
+    e0 = abs(q0) - pr[5]
+    e1 = abs(q1) - pr[6]
+    e2 = abs(q2) - pr[7]
+    s0 = -1.0 if q0 < 0 else 1.0
+    s1 = -1.0 if q1 < 0 else 1.0
+    s2 = -1.0 if q2 < 0 else 1.0
+    o0 = max(e0, 0.0)
+    o1 = max(e1, 0.0)
+    o2 = max(e2, 0.0)
+    ol = np.sqrt(o0 * o0 + o1 * o1 + o2 * o2)
+    if ol > 0:
+        n0, n1, n2 = s0 * o0 / ol, s1 * o1 / ol, s2 * o2 / ol
+        d = ol
+    else:
+        n0 = n1 = n2 = 0.0
+        if e0 >= e1 and e0 >= e2:
+            n0 = s0
+            d = e0
+        elif e1 >= e2:
+            n1 = s1
+            d = e1
         else:
-            n0 = n1 = n2 = 0.0
-            if e0 >= e1 and e0 >= e2:
-                n0 = s0
-                d = e0
-            elif e1 >= e2:
-                n1 = s1
-                d = e1
-            else:
-                n2 = s2
-                d = e2
-        out_n[0] = pr[8] * n0 + pr[9] * n1 + pr[10] * n2
-        out_n[1] = pr[11] * n0 + pr[12] * n1 + pr[13] * n2
-        out_n[2] = pr[14] * n0 + pr[15] * n1 + pr[16] * n2
-        return d
+            n2 = s2
+            d = e2
+    out_n[0] = pr[8] * n0 + pr[9] * n1 + pr[10] * n2
+    out_n[1] = pr[11] * n0 + pr[12] * n1 + pr[13] * n2
+    out_n[2] = pr[14] * n0 + pr[15] * n1 + pr[16] * n2
+    return d
 
-    @numba.njit(cache=True)
-    def friction1(vt, dvn, mu):  # pragma: no cover - compiled
-        if mu == 0.0:
-            return
-        sp = np.sqrt(vt[0] * vt[0] + vt[1] * vt[1] + vt[2] * vt[2])
-        keep = 0.0
-        if sp > 0:
-            keep = max(sp - mu * dvn, 0.0) / sp
+
+@numba_helper
+def _friction1(vt, dvn, mu):  # pragma: no cover - compiled
+    if mu == 0.0:
+        return
+    sp = np.sqrt(vt[0] * vt[0] + vt[1] * vt[1] + vt[2] * vt[2])
+    keep = 0.0
+    if sp > 0:
+        keep = max(sp - mu * dvn, 0.0) / sp
+    for a in range(3):
+        vt[a] *= keep
+
+
+@numba_helper
+def _collide(
+    params, friction, bounds, off0, off1, x_old, v_old, x, v, dt, radius, movable, inv_mass, project_only
+):  # pragma: no cover - compiled
+    """The numba kernel: :func:`resolve_numpy`'s algorithm, one particle at a time.
+
+    Particles are independent here, so each runs through every collider in turn
+    (the NumPy kernel's order for that particle), with the same broad phase.
+    """
+    n_col = params.shape[0]
+    lo = np.empty((n_col, 3))
+    hi = np.empty((n_col, 3))
+    cen = np.empty((n_col, 3))
+    sh = np.empty((n_col, 3))
+    uu = np.empty((n_col, 3))
+    for c in range(n_col):
+        # _grown_box and the centre and velocity of resolve_numpy, operation for operation
+        big = 0.0
+        for a in range(6):
+            big = max(big, abs(bounds[c, a]))
+        d0 = off1[c, 0] - off0[c, 0]
+        d1 = off1[c, 1] - off0[c, 1]
+        d2 = off1[c, 2] - off0[c, 2]
+        grow = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2) + 1e-6 * (1.0 + big) + 1e-8
         for a in range(3):
-            vt[a] *= keep
-
-    @numba.njit(cache=True)
-    def resolve(
-        params, friction, off0, off1, x_old, v_old, x, v, dt, radius, movable, project_only
-    ):  # pragma: no cover
-        changed = False
-        n = np.zeros(3)
-        vt = np.zeros(3)
-        acc = np.zeros(3)
-        for c in range(params.shape[0]):
+            lo[c, a] = bounds[c, a] + off1[c, a] - grow
+            hi[c, a] = bounds[c, 3 + a] + off1[c, a] + grow
+            cen[c, a] = params[c, 1 + a] + off1[c, a]
+            sh[c, a] = off1[c, a] - off0[c, a]
+            uu[c, a] = sh[c, a] / dt
+    changed = False
+    n = np.zeros(3)
+    vt = np.zeros(3)
+    acc = np.zeros(3)
+    for i in range(x.shape[0]):
+        if not movable[i] or not inv_mass[i] > 0:
+            continue
+        r = radius[i]
+        stale = True
+        lx = ly = lz = hx = hy = hz = 0.0
+        for c in range(n_col):
+            if stale:  # the box of _boxes
+                rr = r * (1.0 + 1e-6) + 1e-12
+                if project_only:
+                    lx, ly, lz = x[i, 0], x[i, 1], x[i, 2]
+                    hx, hy, hz = lx, ly, lz
+                else:
+                    lx, hx = min(x_old[i, 0], x[i, 0]), max(x_old[i, 0], x[i, 0])
+                    ly, hy = min(x_old[i, 1], x[i, 1]), max(x_old[i, 1], x[i, 1])
+                    lz, hz = min(x_old[i, 2], x[i, 2]), max(x_old[i, 2], x[i, 2])
+                    # the tracing's tolerance grows with the step's length
+                    rr += 1e-8 * max(hx - lx, max(hy - ly, hz - lz))
+                lx -= rr
+                ly -= rr
+                lz -= rr
+                hx += rr
+                hy += rr
+                hz += rr
+                stale = False
+            if not (
+                hx >= lo[c, 0]
+                and hy >= lo[c, 1]
+                and hz >= lo[c, 2]
+                and lx <= hi[c, 0]
+                and ly <= hi[c, 1]
+                and lz <= hi[c, 2]
+            ):
+                continue
             pr = params[c]
             mu = friction[c]
             e_rest = pr[20]
-            cx, cy, cz = pr[1] + off1[c, 0], pr[2] + off1[c, 1], pr[3] + off1[c, 2]
-            shx, shy, shz = off1[c, 0] - off0[c, 0], off1[c, 1] - off0[c, 1], off1[c, 2] - off0[c, 2]
-            ux, uy, uz = shx / dt, shy / dt, shz / dt
-            for i in range(x.shape[0]):
-                if not movable[i]:
-                    continue
-                r = radius[i]
-                if project_only:
-                    hit = False
-                    sgx = sgy = sgz = 0.0
-                    p0x, p0y, p0z = x[i, 0], x[i, 1], x[i, 2]
-                    length = 0.0
-                    dm = -1.0
-                else:
-                    p0x, p0y, p0z = x_old[i, 0] + shx, x_old[i, 1] + shy, x_old[i, 2] + shz
-                    sgx, sgy, sgz = x[i, 0] - p0x, x[i, 1] - p0y, x[i, 2] - p0z
-                    length = np.sqrt(sgx * sgx + sgy * sgy + sgz * sgz)
-                    dm = sdf1(pr, p0x + 0.5 * sgx - cx, p0y + 0.5 * sgy - cy, p0z + 0.5 * sgz - cz, n) - r
-                if not (dm <= 0.5 * length * (1 + 1e-12) + 1e-12):
-                    continue
-                tol = 1e-9 * (1.0 + length)
-                s = 0.0
-                hit = False
-                for _ in range(0 if project_only else 48):
-                    d = sdf1(pr, p0x + s * sgx - cx, p0y + s * sgy - cy, p0z + s * sgz - cz, n) - r
-                    if d <= tol:
-                        hit = True
+            cx, cy, cz = cen[c, 0], cen[c, 1], cen[c, 2]
+            shx, shy, shz = sh[c, 0], sh[c, 1], sh[c, 2]
+            ux, uy, uz = uu[c, 0], uu[c, 1], uu[c, 2]
+            if project_only:
+                sgx = sgy = sgz = 0.0
+                p0x, p0y, p0z = x[i, 0], x[i, 1], x[i, 2]
+                length = 0.0
+                dm = -1.0
+            else:
+                p0x, p0y, p0z = x_old[i, 0] + shx, x_old[i, 1] + shy, x_old[i, 2] + shz
+                sgx, sgy, sgz = x[i, 0] - p0x, x[i, 1] - p0y, x[i, 2] - p0z
+                length = np.sqrt(sgx * sgx + sgy * sgy + sgz * sgz)
+                dm = _sdf1(pr, p0x + 0.5 * sgx - cx, p0y + 0.5 * sgy - cy, p0z + 0.5 * sgz - cz, n) - r
+            if not (dm <= 0.5 * length * (1 + 1e-12) + 1e-12):
+                continue
+            stale = True  # looked at: it may move
+            tol = 1e-9 * (1.0 + length)
+            s = 0.0
+            hit = False
+            for _ in range(0 if project_only else MARCH_STEPS):
+                d = _sdf1(pr, p0x + s * sgx - cx, p0y + s * sgy - cy, p0z + s * sgz - cz, n) - r
+                if d <= tol:
+                    hit = True
+                    break
+                s += d / length if length > 0 else 2.0
+                if s > 1.0:
+                    break
+            if hit:
+                changed = True
+                if s > 1.0:
+                    s = 1.0
+                xcx, xcy, xcz = p0x + s * sgx, p0y + s * sgy, p0z + s * sgz
+                _sdf1(pr, xcx - cx, xcy - cy, xcz - cz, n)
+                for a in range(3):
+                    acc[a] = (v[i, a] - v_old[i, a]) / dt
+                vcx = v_old[i, 0] + s * (v[i, 0] - v_old[i, 0]) - ux
+                vcy = v_old[i, 1] + s * (v[i, 1] - v_old[i, 1]) - uy
+                vcz = v_old[i, 2] + s * (v[i, 2] - v_old[i, 2]) - uz
+                vn = vcx * n[0] + vcy * n[1] + vcz * n[2]
+                an = acc[0] * n[0] + acc[1] * n[1] + acc[2] * n[2]
+                pressing = max(-an, 0.0)
+                vn_new = vn
+                if vn < 0:
+                    e = e_rest
+                    if -vn <= RESTING_STEPS * pressing * dt:
+                        e = 0.0
+                    vn_new = -e * vn
+                vt[0] = vcx - vn * n[0]
+                vt[1] = vcy - vn * n[1]
+                vt[2] = vcz - vn * n[2]
+                _friction1(vt, abs(vn_new - vn), mu)
+                rest = (1.0 - s) * dt
+                vrx = vt[0] + vn_new * n[0]
+                vry = vt[1] + vn_new * n[1]
+                vrz = vt[2] + vn_new * n[2]
+                x[i, 0] = xcx + rest * vrx + 0.5 * rest * rest * acc[0]
+                x[i, 1] = xcy + rest * vry + 0.5 * rest * rest * acc[1]
+                x[i, 2] = xcz + rest * vrz + 0.5 * rest * rest * acc[2]
+                v[i, 0] = vrx + ux + rest * acc[0]
+                v[i, 1] = vry + uy + rest * acc[1]
+                v[i, 2] = vrz + uz + rest * acc[2]
+            # projection (every candidate, as the NumPy kernel)
+            d = _sdf1(pr, x[i, 0] - cx, x[i, 1] - cy, x[i, 2] - cz, n) - r
+            if d < 0:
+                changed = True
+                bx, by, bz = x[i, 0] - d * n[0], x[i, 1] - d * n[1], x[i, 2] - d * n[2]
+                nx, ny, nz = n[0], n[1], n[2]
+                for _ in range(4):
+                    db = _sdf1(pr, bx - cx, by - cy, bz - cz, n) - r
+                    if db >= 0:
                         break
-                    s += d / length if length > 0 else 2.0
-                    if s > 1.0:
-                        break
-                if hit:
-                    changed = True
-                    if s > 1.0:
-                        s = 1.0
-                    xcx, xcy, xcz = p0x + s * sgx, p0y + s * sgy, p0z + s * sgz
-                    sdf1(pr, xcx - cx, xcy - cy, xcz - cz, n)
-                    for a in range(3):
-                        acc[a] = (v[i, a] - v_old[i, a]) / dt
-                    vcx = v_old[i, 0] + s * (v[i, 0] - v_old[i, 0]) - ux
-                    vcy = v_old[i, 1] + s * (v[i, 1] - v_old[i, 1]) - uy
-                    vcz = v_old[i, 2] + s * (v[i, 2] - v_old[i, 2]) - uz
-                    vn = vcx * n[0] + vcy * n[1] + vcz * n[2]
-                    an = acc[0] * n[0] + acc[1] * n[1] + acc[2] * n[2]
-                    pressing = max(-an, 0.0)
-                    vn_new = vn
-                    if vn < 0:
-                        e = e_rest
-                        if -vn <= 2.0 * pressing * dt:
-                            e = 0.0
-                        vn_new = -e * vn
-                    vt[0] = vcx - vn * n[0]
-                    vt[1] = vcy - vn * n[1]
-                    vt[2] = vcz - vn * n[2]
-                    friction1(vt, abs(vn_new - vn), mu)
-                    rest = (1.0 - s) * dt
-                    vrx = vt[0] + vn_new * n[0]
-                    vry = vt[1] + vn_new * n[1]
-                    vrz = vt[2] + vn_new * n[2]
-                    x[i, 0] = xcx + rest * vrx + 0.5 * rest * rest * acc[0]
-                    x[i, 1] = xcy + rest * vry + 0.5 * rest * rest * acc[1]
-                    x[i, 2] = xcz + rest * vrz + 0.5 * rest * rest * acc[2]
-                    v[i, 0] = vrx + ux + rest * acc[0]
-                    v[i, 1] = vry + uy + rest * acc[1]
-                    v[i, 2] = vrz + uz + rest * acc[2]
-                # projection (every candidate, as the NumPy kernel)
-                d = sdf1(pr, x[i, 0] - cx, x[i, 1] - cy, x[i, 2] - cz, n) - r
-                if d < 0:
-                    changed = True
-                    bx, by, bz = x[i, 0] - d * n[0], x[i, 1] - d * n[1], x[i, 2] - d * n[2]
-                    nx, ny, nz = n[0], n[1], n[2]
-                    for _ in range(4):
-                        db = sdf1(pr, bx - cx, by - cy, bz - cz, n) - r
-                        if db >= 0:
-                            break
-                        big = max(abs(bx), max(abs(by), abs(bz))) + 1.0
-                        push = np.spacing(big) * 4 - db
-                        bx += push * nx
-                        by += push * ny
-                        bz += push * nz
-                    x[i, 0], x[i, 1], x[i, 2] = bx, by, bz
-                    rvx, rvy, rvz = v[i, 0] - ux, v[i, 1] - uy, v[i, 2] - uz
-                    vn = rvx * nx + rvy * ny + rvz * nz
-                    inward = min(vn, 0.0)
-                    vt[0] = rvx - vn * nx
-                    vt[1] = rvy - vn * ny
-                    vt[2] = rvz - vn * nz
-                    friction1(vt, -inward, mu)
-                    v[i, 0] = vt[0] + (vn - inward) * nx + ux
-                    v[i, 1] = vt[1] + (vn - inward) * ny + uy
-                    v[i, 2] = vt[2] + (vn - inward) * nz + uz
-        return changed
+                    big = max(abs(bx), max(abs(by), abs(bz))) + 1.0
+                    push = np.spacing(big) * 4 - db
+                    bx += push * nx
+                    by += push * ny
+                    bz += push * nz
+                x[i, 0], x[i, 1], x[i, 2] = bx, by, bz
+                rvx, rvy, rvz = v[i, 0] - ux, v[i, 1] - uy, v[i, 2] - uz
+                vn = rvx * nx + rvy * ny + rvz * nz
+                inward = min(vn, 0.0)
+                vt[0] = rvx - vn * nx
+                vt[1] = rvy - vn * ny
+                vt[2] = rvz - vn * nz
+                _friction1(vt, -inward, mu)
+                v[i, 0] = vt[0] + (vn - inward) * nx + ux
+                v[i, 1] = vt[1] + (vn - inward) * ny + uy
+                v[i, 2] = vt[2] + (vn - inward) * nz + uz
+    return changed
 
-    _NUMBA_KERNEL = resolve
-    return resolve
+
+def _stage_kernel(x_old, v_old, x, v, dt, inv_mass, fp, ip):  # pragma: no cover - compiled
+    """Static colliders as a fused stage (stage_signature): fp = [C, params, friction, bounds, radius],
+    ip = the rows colliders act on (1) or not (0)."""
+    n_col = int(fp[0])
+    o = 1
+    params = np.ascontiguousarray(fp[o : o + PARAMS * n_col]).reshape((n_col, PARAMS))
+    o += PARAMS * n_col
+    friction = fp[o : o + n_col]
+    o += n_col
+    bounds = np.ascontiguousarray(fp[o : o + 6 * n_col]).reshape((n_col, 6))
+    o += 6 * n_col
+    radius = fp[o : o + x.shape[0]]
+    still = np.zeros((n_col, 3))
+    return _collide(
+        params, friction, bounds, still, still, x_old, v_old, x, v, dt, radius, ip, inv_mass, False
+    )
+
+
+def numba_kernel():
+    """The step-by-step numba kernel (:func:`_collide`), compiled or loaded on first use."""
+    from animsim.elements import jit_kernel
+
+    jit_kernel(_stage_kernel, stage=True)  # compiles this module's helpers (_collide among them)
+    return globals()["_collide"]

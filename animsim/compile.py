@@ -390,6 +390,8 @@ def compile_scene(
             "particle_color": [p.color for p in scene.particles],
             "particle_pinned": system.particle_pinned,
             "collider_surface": solids.collider_surface,
+            # trajectory files then say which springs tore when (animsim.export.trajectory)
+            "springs_can_tear": can_tear,
             **({} if bodies is None else {"bodies": _body_header(system, dynamics)}),
         },
         connectivity=connectivity([(s.id, e, base) for s, e, base in expanded]),

@@ -3,14 +3,19 @@
 After each step (and after the colliders), pairs of particles closer than the
 sum of their radii are found and resolved:
 
-* **Neighbours** never by all pairs: NumPy asks ``scipy.spatial.cKDTree`` for
-  the pairs within ``2 * max radius`` (``query_pairs``); numba hashes the
-  particles into a uniform grid of cells ``2 * max radius`` wide (Teschner et
-  al., "Optimized Spatial Hashing for Collision Detection of Deformable
-  Objects", VMV 2003) and looks in the 27 cells around each one. Both keep a
-  pair by the same test and sort the pairs by (i, j), and the passes below do
-  the same operations in the same order on both, so the backends agree to the
-  bit (granular flow is chaotic: any last-bit difference would grow).
+* **Neighbours** never by all pairs, and not searched afresh every step: a
+  Verlet list (Verlet, Phys. Rev. 159, 98, 1967; Allen and Tildesley,
+  "Computer Simulation of Liquids", section 5.2) keeps the *candidate* pairs
+  closer than ``2 * max radius + skin``, found by ``scipy.spatial.cKDTree``
+  (NumPy) or a uniform grid of cells that wide, sorted by cell with a counting
+  sort (numba; a spatial hash when the particles' box would need too many
+  cells, Teschner et al., "Optimized Spatial Hashing for Collision Detection
+  of Deformable Objects", VMV 2003). The list stays valid while no two
+  particles have closed by more than the skin, which the step checks from how
+  far the particles moved since it was built (the spread of their
+  displacements, so a pile falling as one never rebuilds it). Each step keeps
+  the candidates that overlap, by the same test on both backends, in (i, j)
+  order: the pairs are the same whenever the list was built.
 * **Velocities**: pairwise normal impulses along the line of centres, mass
   weighted (``J = -(1 + e) v_n / (1/m_i + 1/m_j)``, the textbook two-body
   impact, e.g. Goldstein, "Classical Mechanics", section 3.11), solved by a
@@ -30,6 +35,16 @@ sum of their radii are found and resolved:
   particle moving in proportion to its inverse mass, so the pair's centre of
   mass does not move (a few Jacobi passes, averaged as above).
 
+A pass that changes nothing (every correction exactly zero, as for grains
+that touch and fall together) ends its iterations: the passes after it would
+change nothing either.
+
+Both backends do the same operations in the same order: every particle's
+corrections are summed from 0.0 in pair order (the numba kernel scatters pair
+by pair, NumPy adds with ``np.add.at``, which is unbuffered and in index
+order), so the backends agree to the bit (granular flow is chaotic: any
+last-bit difference would grow).
+
 Pinned particles act as infinitely heavy; dead emitter slots and rigid-body
 rows take no part. Two particles joined by a spring whose rest length is
 shorter than the sum of their radii would touch at rest: their contact is
@@ -43,6 +58,8 @@ through each other within one step are not caught.
 
 from __future__ import annotations
 
+from typing import Any, NamedTuple
+
 import numpy as np
 
 from animsim.elements import StepStage
@@ -53,6 +70,11 @@ ITERATIONS = 6
 RESTING_STEPS = 2.0
 #: over-relaxation of the averaged Jacobi passes (1: plain averaging)
 RELAX = 1.5
+#: the Verlet list's skin, as a fraction of the largest contact distance ``2 * max radius``
+SKIN = 0.3
+#: the list is rebuilt once two particles may have closed by this fraction of the skin
+#: (the rest is margin for rounding in the distances)
+SKIN_USE = 0.9
 
 
 def spring_exclusions(index: np.ndarray, rest: np.ndarray, radius: np.ndarray, n: int) -> np.ndarray:
@@ -65,76 +87,91 @@ def spring_exclusions(index: np.ndarray, rest: np.ndarray, radius: np.ndarray, n
     return np.unique(a[near] * n + b[near])
 
 
+_EMPTY = np.zeros(0, dtype=np.int64)
+
+
+def candidates_numpy(
+    x: np.ndarray, active: np.ndarray, exclude: np.ndarray, reach: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs (i, j), i < j, of ``active`` rows at most about ``reach`` apart (cKDTree), sorted by (i, j).
+
+    The tree's own rounding may keep a pair a hair beyond ``reach`` or drop one a
+    hair inside it; callers pass a reach with room to spare.
+    """
+    from scipy.spatial import cKDTree
+
+    rows = np.flatnonzero(active)
+    if rows.size < 2 or not reach > 0:
+        return _EMPTY, _EMPTY
+    # an unbalanced tree builds in half the time and answers as fast for grains
+    tree = cKDTree(x[rows], balanced_tree=False, compact_nodes=False)
+    local = tree.query_pairs(reach, output_type="ndarray")
+    if local.size == 0:
+        return _EMPTY, _EMPTY
+    pairs = rows[local].astype(np.int64)
+    n = np.int64(len(x))
+    # (i, j) order by one sort of the keys i n + j (ten times faster than a lexsort)
+    keys = np.sort(np.minimum(pairs[:, 0], pairs[:, 1]) * n + np.maximum(pairs[:, 0], pairs[:, 1]))
+    if exclude.size:
+        keys = keys[~np.isin(keys, exclude, assume_unique=False)]
+    return keys // n, keys % n
+
+
 def find_pairs_numpy(
     x: np.ndarray, radius: np.ndarray, active: np.ndarray, exclude: np.ndarray
 ) -> np.ndarray:
-    """Overlapping pairs (P, 2), i < j, among ``active`` rows (cKDTree), sorted by (i, j).
+    """Overlapping pairs (P, 2), i < j, among ``active`` rows, sorted by (i, j).
 
     The same pairs in the same order as the numba grid: the tree only proposes
     candidates (within a reach a hair larger than ``2 * max radius``, so its own
     rounding never drops one), and the test that keeps a pair is the numba one,
     ``(d0 d0 + d1 d1) + d2 d2 < (r_i + r_j)^2`` with ``d = x_j - x_i``.
     """
-    from scipy.spatial import cKDTree
-
     rows = np.flatnonzero(active)
-    if rows.size < 2:
-        return np.zeros((0, 2), dtype=np.int64)
-    rmax = float(radius[rows].max())
-    if rmax <= 0:
-        return np.zeros((0, 2), dtype=np.int64)
-    tree = cKDTree(x[rows])
-    local = tree.query_pairs(2.0 * rmax * (1.0 + 1e-9), output_type="ndarray")
-    if local.size == 0:
-        return np.zeros((0, 2), dtype=np.int64)
-    pairs = rows[local].astype(np.int64)
-    pairs.sort(axis=1)
-    d = x[pairs[:, 1]] - x[pairs[:, 0]]
-    dist2 = dot3(d, d)
-    reach = radius[pairs[:, 0]] + radius[pairs[:, 1]]
-    keep = dist2 < reach * reach
-    if exclude.size:
-        keys = pairs[:, 0] * np.int64(len(x)) + pairs[:, 1]
-        keep &= ~np.isin(keys, exclude, assume_unique=False)
-    pairs = pairs[keep]
-    order = np.lexsort((pairs[:, 1], pairs[:, 0]))
-    return np.ascontiguousarray(pairs[order])
+    rmax = float(radius[rows].max()) if rows.size else 0.0
+    ci, cj = candidates_numpy(x, active, exclude, 2.0 * rmax * (1.0 + 1e-9))
+    d = x[cj] - x[ci]
+    reach = radius[ci] + radius[cj]
+    keep = dot3(d, d) < reach * reach
+    return np.stack([ci[keep], cj[keep]], axis=1).reshape(-1, 2)
 
 
-class _Scatter:
-    """Per-particle sums (n_rows, 3) of ``-q`` on ``i`` and ``+q`` on ``j``, in pair order.
+class _Buffers:
+    """Arrays kept between steps, so a step of 100,000 grains allocates (and page-faults) nothing big."""
 
-    ``np.bincount`` adds its weights bin by bin in array order from 0.0, so the
-    interleaved bins ``[3 i0 + (0, 1, 2), 3 j0 + (0, 1, 2), 3 i1 + ...]`` give
-    exactly the numba loop ``dv[i] -= q; dv[j] += q`` over the pairs, to the bit.
-    """
+    def __init__(self) -> None:
+        self._store: dict[str, np.ndarray] = {}
 
-    def __init__(self, i: np.ndarray, j: np.ndarray, n_rows: int):
-        axes = np.arange(3)
-        self.bins = np.stack([3 * i[:, None] + axes, 3 * j[:, None] + axes], axis=1).ravel()
-        self.n_rows = n_rows
-        self.weights = np.empty((i.size, 2, 3))
-
-    def __call__(self, q: np.ndarray) -> np.ndarray:
-        np.negative(q, out=self.weights[:, 0])
-        self.weights[:, 1] = q
-        return np.bincount(self.bins, weights=self.weights.ravel(), minlength=3 * self.n_rows).reshape(
-            self.n_rows, 3
-        )
+    def get(self, name: str, shape: tuple[int, ...], dtype: type = np.float64) -> np.ndarray:
+        size = int(np.prod(shape))
+        buf = self._store.get(name)
+        if buf is None or buf.size < size or buf.dtype != dtype:
+            buf = np.empty(max(16, size + size // 4), dtype=dtype)
+            self._store[name] = buf
+        return buf[:size].reshape(shape)
 
 
-def _unit(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unit rows of ``d`` and their lengths; a zero row points up, as in the numba kernel."""
-    dist = np.sqrt(dot3(d, d))
-    ok = dist > 0
-    out = np.empty_like(d)
-    out[ok] = d[ok] / dist[ok, None]
-    out[~ok] = (0.0, 1.0, 0.0)
-    return out, dist
+def _dot3_into(a: np.ndarray, b: np.ndarray, out: np.ndarray, tmp: np.ndarray) -> np.ndarray:
+    """:func:`animsim.vec.dot3` into ``out`` ((a0 b0 + a1 b1) + a2 b2, the same bits)."""
+    np.multiply(a[:, 0], b[:, 0], out=out)
+    np.multiply(a[:, 1], b[:, 1], out=tmp)
+    out += tmp
+    np.multiply(a[:, 2], b[:, 2], out=tmp)
+    out += tmp
+    return out
+
+
+def _gather_diff(a: np.ndarray, i: np.ndarray, j: np.ndarray, out: np.ndarray, tmp: np.ndarray) -> np.ndarray:
+    """``a[j] - a[i]`` into ``out``."""
+    np.take(a, j, axis=0, out=out, mode="clip")  # "raise" would buffer the output
+    np.take(a, i, axis=0, out=tmp, mode="clip")
+    out -= tmp
+    return out
 
 
 def resolve_pairs_numpy(
-    pairs: np.ndarray,
+    i: np.ndarray,
+    j: np.ndarray,
     x: np.ndarray,
     v: np.ndarray,
     x_old: np.ndarray,
@@ -145,63 +182,140 @@ def resolve_pairs_numpy(
     friction: float,
     dt: float,
     iterations: int = ITERATIONS,
+    buffers: _Buffers | None = None,
 ) -> bool:
-    """Impulses and overlap removal for ``pairs`` (NumPy kernel), in place.
+    """Impulses and overlap removal for the pairs (i, j) (sorted by (i, j)), in place (NumPy kernel).
 
     Every operation is the numba kernel's, in its order and association
     (``(a - b) / w * r`` is not ``(a - b) * (r / w)`` in floating point), and
-    pair quantities reach the particles in pair order (:func:`_scatter`), so
-    both backends give the same bits; granular flow is chaotic and would
-    otherwise part within a fraction of a second.
+    pair quantities reach the particles in pair order (one ``np.bincount`` over
+    interleaved bins ``[3 i0 + (0, 1, 2), 3 j0 + (0, 1, 2), 3 i1 + ...]``, which
+    adds its weights bin by bin in array order from 0.0, as the numba kernel's
+    per-particle sums do), so both backends give the same bits.
     """
-    i, j = pairs[:, 0], pairs[:, 1]
     ok = inv_mass[i] + inv_mass[j] > 0
-    i, j = i[ok], j[ok]
-    if i.size == 0:
+    if not ok.all():
+        i, j = i[ok], j[ok]
+    p = i.size
+    if p == 0:
         return False
+    buf = _Buffers() if buffers is None else buffers
     n_rows = len(x)
     w = inv_mass[i] + inv_mass[j]
-    count = np.bincount(np.concatenate([i, j]), minlength=n_rows)
+    count = np.bincount(i, minlength=n_rows) + np.bincount(j, minlength=n_rows)
     relax = np.minimum(RELAX / np.maximum(count[i], count[j]), 1.0)
-    inv = inv_mass[:, None]
-    scatter = _Scatter(i, j, n_rows)
+    # One coordinate at a time (rows of (3, P) arrays): NumPy's gathers and products run on
+    # contiguous memory. The sums per particle are np.add.at over interleaved bins
+    # [i0, j0, i1, j1, ...] with weights [-q0, +q0, -q1, ...]: add.at adds in index order,
+    # unbuffered, from 0.0, as the numba kernel's loops do (and np.bincount, slower here).
+    bins = buf.get("bins", (p, 2), np.int64)
+    bins[:, 0] = i
+    bins[:, 1] = j
+    bins_flat = bins.reshape(-1)
+    weights = buf.get("weights", (3, p, 2))
+    q = buf.get("q", (3, p))  # what each pair adds to j (and takes from i), per coordinate
+    acc = buf.get("acc", (3, n_rows))
+    state_t = buf.get("state_t", (3, n_rows))
+    d = buf.get("d", (3, p))
+    t1 = buf.get("t1", (p,))
+    t2 = buf.get("t2", (p,))
 
-    n, _ = _unit(x[j] - x[i])
+    def scatter_add(target: np.ndarray) -> None:
+        """target += (sum in pair order of -q on i, +q on j) * inverse mass, for all rows."""
+        for a in range(3):
+            weights[a, :, 1] = q[a]
+            np.negative(q[a], out=weights[a, :, 0])
+            acc[a].fill(0.0)
+            np.add.at(acc[a], bins_flat, weights[a].reshape(-1))
+        np.multiply(acc, inv_mass, out=acc)
+        target += acc.T
+
+    def gather_diff(source: np.ndarray) -> np.ndarray:
+        """source[j] - source[i] as (3, P)."""
+        np.copyto(state_t, source.T)
+        for a in range(3):
+            # mode "clip": with "raise" (the default) take buffers its output; the rows are valid
+            np.take(state_t[a], j, out=d[a], mode="clip")
+            np.take(state_t[a], i, out=t1, mode="clip")
+            d[a] -= t1
+        return d
+
+    def dot(u: np.ndarray, v3: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """(u0 v0 + u1 v1) + u2 v2: :func:`animsim.vec.dot3`'s order, the same bits."""
+        np.multiply(u[0], v3[0], out=out)
+        np.multiply(u[1], v3[1], out=t2)
+        out += t2
+        np.multiply(u[2], v3[2], out=t2)
+        out += t2
+        return out
+
+    # unit normals from i to j (a zero distance points up, as in the numba kernel)
+    n = buf.get("n", (3, p))
+    gather_diff(x)
+    dist = np.sqrt(dot(d, d, np.empty(p)))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        np.divide(d, dist, out=n)
+    pos = dist > 0
+    if not pos.all():
+        n[0, ~pos], n[1, ~pos], n[2, ~pos] = 0.0, 1.0, 0.0
     # restitution target from the approach before any pass
-    vn0 = dot3(v[j] - v[i], n)
-    ar = dot3((v[j] - v_old[j]) - (v[i] - v_old[i]), n) / dt
+    vn0 = dot(gather_diff(v), n, np.empty(p))
+    dv = (np.take(v, j, axis=0) - np.take(v_old, j, axis=0)) - (
+        np.take(v, i, axis=0) - np.take(v_old, i, axis=0)
+    )
+    ar = dot(np.ascontiguousarray(dv.T), n, np.empty(p)) / dt
     resting = -vn0 <= RESTING_STEPS * np.maximum(-ar, 0.0) * dt
     target = np.where((vn0 < 0) & ~resting, -restitution * vn0, 0.0)
-    lam = np.zeros(i.size)
+    lam = np.zeros(p)
+    new = np.empty(p)
+    vn = np.empty(p)
+    dl = np.empty(p)
     for _ in range(iterations):
-        vn = dot3(v[j] - v[i], n)
-        dl = (target - vn) / w * relax
-        new = np.maximum(lam + dl, 0.0)
-        dl = new - lam
-        lam = new
-        v += scatter(dl[:, None] * n) * inv  # +J n on j, -J n on i: momentum kept
+        dot(gather_diff(v), n, vn)
+        np.subtract(target, vn, out=dl)
+        dl /= w
+        dl *= relax
+        np.add(lam, dl, out=new)
+        np.maximum(new, 0.0, out=new)
+        np.subtract(new, lam, out=dl)
+        lam, new = new, lam
+        if not dl.any():  # nothing changed: neither would any later pass
+            break
+        np.multiply(n, dl, out=q)
+        scatter_add(v)  # +J n on j, -J n on i: momentum kept
     if friction > 0:
-        dvel = v[j] - v[i]
-        vn = dot3(dvel, n)
-        vt = dvel - vn[:, None] * n
-        speed = np.sqrt(dot3(vt, vt))
+        dvel = gather_diff(v)
+        dot(dvel, n, vn)
+        vt = dvel - vn * n
+        speed = np.sqrt(dot(vt, vt, np.empty(p)))
         with np.errstate(divide="ignore", invalid="ignore"):
             jt = np.minimum(speed / w * relax, friction * lam) / speed
         # pairs at no sliding speed add nothing (a 0.0 weight leaves every sum's bits alone);
         # the numba kernel adds +jt vt on i and -jt vt on j: the scatter of -(jt vt)
         jt = np.where(speed > 0, jt, 0.0)
-        v += scatter(-(jt[:, None] * vt)) * inv
+        np.negative(jt * vt, out=q)
+        scatter_add(v)
     reach = radius[i] + radius[j]
+    over = np.empty(p)
+    c = np.empty(p)
     for _ in range(iterations):
-        d = x[j] - x[i]
-        dist = np.sqrt(dot3(d, d))
-        over = reach - dist
+        gather_diff(x)
+        np.sqrt(dot(d, d, dist), out=dist)
+        np.subtract(reach, dist, out=over)
         # the numba kernel skips a pair with over <= 0 (so a NaN one is not skipped); a skipped
         # pair's weight 0.0 leaves every sum's bits alone
         with np.errstate(divide="ignore", invalid="ignore"):
-            nn = np.where(dist[:, None] > 0, d / dist[:, None], (0.0, 1.0, 0.0))
-            c = np.where(over <= 0, 0.0, over / w * relax)
-        x += scatter(c[:, None] * nn) * inv  # the pair's centre of mass stays
+            np.divide(over, w, out=c)
+            c *= relax
+            c[over <= 0] = 0.0
+            if not c.any():  # no overlap left to remove
+                break
+            np.divide(d, dist, out=d)
+        pos = dist > 0
+        if not pos.all():
+            d[0, ~pos], d[1, ~pos], d[2, ~pos] = 0.0, 1.0, 0.0
+        np.multiply(d, c, out=q)
+        scatter_add(x)  # the pair's centre of mass stays
     return True
 
 
@@ -235,18 +349,25 @@ class ParticleContacts(StepStage):
         self.iterations = int(iterations)
         self.backend = backend
         self.dissipative = restitution < 1 or friction > 0
-        self._kernel = numba_kernels() if backend == "numba" else None
+        self._kernels = numba_kernels() if backend == "numba" else None
         self.pairs_last = 0
+        #: how often the candidate list was built (a run's statistics, for tests and benchmarks)
+        self.rebuilds = 0
         #: colliders (animsim.colliders.Colliders) and impulse planes (animsim.collisions) to push
         #: out of after the contacts moved particles
         self.colliders = None
         self.planes = None
-        finder = "uniform grid hash" if backend == "numba" else "k-d tree (scipy cKDTree)"
+        self._buffers = _Buffers()
+        self._forget()
+        finder = (
+            "a uniform grid (counting sort by cell)" if backend == "numba" else "a k-d tree (scipy cKDTree)"
+        )
         self.label = (
             f"particle contacts: {int(self.active.sum())} particle(s) as spheres "
             f"(radius {self.radius[self.active].min():.3g}-{self.radius[self.active].max():.3g} m), "
-            f"restitution {restitution:g}, friction {friction:g}, neighbours by {finder}, "
-            f"{iterations} Jacobi passes; {self.exclude.size} spring-joined pair(s) left out"
+            f"restitution {restitution:g}, friction {friction:g}, neighbours by {finder} "
+            f"kept in a Verlet list, {iterations} Jacobi passes; "
+            f"{self.exclude.size} spring-joined pair(s) left out"
             if self.active.any()
             else "particle contacts: no particle takes part"
         )
@@ -259,8 +380,17 @@ class ParticleContacts(StepStage):
             f"through each other"
         )
 
+    def _forget(self) -> None:
+        self._ci = self._cj = _EMPTY
+        self._reach2: np.ndarray = np.zeros(0)
+        self._x_built: np.ndarray | None = None
+        self._active_built: np.ndarray | None = None
+        self._skin = 0.0
+
     def reset(self, state) -> None:
-        """Contacts keep no state between steps."""
+        """A run starts: the candidate list of another run is not reused (it would be valid, but
+        a run should not depend on what ran before it, even in how long it takes)."""
+        self._forget()
 
     def apply(
         self, state, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, dt: float | None = None
@@ -275,6 +405,49 @@ class ParticleContacts(StepStage):
             )
         return changed
 
+    def _list_is_stale(self, x: np.ndarray, active: np.ndarray) -> bool:
+        """True when two particles may have closed by more than the skin since the list was built."""
+        if self._x_built is None or self._x_built.shape != x.shape:
+            return True
+        if not np.array_equal(active, self._active_built):
+            return True
+        if self._kernels is not None:
+            spread = self._kernels.spread(x, self._x_built, active)
+        else:
+            d = self._buffers.get("shift", x.shape)
+            np.subtract(x, self._x_built, out=d)
+            if not self._all_active:
+                d = d[active]
+            if d.shape[0] == 0:
+                return False
+            hi, lo = d.max(axis=0), d.min(axis=0)
+            half = 0.5 * (hi - lo)
+            if 2.0 * float(np.sqrt(half @ half)) <= SKIN_USE * self._skin:
+                return False  # even the corners of the displacements' box are near enough
+            d -= 0.5 * (hi + lo)
+            spread = float(np.sqrt(dot3(d, d).max()))
+        # every displacement lies within ``spread`` of one common shift c (the centre of
+        # their box), so any two particles have closed by at most |d_i - c| + |d_j - c| <= 2 spread
+        return not (2.0 * spread <= SKIN_USE * self._skin)
+
+    def _rebuild(self, x: np.ndarray, active: np.ndarray) -> None:
+        rmax = float(self.radius[active].max()) if active.any() else 0.0
+        self._skin = SKIN * 2.0 * rmax
+        reach = 2.0 * rmax + self._skin
+        if self._kernels is not None:
+            ci, cj = self._kernels.candidates(x, active, self.exclude, reach)
+        else:
+            ci, cj = candidates_numpy(x, active, self.exclude, reach)
+        self._ci, self._cj = ci, cj
+        r = self.radius[ci] + self.radius[cj]
+        self._reach2 = r * r
+        if self._x_built is None or self._x_built.shape != x.shape:
+            self._x_built = np.empty_like(x)
+        np.copyto(self._x_built, x)
+        self._active_built = active.copy()
+        self._all_active = bool(active.all())
+        self.rebuilds += 1
+
     def _apply(self, state, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float) -> bool:
         dt = t1 - t0
         if dt <= 0:
@@ -287,37 +460,56 @@ class ParticleContacts(StepStage):
                 self._inv_copy = np.array(inv_mass)
             inv_mass = self._inv_copy
         active = self.active if state.particle_alive is None else self.active & state.particle_alive
-        if self._kernel is not None:
-            find, resolve = self._kernel
-            rmax = float(self.radius[active].max()) if active.any() else 0.0
-            if rmax <= 0:
-                return False
-            pairs = find(x, self.radius, active, self.exclude, 2.0 * rmax)
-            self.pairs_last = len(pairs)
-            if len(pairs) == 0:
-                return False
-            return bool(
-                resolve(
-                    pairs,
-                    x,
-                    v,
-                    x_old,
-                    v_old,
-                    inv_mass,
-                    self.radius,
-                    self.restitution,
-                    self.friction,
-                    dt,
-                    self.iterations,
-                    RELAX,
-                )
+        if self._list_is_stale(x, active):
+            self._rebuild(x, active)
+        ci, cj = self._ci, self._cj
+        if ci.size == 0:
+            self.pairs_last = 0
+            return False
+        if self._kernels is not None:
+            p = ci.size
+            b = self._buffers
+            n_rows = x.shape[0]
+            found, changed = self._kernels.step(
+                ci,
+                cj,
+                self._reach2,
+                x,
+                v,
+                x_old,
+                v_old,
+                inv_mass,
+                self.radius,
+                self.restitution,
+                self.friction,
+                dt,
+                self.iterations,
+                RELAX,
+                b.get("pi", (p,), np.int64),
+                b.get("pj", (p,), np.int64),
+                b.get("w", (p,)),
+                b.get("rel", (p,)),
+                b.get("nrm", (p, 3)),
+                b.get("tgt", (p,)),
+                b.get("lam", (p,)),
+                b.get("dv", (n_rows, 3)),
+                b.get("count", (n_rows,), np.int64),
             )
-        pairs = find_pairs_numpy(x, self.radius, active, self.exclude)
-        self.pairs_last = len(pairs)
-        if len(pairs) == 0:
+            self.pairs_last = int(found)
+            return bool(changed)
+        # the candidates that overlap now (the numba kernel's test)
+        b = self._buffers
+        p = ci.size
+        d3 = _gather_diff(x, ci, cj, b.get("d3", (p, 3)), b.get("t3", (p, 3)))
+        d2 = _dot3_into(d3, d3, b.get("s1", (p,)), b.get("s2", (p,)))
+        keep = d2 < self._reach2
+        i, j = ci[keep], cj[keep]
+        self.pairs_last = len(i)
+        if len(i) == 0:
             return False
         return resolve_pairs_numpy(
-            pairs,
+            i,
+            j,
             x,
             v,
             x_old,
@@ -328,14 +520,28 @@ class ParticleContacts(StepStage):
             self.friction,
             dt,
             self.iterations,
+            b,
         )
 
 
-_KERNELS = None
+class NumbaKernels(NamedTuple):
+    """The numba twins of this module's NumPy code."""
+
+    #: (x, active, exclude, reach) -> (ci, cj): the Verlet list's candidates, sorted by (i, j)
+    candidates: Any
+    #: one step's contacts from the candidates (see ``contact_step``)
+    step: Any
+    #: (x, radius, active, exclude, cell) -> (P, 2) overlapping pairs, as :func:`find_pairs_numpy`
+    find_pairs: Any
+    #: (x, x_built, active) -> how far the displacements spread since the list was built
+    spread: Any
 
 
-def numba_kernels():
-    """The numba twins: a uniform-grid hash for the pairs, and the same Jacobi passes."""
+_KERNELS: NumbaKernels | None = None
+
+
+def numba_kernels() -> NumbaKernels:
+    """The numba kernels (compiled, or loaded from numba's disk cache, on first use)."""
     global _KERNELS
     if _KERNELS is not None:
         return _KERNELS
@@ -359,219 +565,249 @@ def numba_kernels():
         return lo < keys.shape[0] and keys[lo] == key
 
     @numba.njit(cache=True)
-    def sort_pairs(pairs, n):  # pragma: no cover - compiled
-        # by (i, j), as the NumPy kernel's lexsort: both backends then resolve the
-        # same pairs in the same order, which the Jacobi scatter's rounding depends on
-        keys = pairs[:, 0] * n + pairs[:, 1]
-        order = np.argsort(keys)
-        out = np.empty_like(pairs)
-        for k in range(order.shape[0]):
-            out[k, 0] = pairs[order[k], 0]
-            out[k, 1] = pairs[order[k], 1]
-        return out
+    def candidates(x, active, exclude, reach):  # pragma: no cover - compiled
+        """Pairs (i, j), i < j, of active rows with |x_j - x_i|^2 <= reach^2, sorted by (i, j).
 
-    @numba.njit(cache=True)
-    def find_pairs(x, radius, active, exclude, cell):  # pragma: no cover - compiled
-        return sort_pairs(find_pairs_any(x, radius, active, exclude, cell), x.shape[0])
-
-    @numba.njit(cache=True)
-    def find_pairs_any(x, radius, active, exclude, cell):  # pragma: no cover - compiled
-        # a dense grid over the particles' bounding box when it is not much larger than
-        # the particle count (the common case: grains in a box), else the spatial hash
+        Cells ``reach`` wide: a dense grid over the particles' box when it has not
+        many more cells than particles (grains in a box), else a spatial hash.
+        Rows are counting-sorted by cell; each one looks at the later rows of its
+        own cell and at the rows of the 13 cells after its own (half of the 26
+        around it: every pair of cells once), and the pairs found are put in
+        (i, j) order by a counting sort on i.
+        """
         n = x.shape[0]
         lo = np.full(3, np.inf)
         hi = np.full(3, -np.inf)
         m = 0
+        dense = True  # a dense grid needs every coordinate finite
         for i in range(n):
             if active[i]:
                 m += 1
                 for a in range(3):
+                    if not np.isfinite(x[i, a]):
+                        dense = False
                     lo[a] = min(lo[a], x[i, a])
                     hi[a] = max(hi[a], x[i, a])
-        if m < 2:
-            return np.empty((0, 2), dtype=np.int64)
-        dims = np.empty(3, dtype=np.int64)
+        if m < 2 or not reach > 0:
+            return np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64)
+        inv = 1.0 / reach
+        dims = np.ones(3, dtype=np.int64)
         total = 1.0
         for a in range(3):
-            span = (hi[a] - lo[a]) / cell
+            if not dense:
+                break
+            span = (hi[a] - lo[a]) * inv
             if not np.isfinite(span):
-                return find_pairs_hashed(x, radius, active, exclude, cell)
+                dense = False
+                break
             dims[a] = np.int64(span) + 1
             total *= dims[a]
         if total > 8.0 * m + 4096:
-            return find_pairs_hashed(x, radius, active, exclude, cell)
-        return find_pairs_dense(x, radius, active, exclude, cell, lo, dims, m)
-
-    @numba.njit(cache=True)
-    def find_pairs_dense(x, radius, active, exclude, cell, lo, dims, m):  # pragma: no cover - compiled
-        n = x.shape[0]
-        ny, nz = dims[1], dims[2]
-        ncell = dims[0] * ny * nz
-        inv = 1.0 / cell
-        key = np.empty(n, dtype=np.int64)
-        start = np.zeros(ncell + 1, dtype=np.int64)
-        for i in range(n):
-            if active[i]:
-                cx = min(np.int64((x[i, 0] - lo[0]) * inv), dims[0] - 1)
-                cy = min(np.int64((x[i, 1] - lo[1]) * inv), ny - 1)
-                cz = min(np.int64((x[i, 2] - lo[2]) * inv), nz - 1)
-                key[i] = (cx * ny + cy) * nz + cz
-                start[key[i] + 1] += 1
-        for k in range(ncell):
-            start[k + 1] += start[k]
-        fill = start[:-1].copy()
-        order = np.empty(m, dtype=np.int64)
-        xs = np.empty((m, 3))
-        rs = np.empty(m)
-        for i in range(n):  # ascending rows within a cell: a deterministic order
-            if active[i]:
-                k = fill[key[i]]
-                order[k] = i
-                for a in range(3):
-                    xs[k, a] = x[i, a]
-                rs[k] = radius[i]
-                fill[key[i]] += 1
-        out = np.empty((max(16, 4 * m), 2), dtype=np.int64)
-        npairs = 0
-        for c in range(ncell):
-            c0 = start[c]
-            c1 = start[c + 1]
-            if c0 == c1:
-                continue
-            cz = c % nz
-            cy = (c // nz) % ny
-            cx = c // (ny * nz)
-            # the cell itself and its 13 "forward" neighbours: each pair of cells once
-            for nb in range(14):
-                if nb == 0:
-                    dx, dy, dz = 0, 0, 0
-                else:
-                    q = nb + 13  # offsets 14..26 of the 3x3x3 block, i.e. after the centre
-                    dx, dy, dz = q // 9 - 1, (q // 3) % 3 - 1, q % 3 - 1
-                gx, gy, gz = cx + dx, cy + dy, cz + dz
-                if gx < 0 or gy < 0 or gz < 0 or gx >= dims[0] or gy >= ny or gz >= nz:
-                    continue
-                g = (gx * ny + gy) * nz + gz
-                for ka in range(c0, c1):
-                    kb0 = ka + 1 if nb == 0 else start[g]
-                    for kb in range(kb0, start[g + 1]):
-                        r = rs[ka] + rs[kb]
-                        d2 = 0.0
-                        for a in range(3):
-                            t = xs[kb, a] - xs[ka, a]
-                            d2 += t * t
-                        if not (d2 < r * r):  # the NumPy test, NaN included
-                            continue
-                        i = order[ka]
-                        j = order[kb]
-                        if i > j:
-                            i, j = j, i
-                        if exclude.shape[0] and excluded(exclude, i * n + j):
-                            continue
-                        if npairs == out.shape[0]:
-                            grown = np.empty((2 * out.shape[0], 2), dtype=np.int64)
-                            grown[:npairs] = out
-                            out = grown
-                        out[npairs, 0] = i
-                        out[npairs, 1] = j
-                        npairs += 1
-        return out[:npairs].copy()
-
-    @numba.njit(cache=True)
-    def find_pairs_hashed(x, radius, active, exclude, cell):  # pragma: no cover - compiled
-        n = x.shape[0]
-        size = 1
-        while size < 2 * n:
-            size *= 2
-        ci = np.empty((n, 3), dtype=np.int64)
+            dense = False
+        cc = np.zeros((n, 3), dtype=np.int64)
+        key = np.zeros(n, dtype=np.int64)
+        if dense:
+            size = dims[0] * dims[1] * dims[2]
+        else:
+            size = 1
+            while size < 2 * n:
+                size *= 2
         start = np.zeros(size + 1, dtype=np.int64)
-        inv = 1.0 / cell
-        m = 0
         for i in range(n):
             if active[i]:
-                for a in range(3):
-                    ci[i, a] = np.int64(np.floor(x[i, a] * inv))
-                start[cell_hash(ci[i, 0], ci[i, 1], ci[i, 2], size) + 1] += 1
-                m += 1
+                if dense:
+                    for a in range(3):
+                        cc[i, a] = min(np.int64((x[i, a] - lo[a]) * inv), dims[a] - 1)
+                    key[i] = (cc[i, 0] * dims[1] + cc[i, 1]) * dims[2] + cc[i, 2]
+                else:
+                    for a in range(3):
+                        f = np.floor(x[i, a] * inv)
+                        # a non-finite or huge coordinate: a cell of its own kind, never near others
+                        cc[i, a] = np.int64(f) if abs(f) < 1e15 else np.int64(1) << 62
+                    key[i] = cell_hash(cc[i, 0], cc[i, 1], cc[i, 2], size)
+                start[key[i] + 1] += 1
         for k in range(size):
             start[k + 1] += start[k]
         fill = start[:-1].copy()
         order = np.empty(m, dtype=np.int64)
-        for i in range(n):  # ascending rows within a bucket: a deterministic order
+        for i in range(n):  # ascending rows within a cell
             if active[i]:
-                hb = cell_hash(ci[i, 0], ci[i, 1], ci[i, 2], size)
-                order[fill[hb]] = i
-                fill[hb] += 1
-        # one pass in bucket order (neighbouring particles are near in memory),
-        # into a buffer that doubles when full
-        out = np.empty((max(16, 4 * m), 2), dtype=np.int64)
-        # copies in bucket order: the inner loop then reads memory in sequence
+                order[fill[key[i]]] = i
+                fill[key[i]] += 1
+        # copies in cell order: the scan below reads memory in sequence
         xs = np.empty((m, 3))
         cs = np.empty((m, 3), dtype=np.int64)
-        rs = np.empty(m)
         for k in range(m):
-            i = order[k]
             for a in range(3):
-                xs[k, a] = x[i, a]
-                cs[k, a] = ci[i, a]
-            rs[k] = radius[i]
+                xs[k, a] = x[order[k], a]
+                cs[k, a] = cc[order[k], a]
+        r2 = reach * reach
+        raw_i = np.empty(max(16, 8 * m), dtype=np.int64)
+        raw_j = np.empty(max(16, 8 * m), dtype=np.int64)
         npairs = 0
-        for ki in range(m):
-            i = order[ki]
-            for dx in range(-1, 2):
-                for dy in range(-1, 2):
-                    for dz in range(-1, 2):
-                        gx, gy, gz = cs[ki, 0] + dx, cs[ki, 1] + dy, cs[ki, 2] + dz
-                        hb = cell_hash(gx, gy, gz, size)
-                        for k in range(start[hb], start[hb + 1]):
-                            if cs[k, 0] != gx or cs[k, 1] != gy or cs[k, 2] != gz:
-                                continue
-                            j = order[k]
-                            if j <= i:
-                                continue
-                            r = rs[ki] + rs[k]
-                            d2 = 0.0
-                            for a in range(3):
-                                t = xs[k, a] - xs[ki, a]
-                                d2 += t * t
-                            if not (d2 < r * r):  # the NumPy test, NaN included
-                                continue
-                            if exclude.shape[0] and excluded(exclude, i * n + j):
-                                continue
-                            if npairs == out.shape[0]:
-                                grown = np.empty((2 * out.shape[0], 2), dtype=np.int64)
-                                grown[:npairs] = out
-                                out = grown
-                            out[npairs, 0] = i
-                            out[npairs, 1] = j
-                            npairs += 1
-        out = out[:npairs].copy()
-        return out
+        for ka in range(m):
+            # the own cell and the 13 cells after it in (x, y, z) order: each pair of cells once
+            for q in range(13, 27):
+                gx = cs[ka, 0] + q // 9 - 1
+                gy = cs[ka, 1] + (q // 3) % 3 - 1
+                gz = cs[ka, 2] + q % 3 - 1
+                if dense:
+                    if gx < 0 or gy < 0 or gz < 0 or gx >= dims[0] or gy >= dims[1] or gz >= dims[2]:
+                        continue
+                    b = (gx * dims[1] + gy) * dims[2] + gz
+                else:
+                    b = cell_hash(gx, gy, gz, size)
+                first = ka + 1 if q == 13 else start[b]
+                for kb in range(first, start[b + 1]):
+                    if not dense and (cs[kb, 0] != gx or cs[kb, 1] != gy or cs[kb, 2] != gz):
+                        continue
+                    t0 = xs[kb, 0] - xs[ka, 0]
+                    t1 = xs[kb, 1] - xs[ka, 1]
+                    t2 = xs[kb, 2] - xs[ka, 2]
+                    if not (t0 * t0 + t1 * t1 + t2 * t2 <= r2):  # NaN too
+                        continue
+                    i = min(order[ka], order[kb])
+                    j = max(order[ka], order[kb])
+                    if exclude.shape[0] and excluded(exclude, i * n + j):
+                        continue
+                    if npairs == raw_i.shape[0]:
+                        gi = np.empty(2 * npairs, dtype=np.int64)
+                        gj = np.empty(2 * npairs, dtype=np.int64)
+                        gi[:npairs] = raw_i[:npairs]
+                        gj[:npairs] = raw_j[:npairs]
+                        raw_i, raw_j = gi, gj
+                    raw_i[npairs] = i
+                    raw_j[npairs] = j
+                    npairs += 1
+        # (i, j) order: a counting sort by i, then each i's handful of j by insertion
+        ptr = np.zeros(n + 1, dtype=np.int64)
+        for k in range(npairs):
+            ptr[raw_i[k] + 1] += 1
+        for i in range(n):
+            ptr[i + 1] += ptr[i]
+        at = ptr[:-1].copy()
+        out_i = np.empty(npairs, dtype=np.int64)
+        out_j = np.empty(npairs, dtype=np.int64)
+        for k in range(npairs):
+            i = raw_i[k]
+            out_i[at[i]] = i
+            out_j[at[i]] = raw_j[k]
+            at[i] += 1
+        for i in range(n):
+            for a in range(ptr[i] + 1, ptr[i + 1]):
+                t = out_j[a]
+                b2 = a - 1
+                while b2 >= ptr[i] and out_j[b2] > t:
+                    out_j[b2 + 1] = out_j[b2]
+                    b2 -= 1
+                out_j[b2 + 1] = t
+        return out_i, out_j
 
     @numba.njit(cache=True)
-    def resolve(
-        pairs, x, v, x_old, v_old, inv_mass, radius, e, mu, dt, iterations, relax_factor
-    ):  # pragma: no cover
-        p = pairs.shape[0]
+    def find_pairs(x, radius, active, exclude, cell):  # pragma: no cover - compiled
+        """Overlapping pairs (P, 2) sorted by (i, j): candidates within ``cell`` (>= 2 max radius)."""
+        ci, cj = candidates(x, active, exclude, cell)
+        out = np.empty((ci.shape[0], 2), dtype=np.int64)
+        p = 0
+        for k in range(ci.shape[0]):
+            i, j = ci[k], cj[k]
+            r = radius[i] + radius[j]
+            t0 = x[j, 0] - x[i, 0]
+            t1 = x[j, 1] - x[i, 1]
+            t2 = x[j, 2] - x[i, 2]
+            if t0 * t0 + t1 * t1 + t2 * t2 < r * r:
+                out[p, 0] = i
+                out[p, 1] = j
+                p += 1
+        return out[:p].copy()
+
+    @numba.njit(cache=True)
+    def spread(x, x_built, active):  # pragma: no cover - compiled
+        """The farthest active row's displacement from the centre of all their box (inf if not finite)."""
+        lo = np.full(3, np.inf)
+        hi = np.full(3, -np.inf)
+        for i in range(x.shape[0]):
+            if active[i]:
+                for a in range(3):
+                    d = x[i, a] - x_built[i, a]
+                    if not np.isfinite(d):
+                        return np.inf
+                    lo[a] = min(lo[a], d)
+                    hi[a] = max(hi[a], d)
+        if not hi[0] >= lo[0]:
+            return 0.0
+        c0 = 0.5 * (hi[0] + lo[0])
+        c1 = 0.5 * (hi[1] + lo[1])
+        c2 = 0.5 * (hi[2] + lo[2])
+        s = 0.0
+        for i in range(x.shape[0]):
+            if active[i]:
+                e0 = (x[i, 0] - x_built[i, 0]) - c0
+                e1 = (x[i, 1] - x_built[i, 1]) - c1
+                e2 = (x[i, 2] - x_built[i, 2]) - c2
+                s = max(s, e0 * e0 + e1 * e1 + e2 * e2)
+        return np.sqrt(s)
+
+    @numba.njit(cache=True)
+    def contact_step(
+        ci,
+        cj,
+        reach2,
+        x,
+        v,
+        x_old,
+        v_old,
+        inv_mass,
+        radius,
+        e,
+        mu,
+        dt,
+        iterations,
+        relax_factor,
+        pi,
+        pj,
+        w,
+        rel,
+        nrm,
+        tgt,
+        lam,
+        dv,
+        count,
+    ):  # pragma: no cover - compiled
+        """Keep the candidates that overlap, then the passes of :func:`resolve_pairs_numpy`.
+
+        ``pi`` .. ``lam``: buffers of at least the candidates' length; ``dv`` (N, 3)
+        and ``count`` (N,): per particle. Returns (overlapping pairs, whether any
+        pair was resolved).
+        """
         n_rows = x.shape[0]
-        count = np.zeros(n_rows, dtype=np.int64)
-        use = np.zeros(p, dtype=np.bool_)
-        for k in range(p):
-            if inv_mass[pairs[k, 0]] + inv_mass[pairs[k, 1]] > 0:
-                use[k] = True
-                count[pairs[k, 0]] += 1
-                count[pairs[k, 1]] += 1
-        nrm = np.zeros((p, 3))
-        target = np.zeros(p)
-        lam = np.zeros(p)
-        relax = np.zeros(p)
-        any_ = False
-        for k in range(p):
-            if not use[k]:
+        found = 0
+        p = 0
+        for k in range(ci.shape[0]):
+            i = ci[k]
+            j = cj[k]
+            t0 = x[j, 0] - x[i, 0]
+            t1 = x[j, 1] - x[i, 1]
+            t2 = x[j, 2] - x[i, 2]
+            if not (t0 * t0 + t1 * t1 + t2 * t2 < reach2[k]):
                 continue
-            any_ = True
-            i, j = pairs[k, 0], pairs[k, 1]
-            relax[k] = min(relax_factor / max(count[i], count[j]), 1.0)
+            found += 1
+            if inv_mass[i] + inv_mass[j] > 0:
+                pi[p] = i
+                pj[p] = j
+                p += 1
+        if p == 0:
+            return found, False
+        # contacts per particle (the relaxation's averaging)
+        count[:] = 0
+        for k in range(p):
+            count[pi[k]] += 1
+            count[pj[k]] += 1
+        for k in range(p):
+            i = pi[k]
+            j = pj[k]
+            w[k] = inv_mass[i] + inv_mass[j]
+            rel[k] = min(relax_factor / max(count[i], count[j]), 1.0)
             d2 = 0.0
             for a in range(3):
                 t = x[j, a] - x[i, a]
@@ -590,38 +826,39 @@ def numba_kernels():
                 ar += ((v[j, a] - v_old[j, a]) - (v[i, a] - v_old[i, a])) * nrm[k, a]
             ar /= dt
             resting = -vn0 <= 2.0 * max(-ar, 0.0) * dt
-            if vn0 < 0 and not resting:
-                target[k] = -e * vn0
-        if not any_:
-            return False
-        dv = np.zeros((n_rows, 3))
+            tgt[k] = -e * vn0 if (vn0 < 0 and not resting) else 0.0
+            lam[k] = 0.0
+        # each pass scatters pair by pair into dv (every particle's sum in pair order, from
+        # 0.0), then adds dv / m; a pass that changed nothing adds nothing
         for _ in range(iterations):
             dv[:] = 0.0
+            moved = False
             for k in range(p):
-                if not use[k]:
-                    continue
-                i, j = pairs[k, 0], pairs[k, 1]
-                w = inv_mass[i] + inv_mass[j]
+                i = pi[k]
+                j = pj[k]
                 vn = 0.0
                 for a in range(3):
                     vn += (v[j, a] - v[i, a]) * nrm[k, a]
-                dl = (target[k] - vn) / w * relax[k]
+                dl = (tgt[k] - vn) / w[k] * rel[k]
                 new = max(lam[k] + dl, 0.0)
                 dl = new - lam[k]
                 lam[k] = new
+                if dl != 0.0:
+                    moved = True
                 for a in range(3):
                     dv[i, a] -= dl * nrm[k, a]
                     dv[j, a] += dl * nrm[k, a]
+            if not moved:
+                break
             for r in range(n_rows):
+                w_r = inv_mass[r]
                 for a in range(3):
-                    v[r, a] += dv[r, a] * inv_mass[r]
+                    v[r, a] += dv[r, a] * w_r
         if mu > 0:
             dv[:] = 0.0
             for k in range(p):
-                if not use[k]:
-                    continue
-                i, j = pairs[k, 0], pairs[k, 1]
-                w = inv_mass[i] + inv_mass[j]
+                i = pi[k]
+                j = pj[k]
                 vn = 0.0
                 for a in range(3):
                     vn += (v[j, a] - v[i, a]) * nrm[k, a]
@@ -629,8 +866,8 @@ def numba_kernels():
                 t1 = v[j, 1] - v[i, 1] - vn * nrm[k, 1]
                 t2 = v[j, 2] - v[i, 2] - vn * nrm[k, 2]
                 speed = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
-                if speed > 0:
-                    jt = min(speed / w * relax[k], mu * lam[k]) / speed
+                if speed > 0:  # else it adds nothing
+                    jt = min(speed / w[k] * rel[k], mu * lam[k]) / speed
                     dv[i, 0] += jt * t0
                     dv[i, 1] += jt * t1
                     dv[i, 2] += jt * t2
@@ -638,15 +875,15 @@ def numba_kernels():
                     dv[j, 1] -= jt * t1
                     dv[j, 2] -= jt * t2
             for r in range(n_rows):
+                w_r = inv_mass[r]
                 for a in range(3):
-                    v[r, a] += dv[r, a] * inv_mass[r]
+                    v[r, a] += dv[r, a] * w_r
         for _ in range(iterations):
             dv[:] = 0.0
+            moved = False
             for k in range(p):
-                if not use[k]:
-                    continue
-                i, j = pairs[k, 0], pairs[k, 1]
-                w = inv_mass[i] + inv_mass[j]
+                i = pi[k]
+                j = pj[k]
                 d0 = x[j, 0] - x[i, 0]
                 d1 = x[j, 1] - x[i, 1]
                 d2 = x[j, 2] - x[i, 2]
@@ -658,17 +895,22 @@ def numba_kernels():
                     d0, d1, d2 = d0 / dist, d1 / dist, d2 / dist
                 else:
                     d0, d1, d2 = 0.0, 1.0, 0.0
-                c = over / w * relax[k]
+                c = over / w[k] * rel[k]
+                if c != 0.0:
+                    moved = True
                 dv[i, 0] -= c * d0
                 dv[i, 1] -= c * d1
                 dv[i, 2] -= c * d2
                 dv[j, 0] += c * d0
                 dv[j, 1] += c * d1
                 dv[j, 2] += c * d2
+            if not moved:
+                break
             for r in range(n_rows):
+                w_r = inv_mass[r]
                 for a in range(3):
-                    x[r, a] += dv[r, a] * inv_mass[r]
-        return True
+                    x[r, a] += dv[r, a] * w_r
+        return found, True
 
-    _KERNELS = (find_pairs, resolve)
+    _KERNELS = NumbaKernels(candidates, contact_step, find_pairs, spread)
     return _KERNELS

@@ -268,8 +268,13 @@ def render_trajectory(
     compiled: Any = None,
     progress: Callable[[int], object] | None = None,
 ) -> RenderResult:
-    """Draw a trajectory read from a file; with its scene, springs and planes too."""
+    """Draw a trajectory read from a file; with its scene, springs and planes too (springs the
+    file says were torn are left out from the frame they tore in)."""
+    from dataclasses import replace
+
     spring_index = np.zeros((0, 2), dtype=np.int64)
+    kept = np.zeros(0, dtype=bool)  # which of the scene's springs are drawn
+    spring_count = 0
     planes: list[tuple[np.ndarray, np.ndarray]] = []
     up = "y"
     extra: dict[str, Any] = {}
@@ -281,6 +286,8 @@ def render_trajectory(
         ids = compiled.system.ids
         pairs = compiled.system.spring_index
         keep = [(pos_of.get(ids[a]), pos_of.get(ids[b])) for a, b in pairs.tolist()]
+        kept = np.array([None not in p for p in keep], dtype=bool)
+        spring_count = len(keep)
         spring_index = np.array([p for p in keep if None not in p], dtype=np.int64).reshape(-1, 2)
         extra = _extras_for(compiled, traj.ids)
     lo, hi = traj.bounds()
@@ -297,8 +304,13 @@ def render_trajectory(
         for s in sinks:
             s.begin(header)
         for k in shown.tolist():
+            frame = recorded[k]
+            # a file of a tearing scene says which springs tore when: torn ones are not drawn
+            intact = traj.spring_intact(frame.time, spring_count) if spring_count else None
+            if intact is not None:
+                frame = replace(frame, spring_intact=intact[kept])
             for s in sinks:
-                s.write(recorded[k])
+                s.write(frame)
         for s in sinks:
             s.close({"status": "ok"})
     except BaseException:

@@ -103,9 +103,9 @@ def fused_chunk(
     mass,
     inv_mass,
     pinned,
-    stage,
-    stage_fp,
-    stage_ip,
+    stage_fns,
+    stage_fps,
+    stage_ips,
     kx,
     kv,
     xs,
@@ -186,9 +186,14 @@ def fused_chunk(
                 if tab_b[j] != 0.0:
                     _axpy(x, dt * tab_b[j], kx[j])
                     _axpy(v, dt * tab_b[j], kv[j])
-        if has_stage and stage[0](xo, vo, x, v, dt, inv_mass, stage_fp, stage_ip):
-            changed_steps += 1
-            a0_valid = False  # the state changed behind the integrator's back
+        if has_stage:  # every fusable stage in the loop's order (colliders, then planes)
+            changed = False
+            for s in range(len(stage_fns)):
+                if stage_fns[s](xo, vo, x, v, dt, inv_mass, stage_fps[s], stage_ips[s]):
+                    changed = True
+            if changed:
+                changed_steps += 1
+                a0_valid = False  # the state changed behind the integrator's back
         if not _finite(x, v):
             return step + 1, evals, changed_steps, a0_valid, True
     return steps, evals, changed_steps, a0_valid, False
@@ -373,17 +378,19 @@ class FusedStepper:
         self.tab = (c, a, b)
         stages = b.shape[0]
         self.kernels, self.fps, self.ips = _element_tables(compiled.dynamics.terms)
-        planes = [st for st in compiled.post_step if st.numba_stage_source is not None]
-        if planes:
-            self.stage = _addresses([planes[0].numba_stage], stage=True)[0]
-            self.stage_owner = planes[0]
-            self.stage_fp, self.stage_ip = planes[0].numba_stage_params()
+        fusable = [st for st in compiled.post_step if st.numba_stage_source is not None]
+        if fusable:
+            self.stages = _addresses([st.numba_stage for st in fusable], stage=True)
+            self.stage_owner = fusable[0]
+            params = [st.numba_stage_params() for st in fusable]
         else:
             from animsim.elements import jit_kernel
 
-            self.stage = _addresses([jit_kernel(_no_stage, stage=True)], stage=True)[0]
+            self.stages = _addresses([jit_kernel(_no_stage, stage=True)], stage=True)
             self.stage_owner = None
-            self.stage_fp, self.stage_ip = np.zeros(0), np.zeros(0, dtype=np.int64)
+            params = [(np.zeros(0), np.zeros(0, dtype=np.int64))]
+        self.stage_fps = List([np.ascontiguousarray(p[0], dtype=np.float64) for p in params])
+        self.stage_ips = List([np.ascontiguousarray(p[1], dtype=np.int64) for p in params])
         self.pinned = np.ascontiguousarray(np.flatnonzero(compiled.system.particle_pinned), dtype=np.int64)
         self.kx = np.zeros((stages, n, 3))
         self.kv = np.zeros((stages, n, 3))
@@ -425,11 +432,11 @@ class FusedStepper:
             _live(d.mass, self._copies),
             _live(d.inv_mass, self._copies),
             self.pinned,
-            # a 1-tuple, so numba types it as a first-class function (by signature), not as
-            # this one dispatcher: the cached kernel then serves every stage
-            (self.stage,),
-            self.stage_fp,
-            self.stage_ip,
+            # a tuple of addresses, so numba types them as first-class functions (by
+            # signature), not as these dispatchers: the cached kernel then serves every stage
+            self.stages,
+            self.stage_fps,
+            self.stage_ips,
             self.kx,
             self.kv,
             xs,

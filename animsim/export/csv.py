@@ -2,6 +2,12 @@
 particle per recorded frame, ``t,id,x,y,z,vx,vy,vz``, numbers as Python's
 ``repr`` (the shortest string that reads back to the same float64).
 
+Scenes whose springs can tear add a last column ``torn``: empty, except on the
+first row of a frame, where it lists (separated by spaces) the springs torn
+since the previous frame, numbered in the scene's spring order (listed
+springs, then each structure's families, from 0). A spring is drawn at a frame
+only before the frame in which it is listed.
+
 Ids are quoted by RFC 4180 rules when they hold a comma, a quote or a line
 break, so any id round-trips through a CSV reader.
 """
@@ -20,6 +26,8 @@ from animsim.record import Frame, TrajectoryHeader
 
 HEADER = ("t", "id", "x", "y", "z", "vx", "vy", "vz")
 EXTRA_HEADER = ("age", "size", "r", "g", "b", "a")
+#: the last column of scenes whose springs can tear
+TORN_COLUMN = "torn"
 
 
 def quote_id(pid: str) -> str:
@@ -42,6 +50,7 @@ class CsvSink:
         self._file: AtomicFile | None = None
         self._out: IO[str] | None = None
         self._ids: list[str] = []
+        self._torn: Any = None
 
     def begin(self, header: TrajectoryHeader) -> None:
         if self.path == "-":
@@ -54,6 +63,11 @@ class CsvSink:
 
         self._bodies = body_info(header)
         cols = HEADER + (EXTRA_HEADER if self.extra else ()) + (CSV_COLUMNS if self._bodies else ())
+        from animsim.export.trajectory import TornSprings
+
+        self._torn = TornSprings() if header.extra.get("springs_can_tear") else None
+        if self._torn is not None:
+            cols = (*cols, TORN_COLUMN)
         with writing(self.path):
             self._out.write(",".join(cols) + "\n")
 
@@ -77,6 +91,12 @@ class CsvSink:
                 f"{t},{ids[k]},{a!r},{b!r},{c!r},{d!r},{e!r},{f!r},{x}\n"
                 for k, (a, b, c, d, e, f), x in zip(index, rows, extra, strict=True)
             ]
+        if self._torn is not None:
+            self._torn.update(frame)
+            if lines:  # a frame with no row keeps its torn springs for the next one
+                torn = self._torn.take()
+                lines = [line[:-1] + "," + "\n" for line in lines]
+                lines[0] = lines[0][:-1] + " ".join(str(s) for s in torn) + "\n"
         # A full disk shows here (or only at close): a clear error, never a traceback.
         with writing(self.path):
             self._out.write("".join(lines))
@@ -139,8 +159,8 @@ def read_csv(path: str | Path) -> dict[str, Any]:
         rows = list(reader)
     cols: dict[str, Any] = {}
     for j, name in enumerate(header):
-        if name == "id":
-            cols["id"] = [r[j] for r in rows]
+        if name in ("id", "torn"):
+            cols[name] = [r[j] for r in rows]
         else:
             cols[name] = np.array([float(r[j]) if r[j] != "" else np.nan for r in rows])
     return cols

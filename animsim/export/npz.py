@@ -8,6 +8,12 @@ Arrays: ``t`` (R,), ``particle`` (R,) int64 index into ``ids`` (P,) str,
 Scenes with rigid bodies add ``orientation`` (R, 4) quaternions [w, x, y, z]
 and ``angular_velocity`` (R, 3) rad/s in the world frame (NaN for particle rows).
 
+Scenes whose springs can tear add ``torn_spring`` (K,) int64, the springs (in
+the scene's spring order: listed springs, then each structure's families) torn
+during the run, and ``torn_time`` (K,), the time of the first frame in which
+each is torn; a spring is drawn at a frame only while the frame's time is
+before its ``torn_time``.
+
 Unlike the CSV, the NPZ keeps frames in which no particle is alive (a
 particle system before its first birth), so it round-trips a run exactly.
 
@@ -53,6 +59,7 @@ class NpzSink:
         self._frame_start: list[int] = [0]
         self._ids: list[str] = []
         self._columns = dict(_COLUMNS)
+        self._torn: Any = None
 
     def begin(self, header: TrajectoryHeader) -> None:
         if header.has_emitters:
@@ -67,6 +74,9 @@ class NpzSink:
             for name in self._columns:
                 self._raw[name] = open(Path(self._tmpdir.name) / name, "wb")  # noqa: SIM115
         self._ids = list(header.ids)
+        from animsim.export.trajectory import TornSprings
+
+        self._torn = TornSprings() if header.extra.get("springs_can_tear") else None
 
     def write(self, frame: Frame) -> None:
         self._ids.extend(frame.new_ids)
@@ -84,6 +94,8 @@ class NpzSink:
                     self._raw[name].write(np.ascontiguousarray(arr).tobytes())
             if "orientation" in self._raw:
                 self._write_bodies(frame)
+        if self._torn is not None:
+            self._torn.update(frame)
         self._rows += n
         self._frame_time.append(frame.time)
         self._frame_start.append(self._rows)
@@ -110,6 +122,10 @@ class NpzSink:
                     _write_array(zf, "ids", np.array(self._ids, dtype=str))
                     _write_array(zf, "frame_time", np.array(self._frame_time, dtype=np.float64))
                     _write_array(zf, "frame_start", np.array(self._frame_start, dtype=np.int64))
+                    if self._torn is not None:
+                        spring, time = self._torn.arrays()
+                        _write_array(zf, "torn_spring", spring)
+                        _write_array(zf, "torn_time", time)
         except BaseException:
             if out is not None:
                 out.abort()

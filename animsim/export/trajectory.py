@@ -42,6 +42,20 @@ class Trajectory:
     #: rigid bodies: per row, NaN for particle rows
     orientation: np.ndarray | None = None  # (R, 4)
     angular_velocity: np.ndarray | None = None  # (R, 3)
+    #: scenes whose springs can tear: the springs torn during the run (the scene's spring
+    #: order) and the time of the first frame in which each is torn (empty arrays: none tore)
+    torn_spring: np.ndarray | None = None  # (K,) int64
+    torn_time: np.ndarray | None = None  # (K,)
+
+    def spring_intact(self, time: float, spring_count: int) -> np.ndarray | None:
+        """(spring_count,) bool: the scene's springs not yet torn at ``time`` (None: the file
+        does not say, because nothing in its scene could tear)."""
+        if self.torn_spring is None or self.torn_time is None:
+            return None
+        intact = np.ones(spring_count, dtype=bool)
+        gone = self.torn_spring[(self.torn_time <= time) & (self.torn_spring < spring_count)]
+        intact[gone] = False
+        return intact
 
     @property
     def frame_count(self) -> int:
@@ -119,6 +133,9 @@ def _read_npz(p: Path) -> Trajectory:
             traj.age, traj.size, traj.color = z["age"], z["size"], z["color"]
         if "orientation" in z.files:
             traj.orientation, traj.angular_velocity = z["orientation"], z["angular_velocity"]
+        if "torn_spring" in z.files:
+            traj.torn_spring = z["torn_spring"].astype(np.int64)
+            traj.torn_time = z["torn_time"].astype(np.float64)
         return traj
 
 
@@ -154,14 +171,62 @@ def _read_csv(p: Path) -> Trajectory:
         ).reshape(-1, 7)
         traj.orientation, traj.angular_velocity = body[:, :4], body[:, 4:]
     if {"age", "size", "r", "g", "b", "a"} <= set(names):
+        at = [header.index(c) for c in ("age", "size", "r", "g", "b", "a")]
         extra = np.array(
-            [[float(c) if c != "" else np.nan for c in row[8:]] for row in rows], dtype=np.float64
-        ).reshape(-1, len(names))
-        col = {n: extra[:, i] for i, n in enumerate(names)}
+            [[float(row[j]) if row[j] != "" else np.nan for j in at] for row in rows], dtype=np.float64
+        ).reshape(-1, len(at))
+        col = {n: extra[:, i] for i, n in enumerate(("age", "size", "r", "g", "b", "a"))}
         traj.age = col["age"]
         traj.size = col["size"]
         traj.color = np.stack([col["r"], col["g"], col["b"], col["a"]], axis=1)
+    if "torn" in names:  # the first row of a frame lists the springs torn since the last one
+        j = header.index("torn")
+        spring: list[int] = []
+        when: list[float] = []
+        for r, row in enumerate(rows):
+            if row[j].strip():
+                listed = [int(c) for c in row[j].split()]
+                spring.extend(listed)
+                when.extend([float(t[r])] * len(listed))
+        traj.torn_spring = np.array(spring, dtype=np.int64)
+        traj.torn_time = np.array(when, dtype=np.float64)
     return traj
+
+
+class TornSprings:
+    """Follows the frames' ``spring_intact``: which springs tore, and in which frame first.
+
+    The trajectory writers keep this instead of every frame's (S,) mask: a
+    spring that tears stays torn, so its first torn frame says it all.
+    """
+
+    def __init__(self) -> None:
+        self._torn: np.ndarray | None = None
+        self._spring: list[np.ndarray] = []
+        self._time: list[np.ndarray] = []
+        self._pending: list[int] = []
+
+    def update(self, frame: Frame) -> None:
+        if frame.spring_intact is None:
+            return
+        torn = ~np.asarray(frame.spring_intact, dtype=bool)
+        new = np.flatnonzero(torn if self._torn is None else torn & ~self._torn)
+        self._torn = torn
+        if new.size:
+            self._spring.append(new.astype(np.int64))
+            self._time.append(np.full(new.size, float(frame.time)))
+            self._pending.extend(new.tolist())
+
+    def take(self) -> list[int]:
+        """The springs torn since the last call (the CSV lists them on a frame's first row)."""
+        out, self._pending = self._pending, []
+        return out
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """(torn springs (K,) int64, the time of the first frame each is torn in (K,))."""
+        if not self._spring:
+            return np.zeros(0, dtype=np.int64), np.zeros(0)
+        return np.concatenate(self._spring), np.concatenate(self._time)
 
 
 class TrajectoryCollector:
@@ -176,15 +241,19 @@ class TrajectoryCollector:
         self._has_extra = False
         self._bodies: dict[str, Any] | None = None
         self._body_parts: list[tuple[np.ndarray, np.ndarray]] = []
+        self._torn: TornSprings | None = None
 
     def begin(self, header: Any) -> None:
         from animsim.bodies.export import body_info
 
         self.ids = list(header.ids)
         self._bodies = body_info(header)
+        self._torn = TornSprings() if header.extra.get("springs_can_tear") else None
 
     def write(self, frame: Frame) -> None:
         self.ids.extend(frame.new_ids)
+        if self._torn is not None:
+            self._torn.update(frame)
         n = len(frame.index)
         p = self._parts
         p["t"].append(np.full(n, frame.time))
@@ -227,4 +296,6 @@ class TrajectoryCollector:
         if self._body_parts:
             traj.orientation = np.concatenate([q for q, _ in self._body_parts])
             traj.angular_velocity = np.concatenate([w for _, w in self._body_parts])
+        if self._torn is not None:
+            traj.torn_spring, traj.torn_time = self._torn.arrays()
         return traj

@@ -111,7 +111,7 @@ def test_both_backends_list_the_same_pairs_in_the_same_order(spread: str) -> Non
     active = rng.uniform(size=n) > 0.1
     excl = spring_exclusions(np.array([[0, 1], [5, 9], [7, 2]]), np.zeros(3), radius, n)
     ours = find_pairs_numpy(x, radius, active, excl)
-    find, _ = numba_kernels()
+    find = numba_kernels().find_pairs
     theirs = find(x, radius, active, excl, 2 * radius[active].max())
     assert len(ours) > 100
     np.testing.assert_array_equal(ours, theirs)
@@ -136,7 +136,7 @@ def test_pairs_are_found_without_all_pairs_and_match_brute_force(backend: str, s
     else:
         from animsim.particle_contacts import numba_kernels
 
-        find, _ = numba_kernels()
+        find = numba_kernels().find_pairs
         pairs = find(x, radius, np.ones(n, dtype=bool), np.zeros(0, dtype=np.int64), 2 * radius.max())
     assert set(map(tuple, pairs.tolist())) == brute
 
