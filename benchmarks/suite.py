@@ -46,7 +46,7 @@ TINY_STEPS = 20_000
 TINY_RECORD_EVERY = 100
 IO_GRID = 64  # 64 x 64 = 4096 rows per frame
 IO_FRAMES = 25
-WORKLOADS = ("cloth", "particles", "fountain", "bodies", "stiff", "tiny", "io", "render")
+WORKLOADS = ("cloth", "particles", "fountain", "bodies", "contacts", "stiff", "tiny", "io", "render")
 
 
 @dataclass
@@ -579,6 +579,42 @@ def bench_bodies(settings: Settings) -> Table:
     return table
 
 
+def bench_contacts(settings: Settings) -> Table:
+    """Particle contacts: about 100,000 grains poured into a box (benchmarks/contacts.py)."""
+    from benchmarks import contacts as K
+
+    table = Table(
+        "Particle contacts: about 100,000 grains falling into a box of colliders "
+        "(symplectic Euler; goals: 20 steps/s on numba, 5 on NumPy)",
+        "steps/s",
+        1.0,
+    )
+    steps = 10 if settings is QUICK else 20
+    backends = ["numpy"] + (["numba"] if numba_ok(table.notes) else [])
+    windows = ((0, "steps 0-20: the lattice falling"), (40, "steps 40-60: the pile landed"))
+    for after, label in windows:
+        contenders = []
+        for backend in backends:
+            runs = [K.steps_per_second(backend, steps, 1, after=after) for _ in range(2)]
+            particles = runs[-1][2]
+            best_cpu = max(cpu for _, cpu, _ in runs)
+            c = Contender(
+                f"animsim {backend}, {label}",
+                lambda: None,
+                1,
+                f"{particles:,} grains; best {best_cpu:,.1f} steps per CPU second",
+            )
+            c.rates = [wall for wall, _, _ in runs]
+            contenders.append(c)
+        add_rows(table, "contacts 1e+05", contenders, None)
+    table.notes.append(
+        f"each sample times {steps} steps as the difference of two runs (to the window's end and "
+        "to its start), so compiling and the steps before the window are not counted"
+    )
+    print("  contacts done", flush=True)
+    return table
+
+
 def bench_stiff(settings: Settings) -> Table:
     """Simulated seconds per wall second on a stiff cloth, each method at its largest surviving step."""
     from benchmarks import stiff_cloth as S
@@ -670,6 +706,7 @@ def main(argv: list[str] | None = None) -> int:
         "render": bench_render,
         "fountain": bench_fountain,
         "bodies": bench_bodies,
+        "contacts": bench_contacts,
         "stiff": bench_stiff,
     }
     tables = []
