@@ -901,16 +901,18 @@ class Plan:
                 f"  to fit the time budget of {self.budget:g} s (--budget), the default plan was cut: "
                 + "; ".join(self.cuts)
             )
+            if self.over_budget:
+                out.append(
+                    "  even so it is over the budget: this is the smallest plan compare makes by itself"
+                )
             out.append(
                 "  --integrators, --dt and --duration choose these yourself; --budget 0 runs everything"
             )
         elif self.over_budget:
-            reason = (
-                "even the smallest default plan"
-                if self.window < self.duration or len(self.dts) < len(DEFAULT_STEP_FACTORS)
-                else "the options given are run as they are, and"
+            out.append(
+                f"  note: that is longer than the time budget of {self.budget:g} s (--budget); "
+                "the options given are run as given"
             )
-            out.append(f"  note: {reason} takes longer than the time budget of {self.budget:g} s (--budget)")
         return out
 
 
@@ -1005,7 +1007,7 @@ def make_plan(
             cuts.append(f"{len(steps)} step sizes ({sizes} s) instead of {len(dt_sets[0])}")
         if len(methods) < len(all_methods):
             cuts.append(f"the methods {', '.join(methods)} instead of all {len(all_methods)}")
-        if w < total:
+        if w < total and not window_given:
             cuts.append(f"compared over the first {w:g} s of {total:g} s")
         return Plan(
             list(methods),
