@@ -107,6 +107,8 @@ DEFAULT_BUDGET = 20.0
 #: the methods kept when not every one fits the budget: first order, first
 #: order symplectic, second order, fourth order (and the scene's own method)
 CORE_INTEGRATORS = ("euler", "symplectic_euler", "midpoint", "rk4")
+#: the probe's time counts against the budget, but leaves the runs at least this fraction of it
+MIN_RUN_BUDGET = 0.5
 #: the compared window is never cut below this many steps of the largest dt
 MIN_WINDOW_STEPS = 20
 #: the most steps one run may take (the spec's limit; --max-steps raises it)
@@ -742,12 +744,12 @@ def probe(
     compile_seconds = 0.0
     per_step: dict[str, float] = {}
     chosen = "numpy"
-    setup = 0.0
+    setups = []
     for integ in methods:
         probe_scene = with_overrides(scene, integrator=integ, dt=dt, duration=short)
         t0 = time.perf_counter()
         compiled = record_at(probe_scene, name, integ, dt, np.array([0.0, short]), backend)
-        setup = max(setup, time.perf_counter() - t0)
+        setups.append(time.perf_counter() - t0)
         chosen = compiled.backend if compiled.backend != "numpy" else chosen
         deadline = time.perf_counter() + PROBE_METHOD_SECONDS
         with np.errstate(all="ignore"):
@@ -804,7 +806,8 @@ def probe(
         curve_t=t,
         curve_w=w,
         per_step=per_step,
-        setup=setup,
+        # the median: the first compile of a scene also pays imports that later ones do not
+        setup=statistics.median(setups),
         compile_seconds=compile_seconds,
         seconds=time.perf_counter() - began,
         reference_kind=kind,
@@ -875,8 +878,17 @@ class Plan:
     fine_min_steps: int | None = None
 
     @property
+    def run_budget(self) -> float | None:
+        """What the budget leaves for the runs: the probe's own time (compiling aside) is spent."""
+        if self.budget is None:
+            return None
+        spent = 0.0 if self.probe is None else self.probe.seconds - self.probe.compile_seconds
+        return max(self.budget - spent, MIN_RUN_BUDGET * self.budget)
+
+    @property
     def over_budget(self) -> bool:
-        return self.budget is not None and self.estimate is not None and self.estimate.seconds > self.budget
+        budget = self.run_budget
+        return budget is not None and self.estimate is not None and self.estimate.seconds > budget
 
     def lines(self) -> list[str]:
         """What ``animsim compare`` says before it starts."""
@@ -898,8 +910,8 @@ class Plan:
         )
         if self.cuts:
             out.append(
-                f"  to fit the time budget of {self.budget:g} s (--budget), the default plan was cut: "
-                + "; ".join(self.cuts)
+                f"  to fit the time budget of {self.budget:g} s (--budget; the probe's time counts), "
+                "the default plan was cut: " + "; ".join(self.cuts)
             )
             if self.over_budget:
                 out.append(
@@ -983,6 +995,9 @@ def make_plan(
         common_times(window_scene(scene, window), dt_sets[0], max_steps)
         return Plan(all_methods, dt_sets[0], window, total, repeat, None, None, None)
     found = probe(scene, name, integrators=all_methods, reference=reference, backend=backend, notice=notice)
+    asked = budget
+    if budget is not None:  # the probe has spent part of it
+        budget = Plan([], [], 0.0, 0.0, 0, None, found, budget).run_budget
     floors: list[int | None] = [None]
     if found.reference_kind == "RK4" and not (integrators and dts):
         floors.append(0)  # the RK4 reference held to FINE_MAX_FACTOR times the finest run's steps
@@ -1017,7 +1032,7 @@ def make_plan(
             repeat,
             cost(methods, steps, w, floor),
             found,
-            budget,
+            asked,
             cuts,
             floor,
         )

@@ -82,7 +82,9 @@ def test_no_budget_runs_the_whole_default_plan(pendulum):
 @pytest.mark.parametrize("budget", [cmp.DEFAULT_BUDGET, 60.0, 8.0])
 def test_default_options_pick_a_plan_that_fits_and_say_what_they_cut(pendulum, budget):
     plan = cmp.make_plan(pendulum.scene, pendulum.name, budget=budget)
-    assert plan.estimate.seconds <= budget
+    # the probe's own half second is spent: the runs get the rest
+    assert plan.run_budget == pytest.approx(budget - 0.5)
+    assert plan.estimate.seconds <= plan.run_budget
     assert plan.estimate.seconds == pytest.approx(cost_of(plan), rel=1e-6)
     assert plan.cuts, "something had to be cut, and the plan says what"
     said = "\n".join(plan.lines())
@@ -102,7 +104,7 @@ def test_default_options_pick_a_plan_that_fits_and_say_what_they_cut(pendulum, b
     if plan.window < 5.0:
         longer = plan.window + 1 / 60
         bigger = cmp.estimate_from(plan.probe, plan.integrators, plan.dts, longer, plan.repeat)
-        assert bigger.seconds > budget
+        assert bigger.seconds > plan.run_budget
 
 
 def test_a_generous_budget_cuts_nothing(pendulum):
@@ -177,7 +179,7 @@ def test_an_rk4_reference_is_held_to_its_floor_before_anything_else_is_cut(monke
     assert full.fine_min_steps is None
     floored = cmp.estimate_from(found, full.integrators, full.dts, 2.0, 1, fine_min_steps=0)
     assert floored.reference < full.estimate.reference
-    plan = cmp.make_plan(loaded.scene, loaded.name, budget=floored.seconds * 1.001)
+    plan = cmp.make_plan(loaded.scene, loaded.name, budget=floored.seconds * 1.001 + 0.5)  # + the probe
     assert plan.fine_min_steps == 0 and len(plan.cuts) == 1 and "RK4 reference" in plan.cuts[0]
     assert plan.dts == full.dts and plan.window == 2.0
 
@@ -231,7 +233,10 @@ def test_the_default_budget_is_the_command_line_default():
 def test_command_says_what_it_cut_and_how_long_it_took(tmp_path):
     r = run_cli("compare", SCENES / "oscillator.yaml", "--budget", "0.000001", "-o", tmp_path / "c.csv")
     assert r.returncode == 0, r.stderr
-    assert "to fit the time budget of 1e-06 s (--budget), the default plan was cut" in r.stderr
+    assert (
+        "to fit the time budget of 1e-06 s (--budget; the probe's time counts), the default plan was cut"
+        in r.stderr
+    )
     assert "even so it is over the budget" in r.stderr
     assert "compared over the first 0.4 s of 2 s" in r.stdout  # 20 steps of 2 dt
     assert "errors at 21 record times from 0 to 0.4 s" in r.stdout
