@@ -37,20 +37,44 @@ class Timing:
     wall: float
     cpu: float
     status: str  # "ok", "exit N" or "timeout"
-    estimate: str  # the command's own estimate line(s), shortened
+    estimate: str  # the command's own estimate, before it started
+    took: str  # what it said at the end: the runs' time beside the estimate
+    plan: str  # what it cut to fit its budget, if anything
 
 
 def _estimate_text(stderr: str) -> str:
-    keep = []
-    for line in stderr.splitlines():
-        line = line.strip()
-        m = re.search(r"estimate[d]? (?:total )?(?:about )?(\d+(?:\.\d+)? (?:s|min))", line)
-        if m:
-            keep.append(m.group(0))
-        m = re.search(r"about (\d+(?:\.\d+)? (?:s|min))", line)
-        if m and not keep:
-            keep.append(f"about {m.group(1)}")
-    return "; ".join(dict.fromkeys(keep))
+    """The estimate from the first line compare prints ("... about 12 s in all ...")."""
+    m = re.search(r"about (\d+(?:\.\d+)? (?:s|min))", stderr)
+    return f"about {m.group(1)}" if m else ""
+
+
+def _took_text(stdout: str) -> str:
+    """From compare's last line: "took 9.1 s wall, estimated about 10 s ...; the probe before it 2.0 s wall"."""
+    text = " ".join(stdout.split())
+    m = re.search(
+        r"took (\d+(?:\.\d+)?) s wall, estimated about (\d+(?:\.\d+)? (?:s|min)).*?"
+        r"the probe before it (\d+(?:\.\d+)?) s wall",
+        text,
+    )
+    return f"runs {m.group(1)} s (est. {m.group(2)}), probe {m.group(3)} s" if m else ""
+
+
+def _plan_text(stderr: str) -> str:
+    m = re.search(r"the default plan was cut: (.*)", " ".join(stderr.split()))
+    if not m:
+        return "nothing cut"
+    cut = m.group(1).split(" --integrators")[0]
+    short = []
+    if "RK4 reference may take" in cut:
+        short.append("RK4 ref. floor")
+    if "step sizes" in cut:
+        short.append("3 dts")
+    if "the methods" in cut:
+        short.append("core methods")
+    w = re.search(r"compared over the first (\S+ s of \S+ s)", cut)
+    if w:
+        short.append(f"window {w.group(1)}")
+    return ", ".join(short)
 
 
 def time_scene(tree: Path, scene: Path, timeout: float) -> Timing:
@@ -62,17 +86,20 @@ def time_scene(tree: Path, scene: Path, timeout: float) -> Timing:
     try:
         proc = subprocess.run(cmd, cwd=tree, env=env, capture_output=True, text=True, timeout=timeout)
         status = "ok" if proc.returncode == 0 else f"exit {proc.returncode}"
-        stderr = proc.stderr
+        stderr, stdout = proc.stderr, proc.stdout
     except subprocess.TimeoutExpired as exc:
         status = f"timeout ({timeout:g} s)"
         stderr = exc.stderr.decode() if isinstance(exc.stderr, bytes) else (exc.stderr or "")
+        stdout = ""
     wall = time.perf_counter() - start
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     # A child killed by the timeout is reaped by subprocess.run, so its CPU time is counted too.
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     if status.startswith("exit"):
         print(proc.stderr[-2000:], file=sys.stderr)
-    return Timing(scene.stem, wall, cpu, status, _estimate_text(stderr))
+    return Timing(
+        scene.stem, wall, cpu, status, _estimate_text(stderr), _took_text(stdout), _plan_text(stderr)
+    )
 
 
 def table(timings: list[Timing], tree: Path) -> str:
@@ -80,12 +107,14 @@ def table(timings: list[Timing], tree: Path) -> str:
         f"`animsim compare SCENE` with default options, tree {tree}, "
         f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {os.cpu_count()} cores (shared)",
         "",
-        "| scene | wall s | CPU s | status | the command's estimate |",
-        "| --- | ---: | ---: | --- | --- |",
+        "| scene | wall s | CPU s | status | estimate | runs: actual (estimate), probe | cut to fit the budget |",
+        "| --- | ---: | ---: | --- | --- | --- | --- |",
     ]
     for t in timings:
         flag = "" if t.wall <= TARGET_SECONDS else " (over 30 s)"
-        lines.append(f"| {t.scene} | {t.wall:.1f}{flag} | {t.cpu:.1f} | {t.status} | {t.estimate} |")
+        lines.append(
+            f"| {t.scene} | {t.wall:.1f}{flag} | {t.cpu:.1f} | {t.status} | {t.estimate} | {t.took} | {t.plan} |"
+        )
     over = [t.scene for t in timings if t.wall > TARGET_SECONDS or t.status != "ok"]
     lines += [
         "",
@@ -110,7 +139,10 @@ def main(argv: list[str] | None = None) -> int:
     timings = []
     for scene in scenes:
         t = time_scene(tree, scene, args.timeout)
-        print(f"{t.scene}: {t.wall:.1f} s wall, {t.cpu:.1f} s CPU, {t.status}  {t.estimate}", flush=True)
+        print(
+            f"{t.scene}: {t.wall:.1f} s wall, {t.cpu:.1f} s CPU, {t.status}  {t.estimate}; {t.took}; {t.plan}",
+            flush=True,
+        )
         timings.append(t)
     text = table(timings, tree)
     print(text)
