@@ -608,19 +608,27 @@ class Probe:
     seconds: float  # the probe's own wall time, compile included, s
     reference_kind: str  # "analytic", "DOP853" or "RK4"
     dop853: tuple[float, float] | None = None  # (simulated s reached, wall s) of its first solve
+    grows: bool = False  # births: each step costs more than the one before
 
     def loop(self, window: float) -> float:
         """Wall time of ``method`` at ``dt`` to simulate ``window`` seconds.
 
-        Beyond what the probe reached, the rate of its last quarter goes on:
-        that rate already includes any growth so far (emitters filling up)."""
+        Beyond what the probe reached, the rate of its last quarter goes on,
+        growing as it grew during the probe when births add particles."""
         t, w = self.curve_t, self.curve_w
         if window <= t[-1]:
             return float(np.interp(window, t, w))
-        j = int(np.searchsorted(t, 0.75 * t[-1]))
-        j = min(j, len(t) - 2)
+        j = min(int(np.searchsorted(t, 0.75 * t[-1])), len(t) - 2)
         rate = (w[-1] - w[j]) / max(t[-1] - t[j], 1e-300)
-        return float(w[-1] + rate * (window - t[-1]))
+        ahead = window - t[-1]
+        growth = 0.0
+        if self.grows:
+            # Births keep adding particles: the rate grew from the first half to
+            # the last quarter, and is taken to go on growing as fast.
+            h = min(int(np.searchsorted(t, 0.5 * t[-1])), len(t) - 2)
+            early = (w[h] - w[0]) / max(t[h] - t[0], 1e-300)
+            growth = max(0.0, (rate - early) / max(0.5 * (t[-1] + t[j]) - 0.5 * (t[h] + t[0]), 1e-300))
+        return float(w[-1] + rate * ahead + 0.5 * growth * ahead**2)
 
     def run_seconds(self, method: str, dt: float, window: float) -> float:
         """One run of ``method`` at ``dt`` over ``window``: steps scale as 1/dt, each
@@ -809,12 +817,13 @@ def probe(
         curve_t=t,
         curve_w=w,
         per_step=per_step,
-        # the median: the first compile of a scene also pays imports that later ones do not
-        setup=statistics.median(setups),
+        # the least: the first compiles also pay imports and numba kernels that later ones do not
+        setup=min(setups),
         compile_seconds=compile_seconds,
         seconds=time.perf_counter() - began,
         reference_kind=kind,
         dop853=dop,
+        grows=full.emitters is not None,
     )
 
 

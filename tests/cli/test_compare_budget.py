@@ -27,7 +27,9 @@ EVALS = {
 }
 
 
-def fake_probe(scene, kind: str = "DOP853", dop_rate: float = 1.0, growth: float = 0.0) -> cmp.Probe:
+def fake_probe(
+    scene, kind: str = "DOP853", dop_rate: float = 1.0, growth: float = 0.0, grows: bool = False
+) -> cmp.Probe:
     """A probe that measured ``SECONDS_PER_EVAL`` per evaluation for the scene's method at its dt,
     getting dearer by ``growth`` per simulated second (births), and DOP853 at ``dop_rate`` wall s
     per simulated s."""
@@ -48,6 +50,7 @@ def fake_probe(scene, kind: str = "DOP853", dop_rate: float = 1.0, growth: float
         seconds=0.5,
         reference_kind=kind,
         dop853=(1.0, dop_rate) if kind == "DOP853" else None,
+        grows=grows,
     )
 
 
@@ -169,6 +172,13 @@ def test_a_scene_that_gets_dearer_is_extrapolated_at_its_latest_rate():
     rate = (w[-1] - w[j]) / (t[-1] - t[j])
     assert growing.loop(5.0) == pytest.approx(w[-1] + rate * (5.0 - t[-1]))
     assert growing.loop(5.0) > flat.loop(5.0) * 2
+    # with births, the rate goes on growing as it grew: a quadratic cost is followed to within 10 %
+    births = fake_probe(scene, growth=4.0, grows=True)
+    per_second = births.curve_w[1] / (births.curve_t[1] + 2.0 * births.curve_t[1] ** 2)
+    true = per_second * (5.0 + 2.0 * 5.0**2)
+    assert births.loop(5.0) == pytest.approx(true, rel=0.1)
+    assert births.loop(5.0) > growing.loop(5.0)
+    assert births.loop(1.0) == growing.loop(1.0)  # within the probe: what was measured
 
 
 def test_an_rk4_reference_is_held_to_its_floor_before_anything_else_is_cut(monkeypatch):
