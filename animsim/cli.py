@@ -1059,9 +1059,10 @@ def compare(
             "--budget",
             metavar="SECONDS",
             min=0,
-            help="What the runs may take with default options, estimated from a short timed probe "
-            "of the scene: what you do not name (--integrators, --dt, --duration) is cut until the "
-            "estimate fits (first dt/4, then the window, then the methods), and what was cut is "
+            help="How long compare may take (the probe included, numba compiling not), estimated from "
+            "a short timed probe of the scene: what you do not name (--integrators, --dt, --duration) "
+            "is cut until the estimate fits (an RK4 reference's extra steps, then dt/4, then the window "
+            "down to half the scene, then the methods, then the window again), and what was cut is "
             "printed. Options you name are run as given; the estimate says when they will take "
             "longer. 0: no budget.",
         ),
