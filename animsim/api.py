@@ -314,22 +314,49 @@ def compare(
     reference: str = "auto",
     repeat: int = 1,
     comparison: bool = False,
+    duration: float | None = None,
+    budget: float | None = None,
+    backend: str = "numpy",
+    name: str | None = None,
+    jobs: int = 1,
+    scheduler: Any = None,
+    max_steps: int | None = None,
+    progress: Any = None,
+    notice: Any = None,
+    on_plan: Any = None,
 ) -> Any:
     """One dict per (integrator, dt) with the columns of ``animsim compare``
     (``comparison=True``: the whole :class:`animsim.analysis.compare.Comparison`,
-    with the reference and the observed orders)."""
+    with the reference, the observed orders, the plan and the time taken).
+
+    ``integrators``, ``dts``: default every fixed-step method at 2 dt, dt, dt/2
+    and dt/4 of the scene's dt. ``duration``: compare over the first seconds
+    of the scene only. ``budget`` (seconds, None: no limit): probe the scene
+    first and cut what was left to the default (dt/4, then the window, then
+    the methods) until the estimated run time fits, as ``animsim compare``
+    does; ``on_plan(plan)`` hears the :class:`~animsim.analysis.compare.Plan`
+    before the runs start.
+    """
     from dataclasses import asdict
 
     from animsim.analysis import compare as cmp
-    from animsim.integrators import FIXED_STEP
 
-    result = cmp.compare(
+    result = cmp.run_planned(
         scene,
-        scene.name or "scene",
-        integrators=list(integrators) if integrators else list(FIXED_STEP),
-        dts=list(dts) if dts else cmp.default_dts(scene.dt),
+        name or scene.name or "scene",
+        integrators=list(integrators) if integrators else None,
+        dts=list(dts) if dts else None,
+        duration=duration,
         reference=reference,
         repeat=repeat,
+        budget=budget,
+        backend=backend,
+        jobs=jobs,
+        scheduler=scheduler,
+        max_steps=max_steps if max_steps is not None else cmp.DEFAULT_MAX_STEPS,
+        progress=progress,
+        notice=notice,
+        on_plan=on_plan,
     )
     return result if comparison else [asdict(row) for row in result.rows]
 

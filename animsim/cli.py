@@ -870,9 +870,32 @@ def compare(
         typer.Option(
             "--dt",
             help="Comma-separated step sizes (s); default 2 dt, dt, dt/2 and dt/4 of the scene's dt "
-            "(dt/8 instead of 2 dt when 2 dt is longer than the duration).",
+            "(dt/8 instead of 2 dt when 2 dt is longer than the duration), without dt/4 when the four "
+            "do not fit --budget.",
         ),
     ] = None,
+    duration: Annotated[
+        float | None,
+        typer.Option(
+            "--duration",
+            help="Compare over the first S seconds of the scene; default all of it, or as much as "
+            "fits --budget.",
+        ),
+    ] = None,
+    budget: Annotated[
+        float,
+        typer.Option(
+            "--budget",
+            metavar="SECONDS",
+            min=0,
+            help="How long compare may take (the probe included, numba compiling not), estimated from "
+            "a short timed probe of the scene: what you do not name (--integrators, --dt, --duration) "
+            "is cut until the estimate fits (an RK4 reference's extra steps, then dt/4, then the window "
+            "down to half the scene, then the methods, then the window again), and what was cut is "
+            "printed. Options you name are run as given; the estimate says when they will take "
+            "longer. 0: no budget.",
+        ),
+    ] = 20.0,  # animsim.analysis.compare.DEFAULT_BUDGET (a test keeps them equal)
     reference: Annotated[
         ReferenceKind,
         typer.Option(
@@ -920,7 +943,7 @@ def compare(
         typer.Option(
             "--backend",
             help="auto (default: numba when installed and it can run the scene, else numpy), numpy or numba "
-            '(needs pip install -e ".\\[fast]"). Rows are timed on it; the reference always runs on numpy.',
+            '(needs pip install -e ".\\[fast]"). Rows and any RK4 reference run on it; DOP853 on numpy.',
         ),
     ] = "auto",
     *,
@@ -933,66 +956,63 @@ def compare(
     the median simulation time and force evaluations. Under the table: each
     integrator's observed order of convergence.
 
-    Cost: each row is run 1 + --repeat times (the accuracy run, then any
-    extra timed runs), so the finest dt dominates; the estimated total is
-    printed before the runs start. Pass fewer or larger step sizes with --dt
-    for big scenes.
+    Cost: before the runs, a short timed probe of the scene on the chosen
+    backend estimates the total, which is printed. With default options the
+    plan is cut to fit --budget (20 s), and what was cut is printed; options
+    you name are run as given. At the end, the time taken is printed beside
+    the estimate.
 
     An unstable run is a row with status 'unstable', not a failure of the
     comparison: the exit status is 0 when the comparison itself completed
     (use --fail-on-unstable to exit 1 instead), 2 for a bad scene or option.
     """
-    from animsim.analysis.compare import compare as run_compare
     from animsim.analysis.compare import (
-        estimate,
         left_out,
-        parse_dts,
+        parse_dt_option,
         parse_integrators,
         summary_lines,
         table,
         write_csv,
     )
+    from animsim.api import compare as api_compare
+    from animsim.console import terminal_notice
     from animsim.export.plots import plot_format, write_compare_plot
 
     # The scene's own file, step and memory limits; each step size is checked
-    # against --max-steps again below, before any run.
+    # against --max-steps again before any run.
     loaded, _, _ = prepare_scene(scene, limits)
-    names = parse_integrators(integrators)
-    dts = parse_dts(dt, loaded.scene)
     for path in (output, plot):
         if path is not None:
             check_output_path(path, scene)
     if plot is not None:
         plot_format(plot)
-    backend = _backend(backend)
-    console = _stdout_console()
-    from animsim.console import terminal_notice
 
-    # The probe runs first, so numba's one-time compilation is announced (on a terminal) and done there.
-    cost = estimate(
-        loaded.scene,
-        loaded.name,
-        integrators=names,
-        dts=dts,
-        repeat=repeat,
-        backend=backend,
-        notice=terminal_notice(),
-    )
-    _err(f"comparing {len(names)} methods at {len(dts)} step sizes: {cost.describe()}")
-    with _compare_progress(len(names) * len(dts)) as progress:
-        result = run_compare(
+    with _compare_progress() as (progress, planned):
+
+        def announce(plan: Any) -> None:
+            for line in plan.lines():
+                _err(line)
+            planned(len(plan.integrators) * len(plan.dts))
+
+        result = api_compare(
             loaded.scene,
-            loaded.name,
-            integrators=names,
-            dts=dts,
+            parse_integrators(integrators) if integrators is not None else None,
+            parse_dt_option(dt),
+            name=loaded.name,
+            duration=duration,
+            budget=budget,
             reference=reference.value,
             repeat=repeat,
-            progress=progress,
-            max_steps=limits.max_steps,
+            backend=_backend(backend),
             jobs=jobs,
             scheduler=scheduler,
-            backend=backend,
+            max_steps=limits.max_steps,
+            progress=progress,
+            notice=terminal_notice(),
+            on_plan=announce,
+            comparison=True,
         )
+    console = _stdout_console()
     console.print(table(result, width=console.width))
     hidden = left_out(result, console.width)
     if hidden:
@@ -1014,22 +1034,26 @@ def compare(
 
 
 @contextmanager
-def _compare_progress(total: int):
-    """A transient progress bar on stderr (terminal only), advanced once per run."""
+def _compare_progress():
+    """A transient progress bar on stderr (terminal only), advanced once per run; yields
+    (update, planned): ``planned(total)`` sets the number of runs once they are known."""
     if not sys.stderr.isatty():
-        yield None
+        yield None, lambda total: None
         return
     from rich.progress import Progress
 
     with Progress(transient=True, console=_stderr_console()) as bar:
-        task = bar.add_task("comparing", total=total)
+        task = bar.add_task("probing", total=None)
+
+        def planned(total: int) -> None:
+            bar.update(task, total=total, description="comparing")
 
         def update(label: str) -> None:
             bar.update(task, description=label)
             if not label.startswith("reference"):
                 bar.advance(task)
 
-        yield update
+        yield update, planned
 
 
 # --- plot -------------------------------------------------------------------------------

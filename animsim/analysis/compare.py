@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import math
 import statistics
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -53,6 +54,7 @@ from typing import Any
 import numpy as np
 
 from animsim.analysis.references import (
+    FINE_MAX_FACTOR,
     NoClosedForm,
     Reference,
     ReferenceFailed,
@@ -91,8 +93,25 @@ REFERENCE_KINDS = ("auto", "analytic", "fine")
 DEFAULT_STEP_FACTORS = (2.0, 1.0, 0.5, 0.25)
 #: timed runs per row, after its accuracy run (which also warms it up)
 DEFAULT_REPEAT = 1
-#: the probe that estimates the total time runs each method this many steps
+#: the probe that estimates the total time runs each method this many steps ...
 PROBE_STEPS = 200
+#: ... or for this long (wall time, s), whichever comes first
+PROBE_METHOD_SECONDS = 0.08
+#: then one method through the scene for at most this long (wall time, s), so
+#: that a scene whose steps get dearer as it runs (births, contacts) is measured
+PROBE_SECONDS = 0.75
+#: and the DOP853 reference's first solve for at most this long, s
+PROBE_REFERENCE_SECONDS = 0.5
+#: with default options, compare plans its runs to take about this long (s):
+#: with the probe, start-up and numba's compiling it finishes within 30 s
+DEFAULT_BUDGET = 20.0
+#: the methods kept when not every one fits the budget: first order, first
+#: order symplectic, second order, fourth order (and the scene's own method)
+CORE_INTEGRATORS = ("euler", "symplectic_euler", "midpoint", "rk4")
+#: the probe's time counts against the budget, but leaves the runs at least this fraction of it
+MIN_RUN_BUDGET = 0.5
+#: the compared window is never cut below this many steps of the largest dt
+MIN_WINDOW_STEPS = 20
 #: the most steps one run may take (the spec's limit; --max-steps raises it)
 DEFAULT_MAX_STEPS = 100_000_000
 #: an error below this many machine epsilons of |x| sqrt(steps) is round-off
@@ -205,6 +224,9 @@ class Comparison:
     repeat: int
     conservative: bool
     notes: list[str] = field(default_factory=list)
+    plan: Plan | None = None  # set by run_planned
+    seconds: float | None = None  # wall time of the comparison (probe excluded), s
+    reference_seconds: float = 0.0  # of which computing the reference, s
 
     @property
     def any_unstable(self) -> bool:
@@ -241,10 +263,10 @@ def default_dts(dt: float, duration: float | None = None) -> list[float]:
     return dts
 
 
-def parse_dts(text: str | None, scene: m.Scene) -> list[float]:
-    """Step sizes from ``--dt``, largest first; default :func:`default_dts` of the scene's dt."""
+def parse_dt_option(text: str | None) -> list[float] | None:
+    """Step sizes from ``--dt`` (checked against the duration later), or None for the default."""
     if text is None:
-        return default_dts(scene.dt, scene.duration)
+        return None
     values: list[float] = []
     for part in (s.strip() for s in text.split(",")):
         if not part:
@@ -255,12 +277,21 @@ def parse_dts(text: str | None, scene: m.Scene) -> list[float]:
             raise UsageError(f"--dt: {part!r} is not a number") from None
         if not (math.isfinite(v) and v > 0):
             raise UsageError(f"--dt: {part!r} must be a finite number > 0")
-        if v > scene.duration:
-            raise UsageError(f"--dt: {part} is longer than the duration {scene.duration!r}")
         values.append(v)
     if not values:
         raise UsageError("--dt: give at least one step size")
     return sorted(set(values), reverse=True)
+
+
+def parse_dts(text: str | None, scene: m.Scene) -> list[float]:
+    """Step sizes from ``--dt``, largest first; default :func:`default_dts` of the scene's dt."""
+    values = parse_dt_option(text)
+    if values is None:
+        return default_dts(scene.dt, scene.duration)
+    for v in values:
+        if v > scene.duration:
+            raise UsageError(f"--dt: {v:g} is longer than the duration {scene.duration!r}")
+    return values
 
 
 # --- errors ------------------------------------------------------------------------------
@@ -399,8 +430,12 @@ def compare(
     jobs: int = 1,
     scheduler: Any = None,
     backend: str = "numpy",
+    fine_min_steps: int | None = None,
 ) -> Comparison:
     """Run every (integrator, dt), measure errors against a reference and time the runs.
+
+    ``fine_min_steps``: the least step allowance of an RK4 reference (default
+    its own, :data:`animsim.analysis.references.FINE_MIN_STEPS`).
 
     ``jobs`` > 1 or a Dask ``scheduler`` (see :func:`animsim.parallel.map_cases`)
     measures the rows in parallel: the errors are identical, the timings share
@@ -420,16 +455,13 @@ def compare(
     base = record_at(scene, name, integrators[0], dts[-1], times)
 
     ref: Reference | None = None
+    ref_start = time.perf_counter()
     if reference in ("auto", "analytic"):
         try:
             ref = analytic_reference(base, times)
         except NoClosedForm as exc:
             if reference == "analytic":
-                raise UsageError(
-                    f"--reference analytic: scene {name!r} has no closed form: {exc}.\n"
-                    f"  closed forms cover: {'; '.join(CLOSED_FORM_FAMILIES)}.\n"
-                    "  use --reference fine (a converged run) or auto"
-                ) from None
+                raise _no_closed_form(name, exc) from None
             notes.append(f"no closed form: {exc}; the reference is a converged run")
     if ref is None and smooth(base):
         try:
@@ -437,6 +469,7 @@ def compare(
                 ref = dop853_reference(base, times)
         except ReferenceFailed as exc:
             notes.append(f"{exc}; falling back to RK4 with dt halved")
+    ref_seconds = time.perf_counter() - ref_start
 
     cases = [(scene, name, integ, dt, times, repeat, backend) for integ in integrators for dt in dts]
     if jobs == 1 and scheduler is None:
@@ -474,7 +507,10 @@ def compare(
         if progress is not None:
             progress("reference (RK4, halving dt)")
         # On the rows' backend: numba's RK4 is the same method, several times faster.
-        ref = rk4_reference(scene, name, times, dts[-1], smallest, distance, backend)
+        floor = {} if fine_min_steps is None else {"min_steps": fine_min_steps}
+        ref_start = time.perf_counter()
+        ref = rk4_reference(scene, name, times, dts[-1], smallest, distance, backend, **floor)
+        ref_seconds += time.perf_counter() - ref_start
     notes.extend(ref.notes)
 
     conservative = base.conservative
@@ -492,7 +528,17 @@ def compare(
                 "particles born inside a step finish it with constant acceleration, "
                 "which limits any method to order 2"
             )
-    return Comparison(name, ref, rows, orders, times, repeat, conservative, notes)
+    result = Comparison(name, ref, rows, orders, times, repeat, conservative, notes)
+    result.reference_seconds = ref_seconds
+    return result
+
+
+def _no_closed_form(name: str, exc: Exception) -> UsageError:
+    return UsageError(
+        f"--reference analytic: scene {name!r} has no closed form: {exc}.\n"
+        f"  closed forms cover: {'; '.join(CLOSED_FORM_FAMILIES)}.\n"
+        "  use --reference fine (a converged run) or auto"
+    )
 
 
 def _measure(
@@ -541,19 +587,118 @@ def _measure(
     )
 
 
+# --- the plan: what to run so that it finishes in time ------------------------------------
+
+
+@dataclass
+class Probe:
+    """What the scene costs on this machine, from short timed runs of it.
+
+    ``curve_t``/``curve_w``: simulated time reached and the loop's wall time to
+    reach it, for ``method`` at ``dt`` (recording as the scene records), so a
+    scene that gets dearer as it runs (births, contacts) is measured as it
+    grows. ``per_step``: seconds per step of each method at ``dt`` over the
+    first steps, for the ratios between methods.
+    """
+
+    backend: str
+    method: str
+    dt: float
+    duration: float  # the scene's, s
+    curve_t: np.ndarray
+    curve_w: np.ndarray
+    per_step: dict[str, float]
+    setup: float  # compiling the scene once (every row and reference run does), s
+    compile_seconds: float  # each method's first stretch: numba compiling its kernels (some on first call), s
+    seconds: float  # the probe's own wall time, compile included, s
+    reference_kind: str  # "analytic", "DOP853" or "RK4"
+    dop853: tuple[float, float] | None = None  # (simulated s reached, wall s) of its first solve
+    grows: bool = False  # births: each step costs more than the one before
+
+    def loop(self, window: float) -> float:
+        """Wall time of ``method`` at ``dt`` to simulate ``window`` seconds.
+
+        Beyond what the probe reached, the rate of its last quarter goes on,
+        growing as it grew during the probe when births add particles."""
+        t, w = self.curve_t, self.curve_w
+        if window <= t[-1]:
+            return float(np.interp(window, t, w))
+        j = min(int(np.searchsorted(t, 0.75 * t[-1])), len(t) - 2)
+        rate = (w[-1] - w[j]) / max(t[-1] - t[j], 1e-300)
+        ahead = window - t[-1]
+        growth = 0.0
+        if self.grows:
+            # Births keep adding particles: the rate grew from the first half to
+            # the last quarter, and is taken to go on growing as fast.
+            h = min(int(np.searchsorted(t, 0.5 * t[-1])), len(t) - 2)
+            early = (w[h] - w[0]) / max(t[h] - t[0], 1e-300)
+            growth = max(0.0, (rate - early) / max(0.5 * (t[-1] + t[j]) - 0.5 * (t[h] + t[0]), 1e-300))
+        return float(w[-1] + rate * ahead + 0.5 * growth * ahead**2)
+
+    def run_seconds(self, method: str, dt: float, window: float) -> float:
+        """One run of ``method`` at ``dt`` over ``window``: steps scale as 1/dt, each
+        method's step costs what it cost in the probe relative to ``method``'s."""
+        ratio = self.per_step[method] / max(self.per_step[self.method], 1e-300)
+        return self.loop(window) * (self.dt / dt) * ratio + self.setup
+
+    def reference_seconds(self, dts: Sequence[float], window: float, min_steps: int | None = None) -> float:
+        if self.reference_kind == "analytic":
+            return 0.0
+        if self.reference_kind == "DOP853":
+            assert self.dop853 is not None
+            reached, wall = self.dop853
+            first = wall * min(window, self.duration) / max(reached, 1e-300)
+            # The check solve at rtol 1e-11 takes about 10^(-1/8) as many steps
+            # (an order-8 method's steps scale as rtol^(-1/8)).
+            return first * (1 + 10 ** (-1 / 8)) + self.setup
+        # RK4 halving (references.rk4_reference): at most the runs up to its step limit.
+        return sum(self.run_seconds("rk4", d, window) for d in rk4_reference_dts(min(dts), window, min_steps))
+
+
+def rk4_reference_dts(finest_dt: float, duration: float, min_steps: int | None = None) -> list[float]:
+    """The step sizes :func:`animsim.analysis.references.rk4_reference` runs when it does
+    not converge early (the most it may cost)."""
+    from animsim.analysis.references import (
+        FINE_MAX_FACTOR,
+        FINE_MAX_STEPS,
+        FINE_MIN_STEPS,
+        FINE_START_DIVISOR,
+    )
+
+    dt = finest_dt / FINE_START_DIVISOR
+    steps = Clock.make(duration, dt).steps
+    finest_steps = max(1, steps // FINE_START_DIVISOR)
+    floor = FINE_MIN_STEPS if min_steps is None else min_steps
+    limit = min(FINE_MAX_STEPS, max(floor, FINE_MAX_FACTOR * finest_steps))
+    out = [dt]
+    while True:
+        dt /= 2
+        out.append(dt)
+        if Clock.make(duration, dt).steps * 2 > limit:
+            return out
+
+
 @dataclass(frozen=True)
 class Estimate:
-    """What a comparison will cost, from a short timed probe of each method."""
+    """What a comparison will cost, from a short timed probe of the scene."""
 
-    seconds: float  # the rows' runs (accuracy run + repeats), s
+    seconds: float  # rows and reference together, s
     runs: int
-    steps: int  # steps of every run together
-    backend: str  # what the probe ran on (numba, or numpy when numba cannot run the scene)
+    steps: int  # steps of every row run together
+    backend: str  # what the rows run on (numba, or numpy when numba cannot run the scene)
+    rows: float = 0.0  # s
+    reference: float = 0.0  # s
+    reference_kind: str = ""
 
     def describe(self) -> str:
+        ref = (
+            f"; the {self.reference_kind} reference about {_duration(self.reference)}"
+            if self.reference_kind and self.reference_kind != "analytic"
+            else ""
+        )
         return (
             f"{self.runs} runs, {self.steps:,} steps on {self.backend}: "
-            f"about {_duration(self.seconds)} plus the reference"
+            f"about {_duration(self.seconds)} in all{ref}"
         )
 
 
@@ -561,6 +706,188 @@ def _duration(seconds: float) -> str:
     if seconds < 60:
         return f"{max(seconds, 0.1):.2g} s" if seconds < 10 else f"{seconds:.0f} s"
     return f"{seconds / 60:.1f} min"
+
+
+def _reference_kind(base: Compiled, reference: str, name: str) -> str:
+    """Which reference :func:`compare` will use (the same decision, made early, so
+    that ``--reference analytic`` on a scene without a closed form is refused first)."""
+    if reference in ("auto", "analytic"):
+        try:
+            analytic_reference(base, np.array([0.0, base.clock.duration]))
+            return "analytic"
+        except NoClosedForm as exc:
+            if reference == "analytic":
+                raise _no_closed_form(name, exc) from None
+    return "DOP853" if smooth(base) else "RK4"
+
+
+def _curve(full: Compiled, deadline: float, run: Any, sink: Any) -> tuple[np.ndarray, np.ndarray, bool]:
+    """(simulated time, loop wall time, reached the end) of one run of ``full`` until ``deadline``."""
+    clock = full.clock
+    samples_t, samples_w = [0.0], [0.0]
+    loop_start: list[float] = []
+
+    def seen(k: int, _total: int) -> None:
+        now = time.perf_counter()
+        if not loop_start:  # the first stretch: the loop started before it, so take its rate
+            loop_start.append(now)
+            samples_t.append(clock.time(k))
+            samples_w.append(0.0)
+            return
+        samples_t.append(clock.time(k))
+        samples_w.append(now - loop_start[0])
+
+    with np.errstate(all="ignore"):
+        result = run(full, [sink()], stop=lambda: time.perf_counter() > deadline, progress=seen)
+    t = np.array(samples_t)
+    w = np.array(samples_w)
+    if len(t) >= 3 and t[1] > 0:
+        # The first stretch was not timed (no stamp before it): give it the rate of the next.
+        rate = w[2] / max(t[2] - t[1], 1e-300)
+        w[1:] += rate * t[1]
+    elif result.steps_taken:
+        t = np.array([0.0, clock.time(result.steps_taken)])
+        w = np.array([0.0, result.wall_time])
+    else:
+        t, w = np.array([0.0]), np.array([0.0])
+    return t, w, result.steps_taken >= clock.steps
+
+
+def probe(
+    scene: m.Scene,
+    name: str,
+    *,
+    integrators: Sequence[str],
+    reference: str = "auto",
+    backend: str = "numpy",
+    notice: Callable[[str], None] | None = None,
+    seconds: float | None = None,
+) -> Probe:
+    """Time the scene itself on ``backend``: each method over its first steps, then one
+    method as far as ``PROBE_SECONDS`` of wall time take it (or to the end), and the
+    DOP853 reference's first solve the same way when the reference will be one.
+
+    Every method runs once before it is timed, so numba's compiling (reported as
+    ``compile_seconds``, never estimated) and NumPy's warm-up are not counted.
+    """
+
+    from animsim.compile import compile_scene, with_overrides
+    from animsim.engine import run
+    from animsim.record import MemorySink
+
+    budget = PROBE_SECONDS if seconds is None else seconds
+    began = time.perf_counter()
+    scene = scene.model_copy(update={"integrator": scene.integrator_name})
+    dt = scene.dt
+    first_steps = min(PROBE_STEPS, Clock.make(scene.duration, dt).steps)
+    short = min(scene.duration, first_steps * dt)
+    method = scene.integrator_name if scene.integrator_name in integrators else integrators[0]
+    base = record_at(scene, name, method, dt, np.array([0.0, scene.duration]), "numpy")
+    kind = _reference_kind(base, reference, name)
+    extra = ["rk4"] if kind == "RK4" else []  # what the RK4 reference's steps cost
+    methods = list(dict.fromkeys([*integrators, *extra]))
+    compile_seconds = 0.0
+    per_step: dict[str, float] = {}
+    chosen = "numpy"
+    setups = []
+    for integ in methods:
+        probe_scene = with_overrides(scene, integrator=integ, dt=dt, duration=short)
+        t0 = time.perf_counter()
+        compiled = record_at(probe_scene, name, integ, dt, np.array([0.0, short]), backend)
+        setups.append(time.perf_counter() - t0)
+        chosen = compiled.backend if compiled.backend != "numpy" else chosen
+        with np.errstate(all="ignore"):
+            # One stretch, to compile: all of its time counts as compiling, since
+            # some kernels compile on their first call, inside the loop's time.
+            t0 = time.perf_counter()
+            warm = run(compiled, [], notice=notice, stop=lambda: True)
+            compile_seconds += max(time.perf_counter() - t0, float(warm.meta.get("compile_time", 0.0)))
+            # The fastest of at least two runs: a kernel that compiles on its first
+            # call later on (the first birth, the first contact) lands in the first.
+            until = time.perf_counter() + PROBE_METHOD_SECONDS
+            runs: list[tuple[float, int]] = []
+            while len(runs) < 2 or time.perf_counter() < until:
+                deadline = time.perf_counter() + PROBE_METHOD_SECONDS
+                result = run(compiled, [], stop=lambda d=deadline: time.perf_counter() > d)
+                runs.append((result.wall_time, max(result.steps_taken, 1)))
+        per_step[integ] = min(wall / steps for wall, steps in runs)
+        wall, steps = runs[0]
+        compile_seconds += max(0.0, wall - per_step[integ] * steps)  # what the first run paid extra
+
+    # One method through as much of the scene as the probe's time allows. A run
+    # that reaches the end quickly is repeated and the fastest kept: on a busy
+    # machine a run of a few milliseconds can lose a whole time slice.
+    full = compile_scene(with_overrides(scene, integrator=method), name, backend=backend)
+    # Recording frames can take code paths the bare runs above did not (some
+    # compile on their first call): one stretch first, counted as compiling.
+    t0 = time.perf_counter()
+    with np.errstate(all="ignore"):
+        run(full, [MemorySink()], stop=lambda: True)
+    compile_seconds += time.perf_counter() - t0
+    curve_start = time.perf_counter()
+    deadline = curve_start + budget
+    best: tuple[np.ndarray, np.ndarray] | None = None
+    while True:
+        t, w, finished = _curve(full, deadline, run, MemorySink)
+        if best is None or (len(t) == len(best[0]) and w[-1] < best[1][-1]):
+            best = (t, w)
+        if not finished or time.perf_counter() > curve_start + budget / 3 or len(t) < 2:
+            break
+    t, w = best
+    if len(t) < 2 or t[-1] <= 0:  # nothing ran (a zero-step scene): the short probe's rate stands in
+        t = np.array([0.0, short])
+        w = np.array([0.0, per_step[method] * first_steps])
+
+    dop = None
+    if kind == "DOP853":
+        from animsim.analysis.references import dop853_rate
+
+        dop = dop853_rate(base, PROBE_REFERENCE_SECONDS)
+    return Probe(
+        backend=chosen,
+        method=method,
+        dt=full.clock.dt,
+        duration=scene.duration,
+        curve_t=t,
+        curve_w=w,
+        per_step=per_step,
+        # the least: the first compiles also pay imports and numba kernels that later ones do not
+        setup=min(setups),
+        compile_seconds=compile_seconds,
+        seconds=time.perf_counter() - began,
+        reference_kind=kind,
+        dop853=dop,
+        grows=full.emitters is not None,
+    )
+
+
+def estimate_from(
+    probe_: Probe,
+    integrators: Sequence[str],
+    dts: Sequence[float],
+    window: float,
+    repeat: int,
+    jobs: int = 1,
+    fine_min_steps: int | None = None,
+) -> Estimate:
+    """The cost of running ``integrators`` x ``dts`` over ``window`` seconds, as ``probe_`` predicts."""
+    rows = sum(
+        probe_.run_seconds(integ, d, window) * (1 + repeat) - probe_.setup * repeat
+        for integ in integrators
+        for d in dts
+    )
+    rows /= max(1, jobs)
+    ref = probe_.reference_seconds(dts, window, fine_min_steps)
+    total_steps = sum(Clock.make(window, d).steps for d in dts)
+    return Estimate(
+        seconds=rows + ref,
+        runs=len(integrators) * len(dts) * (1 + repeat),
+        steps=total_steps * len(integrators) * (1 + repeat),
+        backend=probe_.backend,
+        rows=rows,
+        reference=ref,
+        reference_kind=probe_.reference_kind,
+    )
 
 
 def estimate(
@@ -571,33 +898,244 @@ def estimate(
     dts: Sequence[float],
     repeat: int = DEFAULT_REPEAT,
     backend: str = "numpy",
+    reference: str = "auto",
     notice: Callable[[str], None] | None = None,
 ) -> Estimate:
-    """Time each method over a few steps at the largest dt and scale to every row's steps.
+    """The cost of comparing ``integrators`` at ``dts`` over the whole scene (see :func:`probe`)."""
+    found = probe(scene, name, integrators=integrators, reference=reference, backend=backend, notice=notice)
+    return estimate_from(found, integrators, dts, scene.duration, repeat)
 
-    Each probe runs twice (the first pays numba's compilation and NumPy's
-    warm-up, the second is timed), so the estimate is of steady stepping.
-    Recording is left out: compare records only at the common times.
+
+@dataclass
+class Plan:
+    """What ``compare`` will run, why, and what it should cost."""
+
+    integrators: list[str]
+    dts: list[float]
+    window: float  # the compared stretch from t = 0, s
+    duration: float  # the scene's, s
+    repeat: int
+    estimate: Estimate | None  # None when nobody asked (no budget, nothing to announce)
+    probe: Probe | None
+    budget: float | None
+    #: what was left out of the default plan to fit the budget, in words
+    cuts: list[str] = field(default_factory=list)
+    #: the RK4 reference's least step allowance (None: its own, FINE_MIN_STEPS)
+    fine_min_steps: int | None = None
+
+    @property
+    def run_budget(self) -> float | None:
+        """What the budget leaves for the runs: the probe's own time (compiling aside) is spent."""
+        if self.budget is None:
+            return None
+        spent = 0.0 if self.probe is None else self.probe.seconds - self.probe.compile_seconds
+        return max(self.budget - spent, MIN_RUN_BUDGET * self.budget)
+
+    @property
+    def over_budget(self) -> bool:
+        budget = self.run_budget
+        return budget is not None and self.estimate is not None and self.estimate.seconds > budget
+
+    def lines(self) -> list[str]:
+        """What ``animsim compare`` says before it starts."""
+        over = (
+            ""
+            if self.window >= self.duration
+            else f" over the first {self.window:g} s of {self.duration:g} s"
+        )
+        head = f"comparing {len(self.integrators)} methods at {len(self.dts)} step sizes{over}"
+        if self.estimate is None or self.probe is None:
+            return [head]
+        out = [f"{head}: {self.estimate.describe()}"]
+        probe_ = self.probe
+        compiled = (
+            f", numba compiling {probe_.compile_seconds:.1f} s wall" if probe_.backend == "numba" else ""
+        )
+        out.append(
+            f"  (from a probe of this scene: {probe_.seconds:.1f} s wall{compiled}, not in the estimate)"
+        )
+        if self.cuts:
+            out.append(
+                f"  to fit the time budget of {self.budget:g} s (--budget; the probe's time counts), "
+                "the default plan was cut: " + "; ".join(self.cuts)
+            )
+            if self.over_budget:
+                out.append(
+                    "  even so it is over the budget: this is the smallest plan compare makes by itself"
+                )
+            out.append(
+                "  --integrators, --dt and --duration choose these yourself; --budget 0 runs everything"
+            )
+        elif self.over_budget:
+            out.append(
+                f"  note: that is longer than the time budget of {self.budget:g} s (--budget); "
+                "the options given are run as given"
+            )
+        return out
+
+
+def _core_methods(scene: m.Scene, available: Sequence[str]) -> list[str]:
+    """CORE_INTEGRATORS, plus the scene's own method (the one a user cares about first)."""
+    core = [name for name in CORE_INTEGRATORS if name in available]
+    own = scene.integrator_name
+    if own in available and own not in core:
+        core.append(own)
+    return [name for name in available if name in core]
+
+
+def make_plan(
+    scene: m.Scene,
+    name: str,
+    *,
+    integrators: Sequence[str] | None = None,
+    dts: Sequence[float] | None = None,
+    duration: float | None = None,
+    repeat: int = DEFAULT_REPEAT,
+    reference: str = "auto",
+    budget: float | None = DEFAULT_BUDGET,
+    backend: str = "numpy",
+    jobs: int = 1,
+    max_steps: int = DEFAULT_MAX_STEPS,
+    notice: Callable[[str], None] | None = None,
+    estimate: bool = True,
+) -> Plan:
+    """Probe the scene and choose what to run.
+
+    What the caller names (``integrators``, ``dts``, ``duration``) is run as
+    named. What is left to the default is cut, in this order, until the
+    estimate fits ``budget`` seconds (None or 0: no budget): the finest of the
+    four default step sizes; then the compared window, down to half the
+    scene; then the methods, to CORE_INTEGRATORS and the scene's own; then the
+    window again, down to MIN_WINDOW_STEPS steps of the largest dt.
     """
-    from animsim.compile import with_overrides
-    from animsim.engine import run
+    if repeat < 0:
+        raise UsageError(f"--repeat: must be >= 0, not {repeat}")
+    if budget is not None and not (math.isfinite(budget) and budget >= 0):
+        raise UsageError(f"--budget: must be a number of seconds >= 0, not {budget!r}")
+    budget = budget or None
+    total = scene.duration
+    if duration is not None:
+        if not (math.isfinite(duration) and duration > 0):
+            raise UsageError(f"--duration: must be a finite number > 0, not {duration!r}")
+        if duration > total:
+            raise UsageError(f"--duration: {duration:g} is longer than the scene ({total:g} s)")
+    window_given = duration is not None
+    window = duration if duration is not None else total
+    for v in dts or ():
+        if v > window:
+            raise UsageError(f"--dt: {v:g} is longer than the duration {window!r}")
+    if dts:  # refused before the probe runs
+        common_times(window_scene(scene, window), dts, max_steps)
+    all_methods = list(integrators) if integrators else parse_integrators(None)
+    method_sets = [all_methods]
+    if not integrators:
+        core = _core_methods(scene, all_methods)
+        if core != all_methods:
+            method_sets.append(core)
+    if dts:
+        dt_sets = [sorted(set(dts), reverse=True)]
+    else:
+        full_dts = default_dts(scene.dt, window)
+        dt_sets = [full_dts, full_dts[:-1]]
+    if budget is None and not estimate:  # nothing to fit and nobody to tell: no probe
+        common_times(window_scene(scene, window), dt_sets[0], max_steps)
+        return Plan(all_methods, dt_sets[0], window, total, repeat, None, None, None)
+    found = probe(scene, name, integrators=all_methods, reference=reference, backend=backend, notice=notice)
+    asked = budget
+    if budget is not None:  # the probe has spent part of it
+        budget = Plan([], [], 0.0, 0.0, 0, None, found, budget).run_budget
+    floors: list[int | None] = [None]
+    if found.reference_kind == "RK4" and not (integrators and dts):
+        floors.append(0)  # the RK4 reference held to FINE_MAX_FACTOR times the finest run's steps
 
-    dt = max(dts)
-    total_steps = sum(Clock.make(scene.duration, d).steps for d in dts)
-    probe_duration = min(scene.duration, PROBE_STEPS * dt)
-    seconds = 0.0
-    chosen = "numpy"
-    for integ in integrators:
-        probe = with_overrides(scene, integrator=integ, dt=dt, duration=probe_duration)
-        compiled = record_at(probe, name, integ, dt, np.array([0.0, probe.duration]), backend)
-        chosen = compiled.backend if compiled.backend != "numpy" else chosen
-        with np.errstate(all="ignore"):
-            run(compiled, [], notice=notice)
-            result = run(compiled, [])
-        per_step = result.wall_time / max(result.steps_taken, 1)
-        seconds += per_step * total_steps * (1 + repeat)
-    runs = len(integrators) * len(dts) * (1 + repeat)
-    return Estimate(seconds, runs, total_steps * len(integrators) * (1 + repeat), chosen)
+    def cost(methods: Sequence[str], steps: Sequence[float], w: float, floor: int | None) -> Estimate:
+        return estimate_from(found, methods, steps, w, repeat, jobs, floor)
+
+    def fits(level: tuple[list[str], list[float], int | None], w: float) -> bool:
+        return budget is None or cost(*level[:2], w, level[2]).seconds <= budget
+
+    def plan(level: tuple[list[str], list[float], int | None], w: float) -> Plan:
+        methods, steps, floor = level
+        common_times(window_scene(scene, w), steps, max_steps)  # refuses too many steps now
+        cuts = []
+        if floor is not None:
+            cuts.append(
+                f"the RK4 reference may take at most {FINE_MAX_FACTOR} times the finest run's steps "
+                "(a note says so if it has not converged by then)"
+            )
+        if len(steps) < len(dt_sets[0]):
+            sizes = ", ".join(f"{d:g}" for d in steps)
+            cuts.append(f"{len(steps)} step sizes ({sizes} s) instead of {len(dt_sets[0])}")
+        if len(methods) < len(all_methods):
+            cuts.append(f"the methods {', '.join(methods)} instead of all {len(all_methods)}")
+        if w < total and not window_given:
+            cuts.append(f"compared over the first {w:g} s of {total:g} s")
+        return Plan(
+            list(methods),
+            list(steps),
+            w,
+            total,
+            repeat,
+            cost(methods, steps, w, floor),
+            found,
+            asked,
+            cuts,
+            floor,
+        )
+
+    def longest_window(level: tuple[list[str], list[float], int | None], shortest: float) -> float | None:
+        """The longest record time of the coarsest run, >= shortest, whose plan fits (None: none)."""
+        times, _ = common_times(scene, level[1], DEFAULT_MAX_STEPS * 1000)
+        candidates = [float(t) for t in times if t >= shortest - 1e-12 and t > 0]
+        best = None
+        lo, hi = 0, len(candidates) - 1
+        while lo <= hi:  # the cost grows with the window: bisect
+            mid = (lo + hi) // 2
+            if fits(level, candidates[mid]):
+                best = candidates[mid]
+                lo = mid + 1
+            else:
+                hi = mid - 1
+        return best
+
+    first = (method_sets[0], dt_sets[0], None)
+    # Everything named, or no budget: run as asked (the estimate says what it costs).
+    if budget is None or (integrators and dts and window_given):
+        return plan(first, window)
+    # 1. the whole window, cutting as little as possible: the reference's floor,
+    #    the finest step size, the methods
+    levels = [first]
+    levels += [(method_sets[0], dt_sets[0], f) for f in floors[1:]]
+    levels += [(method_sets[0], ds, floors[-1]) for ds in dt_sets[1:]]
+    levels += [(ms, dt_sets[-1], floors[-1]) for ms in method_sets[1:]]
+    for level in levels:
+        if fits(level, window):
+            return plan(level, window)
+    if window_given:  # the window was named: it stays, and the plan says it is over budget
+        return plan(levels[-1], window)
+    # 2. every method still, the fewest step sizes, over at least half the scene
+    coarse = max(dt_sets[-1])
+    shortest = min(total, MIN_WINDOW_STEPS * coarse)
+    level = (method_sets[0], dt_sets[-1], floors[-1])
+    w = longest_window(level, max(shortest, 0.5 * total))
+    if w is not None:
+        return plan(level, w)
+    # 3. the fewest methods too, over as much of the scene as fits
+    level = levels[-1]
+    w = longest_window(level, shortest)
+    if w is None:  # nothing fits: the smallest plan, which says it is over budget
+        times, _ = common_times(scene, level[1], DEFAULT_MAX_STEPS * 1000)
+        w = next((float(t) for t in times if t >= shortest - 1e-12 and t > 0), total)
+    return plan(level, w)
+
+
+def window_scene(scene: m.Scene, duration: float) -> m.Scene:
+    """The scene cut to its first ``duration`` seconds (itself when that is all of it)."""
+    if duration >= scene.duration:
+        return scene
+    from animsim.compile import with_overrides
+
+    return with_overrides(scene, duration=duration)
 
 
 def _measure_case(case: tuple[Any, ...]) -> _Run:
@@ -786,4 +1324,80 @@ def summary_lines(comparison: Comparison) -> list[str]:
             lines.append(f"{r.integrator} at dt = {r.dt:g}: {r.failure.splitlines()[0]}")
     for note in comparison.notes:
         lines.append(f"note: {note}")
+    plan = comparison.plan
+    if plan is not None:
+        for cut in plan.cuts:
+            lines.append(f"note: to fit the time budget of {plan.budget:g} s: {cut}")
+        est = plan.estimate
+        if comparison.seconds is not None and est is not None and plan.probe is not None:
+            ref = ""
+            if est.reference_kind != "analytic":
+                ref = (
+                    f" (the reference {comparison.reference_seconds:.1f} s wall, "
+                    f"estimated about {_duration(est.reference)})"
+                )
+            lines.append(
+                f"took {comparison.seconds:.1f} s wall, estimated about {_duration(est.seconds)}{ref}; "
+                f"the probe before it {plan.probe.seconds:.1f} s wall"
+            )
     return lines
+
+
+def run_planned(
+    scene: m.Scene,
+    name: str,
+    *,
+    integrators: Sequence[str] | None = None,
+    dts: Sequence[float] | None = None,
+    duration: float | None = None,
+    reference: str = "auto",
+    repeat: int = DEFAULT_REPEAT,
+    budget: float | None = DEFAULT_BUDGET,
+    backend: str = "numpy",
+    jobs: int = 1,
+    scheduler: Any = None,
+    max_steps: int = DEFAULT_MAX_STEPS,
+    progress: Callable[[str], None] | None = None,
+    notice: Callable[[str], None] | None = None,
+    on_plan: Callable[[Plan], None] | None = None,
+) -> Comparison:
+    """Plan (:func:`make_plan`: probe the scene, fit ``budget``), tell ``on_plan``, then
+    :func:`compare` what the plan chose; the result holds the plan and the time taken."""
+
+    if reference not in REFERENCE_KINDS:
+        raise UsageError(f"--reference: {reference!r} is not one of {', '.join(REFERENCE_KINDS)}")
+    plan = make_plan(
+        scene,
+        name,
+        integrators=integrators,
+        dts=dts,
+        duration=duration,
+        repeat=repeat,
+        reference=reference,
+        budget=budget,
+        backend=backend,
+        jobs=jobs,
+        max_steps=max_steps,
+        notice=notice,
+        estimate=budget is not None or on_plan is not None,
+    )
+    if on_plan is not None:
+        on_plan(plan)
+    start = time.perf_counter()
+    result = compare(
+        window_scene(scene, plan.window),
+        name,
+        integrators=plan.integrators,
+        dts=plan.dts,
+        reference=reference,
+        repeat=repeat,
+        progress=progress,
+        max_steps=max_steps,
+        jobs=jobs,
+        scheduler=scheduler,
+        backend=backend,
+        fine_min_steps=plan.fine_min_steps,
+    )
+    result.seconds = time.perf_counter() - start
+    result.plan = plan
+    return result

@@ -44,6 +44,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -713,16 +714,8 @@ def smooth(compiled: Compiled) -> bool:
     return not compiled.post_step and not compiled.system.body_count
 
 
-def dop853_reference(compiled: Compiled, times: np.ndarray) -> Reference:
-    """Solve the compiled Dynamics with SciPy's DOP853 at rtol 1e-12.
-
-    The right-hand side is exactly what every integrator sees,
-    y = (x, v), y' = (v, a(x, v, t)). A second solve at rtol 1e-11 measures
-    the error: the two differ by about the looser one's error, a tenth of
-    which is taken as the tighter one's accuracy.
-    """
-    from scipy.integrate import solve_ivp
-
+def _dop853_problem(compiled: Compiled) -> tuple[Callable[..., np.ndarray], np.ndarray, float, float]:
+    """(rhs, y0, length, speed) of the DOP853 solve: y = (x, v), y' = (v, a(x, v, t))."""
     dyn = compiled.dynamics
     n = compiled.system.particle_count
     x0 = compiled.initial.particle_position
@@ -739,19 +732,64 @@ def dop853_reference(compiled: Compiled, times: np.ndarray) -> Reference:
     length = max(
         float(np.max(np.abs(x0), initial=0.0)), float(np.max(np.abs(v0), initial=0.0)) * duration, 1e-6
     )
-    speed = length / duration
+    return rhs, np.concatenate([x0.ravel(), v0.ravel()]), length, length / duration
+
+
+def _dop853_solve(compiled: Compiled, rhs: Callable[..., np.ndarray], times: np.ndarray, rtol: float) -> Any:
+    from scipy.integrate import solve_ivp
+
+    _, y0, length, speed = _dop853_problem(compiled)
+    n3 = 3 * compiled.system.particle_count
+    atol = np.concatenate([np.full(n3, rtol * length), np.full(n3, rtol * speed)])
+    return solve_ivp(
+        rhs, (0.0, compiled.clock.duration), y0, method="DOP853", t_eval=times, rtol=rtol, atol=atol
+    )
+
+
+class _OutOfTime(Exception):
+    pass
+
+
+def dop853_rate(compiled: Compiled, seconds: float) -> tuple[float, float]:
+    """(simulated time reached, wall time) of :func:`dop853_reference`'s first solve when
+    stopped after about ``seconds`` of wall time (or at the end): a probe of its cost."""
+    import time
+
+    import scipy.integrate  # noqa: F401  (imported before the clock starts: it takes a while)
+
+    rhs, _, _, _ = _dop853_problem(compiled)
+    start = time.perf_counter()
+    deadline = start + seconds
+    reached = [0.0]
+
+    def timed(t: float, y: np.ndarray) -> np.ndarray:
+        if time.perf_counter() > deadline:
+            raise _OutOfTime
+        reached[0] = max(reached[0], t)
+        return rhs(t, y)
+
+    try:
+        with np.errstate(all="ignore"):
+            _dop853_solve(compiled, timed, np.array([0.0, compiled.clock.duration]), DOP853_RTOL)
+        reached[0] = compiled.clock.duration
+    except _OutOfTime:
+        pass
+    return reached[0], time.perf_counter() - start
+
+
+def dop853_reference(compiled: Compiled, times: np.ndarray) -> Reference:
+    """Solve the compiled Dynamics with SciPy's DOP853 at rtol 1e-12.
+
+    The right-hand side is exactly what every integrator sees,
+    y = (x, v), y' = (v, a(x, v, t)). A second solve at rtol 1e-11 measures
+    the error: the two differ by about the looser one's error, a tenth of
+    which is taken as the tighter one's accuracy.
+    """
+    n = compiled.system.particle_count
+    rhs, _, _, _ = _dop853_problem(compiled)
 
     def solve(rtol: float) -> np.ndarray:
-        atol = np.concatenate([np.full(3 * n, rtol * length), np.full(3 * n, rtol * speed)])
-        sol = solve_ivp(
-            rhs,
-            (0.0, duration),
-            np.concatenate([x0.ravel(), v0.ravel()]),
-            method="DOP853",
-            t_eval=times,
-            rtol=rtol,
-            atol=atol,
-        )
+        sol = _dop853_solve(compiled, rhs, times, rtol)
         if not sol.success:
             raise ReferenceFailed(f"DOP853 failed: {sol.message}")
         return sol.y.T
@@ -803,6 +841,7 @@ def rk4_reference(
     smallest_error: Callable[[Trajectory], float],
     distance: Callable[[Trajectory, Trajectory], float],
     backend: str = "numpy",
+    min_steps: int = FINE_MIN_STEPS,
 ) -> Reference:
     """RK4 with dt halved until the change is far below the smallest error measured.
 
@@ -811,7 +850,7 @@ def rk4_reference(
     off by about change/15). Stops when the change is below a thousandth of
     ``smallest_error(reference)`` (re-measured against each new reference), or
     at :data:`FINE_MAX_STEPS` or :data:`FINE_MAX_FACTOR` times the finest
-    compared run's steps, saying so.
+    compared run's steps (but never below ``min_steps``), saying so.
     """
     dt = finest_dt / FINE_START_DIVISOR
     first = record_at(scene, name, "rk4", dt, times, backend)
@@ -832,7 +871,7 @@ def rk4_reference(
         prev = cur
         if change <= target or change == 0.0:
             break
-        limit = min(FINE_MAX_STEPS, max(FINE_MIN_STEPS, FINE_MAX_FACTOR * finest_steps))
+        limit = min(FINE_MAX_STEPS, max(min_steps, FINE_MAX_FACTOR * finest_steps))
         if compiled.clock.steps * 2 > limit:
             notes.append(
                 f"the RK4 reference did not converge within {limit} steps "
