@@ -307,10 +307,13 @@ def _fill_bodies(traj: Trajectory, compiled: Any) -> None:
 
 
 def compare(
-    scene: Scene,
-    integrators: Sequence[str] | None = None,
-    dts: Sequence[float] | None = None,
+    scene: Scene | str | Path,
+    integrators: str | Sequence[str] | None = None,
+    dts: str | Sequence[float] | None = None,
     *,
+    output: str | Path | None = None,
+    plot: str | Path | None = None,
+    limits: Any = None,
     reference: str = "auto",
     repeat: int = 1,
     comparison: bool = False,
@@ -335,12 +338,34 @@ def compare(
     first and cut what was left to the default (dt/4, then the window, then
     the methods) until the estimated run time fits, as ``animsim compare``
     does; ``on_plan(plan)`` hears the :class:`~animsim.analysis.compare.Plan`
-    before the runs start.
+    before the runs start. ``scene`` may be a scene file (its limits checked
+    with ``limits``); ``integrators`` and ``dts`` may be the command line's
+    comma-separated text. ``output`` (CSV) and ``plot`` (PNG, SVG, PDF) are
+    checked before any run and written after.
     """
     from dataclasses import asdict
 
     from animsim.analysis import compare as cmp
 
+    if not isinstance(scene, Scene):
+        loaded, _, _ = prepare_file(Path(scene), limits)  # the file's step and memory limits
+        source: Any = scene
+        scene, name = loaded.scene, name or loaded.name
+    else:
+        source = Path(f"{scene.name or 'scene'}.yaml")
+    for path in (output, plot):
+        if path is not None:
+            _check_output(Path(path), source)
+    if plot is not None:
+        from animsim.export.plots import plot_format
+
+        plot_format(Path(plot))
+    if isinstance(integrators, str):
+        integrators = cmp.parse_integrators(integrators)
+    if isinstance(dts, str):
+        dts = cmp.parse_dt_option(dts)
+    if max_steps is None and limits is not None:
+        max_steps = limits.max_steps
     result = cmp.run_planned(
         scene,
         name or scene.name or "scene",
@@ -358,6 +383,12 @@ def compare(
         notice=notice,
         on_plan=on_plan,
     )
+    if output is not None:
+        cmp.write_csv(result, Path(output))
+    if plot is not None:
+        from animsim.export.plots import write_compare_plot
+
+        write_compare_plot(result, Path(plot))
     return result if comparison else [asdict(row) for row in result.rows]
 
 

@@ -299,13 +299,6 @@ def _graceful_stop():
             signal.signal(s, h)
 
 
-def check_output_path(output: Path, scene_path: Path) -> None:
-    """Refuse, before any step, an output that cannot be written (see animsim.preflight)."""
-    from animsim.preflight import check_output_path as check
-
-    check(output, scene_path)
-
-
 # --- run ----------------------------------------------------------------------------
 
 
@@ -380,13 +373,6 @@ def run(
             f"{scene}: interrupted at step {result.steps_taken} (t = {result.final_state.time:.6g} s); frames so far in {out}"
         )
         raise typer.Exit(EXIT_INTERRUPTED)
-
-
-def prepare_scene(scene: Path, limits: Any, **kw: Any) -> tuple[Any, Any, Any]:
-    """:func:`api.prepare_file`, imported late: a refused scene never pays for NumPy."""
-    from animsim.api import prepare_file
-
-    return prepare_file(scene, limits, **kw)
 
 
 @contextmanager
@@ -966,26 +952,9 @@ def compare(
     comparison: the exit status is 0 when the comparison itself completed
     (use --fail-on-unstable to exit 1 instead), 2 for a bad scene or option.
     """
-    from animsim.analysis.compare import (
-        left_out,
-        parse_dt_option,
-        parse_integrators,
-        summary_lines,
-        table,
-        write_csv,
-    )
-    from animsim.api import compare as api_compare
+    from animsim import api
+    from animsim.analysis.compare import left_out, summary_lines, table
     from animsim.console import terminal_notice
-    from animsim.export.plots import plot_format, write_compare_plot
-
-    # The scene's own file, step and memory limits; each step size is checked
-    # against --max-steps again before any run.
-    loaded, _, _ = prepare_scene(scene, limits)
-    for path in (output, plot):
-        if path is not None:
-            check_output_path(path, scene)
-    if plot is not None:
-        plot_format(plot)
 
     with _compare_progress() as (progress, planned):
 
@@ -994,11 +963,13 @@ def compare(
                 _err(line)
             planned(len(plan.integrators) * len(plan.dts))
 
-        result = api_compare(
-            loaded.scene,
-            parse_integrators(integrators) if integrators is not None else None,
-            parse_dt_option(dt),
-            name=loaded.name,
+        result = api.compare(
+            scene,
+            integrators,
+            dt,
+            output=output,
+            plot=plot,
+            limits=limits,
             duration=duration,
             budget=budget,
             reference=reference.value,
@@ -1006,7 +977,6 @@ def compare(
             backend=_backend(backend),
             jobs=jobs,
             scheduler=scheduler,
-            max_steps=limits.max_steps,
             progress=progress,
             notice=terminal_notice(),
             on_plan=announce,
@@ -1023,12 +993,9 @@ def compare(
         )
     for line in summary_lines(result):
         console.print(line, highlight=False, markup=False)
-    if output is not None:
-        write_csv(result, output)
-        console.print(f"wrote {output}", highlight=False, markup=False)
-    if plot is not None:
-        write_compare_plot(result, plot)
-        console.print(f"wrote {plot}", highlight=False, markup=False)
+    for path in (output, plot):
+        if path is not None:
+            console.print(f"wrote {path}", highlight=False, markup=False)
     if fail_on_unstable and result.any_unstable:
         raise typer.Exit(EXIT_FAILED)
 
