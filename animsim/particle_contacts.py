@@ -62,7 +62,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from animsim.elements import StepStage
+from animsim.elements import StepStage, _compile_helpers, numba_helper
 from animsim.vec import dot3
 
 #: velocity and position passes per step
@@ -540,6 +540,169 @@ class NumbaKernels(NamedTuple):
 _KERNELS: NumbaKernels | None = None
 
 
+# Helpers the kernels below call. They live at module level, not inside numba_kernels():
+# numba keys a closure's disk-cache entry on its captured values, and a captured
+# dispatcher pickles differently in every process, so a kernel calling a nested kernel
+# missed the cache and compiled again on every run (seconds for every contact scene).
+@numba_helper
+def cell_hash(cx, cy, cz, size):  # pragma: no cover - compiled
+    # Teschner et al. 2003: XOR of the cell coordinates times three large primes.
+    # size is a power of two: the mask is the modulo, for negative h too
+    return ((cx * 73856093) ^ (cy * 19349663) ^ (cz * 83492791)) & (size - 1)
+
+
+@numba_helper
+def excluded(keys, key):  # pragma: no cover - compiled
+    lo, hi = 0, keys.shape[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if keys[mid] < key:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo < keys.shape[0] and keys[lo] == key
+
+
+@numba_helper
+def candidates(x, active, exclude, reach):  # pragma: no cover - compiled
+    """Pairs (i, j), i < j, of active rows with |x_j - x_i|^2 <= reach^2, sorted by (i, j).
+
+    Cells ``reach`` wide: a dense grid over the particles' box when it has not
+    many more cells than particles (grains in a box), else a spatial hash.
+    Rows are counting-sorted by cell; each one looks at the later rows of its
+    own cell and at the rows of the 13 cells after its own (half of the 26
+    around it: every pair of cells once), and the pairs found are put in
+    (i, j) order by a counting sort on i.
+    """
+    n = x.shape[0]
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    m = 0
+    dense = True  # a dense grid needs every coordinate finite
+    for i in range(n):
+        if active[i]:
+            m += 1
+            for a in range(3):
+                if not np.isfinite(x[i, a]):
+                    dense = False
+                lo[a] = min(lo[a], x[i, a])
+                hi[a] = max(hi[a], x[i, a])
+    if m < 2 or not reach > 0:
+        return np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64)
+    inv = 1.0 / reach
+    dims = np.ones(3, dtype=np.int64)
+    total = 1.0
+    for a in range(3):
+        if not dense:
+            break
+        span = (hi[a] - lo[a]) * inv
+        if not np.isfinite(span):
+            dense = False
+            break
+        dims[a] = np.int64(span) + 1
+        total *= dims[a]
+    if total > 8.0 * m + 4096:
+        dense = False
+    cc = np.zeros((n, 3), dtype=np.int64)
+    key = np.zeros(n, dtype=np.int64)
+    if dense:
+        size = dims[0] * dims[1] * dims[2]
+    else:
+        size = 1
+        while size < 2 * n:
+            size *= 2
+    start = np.zeros(size + 1, dtype=np.int64)
+    for i in range(n):
+        if active[i]:
+            if dense:
+                for a in range(3):
+                    cc[i, a] = min(np.int64((x[i, a] - lo[a]) * inv), dims[a] - 1)
+                key[i] = (cc[i, 0] * dims[1] + cc[i, 1]) * dims[2] + cc[i, 2]
+            else:
+                for a in range(3):
+                    f = np.floor(x[i, a] * inv)
+                    # a non-finite or huge coordinate: a cell of its own kind, never near others
+                    cc[i, a] = np.int64(f) if abs(f) < 1e15 else np.int64(1) << 62
+                key[i] = cell_hash(cc[i, 0], cc[i, 1], cc[i, 2], size)
+            start[key[i] + 1] += 1
+    for k in range(size):
+        start[k + 1] += start[k]
+    fill = start[:-1].copy()
+    order = np.empty(m, dtype=np.int64)
+    for i in range(n):  # ascending rows within a cell
+        if active[i]:
+            order[fill[key[i]]] = i
+            fill[key[i]] += 1
+    # copies in cell order: the scan below reads memory in sequence
+    xs = np.empty((m, 3))
+    cs = np.empty((m, 3), dtype=np.int64)
+    for k in range(m):
+        for a in range(3):
+            xs[k, a] = x[order[k], a]
+            cs[k, a] = cc[order[k], a]
+    r2 = reach * reach
+    raw_i = np.empty(max(16, 8 * m), dtype=np.int64)
+    raw_j = np.empty(max(16, 8 * m), dtype=np.int64)
+    npairs = 0
+    for ka in range(m):
+        # the own cell and the 13 cells after it in (x, y, z) order: each pair of cells once
+        for q in range(13, 27):
+            gx = cs[ka, 0] + q // 9 - 1
+            gy = cs[ka, 1] + (q // 3) % 3 - 1
+            gz = cs[ka, 2] + q % 3 - 1
+            if dense:
+                if gx < 0 or gy < 0 or gz < 0 or gx >= dims[0] or gy >= dims[1] or gz >= dims[2]:
+                    continue
+                b = (gx * dims[1] + gy) * dims[2] + gz
+            else:
+                b = cell_hash(gx, gy, gz, size)
+            first = ka + 1 if q == 13 else start[b]
+            for kb in range(first, start[b + 1]):
+                if not dense and (cs[kb, 0] != gx or cs[kb, 1] != gy or cs[kb, 2] != gz):
+                    continue
+                t0 = xs[kb, 0] - xs[ka, 0]
+                t1 = xs[kb, 1] - xs[ka, 1]
+                t2 = xs[kb, 2] - xs[ka, 2]
+                if not (t0 * t0 + t1 * t1 + t2 * t2 <= r2):  # NaN too
+                    continue
+                i = min(order[ka], order[kb])
+                j = max(order[ka], order[kb])
+                if exclude.shape[0] and excluded(exclude, i * n + j):
+                    continue
+                if npairs == raw_i.shape[0]:
+                    gi = np.empty(2 * npairs, dtype=np.int64)
+                    gj = np.empty(2 * npairs, dtype=np.int64)
+                    gi[:npairs] = raw_i[:npairs]
+                    gj[:npairs] = raw_j[:npairs]
+                    raw_i, raw_j = gi, gj
+                raw_i[npairs] = i
+                raw_j[npairs] = j
+                npairs += 1
+    # (i, j) order: a counting sort by i, then each i's handful of j by insertion
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    for k in range(npairs):
+        ptr[raw_i[k] + 1] += 1
+    for i in range(n):
+        ptr[i + 1] += ptr[i]
+    at = ptr[:-1].copy()
+    out_i = np.empty(npairs, dtype=np.int64)
+    out_j = np.empty(npairs, dtype=np.int64)
+    for k in range(npairs):
+        i = raw_i[k]
+        out_i[at[i]] = i
+        out_j[at[i]] = raw_j[k]
+        at[i] += 1
+    for i in range(n):
+        for a in range(ptr[i] + 1, ptr[i + 1]):
+            t = out_j[a]
+            b2 = a - 1
+            while b2 >= ptr[i] and out_j[b2] > t:
+                out_j[b2 + 1] = out_j[b2]
+                b2 -= 1
+            out_j[b2 + 1] = t
+    return out_i, out_j
+
+
 def numba_kernels() -> NumbaKernels:
     """The numba kernels (compiled, or loaded from numba's disk cache, on first use)."""
     global _KERNELS
@@ -547,161 +710,7 @@ def numba_kernels() -> NumbaKernels:
         return _KERNELS
     import numba
 
-    @numba.njit(cache=True)
-    def cell_hash(cx, cy, cz, size):  # pragma: no cover - compiled
-        # Teschner et al. 2003: XOR of the cell coordinates times three large primes.
-        # size is a power of two: the mask is the modulo, for negative h too
-        return ((cx * 73856093) ^ (cy * 19349663) ^ (cz * 83492791)) & (size - 1)
-
-    @numba.njit(cache=True)
-    def excluded(keys, key):  # pragma: no cover - compiled
-        lo, hi = 0, keys.shape[0]
-        while lo < hi:
-            mid = (lo + hi) // 2
-            if keys[mid] < key:
-                lo = mid + 1
-            else:
-                hi = mid
-        return lo < keys.shape[0] and keys[lo] == key
-
-    @numba.njit(cache=True)
-    def candidates(x, active, exclude, reach):  # pragma: no cover - compiled
-        """Pairs (i, j), i < j, of active rows with |x_j - x_i|^2 <= reach^2, sorted by (i, j).
-
-        Cells ``reach`` wide: a dense grid over the particles' box when it has not
-        many more cells than particles (grains in a box), else a spatial hash.
-        Rows are counting-sorted by cell; each one looks at the later rows of its
-        own cell and at the rows of the 13 cells after its own (half of the 26
-        around it: every pair of cells once), and the pairs found are put in
-        (i, j) order by a counting sort on i.
-        """
-        n = x.shape[0]
-        lo = np.full(3, np.inf)
-        hi = np.full(3, -np.inf)
-        m = 0
-        dense = True  # a dense grid needs every coordinate finite
-        for i in range(n):
-            if active[i]:
-                m += 1
-                for a in range(3):
-                    if not np.isfinite(x[i, a]):
-                        dense = False
-                    lo[a] = min(lo[a], x[i, a])
-                    hi[a] = max(hi[a], x[i, a])
-        if m < 2 or not reach > 0:
-            return np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64)
-        inv = 1.0 / reach
-        dims = np.ones(3, dtype=np.int64)
-        total = 1.0
-        for a in range(3):
-            if not dense:
-                break
-            span = (hi[a] - lo[a]) * inv
-            if not np.isfinite(span):
-                dense = False
-                break
-            dims[a] = np.int64(span) + 1
-            total *= dims[a]
-        if total > 8.0 * m + 4096:
-            dense = False
-        cc = np.zeros((n, 3), dtype=np.int64)
-        key = np.zeros(n, dtype=np.int64)
-        if dense:
-            size = dims[0] * dims[1] * dims[2]
-        else:
-            size = 1
-            while size < 2 * n:
-                size *= 2
-        start = np.zeros(size + 1, dtype=np.int64)
-        for i in range(n):
-            if active[i]:
-                if dense:
-                    for a in range(3):
-                        cc[i, a] = min(np.int64((x[i, a] - lo[a]) * inv), dims[a] - 1)
-                    key[i] = (cc[i, 0] * dims[1] + cc[i, 1]) * dims[2] + cc[i, 2]
-                else:
-                    for a in range(3):
-                        f = np.floor(x[i, a] * inv)
-                        # a non-finite or huge coordinate: a cell of its own kind, never near others
-                        cc[i, a] = np.int64(f) if abs(f) < 1e15 else np.int64(1) << 62
-                    key[i] = cell_hash(cc[i, 0], cc[i, 1], cc[i, 2], size)
-                start[key[i] + 1] += 1
-        for k in range(size):
-            start[k + 1] += start[k]
-        fill = start[:-1].copy()
-        order = np.empty(m, dtype=np.int64)
-        for i in range(n):  # ascending rows within a cell
-            if active[i]:
-                order[fill[key[i]]] = i
-                fill[key[i]] += 1
-        # copies in cell order: the scan below reads memory in sequence
-        xs = np.empty((m, 3))
-        cs = np.empty((m, 3), dtype=np.int64)
-        for k in range(m):
-            for a in range(3):
-                xs[k, a] = x[order[k], a]
-                cs[k, a] = cc[order[k], a]
-        r2 = reach * reach
-        raw_i = np.empty(max(16, 8 * m), dtype=np.int64)
-        raw_j = np.empty(max(16, 8 * m), dtype=np.int64)
-        npairs = 0
-        for ka in range(m):
-            # the own cell and the 13 cells after it in (x, y, z) order: each pair of cells once
-            for q in range(13, 27):
-                gx = cs[ka, 0] + q // 9 - 1
-                gy = cs[ka, 1] + (q // 3) % 3 - 1
-                gz = cs[ka, 2] + q % 3 - 1
-                if dense:
-                    if gx < 0 or gy < 0 or gz < 0 or gx >= dims[0] or gy >= dims[1] or gz >= dims[2]:
-                        continue
-                    b = (gx * dims[1] + gy) * dims[2] + gz
-                else:
-                    b = cell_hash(gx, gy, gz, size)
-                first = ka + 1 if q == 13 else start[b]
-                for kb in range(first, start[b + 1]):
-                    if not dense and (cs[kb, 0] != gx or cs[kb, 1] != gy or cs[kb, 2] != gz):
-                        continue
-                    t0 = xs[kb, 0] - xs[ka, 0]
-                    t1 = xs[kb, 1] - xs[ka, 1]
-                    t2 = xs[kb, 2] - xs[ka, 2]
-                    if not (t0 * t0 + t1 * t1 + t2 * t2 <= r2):  # NaN too
-                        continue
-                    i = min(order[ka], order[kb])
-                    j = max(order[ka], order[kb])
-                    if exclude.shape[0] and excluded(exclude, i * n + j):
-                        continue
-                    if npairs == raw_i.shape[0]:
-                        gi = np.empty(2 * npairs, dtype=np.int64)
-                        gj = np.empty(2 * npairs, dtype=np.int64)
-                        gi[:npairs] = raw_i[:npairs]
-                        gj[:npairs] = raw_j[:npairs]
-                        raw_i, raw_j = gi, gj
-                    raw_i[npairs] = i
-                    raw_j[npairs] = j
-                    npairs += 1
-        # (i, j) order: a counting sort by i, then each i's handful of j by insertion
-        ptr = np.zeros(n + 1, dtype=np.int64)
-        for k in range(npairs):
-            ptr[raw_i[k] + 1] += 1
-        for i in range(n):
-            ptr[i + 1] += ptr[i]
-        at = ptr[:-1].copy()
-        out_i = np.empty(npairs, dtype=np.int64)
-        out_j = np.empty(npairs, dtype=np.int64)
-        for k in range(npairs):
-            i = raw_i[k]
-            out_i[at[i]] = i
-            out_j[at[i]] = raw_j[k]
-            at[i] += 1
-        for i in range(n):
-            for a in range(ptr[i] + 1, ptr[i + 1]):
-                t = out_j[a]
-                b2 = a - 1
-                while b2 >= ptr[i] and out_j[b2] > t:
-                    out_j[b2 + 1] = out_j[b2]
-                    b2 -= 1
-                out_j[b2 + 1] = t
-        return out_i, out_j
+    _compile_helpers(globals())
 
     @numba.njit(cache=True)
     def find_pairs(x, radius, active, exclude, cell):  # pragma: no cover - compiled
