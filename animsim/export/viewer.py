@@ -161,6 +161,9 @@ class ViewerPanel:
 
     ``times`` (F,) s; ``positions`` (F, N, 3) m, NaN rows for particles not
     alive in a frame; ``springs`` (S, 2) indices into the N particles;
+    ``spring_drawn`` (F,) how many of ``springs``, from the first, are drawn in
+    each frame (springs that tear are put last, the latest to tear first, so
+    the intact ones are always a prefix; None: all of them, always);
     ``pinned`` (N,) bool; ``colors`` (F, N, 4) RGBA in [0, 1]; ``sizes`` (F,
     N) m diameter (NaN: the default dot); ``energies`` name -> (F,) J (the
     plot shows kinetic, potential and total); ``shapes`` scene geometry.
@@ -175,6 +178,7 @@ class ViewerPanel:
     springs: np.ndarray | None = None
     pinned: np.ndarray | None = None
     colors: np.ndarray | None = None
+    spring_drawn: np.ndarray | None = None
     sizes: np.ndarray | None = None
     energies: dict[str, np.ndarray] | None = None
     shapes: Sequence[Shape] = field(default_factory=tuple)
@@ -196,6 +200,12 @@ class ViewerPanel:
             if len(s) and (s.min() < 0 or s.max() >= n):
                 raise ValueError(f"spring indices must be in 0..{n - 1}")
             self.springs = s
+        if self.spring_drawn is not None:
+            drawn = np.asarray(self.spring_drawn, dtype=np.int64).reshape(-1)
+            count = 0 if self.springs is None else len(self.springs)
+            if len(drawn) != f or (len(drawn) and (drawn.min() < 0 or drawn.max() > count)):
+                raise ValueError(f"spring_drawn must be (frames={f},) counts in 0..{count}")
+            self.spring_drawn = drawn
         if self.pinned is not None:
             p = np.asarray(self.pinned, dtype=bool).reshape(-1)
             if len(p) != n:
@@ -319,6 +329,7 @@ def _panel_json(panel: ViewerPanel) -> dict[str, Any]:
             "empty": not np.isfinite(panel.positions).all(axis=-1).any(),
         },
         "springs": _blob(panel.springs, "u32") if panel.springs is not None and len(panel.springs) else None,
+        "spring_drawn": _blob(panel.spring_drawn, "u32") if panel.spring_drawn is not None else None,
         "pinned": _blob(panel.pinned, "u8") if panel.pinned is not None and panel.pinned.any() else None,
         "colors": None,
         "sizes": None,
@@ -483,10 +494,35 @@ def dense_frames(traj: Any) -> dict[str, np.ndarray | None]:
 
 def _springs_for(compiled: Any, ids: Sequence[str]) -> np.ndarray:
     """The scene's springs as index pairs into ``ids`` (those whose both ends are there)."""
+    return _spring_pairs(compiled, ids)[0]
+
+
+def _spring_pairs(compiled: Any, ids: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    """(pairs (S, 2) into ``ids``, the scene's spring number of each) for the springs whose
+    both ends are in ``ids``."""
     pos_of = {pid: k for k, pid in enumerate(ids)}
     names = compiled.system.ids
     pairs = [(pos_of.get(names[a]), pos_of.get(names[b])) for a, b in compiled.system.spring_index.tolist()]
-    return np.array([p for p in pairs if None not in p], dtype=np.int64).reshape(-1, 2)
+    keep = [k for k, p in enumerate(pairs) if None not in p]
+    out = np.array([pairs[k] for k in keep], dtype=np.int64).reshape(-1, 2)
+    return out, np.array(keep, dtype=np.int64)
+
+
+def _springs_over_time(compiled: Any, traj: Any) -> tuple[np.ndarray, np.ndarray | None]:
+    """(springs, drawn per frame or None): with the springs a trajectory says tore, those
+    go last, the latest to tear first, and each frame draws the prefix still intact."""
+    springs, number = _spring_pairs(compiled, traj.ids)
+    torn, when = getattr(traj, "torn_spring", None), getattr(traj, "torn_time", None)
+    if torn is None or when is None or not len(torn):
+        return springs, None
+    tear_time = np.full(compiled.system.spring_count, np.inf)
+    tear_time[np.asarray(torn, dtype=np.int64)] = when
+    t = tear_time[number]
+    order = np.argsort(-t, kind="stable")  # never torn (inf) first, in scene order
+    times = np.asarray(traj.times, dtype=np.float64)
+    # a spring is drawn in the frames before the first one it is torn in
+    drawn = (t[None, :] > times[:, None]).sum(axis=1)
+    return springs[order], drawn
 
 
 def _pinned_for(compiled: Any, ids: Sequence[str]) -> np.ndarray:
@@ -522,8 +558,9 @@ def panel_from_trajectory(
     dense = dense_frames(traj)
     springs = pinned = None
     shapes: list[Shape] = []
+    drawn = None
     if compiled is not None:
-        springs = _springs_for(compiled, traj.ids)
+        springs, drawn = _springs_over_time(compiled, traj)
         pinned = _pinned_for(compiled, traj.ids)
         shapes = scene_shapes(compiled)
     return ViewerPanel(
@@ -531,6 +568,7 @@ def panel_from_trajectory(
         positions=dense["position"],
         label=label,
         springs=springs,
+        spring_drawn=drawn,
         pinned=pinned,
         colors=dense["color"],
         sizes=dense["size"],

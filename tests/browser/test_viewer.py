@@ -293,3 +293,32 @@ def test_degenerate_runs_open_without_errors(browser, tmp_path, frames, particle
     time.sleep(0.3)
     assert browser.execute_script("return window.animsimViewer.errors") == []
     assert severe(browser) == []
+
+
+def test_torn_springs_are_not_drawn(browser, tmp_path):
+    """A tearing sheet, viewed from the scene and from its CSV: every spring in the first
+    frame, fewer once it has torn, and the page's count equals the run's intact springs."""
+    page = tmp_path / "tear.html"
+    r = run_cli("view", SCENES / "sheet_tear.yaml", "-o", page, "-q")
+    assert r.returncode == 0, r.stderr
+    csv = tmp_path / "tear.csv"
+    assert run_cli("run", SCENES / "sheet_tear.yaml", "-o", csv, "-q").returncode == 0
+    from_file = tmp_path / "tear_file.html"
+    r = run_cli("view", csv, "--scene", SCENES / "sheet_tear.yaml", "-o", from_file, "-q")
+    assert r.returncode == 0, r.stderr
+    from animsim import api
+    from animsim.export.trajectory import read_trajectory
+
+    run = read_trajectory(csv)
+    springs = api.compile(api.load(SCENES / "sheet_tear.yaml")).system.spring_count
+    for path in (page, from_file):
+        open_page(browser, path)
+        v = "window.animsimViewer"
+        last = browser.execute_script(f"return {v}.frameCount") - 1
+        set_frame(browser, 0)
+        assert browser.execute_script(f"return {v}.springsShown(0)") == springs
+        set_frame(browser, last)
+        shown = browser.execute_script(f"return {v}.springsShown(0)")
+        intact = run.spring_intact(float(run.times[-1]), springs)
+        assert intact is not None and shown == int(intact.sum()) < springs
+        assert severe(browser) == []

@@ -354,6 +354,8 @@ void main() { o = u_col; }`;
       const d = this.data;
       this.pos = await decodePositions(d.pos, this.frames);
       this.springs = await decode(d.springs);
+      // springs that tear are last: frame k draws the first springDrawn[k] of them
+      this.springDrawn = await decode(d.spring_drawn);
       this.pinned = await decode(d.pinned);
       this.colors = await decode(d.colors);
       this.sizes = await decode(d.sizes);
@@ -557,11 +559,13 @@ void main() { o = u_col; }`;
           gl.bindBuffer(gl.ARRAY_BUFFER, this.sizeBuf);
           gl.bufferSubData(gl.ARRAY_BUFFER, 0, this.sizes, k * n, n);
         }
-        if (this.springCount) {
+        const drawn = this.springDrawn ? this.springDrawn[k] : this.springCount;
+        this.springsShown = drawn;
+        if (drawn) {
           gl.uniformMatrix4fv(lp.loc("u_mvp"), false, mvp);
           gl.uniform4fv(lp.loc("u_col"), SPRING_COL);
           gl.bindVertexArray(this.springVao);
-          gl.drawElements(gl.LINES, this.springCount * 2, gl.UNSIGNED_INT, 0);
+          gl.drawElements(gl.LINES, drawn * 2, gl.UNSIGNED_INT, 0);
         }
         const pp = this.pointProg;
         gl.useProgram(pp.prog);
@@ -879,6 +883,7 @@ void main() { o = u_col; }`;
       labels: () => panels.map((p) => p.el.querySelector(".as-label").textContent),
       marks: () => panels.map((p) => (p.mark.classList.contains("on") ? p.mark.textContent : "")),
       frameShown: (i) => panels[i].lastFrame,
+      springsShown: (i) => panels[i].springsShown,
       setView: (v) => { camera.view = v; document.getElementById("as-view").value = v; resetCamera(false); },
       orbit: (daz, del) => { camera.az += daz; camera.el = Math.min(89, Math.max(-89, camera.el + del)); state.dirty = true; },
       // Timing of requestAnimationFrame callbacks, for measuring playback smoothness.
