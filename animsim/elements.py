@@ -253,7 +253,8 @@ def _compile_helpers(namespace: dict[str, Any]) -> None:
     import numba
 
     for name, obj in list(namespace.items()):
-        if getattr(obj, "_numba_helper", False):
+        # a dispatcher from an earlier call answers for its function's attributes too
+        if getattr(obj, "_numba_helper", False) and not isinstance(obj, numba.core.dispatcher.Dispatcher):
             namespace[name] = numba.njit(cache=True)(obj)
 
 

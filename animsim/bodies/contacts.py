@@ -44,8 +44,9 @@ from typing import Any
 import numpy as np
 
 from animsim.bodies import quaternion as quat
+from animsim.bodies.quaternion import rotate_scalar
 from animsim.bodies.shapes import BodyShape, Box, Capsule, Sphere, contact_table
-from animsim.elements import StepStage
+from animsim.elements import StepStage, _compile_helpers
 
 #: sequential-impulse sweeps over the contacts per step
 ITERATIONS = 10
@@ -426,22 +427,14 @@ def _pair_contacts_loop(
             tw, tx_, ty_, tz_ = q[dst, 0], q[dst, 1], q[dst, 2], q[dst, 3]
             for k in range(counts[src]):
                 # the sphere's centre in the world: x + R(q) p
-                px, py, pz = points[src, k, 0], points[src, k, 1], points[src, k, 2]
-                t0 = 2.0 * (qy * pz - qz * py)
-                t1 = 2.0 * (qz * px - qx * pz)
-                t2 = 2.0 * (qx * py - qy * px)
-                cx = x[src, 0] + (px + qw * t0 + (qy * t2 - qz * t1))
-                cy = x[src, 1] + (py + qw * t1 + (qz * t0 - qx * t2))
-                cz = x[src, 2] + (pz + qw * t2 + (qx * t1 - qy * t0))
+                rx, ry, rz = rotate_scalar(
+                    qw, qx, qy, qz, points[src, k, 0], points[src, k, 1], points[src, k, 2]
+                )
+                cx, cy, cz = x[src, 0] + rx, x[src, 1] + ry, x[src, 2] + rz
                 # ... in the target's frame: R(q)^T v, the rotation by the conjugate
-                vx, vy, vz = cx - x[dst, 0], cy - x[dst, 1], cz - x[dst, 2]
-                ux, uy, uz = -tx_, -ty_, -tz_
-                t0 = 2.0 * (uy * vz - uz * vy)
-                t1 = 2.0 * (uz * vx - ux * vz)
-                t2 = 2.0 * (ux * vy - uy * vx)
-                lx = vx + tw * t0 + (uy * t2 - uz * t1)
-                ly = vy + tw * t1 + (uz * t0 - ux * t2)
-                lz = vz + tw * t2 + (ux * t1 - uy * t0)
+                lx, ly, lz = rotate_scalar(
+                    tw, -tx_, -ty_, -tz_, cx - x[dst, 0], cy - x[dst, 1], cz - x[dst, 2]
+                )
                 # signed distance and outward normal in the target's frame (local_sdf)
                 if kind[dst] == SHAPE_BOX:
                     q0 = abs(lx) - dims[dst, 0]
@@ -521,6 +514,7 @@ def numba_pair_contacts() -> Any:
     """:func:`_pair_contacts_loop` compiled by numba."""
     from numba import njit
 
+    _compile_helpers(globals())
     return njit(cache=True)(_pair_contacts_loop)
 
 
@@ -862,6 +856,7 @@ def numba_kernels() -> tuple[Any, Any]:
     """(plane detection, list solver) compiled by numba."""
     from numba import njit
 
+    _compile_helpers(globals())
     detect = njit(cache=True)(_detect_planes_loop)
     solver = njit(cache=True)(_solve_list_loop)
     return detect, solver
@@ -893,14 +888,10 @@ def _detect_planes_loop(
         for p in range(plane_point.shape[0]):
             nx, ny, nz = plane_normal[p, 0], plane_normal[p, 1], plane_normal[p, 2]
             for k in range(counts[bi]):
-                px, py, pz = points[bi, k, 0], points[bi, k, 1], points[bi, k, 2]
-                # R(q) p = p + w t + u x t, t = 2 u x p (quaternion.rotate)
-                tx = 2.0 * (qy * pz - qz * py)
-                ty = 2.0 * (qz * px - qx * pz)
-                tz = 2.0 * (qx * py - qy * px)
-                cx = x[bi, 0] + (px + qw * tx + (qy * tz - qz * ty))
-                cy = x[bi, 1] + (py + qw * ty + (qz * tx - qx * tz))
-                cz = x[bi, 2] + (pz + qw * tz + (qx * ty - qy * tx))
+                rx, ry, rz = rotate_scalar(
+                    qw, qx, qy, qz, points[bi, k, 0], points[bi, k, 1], points[bi, k, 2]
+                )
+                cx, cy, cz = x[bi, 0] + rx, x[bi, 1] + ry, x[bi, 2] + rz
                 rr = radii[bi, k]
                 d = ((cx - plane_point[p, 0]) * nx + (cy - plane_point[p, 1]) * ny) + (
                     cz - plane_point[p, 2]

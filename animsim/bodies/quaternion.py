@@ -23,6 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from animsim.elements import _compile_helpers, numba_helper
+
 IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
 
 
@@ -71,6 +73,22 @@ def rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
             vz + qw * tz + (ux * ty - uy * tx),
         ],
         axis=-1,
+    )
+
+
+@numba_helper
+def rotate_scalar(
+    qw: float, ux: float, uy: float, uz: float, vx: float, vy: float, vz: float
+) -> tuple[float, float, float]:
+    """:func:`rotate` on scalars, for the numba loops (the same operations in the same
+    order, so both backends agree to the bit). For R(q)^T v pass u = -(x, y, z)."""
+    tx = 2.0 * (uy * vz - uz * vy)
+    ty = 2.0 * (uz * vx - ux * vz)
+    tz = 2.0 * (ux * vy - uy * vx)
+    return (
+        vx + qw * tx + (uy * tz - uz * ty),
+        vy + qw * ty + (uz * tx - ux * tz),
+        vz + qw * tz + (ux * ty - uy * tx),
     )
 
 
@@ -196,32 +214,14 @@ def _angular_acceleration_loop(
     """Loop form of :func:`angular_acceleration`, compiled by numba (same operations, same order)."""
     for b in range(q.shape[0]):
         qw, qx, qy, qz = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
-        # body frame: R^T v = v + w t + u x t, t = 2 u x v, with u = -(x, y, z)
-        wx, wy, wz = omega[b, 0], omega[b, 1], omega[b, 2]
-        tx = 2.0 * (-qy * wz + qz * wy)
-        ty = 2.0 * (-qz * wx + qx * wz)
-        tz = 2.0 * (-qx * wy + qy * wx)
-        bx = wx + qw * tx + (-qy * tz + qz * ty)
-        by = wy + qw * ty + (-qz * tx + qx * tz)
-        bz = wz + qw * tz + (-qx * ty + qy * tx)
-        vx, vy, vz = torque[b, 0], torque[b, 1], torque[b, 2]
-        tx = 2.0 * (-qy * vz + qz * vy)
-        ty = 2.0 * (-qz * vx + qx * vz)
-        tz = 2.0 * (-qx * vy + qy * vx)
-        cx = vx + qw * tx + (-qy * tz + qz * ty)
-        cy = vy + qw * ty + (-qz * tx + qx * tz)
-        cz = vz + qw * tz + (-qx * ty + qy * tx)
+        # body frame: R^T v, the rotation with u = -(x, y, z)
+        bx, by, bz = rotate_scalar(qw, -qx, -qy, -qz, omega[b, 0], omega[b, 1], omega[b, 2])
+        cx, cy, cz = rotate_scalar(qw, -qx, -qy, -qz, torque[b, 0], torque[b, 1], torque[b, 2])
         lx, ly, lz = inertia[b, 0] * bx, inertia[b, 1] * by, inertia[b, 2] * bz
         ax = inv_inertia[b, 0] * (cx - (by * lz - bz * ly))
         ay = inv_inertia[b, 1] * (cy - (bz * lx - bx * lz))
         az = inv_inertia[b, 2] * (cz - (bx * ly - by * lx))
-        # back to the world: R v with u = (x, y, z)
-        tx = 2.0 * (qy * az - qz * ay)
-        ty = 2.0 * (qz * ax - qx * az)
-        tz = 2.0 * (qx * ay - qy * ax)
-        out[b, 0] = ax + qw * tx + (qy * tz - qz * ty)
-        out[b, 1] = ay + qw * ty + (qz * tx - qx * tz)
-        out[b, 2] = az + qw * tz + (qx * ty - qy * tx)
+        out[b, 0], out[b, 1], out[b, 2] = rotate_scalar(qw, qx, qy, qz, ax, ay, az)
 
 
 @cache
@@ -232,4 +232,5 @@ def numba_angular_acceleration() -> Any:
     """
     from numba import njit
 
+    _compile_helpers(globals())
     return njit(cache=True)(_angular_acceleration_loop)
