@@ -347,12 +347,10 @@ def compare(
 
     from animsim.analysis import compare as cmp
 
+    source = scene  # what the outputs must not overwrite (a file), see _check_output
     if not isinstance(scene, Scene):
         loaded, _, _ = prepare_file(Path(scene), limits)  # the file's step and memory limits
-        source: Any = scene
         scene, name = loaded.scene, name or loaded.name
-    else:
-        source = Path(f"{scene.name or 'scene'}.yaml")
     for path in (output, plot):
         if path is not None:
             _check_output(Path(path), source)
