@@ -82,9 +82,11 @@ PROBE_ITERATIONS = 3
 #: steps a failed reuse of old factors makes the solver factor afresh, at most
 REUSE_BACKOFF_MAX = 16
 #: banded Cholesky (LAPACK) instead of SuperLU when unknowns x bandwidth^2 (after a reverse
-#: Cuthill-McKee ordering) is below this: 1.1e8 for a 32 x 32 cloth, factored in 8 ms
-#: against SuperLU's 14 (CPU time on the benchmark machine)
-BANDED_MAX_WORK = 2e8
+#: Cuthill-McKee ordering) is below this (without CHOLMOD): 1.2e8 for a 32 x 32 cloth with
+#: bend springs, 1.8e9 for a 64 x 64 one, whose single-precision factors take 46 ms against
+#: SuperLU's 151 (48 x 48: 18 against 67; CPU time, one BLAS thread); the bound keeps the
+#: band buffers (unknowns x bandwidth x 12 bytes) to tens of MB
+BANDED_MAX_WORK = 2e9
 #: CHOLMOD (through cvxopt) factors stiff systems when it is installed; False keeps to the
 #: banded Cholesky and SuperLU (which the tests use to run both paths)
 SPARSE_CHOLESKY = True
