@@ -37,14 +37,15 @@ positive definite): a banded Cholesky factorisation (LAPACK ``?pbtrf``) after a
 reverse Cuthill-McKee ordering when the band is narrow, else SuperLU. The
 banded factors are made in single precision, half the work of double (two or
 three CG iterations on a stiff cloth); double-precision factors and their
-direct solve are the fallback. Before factoring, the last factors are tried as the
-preconditioner while they keep conjugate gradients within ``REUSE_ITERATIONS``
-(a cloth coming to rest changes its matrix little; a falling one changes it too
-much at a frame-sized step, and the attempt is given up after
-``PROBE_ITERATIONS`` and tried again later and later). A is written into one
-sparsity pattern fixed for the run (:class:`_Assembly`), so the orderings, the
-band layout and CHOLMOD's symbolic analysis are computed once. Measured on a stiff cloth in
-``benchmarks/stiff_cloth.py`` (``benchmarks/optimisation_log.md``).
+direct solve are the fallback. Before factoring, the last factors are tried as
+the preconditioner while they keep conjugate gradients within
+``REUSE_ITERATIONS`` (a cloth coming to rest changes its matrix little; a
+falling one changes it too much at a frame-sized step, and the attempt is given
+up after ``PROBE_ITERATIONS`` and tried again later and later). A is written
+into one sparsity pattern fixed for the run (:class:`_Assembly`), so the
+orderings, the band layout and CHOLMOD's symbolic analysis are computed once.
+Measured on a stiff cloth in ``benchmarks/stiff_cloth.py``
+(``benchmarks/optimisation_log.md``).
 """
 
 from __future__ import annotations
