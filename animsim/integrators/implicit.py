@@ -25,24 +25,32 @@ Conjugate gradients use a Jacobi (diagonal) preconditioner while it
 converges within ``JACOBI_ITERATIONS`` iterations (small steps: the matrix is
 close to M). A stiff system at animation-sized steps needs hundreds or
 thousands (a diagonal over ``JACOBI_MAX_DIAGONAL_RATIO`` times the mass says so
-before trying); from then on each step is factored: a banded Cholesky
-factorisation (LAPACK ``?pbtrf``) after a reverse Cuthill-McKee ordering when
-the band is narrow, else SuperLU. The banded factors are made in single
-precision, half the work of double, and serve as the preconditioner of
-conjugate gradients, which still stop at ``CG_RTOL`` in double precision (two or
-three iterations on a stiff cloth); double-precision factors and their direct
-solve are the fallback. Before factoring, the last factors are tried as the
-preconditioner while they keep conjugate gradients within ``REUSE_ITERATIONS``
-(a cloth coming to rest changes its matrix little; a falling one changes it too
-much at a frame-sized step, and the attempt is given up after
-``PROBE_ITERATIONS`` and tried again later and later). A is written into one
-sparsity pattern fixed for the run (:class:`_Assembly`), so the ordering and the
-band layout are computed once. Measured on a stiff cloth in
-``benchmarks/stiff_cloth.py`` (``benchmarks/optimisation_log.md``).
+before trying); from then on each step is factored, and the factors serve as
+the preconditioner of conjugate gradients, which still stop at ``CG_RTOL`` in
+double precision. With cvxopt installed (the ``cholmod`` extra) the factors are
+CHOLMOD's supernodal sparse Cholesky (Chen, Davis, Hager and Rajamanickam, ACM
+TOMS 35(3), 2008) after a fill-reducing approximate minimum degree ordering:
+its symbolic analysis is made once for the run's fixed pattern, each step
+redoes only the numeric factorisation, and the exact double-precision factors
+leave CG one iteration. Without it (or when CHOLMOD finds the matrix not
+positive definite): a banded Cholesky factorisation (LAPACK ``?pbtrf``) after a
+reverse Cuthill-McKee ordering when the band is narrow, else SuperLU. The
+banded factors are made in single precision, half the work of double (two or
+three CG iterations on a stiff cloth); double-precision factors and their
+direct solve are the fallback. Before factoring, the last factors are tried as
+the preconditioner while they keep conjugate gradients within
+``REUSE_ITERATIONS`` (a cloth coming to rest changes its matrix little; a
+falling one changes it too much at a frame-sized step, and the attempt is given
+up after ``PROBE_ITERATIONS`` and tried again later and later). A is written
+into one sparsity pattern fixed for the run (:class:`_Assembly`), so the
+orderings, the band layout and CHOLMOD's symbolic analysis are computed once.
+Measured on a stiff cloth in ``benchmarks/stiff_cloth.py``
+(``benchmarks/optimisation_log.md``).
 """
 
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 from typing import Any
@@ -75,9 +83,14 @@ PROBE_ITERATIONS = 3
 #: steps a failed reuse of old factors makes the solver factor afresh, at most
 REUSE_BACKOFF_MAX = 16
 #: banded Cholesky (LAPACK) instead of SuperLU when unknowns x bandwidth^2 (after a reverse
-#: Cuthill-McKee ordering) is below this: 1.1e8 for a 32 x 32 cloth, factored in 8 ms
-#: against SuperLU's 14 (CPU time on the benchmark machine)
-BANDED_MAX_WORK = 2e8
+#: Cuthill-McKee ordering) is below this (without CHOLMOD): 1.2e8 for a 32 x 32 cloth with
+#: bend springs, 1.8e9 for a 64 x 64 one, whose single-precision factors take 46 ms against
+#: SuperLU's 151 (48 x 48: 18 against 67; CPU time, one BLAS thread); the bound keeps the
+#: band buffers (unknowns x bandwidth x 12 bytes) to tens of MB
+BANDED_MAX_WORK = 2e9
+#: CHOLMOD (through cvxopt) factors stiff systems when it is installed; False keeps to the
+#: banded Cholesky and SuperLU (which the tests use to run both paths)
+SPARSE_CHOLESKY = True
 #: free degrees of freedom above which no LU is made (fill-in grows faster than the
 #: matrix; Jacobi CG with the full iteration cap serves those)
 LU_MAX_DOF = 60_000
@@ -87,10 +100,14 @@ class ImplicitEuler(Integrator):
     name = "implicit_euler"
     order = 1
     evaluations_per_step = 1
-    description = "backward Euler linearised per step (Baraff & Witkin 1998), sparse CG with Jacobi"
 
     def __init__(self, dynamics: Dynamics):
         super().__init__(dynamics)
+        #: what ``animsim explain`` shows: the solver a stiff system gets on this installation
+        self.description = (
+            "backward Euler linearised per step (Baraff & Witkin 1998): conjugate gradients, "
+            f"Jacobi-preconditioned, or on a stiff system with each step's {factor_description()}"
+        )
         n = dynamics.system.particle_count
         self._a = np.zeros((n, 3))
         self._f = np.zeros(3 * n)
@@ -101,6 +118,9 @@ class ImplicitEuler(Integrator):
         self.direct_solves = 0
         #: LU factorisations made (each serves as the preconditioner of the steps after it)
         self.factorizations = 0
+        #: the kind of the last factorisation: "cholmod", "banded float32", "banded float64",
+        #: "superlu" (None before the first)
+        self.factor_kind: str | None = None
         self._lu: tuple[np.ndarray, object] | None = None  # (free DOF mask it was made for, factors)
         self._stiff = False  # Jacobi CG was too slow once: LU from then on
         self._skip = 0  # steps left that factor directly instead of trying old factors
@@ -160,21 +180,28 @@ class ImplicitEuler(Integrator):
         x += dt * v
 
     def _factor(self, a_mat: sp.csr_matrix, free: np.ndarray, dtype: type = np.float64) -> Any:
-        """Factors of A with a ``solve(b)``: banded Cholesky (in ``dtype``) when the band is narrow,
-        else SuperLU (float64 only: None for float32, the caller then factors in float64)."""
+        """Factors of A with a ``solve(b)``: CHOLMOD's (always double precision) when cvxopt is
+        installed, else banded Cholesky (in ``dtype``) when the band is narrow, else SuperLU
+        (float64 only: None for float32, the caller then factors in float64)."""
         plan = self._plan
         assert plan is not None
-        self._lu = None  # the band buffers are reused: old factors are gone from here on
+        self._lu = None  # the factor buffers are reused: old factors are gone from here on
+        chol = plan.sparse_cholesky()
+        if chol is not None:
+            try:
+                lu: Any = chol.factor(a_mat.data)
+            except np.linalg.LinAlgError:  # not positive definite: the paths below
+                lu = None
+            if lu is not None:
+                return self._made(free, lu, "cholmod")
         band = plan.band()
         if band is not None:
             try:
-                lu: Any = _BandedCholesky(a_mat.data, band, dtype)
+                lu = _BandedCholesky(a_mat.data, band, dtype)
             except np.linalg.LinAlgError:  # not positive definite (in this precision): SuperLU pivots
                 lu = None
             if lu is not None:
-                self._lu = (free.copy(), lu)
-                self.factorizations += 1
-                return lu
+                return self._made(free, lu, f"banded {np.dtype(dtype).name}")
         if dtype is not np.float64:
             return None
         with warnings.catch_warnings():
@@ -186,8 +213,13 @@ class ImplicitEuler(Integrator):
                 diag_pivot_thresh=0.0,
                 options={"SymmetricMode": True},
             )
+        return self._made(free, lu, "superlu")
+
+    def _made(self, free: np.ndarray, lu: Any, kind: str) -> Any:
+        """Keep new factors (for the next steps' reuse) and count them."""
         self._lu = (free.copy(), lu)
         self.factorizations += 1
+        self.factor_kind = kind
         return lu
 
     def _cg(
@@ -275,8 +307,9 @@ class ImplicitEuler(Integrator):
             self._skip = self._backoff
         elif self._skip:
             self._skip -= 1
-        # This step's own factors in single precision, as conjugate gradients' preconditioner:
-        # half the work of double precision, and CG still stops at CG_RTOL in double.
+        # This step's own factors as conjugate gradients' preconditioner: CHOLMOD's (exact: one
+        # iteration), else banded ones in single precision (half the work of double); CG still
+        # stops at CG_RTOL in double.
         lu32 = self._factor(a_mat, free, np.float32)
         if lu32 is not None:
             dv, info = self._cg(a_mat, rhs, lu32, FRESH_ITERATIONS, warm=False)
@@ -303,6 +336,74 @@ class ImplicitEuler(Integrator):
             dv = spla.spsolve(a_mat.tocsc(), rhs)
         self.direct_solves += 1
         return np.asarray(dv, dtype=np.float64)
+
+
+@functools.cache
+def _find_cholmod() -> Any | None:
+    """cvxopt's CHOLMOD module, or None when cvxopt is not installed (looked for once)."""
+    try:
+        from cvxopt import cholmod
+    except ImportError:
+        return None
+    return cholmod
+
+
+def sparse_cholesky_module() -> Any | None:
+    """The sparse Cholesky that stiff systems get (cvxopt's CHOLMOD), or None: banded/SuperLU."""
+    return _find_cholmod() if SPARSE_CHOLESKY else None
+
+
+def factor_description() -> str:
+    """Which factors precondition conjugate gradients on a stiff system, on this installation."""
+    if sparse_cholesky_module() is not None:
+        return "sparse Cholesky factors (CHOLMOD through cvxopt, minimum degree ordering)"
+    return (
+        "banded Cholesky factors (single precision, reverse Cuthill-McKee ordering; SuperLU "
+        "when the band is wide; install the cholmod extra for a sparse Cholesky)"
+    )
+
+
+class _SparseCholesky:
+    """A = P^T L L^T P by CHOLMOD (through cvxopt), in double precision.
+
+    The symbolic analysis (the fill-reducing ordering, the elimination tree and the
+    supernodes) is made once for the pattern; each ``factor`` writes this step's values into
+    one cvxopt matrix and redoes only the numeric factorisation, in place, so only the
+    latest factors are valid (as with the band buffers)."""
+
+    def __init__(self, cholmod: Any, plan: _Assembly):
+        from cvxopt import matrix, spmatrix
+
+        # A is symmetric: its CSR entries on or above the diagonal, row after row, are its
+        # lower triangle column after column (the compressed-column order cvxopt stores).
+        # Entries between an unknown and a pinned row are zero on every step: left out.
+        diagonal = plan.rows == plan.indices
+        self.entries = np.flatnonzero((plan.rows <= plan.indices) & ((plan.keep > 0) | diagonal))
+        self._cholmod = cholmod
+        self._matrix = matrix
+        n = plan.n
+        # built with ones so that no entry is dropped as zero; the values come with each step
+        self.a = spmatrix(
+            matrix(np.ones(len(self.entries))),
+            matrix(plan.indices[self.entries]),
+            matrix(plan.rows[self.entries]),
+            (n, n),
+        )
+        self.symbolic = cholmod.symbolic(self.a, uplo="L")
+
+    def factor(self, data: np.ndarray) -> _SparseCholesky:
+        """This step's numeric factorisation (LinAlgError when A is not positive definite)."""
+        self.a.V = self._matrix(data[self.entries])  # the values only: the pattern stays
+        try:
+            self._cholmod.numeric(self.a, self.symbolic)
+        except ArithmeticError as exc:
+            raise np.linalg.LinAlgError(f"not positive definite (CHOLMOD: {exc})") from exc
+        return self
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        x = self._matrix(b)  # a copy: solved in place
+        self._cholmod.solve(self.symbolic, x)
+        return np.asarray(x).reshape(-1)
 
 
 class _BandLayout:
@@ -414,6 +515,7 @@ class _Assembly:
         self.work = np.zeros(len(keys))
         self.matrix = sp.csr_matrix((np.zeros(len(keys)), self.indices, self.indptr), shape=(n, n))
         self._band: _BandLayout | bool | None = False  # False: not computed yet
+        self._cholesky: _SparseCholesky | None = None
 
     def matches(
         self, kx: sp.csr_matrix | None, kv: sp.csr_matrix | None, free: np.ndarray, m_dof: np.ndarray
@@ -466,6 +568,15 @@ class _Assembly:
                 slot = cols[upper] * (width + 1) + width + rows[upper] - cols[upper]
                 self._band = _BandLayout(perm, upper, slot, width, n)
         return self._band  # type: ignore[return-value]
+
+    def sparse_cholesky(self) -> _SparseCholesky | None:
+        """CHOLMOD's analysis of this pattern (made once), or None without cvxopt."""
+        cholmod = sparse_cholesky_module()
+        if cholmod is None:
+            return None
+        if self._cholesky is None:
+            self._cholesky = _SparseCholesky(cholmod, self)
+        return self._cholesky
 
 
 def _diagonal_ratio(a_mat: sp.csr_matrix, plan: _Assembly | None) -> float:

@@ -22,6 +22,10 @@ from animsim.scene.loader import load_scene_text
 from animsim.system import State
 
 HAS_NUMBA = importlib.util.find_spec("numba") is not None
+HAS_CVXOPT = importlib.util.find_spec("cvxopt") is not None
+needs_cvxopt = pytest.mark.skipif(not HAS_CVXOPT, reason="cvxopt (the cholmod extra) is not installed")
+#: the stiff systems' factorisations: CHOLMOD when cvxopt is installed, else the banded path
+SOLVERS = [pytest.param(True, marks=needs_cvxopt, id="cholmod"), pytest.param(False, id="banded")]
 
 
 def test_one_bincount_for_three_axes_equals_one_per_axis():
@@ -103,17 +107,22 @@ def _stiff(n: int, dt: float, steps: int):
     return compiled, run(compiled, [])
 
 
-@pytest.mark.parametrize("banded", [True, False])
-def test_stiff_implicit_switches_to_factors_and_agrees_with_conjugate_gradients(monkeypatch, banded):
-    """A stiff cloth at a frame-sized step: the factored solve (banded Cholesky, or SuperLU when
-    the band is too wide) gives the state Jacobi CG run to convergence gives."""
-    if not banded:
+@pytest.mark.parametrize("kind", [pytest.param("cholmod", marks=needs_cvxopt), "banded float32", "superlu"])
+def test_stiff_implicit_switches_to_factors_and_agrees_with_conjugate_gradients(monkeypatch, kind):
+    """A stiff cloth at a frame-sized step: the factored solve (CHOLMOD's sparse Cholesky;
+    without it banded Cholesky, or SuperLU when the band is too wide) gives the state Jacobi
+    CG run to convergence gives."""
+    if kind != "cholmod":
+        monkeypatch.setattr(implicit, "SPARSE_CHOLESKY", False)  # as without cvxopt
+    if kind == "superlu":
         monkeypatch.setattr(implicit, "BANDED_MAX_WORK", 0.0)
     compiled, result = _stiff(8, 1 / 30, 6)
     assert result.status == STATUS_OK
     assert compiled.integrator.factorizations >= 1
+    assert compiled.integrator.factor_kind == kind
     plan = compiled.integrator._plan
-    assert (plan.band() is not None) == banded
+    assert (plan.band() is not None) == (kind != "superlu")
+    assert (plan.sparse_cholesky() is not None) == (kind == "cholmod")
 
     # The reference: Jacobi CG to convergence on every step, as before the switch.
     monkeypatch.setattr(implicit, "JACOBI_ITERATIONS", 10**9)
@@ -142,9 +151,12 @@ def test_banded_cholesky_solves_the_system(dtype, tol):
         assert np.allclose(got, want, rtol=tol, atol=tol)
 
 
-def test_stiff_implicit_steps_meet_the_cg_tolerance_on_one_fixed_pattern(monkeypatch):
-    """Every step's dv solves its system to CG_RTOL (single-precision factors only precondition),
-    on one sparsity pattern for the whole run (a flat cloth's zero entries do not change it)."""
+@pytest.mark.parametrize("sparse", SOLVERS)
+def test_stiff_implicit_steps_meet_the_cg_tolerance_on_one_fixed_pattern(monkeypatch, sparse):
+    """Every step's dv solves its system to CG_RTOL (the factors only precondition, CHOLMOD's
+    or single-precision banded ones), on one sparsity pattern for the whole run (a flat
+    cloth's zero entries do not change it)."""
+    monkeypatch.setattr(implicit, "SPARSE_CHOLESKY", sparse)
     residuals: list[float] = []
     plans: set[int] = set()
     solve = implicit.ImplicitEuler._solve
@@ -162,6 +174,67 @@ def test_stiff_implicit_steps_meet_the_cg_tolerance_on_one_fixed_pattern(monkeyp
     assert compiled.integrator.cg_iterations > 0  # the preconditioned CG ran
     assert len(residuals) == 8 and max(residuals) < implicit.CG_RTOL
     assert len(plans) == 1
+    assert compiled.integrator.factor_kind == ("cholmod" if sparse else "banded float32")
+    assert ("CHOLMOD" in compiled.integrator.description) == sparse
+
+
+def _spd_with_pinned_rows(n: int, pinned: np.ndarray, seed: int):
+    """A random SPD matrix written into an assembly plan, pinned rows and columns as identity
+    ones (their off-diagonal entries stored as zeros, as in the integrator's pattern)."""
+    import scipy.sparse as sp
+
+    b = sp.random(n, n, density=0.05, random_state=seed)
+    k = (b @ b.T).tocsr()
+    k.sum_duplicates()
+    free = ~pinned
+    plan = implicit._Assembly(-k, None, free, np.full(n, 0.5))
+    return plan, plan.fill(-k, None, 1.0)
+
+
+@needs_cvxopt
+def test_sparse_cholesky_solves_the_system_and_refuses_an_indefinite_one(monkeypatch):
+    rng = np.random.default_rng(11)
+    n = 70
+    pinned = np.zeros(n, dtype=bool)
+    pinned[[0, 1, 2, 40]] = True
+    plan, a = _spd_with_pinned_rows(n, pinned, 3)
+    assert np.any((a.data == 0.0) & (plan.keep == 0.0))  # pinned couplings stored as zeros
+    chol = plan.sparse_cholesky()
+    assert chol is not None and plan.sparse_cholesky() is chol  # analysed once
+    for scale in (1.0, 3.0):  # a second numeric factorisation on the same analysis
+        rhs = rng.normal(size=n)
+        data = a.data * scale
+        want = spla.spsolve(a.tocsc() * scale, rhs)
+        got = chol.factor(data).solve(rhs)
+        assert np.allclose(got, want, rtol=1e-12, atol=1e-12)
+    # not positive definite: LinAlgError, and the integrator falls back to the banded factors
+    bad = a.data.copy()
+    bad[plan.rows == plan.indices] *= -1.0
+    with pytest.raises(np.linalg.LinAlgError):
+        chol.factor(bad)
+    integ = implicit.ImplicitEuler.__new__(implicit.ImplicitEuler)
+    integ._plan, integ._lu, integ.factorizations = plan, None, 0
+    lu = integ._factor(a, ~pinned, np.float32)
+    assert integ.factor_kind == "cholmod" and lu is chol  # double precision whatever was asked
+
+    def refuse(data: np.ndarray) -> None:
+        raise np.linalg.LinAlgError("refused")
+
+    # the same SPD matrix with CHOLMOD made to refuse it: the banded path factors it instead
+    monkeypatch.setattr(chol, "factor", refuse)
+    lu = integ._factor(a, ~pinned, np.float64)
+    assert integ.factor_kind == "banded float64" and integ.factorizations == 2
+    rhs = rng.normal(size=n)
+    assert np.allclose(lu.solve(rhs), spla.spsolve(a.tocsc(), rhs), rtol=1e-10, atol=1e-10)
+
+
+def test_the_integrator_says_which_factors_it_uses(monkeypatch):
+    monkeypatch.setattr(implicit, "SPARSE_CHOLESKY", False)
+    assert "banded Cholesky" in implicit.factor_description()
+    assert implicit.sparse_cholesky_module() is None
+    monkeypatch.setattr(implicit, "SPARSE_CHOLESKY", True)
+    assert ("CHOLMOD" in implicit.factor_description()) == HAS_CVXOPT
+    assert (implicit.sparse_cholesky_module() is not None) == HAS_CVXOPT
 
 
 @pytest.mark.skipif(not HAS_NUMBA, reason="numba is not installed")
