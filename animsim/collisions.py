@@ -184,21 +184,22 @@ class _Blocks:
         # RESTING_STEPS steps is a resting contact: it stops instead of
         # bouncing, so a particle at rest does not jitter.
         vn = dot3(vc, n, out=self.vn[:k])
-        approaching = np.less(vn, 0, out=self.b1[:k])
-        pressing = dot3(acc, n, out=self.w1[:k])
-        np.negative(pressing, out=pressing)
-        np.maximum(pressing, 0.0, out=pressing)
-        pressing *= RESTING_STEPS
-        pressing *= dt_row
-        resting = np.less_equal(np.negative(vn, out=self.w2[:k]), pressing, out=self.b2[:k])
-        resting &= approaching
-        # vn_new = -e vn with e = 0 when resting, the restitution otherwise (-0.0 is -e for e = 0)
-        neg_e = self.w2[:k]
-        neg_e.fill(-pl.restitution)
-        np.copyto(neg_e, -0.0, where=resting)
         vn_new = self.vnn[:k]
         np.copyto(vn_new, vn)
-        np.multiply(neg_e, vn, out=vn_new, where=approaching)
+        # Only the approaching rows change their normal speed: worked on as a few gathered rows
+        # (most contacts of a pile at rest are not approaching), each with the same operations.
+        app = np.flatnonzero(np.less(vn, 0, out=self.b1[:k]))
+        if app.size:
+            vn_a = vn[app]
+            pressing = dot3(np.take(acc, app, axis=0), n)
+            np.negative(pressing, out=pressing)
+            np.maximum(pressing, 0.0, out=pressing)
+            pressing *= RESTING_STEPS
+            pressing *= dt_row if np.ndim(dt_row) == 0 else dt_row[app]
+            resting = -vn_a <= pressing
+            # vn_new = -e vn with e = 0 when resting, the restitution otherwise (-0.0 is -e for e = 0)
+            neg_e = np.where(resting, -0.0, -pl.restitution)
+            vn_new[app] = neg_e * vn_a
         tmp = self.w2[:k]
         for j in range(3):  # vt = vc - vn n
             np.multiply(vn, n[j], out=tmp)
