@@ -59,9 +59,10 @@ def _apply_friction(vt: np.ndarray, dvn: np.ndarray, mu: float) -> np.ndarray:
     return out
 
 
-#: contact rows handled together: the block's arrays (a dozen of BLOCK x 3 floats) stay in
-#: a core's cache while the rule's ~45 operations pass over them, where whole-array
-#: operations on a few hundred thousand contacts each went out to memory (and allocated)
+#: contact rows handled together: the block's buffers (five of BLOCK x 3 floats, eight of
+#: BLOCK) stay in a core's cache while the rule's ~150 NumPy calls pass over them, where
+#: whole-array operations on a few hundred thousand contacts each went out to memory (and
+#: allocated); 16,384 was the fastest of 1,024 to 65,536 (benchmarks/optimisation_log.md)
 BLOCK = 16384
 
 
@@ -108,7 +109,8 @@ class _Blocks:
     backends agree to the bit; only where the values live changed.
     """
 
-    def __init__(self, rows: int = BLOCK):
+    def __init__(self, rows: int | None = None):
+        rows = BLOCK if rows is None else rows
         self.xo, self.vo, self.xh, self.vh, self.acc = (np.empty((rows, 3)) for _ in range(5))
         self.d0, self.d1, self.s, self.vn, self.vnn, self.w1, self.w2, self.w3 = (
             np.empty(rows) for _ in range(8)
@@ -313,7 +315,7 @@ class PlaneColliders(StepStage):
         """
         touched: list[np.ndarray] = []
         single = len(self.planes) == 1
-        blocks = self._blocks
+        blocks = self._buffers(min(BLOCK, len(x)))
         for pl in self.planes:
             cand = _candidates(x, pl)
             if cand.size == 0:
@@ -334,12 +336,13 @@ class PlaneColliders(StepStage):
             self._project(x, v, np.unique(np.concatenate(touched)))
         return True
 
-    @property
-    def _blocks(self) -> _Blocks:
-        b = self.__dict__.get("_block_buffers")
-        if b is None:
-            b = self.__dict__["_block_buffers"] = _Blocks()
-        return b
+    _block_buffers: _Blocks | None = None
+
+    def _buffers(self, rows: int) -> _Blocks:
+        """Buffers for blocks of ``rows`` contacts, made on first use and kept."""
+        if self._block_buffers is None or len(self._block_buffers.s) < rows:
+            self._block_buffers = _Blocks(rows)
+        return self._block_buffers
 
     def _project(self, x: np.ndarray, v: np.ndarray, idx: np.ndarray) -> None:
         """Put any of ``idx`` still behind a plane onto it and stop its inward motion."""
