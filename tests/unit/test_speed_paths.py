@@ -272,10 +272,12 @@ def test_cg_converges_gives_up_on_poor_factors_and_survives_a_breakdown():
     assert info != 0
 
 
-def test_symplectic_step_in_row_blocks_equals_the_whole_array_step(monkeypatch):
+@pytest.mark.parametrize("equal_masses", [True, False])
+def test_symplectic_step_in_row_blocks_equals_the_whole_array_step(monkeypatch, equal_masses):
     """Many particles under pointwise forces: the step runs a block of rows at a time
-    (force sum and update while the rows are in cache); the same bits as the whole-array step,
-    with a last block shorter than the rest."""
+    (force sum and update while the rows are in cache; with equal masses every block starts
+    from one cached block of gravity and one inverse mass); the same bits as the whole-array
+    step, with a last block shorter than the rest."""
     from animsim import dynamics as dyn_module
 
     monkeypatch.setattr(dyn_module, "BLOCK_ROWS", 1000)
@@ -300,6 +302,10 @@ structures:
         if not blocked:
             monkeypatch.setattr(dyn_module, "BLOCKS_FROM", 10**9)
         state = compiled.fresh_state()
+        if not equal_masses:  # the system's masses are read-only: a state of its own
+            mass = state.particle_mass.copy()
+            mass[::7] = 1.3
+            state.particle_mass, state.particle_inv_mass = mass, 1.0 / mass
         compiled.dynamics.bind(state)
         assert compiled.dynamics.blocks == blocked
         evaluations = compiled.dynamics.evaluations
