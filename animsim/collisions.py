@@ -25,7 +25,7 @@ import numpy as np
 
 from animsim.elements import BuildContext, StepStage, numba_helper, register
 from animsim.scene import models as m
-from animsim.vec import dot3, outer3, put_rows, rep3, take_rows
+from animsim.vec import dot3, put_rows, take_rows
 
 #: penalty stiffness when a penalty plane names none, N/m
 DEFAULT_PENALTY_STIFFNESS = 1e4
@@ -53,10 +53,202 @@ def _apply_friction(vt: np.ndarray, dvn: np.ndarray, mu: float) -> np.ndarray:
     """Reduce tangential velocities (k, 3) by at most mu * dvn (k,), never reversing them."""
     if mu == 0.0:
         return vt
-    speed = np.sqrt(dot3(vt, vt))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        keep = np.where(speed > 0, np.maximum(speed - mu * dvn, 0.0) / speed, 0.0)
-    return vt * rep3(keep)
+    out = vt.copy()
+    k = len(vt)
+    _friction_rows(out, dvn, mu, np.empty(k), np.empty(k), np.empty(k, dtype=bool))
+    return out
+
+
+#: contact rows handled together: the block's buffers (five of BLOCK x 3 floats, eight of
+#: BLOCK) stay in a core's cache while the rule's ~150 NumPy calls pass over them, where
+#: whole-array operations on a few hundred thousand contacts each went out to memory (and
+#: allocated); 16,384 was the fastest of 1,024 to 65,536 (benchmarks/optimisation_log.md)
+BLOCK = 16384
+
+
+def _axis(n: np.ndarray) -> tuple[int, float] | None:
+    """(j, n_j) when the unit normal is +-e_j exactly, else None."""
+    nz = np.flatnonzero(n)
+    if nz.size == 1 and abs(n[nz[0]]) == 1.0:
+        return int(nz[0]), float(n[nz[0]])
+    return None
+
+
+def _candidates(x: np.ndarray, pl: ImpulsePlane) -> np.ndarray:
+    """Rows of x that may be on or behind the plane (x.n - p.n <= 0), in increasing order.
+
+    For an axis normal +-e_j this is one comparison of column j: for finite rows
+    x.n - off is (+-x_j) - off up to the sign of a zero (the other products are
+    zeros), and a difference of two floats is <= 0 exactly when a <= b. Rows
+    with a non-finite component may be included; the exact test on the
+    candidates (:meth:`_Blocks.collide`) drops them, as the full dot product does.
+    """
+    off = pl.offset
+    axis = _axis(pl.normal)
+    if axis is not None:
+        j, sign = axis
+        col = x[:, j]
+        return np.flatnonzero(col <= off) if sign > 0 else np.flatnonzero(col >= -off)
+    d = dot3(x, pl.normal)
+    d -= off
+    return np.flatnonzero(d <= 0)
+
+
+def _scale_rows(a: np.ndarray, s: np.ndarray) -> None:
+    """a *= s[:, None] column by column (the same products; see :func:`animsim.vec.outer3`)."""
+    for j in range(3):
+        np.multiply(a[:, j], s, out=a[:, j])
+
+
+class _Blocks:
+    """Reused buffers for one block of contacts, and the rule on them.
+
+    Operation for operation the rule of the numba kernel below (and of
+    Lander's Eq. 3 with the time of impact, module docstring), each value
+    computed by the same IEEE operations in the same order, so the two
+    backends agree to the bit; only where the values live changed.
+    """
+
+    def __init__(self, rows: int | None = None):
+        rows = BLOCK if rows is None else rows
+        self.xo, self.vo, self.xh, self.vh, self.acc = (np.empty((rows, 3)) for _ in range(5))
+        self.d0, self.d1, self.s, self.vn, self.vnn, self.w1, self.w2, self.w3 = (
+            np.empty(rows) for _ in range(8)
+        )
+        self.b1, self.b2, self.b3 = (np.empty(rows, dtype=bool) for _ in range(3))
+
+    def collide(
+        self,
+        pl: ImpulsePlane,
+        x_old: np.ndarray,
+        v_old: np.ndarray,
+        x: np.ndarray,
+        v: np.ndarray,
+        dt: float | np.ndarray,
+        inv_mass: np.ndarray,
+        idx: np.ndarray,
+        project: PlaneColliders | None,
+    ) -> np.ndarray:
+        """Collide candidate rows ``idx`` (at most the block) with one plane, writing them back.
+
+        Returns the rows that touched the plane. With ``project`` (a single plane)
+        the rows are settled (:meth:`PlaneColliders._project_rows`) before the write-back.
+        """
+        n, off, m = pl.normal, pl.offset, idx.size
+        xh = np.take(x, idx, axis=0, out=self.xh[:m])
+        vh = np.take(v, idx, axis=0, out=self.vh[:m])
+        d1 = dot3(xh, n, out=self.d1[:m])
+        d1 -= off
+        # Behind the plane, or exactly on it and still moving in (a contact that
+        # would cross next step: Lander's "colliding contact"); never pinned
+        # particles or dead pool slots.
+        keep = np.less(dot3(vh, n, out=self.w1[:m]), 0, out=self.b1[:m])
+        keep |= np.less(d1, 0, out=self.b2[:m])
+        keep &= np.less_equal(d1, 0, out=self.b2[:m])
+        keep &= np.greater(np.take(inv_mass, idx, out=self.w1[:m]), 0, out=self.b2[:m])
+        if keep.all():
+            hit = idx
+        else:
+            hit = idx[keep]
+            if hit.size == 0:
+                return hit
+            d1 = d1[keep]
+            xh = np.take(x, hit, axis=0, out=self.xh[: hit.size])
+            vh = np.take(v, hit, axis=0, out=self.vh[: hit.size])
+        k = hit.size
+        xo = np.take(x_old, hit, axis=0, out=self.xo[:k])
+        vo = np.take(v_old, hit, axis=0, out=self.vo[:k])
+        dt_row = dt if np.ndim(dt) == 0 else np.asarray(dt)[hit]
+        d0 = dot3(xo, n, out=self.d0[:k])
+        d0 -= off
+        np.maximum(d0, 0.0, out=d0)
+        gap = np.subtract(d0, d1, out=self.w1[:k])
+        # fraction of the step at impact; a particle ending exactly on the plane touched it at the end
+        s = self.s[:k]
+        s.fill(1.0)
+        np.divide(d0, gap, out=s, where=np.greater(gap, 0, out=self.b1[:k]))
+        # the step's mean acceleration (vh - vo) / dt, then vh becomes vo + s (vh - vo)
+        vh -= vo
+        acc = self.acc[:k]
+        if np.ndim(dt_row) == 0:
+            np.divide(vh, dt_row, out=acc)
+        else:
+            for j in range(3):
+                np.divide(vh[:, j], dt_row, out=acc[:, j])
+        xh -= xo
+        _scale_rows(xh, s)
+        xh += xo  # xc = xo + s (xh - xo)
+        _scale_rows(vh, s)
+        vh += vo  # vc = vo + s (vh - vo)
+        vc = vh
+        # Reflect the approaching ones (Lander Eq. 3) with Coulomb friction.
+        # An approach slower than what the pressing acceleration adds in
+        # RESTING_STEPS steps is a resting contact: it stops instead of
+        # bouncing, so a particle at rest does not jitter.
+        vn = dot3(vc, n, out=self.vn[:k])
+        vn_new = self.vnn[:k]
+        np.copyto(vn_new, vn)
+        # Only the approaching rows change their normal speed: worked on as a few gathered rows
+        # (most contacts of a pile at rest are not approaching), each with the same operations.
+        app = np.flatnonzero(np.less(vn, 0, out=self.b1[:k]))
+        if app.size:
+            vn_a = vn[app]
+            pressing = dot3(np.take(acc, app, axis=0), n)
+            np.negative(pressing, out=pressing)
+            np.maximum(pressing, 0.0, out=pressing)
+            pressing *= RESTING_STEPS
+            pressing *= dt_row if np.ndim(dt_row) == 0 else dt_row[app]
+            resting = -vn_a <= pressing
+            # vn_new = -e vn with e = 0 when resting, the restitution otherwise (-0.0 is -e for e = 0)
+            neg_e = np.where(resting, -0.0, -pl.restitution)
+            vn_new[app] = neg_e * vn_a
+        tmp = self.w2[:k]
+        for j in range(3):  # vt = vc - vn n
+            np.multiply(vn, n[j], out=tmp)
+            np.subtract(vc[:, j], tmp, out=vc[:, j])
+        vt = vc
+        if pl.friction != 0.0:
+            dvn = np.subtract(vn_new, vn, out=self.w1[:k])
+            np.abs(dvn, out=dvn)
+            _friction_rows(vt, dvn, pl.friction, self.w2[:k], self.w3[:k], self.b2[:k])
+        for j in range(3):  # vr = vt + vn_new n
+            np.multiply(vn_new, n[j], out=tmp)
+            vt[:, j] += tmp
+        vr = vt
+        # Fly on for the rest of the step: r = (1 - s) dt.
+        r = np.subtract(1.0, s, out=self.w1[:k])
+        r *= dt_row
+        half_r2 = np.multiply(r, 0.5, out=self.w3[:k])
+        half_r2 *= r
+        for j in range(3):
+            np.multiply(r, vr[:, j], out=tmp)
+            xh[:, j] += tmp  # xc + r vr
+            np.multiply(half_r2, acc[:, j], out=tmp)
+            xh[:, j] += tmp  # ... + (r^2 / 2) a
+            np.multiply(r, acc[:, j], out=tmp)
+            vr[:, j] += tmp  # v = vr + r a
+        if project is not None:  # one plane: settle the rows before writing them back, once
+            project._project_rows(xh, vr, self)
+        put_rows(x, hit, xh)
+        put_rows(v, hit, vr)
+        return hit
+
+
+def _friction_rows(
+    vt: np.ndarray, dvn: np.ndarray, mu: float, speed: np.ndarray, keep: np.ndarray, moving: np.ndarray
+) -> None:
+    """Coulomb friction on vt (k, 3) in place: each row's speed drops by at most mu * dvn (k,)
+    and never reverses, vt * max(|vt| - mu dvn, 0) / |vt| (0 at rest). ``speed``, ``keep`` (k,)
+    and ``moving`` (k,) bool are scratch arrays."""
+    dot3(vt, vt, out=speed)
+    np.sqrt(speed, out=speed)
+    np.multiply(dvn, mu, out=keep)
+    np.subtract(speed, keep, out=keep)
+    np.maximum(keep, 0.0, out=keep)
+    np.greater(speed, 0, out=moving)
+    np.divide(keep, speed, out=keep, where=moving)
+    np.copyto(keep, 0.0, where=~moving)
+    _scale_rows(vt, keep)
 
 
 class PlaneColliders(StepStage):
@@ -117,73 +309,25 @@ class PlaneColliders(StepStage):
         ``dt`` may be an (N,) array of per-particle step lengths: an emitted
         particle moves only for the rest of its birth step.
 
-        Cost: one pass over all particles per plane (a signed distance and a
-        comparison); everything else works on the few that reached a plane.
+        Cost: one pass over all particles per plane (a comparison); everything
+        else works on the particles that reached a plane, a block of rows at a
+        time (:class:`_Blocks`), so the contacts' arithmetic stays in cache.
         """
         touched: list[np.ndarray] = []
         single = len(self.planes) == 1
+        blocks = self._buffers(min(BLOCK, len(x)))
         for pl in self.planes:
-            n = pl.normal
-            # Signed distance as x.n - p.n: no (N, 3) temporary.
-            d_new = dot3(x, n) - pl.offset
-            cand = np.flatnonzero(d_new <= 0)
+            cand = _candidates(x, pl)
             if cand.size == 0:
                 continue
-            # Behind the plane, or exactly on it and still moving in (a contact
-            # that would cross next step: Lander's "colliding contact"); never
-            # pinned particles or dead pool slots.
-            d1 = d_new[cand]
-            keep = ((d1 < 0) | (dot3(take_rows(v, cand), n) < 0)) & (self.inv_mass[cand] > 0)
-            hit = cand[keep]
-            if hit.size == 0:
-                continue
-            touched.append(hit)
-            d1 = d1[keep]
-            # rows gathered with np.take and written back with put_rows: the same values as
-            # fancy indexing, a third of its cost (these gathers were most of the stage)
-            xo, vo, xh, vh = (
-                take_rows(x_old, hit),
-                take_rows(v_old, hit),
-                take_rows(x, hit),
-                take_rows(v, hit),
-            )
-            d0 = np.maximum(dot3(xo, n) - pl.offset, 0.0)
-            gap = d0 - d1
-            # fraction of the step at impact; a particle ending exactly on the plane touched it at the end
-            s = np.divide(d0, gap, out=np.ones_like(d0), where=gap > 0)
-            # (k, 3) copies of per-row factors (rep3, outer3): the products of the
-            # broadcast forms, without NumPy's slow inner loop of three
-            s3 = rep3(s)
-            dt_row = dt if np.ndim(dt) == 0 else np.asarray(dt)[hit]
-            dv = vh - vo
-            mean_acc = dv / (dt_row if np.ndim(dt_row) == 0 else dt_row[:, None])
-            xh -= xo
-            xh *= s3
-            xc = np.add(xo, xh, out=xh)  # xo + s (xh - xo)
-            dv *= s3
-            vc = np.add(vo, dv, out=dv)  # vo + s (vh - vo)
-            # Reflect the approaching ones (Lander Eq. 3) with Coulomb friction.
-            # An approach slower than what the pressing acceleration adds in
-            # RESTING_STEPS steps is a resting contact: it stops instead of
-            # bouncing, so a particle at rest does not jitter.
-            vn = dot3(vc, n)
-            approaching = vn < 0
-            pressing = np.maximum(-dot3(mean_acc, n), 0.0)
-            resting = approaching & (-vn <= RESTING_STEPS * pressing * dt_row)
-            e = np.where(resting, 0.0, pl.restitution)
-            vn_new = np.where(approaching, -e * vn, vn)
-            vt = vc - outer3(vn, n)
-            vt = _apply_friction(vt, np.abs(vn_new - vn), pl.friction)
-            vr = vt + outer3(vn_new, n)
-            # Fly on for the rest of the step.
-            r = (1.0 - s) * dt_row
-            r3 = rep3(r)
-            x_hit = xc + r3 * vr + rep3(0.5 * r * r) * mean_acc
-            v_hit = vr + r3 * mean_acc
-            if single:  # one plane: settle the rows before writing them back, once
-                self._project_rows(x_hit, v_hit)
-            put_rows(x, hit, x_hit)
-            put_rows(v, hit, v_hit)
+            project = self if single else None
+            hits = [
+                blocks.collide(pl, x_old, v_old, x, v, dt, self.inv_mass, cand[i : i + BLOCK], project)
+                for i in range(0, cand.size, BLOCK)
+            ]
+            hit = np.concatenate(hits) if len(hits) > 1 else hits[0]
+            if hit.size:
+                touched.append(hit)
         if not touched:
             return False
         if not single:
@@ -192,6 +336,14 @@ class PlaneColliders(StepStage):
             self._project(x, v, np.unique(np.concatenate(touched)))
         return True
 
+    _block_buffers: _Blocks | None = None
+
+    def _buffers(self, rows: int) -> _Blocks:
+        """Buffers for blocks of ``rows`` contacts, made on first use and kept."""
+        if self._block_buffers is None or len(self._block_buffers.s) < rows:
+            self._block_buffers = _Blocks(rows)
+        return self._block_buffers
+
     def _project(self, x: np.ndarray, v: np.ndarray, idx: np.ndarray) -> None:
         """Put any of ``idx`` still behind a plane onto it and stop its inward motion."""
         xs, vs = take_rows(x, idx), take_rows(v, idx)
@@ -199,30 +351,60 @@ class PlaneColliders(StepStage):
         put_rows(x, idx, xs)
         put_rows(v, idx, vs)
 
-    def _project_rows(self, x: np.ndarray, v: np.ndarray) -> None:
-        """:meth:`_project` on gathered rows (k, 3), in place."""
+    def _project_rows(self, x: np.ndarray, v: np.ndarray, scratch: _Blocks | None = None) -> None:
+        """:meth:`_project` on gathered rows (k, 3), in place (``scratch``: buffers of at least k rows
+        other than those holding x and v)."""
+        buf = scratch if scratch is not None else _Blocks(len(x))
         for pl in self.planes:
-            n = pl.normal
-            d = dot3(x, n) - pl.offset
-            sel = d < 0
-            if not sel.any():
-                continue
-            behind = np.flatnonzero(sel)
-            xb = take_rows(x, behind) - outer3(d[behind], n)
-            # Rounding can leave the projected point 1 ulp behind; nudge until it is not.
-            for _ in range(4):
-                db = dot3(xb, n) - pl.offset
-                still = db < 0
-                if not still.any():
-                    break
-                xb[still] -= (2.0 * db[still])[:, None] * n + np.spacing(np.abs(xb[still])) * np.sign(n)
-            put_rows(x, behind, xb)
-            vb = take_rows(v, behind)
-            vn = dot3(vb, n)
-            inward = np.minimum(vn, 0.0)
-            vt = vb - outer3(vn, n)
-            vt = _apply_friction(vt, -inward, pl.friction)
-            put_rows(v, behind, vt + outer3(vn - inward, n))
+            _settle(pl, x, v, buf)
+
+
+def _settle(pl: ImpulsePlane, x: np.ndarray, v: np.ndarray, buf: _Blocks) -> None:
+    """Put rows (k, 3) of x behind the plane onto it and stop their inward motion, in place.
+
+    Every operation runs over all k rows and only the rows behind the plane are
+    written (``where=``), so the values are those of the rows alone: no gather,
+    no scatter. Uses the buffers d0, d1, s, w1-w3, b1-b3 and vo of ``buf``.
+    """
+    n, off, k = pl.normal, pl.offset, len(x)
+    d = dot3(x, n, out=buf.d0[:k])
+    d -= off
+    behind = np.less(d, 0, out=buf.b1[:k])
+    if not behind.any():
+        return
+    tmp = buf.w2[:k]
+    for j in range(3):  # x - d n
+        np.multiply(d, n[j], out=tmp)
+        np.subtract(x[:, j], tmp, out=x[:, j], where=behind)
+    # Rounding can leave the projected point 1 ulp behind; nudge until it is not.
+    # (Rows in front keep x, so their distance is d again, and they are never nudged.)
+    for _ in range(4):
+        db = dot3(x, n, out=buf.d1[:k])
+        db -= off
+        still = np.less(db, 0, out=buf.b2[:k])
+        if not still.any():
+            break
+        db *= 2.0
+        for j in range(3):  # x -= 2 db n + spacing(|x|) sign(n)
+            spacing = np.abs(x[:, j], out=buf.w3[:k])
+            np.spacing(spacing, out=spacing)
+            spacing *= np.sign(n[j])
+            np.multiply(db, n[j], out=tmp)
+            tmp += spacing
+            np.subtract(x[:, j], tmp, out=x[:, j], where=still)
+    vn = dot3(v, n, out=buf.d1[:k])
+    inward = np.minimum(vn, 0.0, out=buf.d0[:k])
+    vt = buf.vo[:k]
+    for j in range(3):  # vt = v - vn n
+        np.multiply(vn, n[j], out=tmp)
+        np.subtract(v[:, j], tmp, out=vt[:, j])
+    if pl.friction != 0.0:
+        dvn = np.negative(inward, out=buf.w1[:k])
+        _friction_rows(vt, dvn, pl.friction, buf.w3[:k], buf.s[:k], buf.b3[:k])
+    np.subtract(vn, inward, out=buf.d1[:k])  # vn - inward
+    for j in range(3):  # v = vt + (vn - inward) n on the rows behind
+        np.multiply(buf.d1[:k], n[j], out=tmp)
+        np.add(vt[:, j], tmp, out=v[:, j], where=behind)
 
 
 # --- the numba kernel: the same rule, particle by particle ---------------------------------

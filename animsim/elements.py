@@ -97,6 +97,10 @@ class ForceElement:
     contact_stiffness: float = 0.0
     #: body-aware forces (springs to points of rigid bodies) set this
     acts_on_bodies: bool = False
+    #: accumulate(x[lo:hi], v[lo:hi], t, out[lo:hi]) adds rows lo:hi of the whole evaluation
+    #: (row i reads only row i and the element holds no per-particle array), so the NumPy
+    #: integrator may evaluate it a block of rows at a time (Dynamics.blocks)
+    row_blocks: bool = False
 
     def accumulate(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None:
         raise NotImplementedError  # pragma: no cover - every element defines its kernel

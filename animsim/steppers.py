@@ -183,6 +183,9 @@ def _kernels_cached() -> bool:
 class _NumbaDynamics:
     """A Dynamics whose acceleration runs the elements' numba kernels (everything else delegated)."""
 
+    #: never the NumPy force terms a block at a time: every evaluation goes to the kernels
+    blocks = False
+
     def __init__(self, dynamics: Any, forces: Any):
         self._dynamics = dynamics
         self.acceleration = forces.acceleration

@@ -35,6 +35,9 @@ def _quadratic_kernel(x, v, t, out, mass, fp, ip):
 class Drag(ForceElement):
     #: row i of its force reads only row i (the numba backend may evaluate it on a few rows)
     pointwise = True
+    #: accumulate on row slices x[lo:hi], v[lo:hi], out[lo:hi] gives those rows of the whole
+    #: evaluation (it reads no per-particle array of its own), so it may run a block at a time
+    row_blocks = True
     watch_role = DISSIPATIVE
     has_damping = True
 
@@ -47,8 +50,9 @@ class Drag(ForceElement):
 
     def accumulate(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None:
         buf = self._scratch  # k v into a buffer of our own: no (N, 3) temporary per evaluation
-        if buf is None or buf.shape != v.shape:
+        if buf is None or len(buf) < len(v) or buf.shape[1:] != v.shape[1:]:
             buf = self._scratch = np.empty(v.shape)
+        buf = buf[: len(v)]  # a block of rows uses the front of the buffer
         np.multiply(v, self.k, out=buf)
         out -= buf
 

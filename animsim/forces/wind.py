@@ -31,6 +31,8 @@ COLUMNS_FROM = 256
 class Wind(ForceElement):
     #: row i of its force reads only row i (the numba backend may evaluate it on a few rows)
     pointwise = True
+    #: accumulate on row slices gives those rows of the whole evaluation (see Drag)
+    row_blocks = True
     watch_role = INJECTING
     has_damping = True
 
@@ -53,8 +55,9 @@ class Wind(ForceElement):
             out += self.k * (self.w - v)
             return
         buf = self._scratch
-        if buf is None or buf.shape != v.shape:
+        if buf is None or len(buf) < len(v) or buf.shape[1:] != v.shape[1:]:
             buf = self._scratch = np.empty(v.shape)
+        buf = buf[: len(v)]  # a block of rows uses the front of the buffer
         for j in range(3):
             np.subtract(self.w[j], v[:, j], out=buf[:, j])
         buf *= self.k

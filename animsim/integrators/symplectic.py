@@ -46,7 +46,18 @@ class SymplecticEuler(Integrator):
         if state.body_orientation is not None:  # rigid bodies: (q, omega) advance too
             return body_step(self, state, dt)
         x, v = state.particle_position, state.particle_velocity
-        a = self.dynamics.acceleration(x, v, state.time, self._a)
+        dyn = self.dynamics
+        if dyn.blocks:  # many particles: each block of rows updated while it is in cache
+
+            def update(rows: slice, a: np.ndarray) -> None:
+                a *= dt
+                v[rows] += a
+                np.multiply(v[rows], dt, out=a)
+                x[rows] += a
+
+            dyn.acceleration_blocks(x, v, state.time, self._a, update)
+            return
+        a = dyn.acceleration(x, v, state.time, self._a)
         # In place through our own buffer: the same products as v += dt*a;
         # x += dt*v, without two (N, 3) temporaries per step.
         a *= dt

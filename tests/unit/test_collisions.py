@@ -129,3 +129,88 @@ def test_row_helpers_move_the_same_bytes_as_fancy_indexing():
     n = np.array([0.0, -1.0, 0.5])
     assert np.array_equal(outer3(s, n).view(np.int64), (s[:, None] * n).view(np.int64))
     assert np.array_equal((rep3(s) * values).view(np.int64), (s[:, None] * values).view(np.int64))
+
+
+def _plane_contact_states(rng: np.random.Generator, n: int) -> tuple[np.ndarray, ...]:
+    """A step x_old -> x near the planes of :func:`_contact_planes`: resting drops (on the
+    ground at rest, pulled down by gravity), bouncing and grazing ones, rows exactly on a
+    plane, signed zeros everywhere, pinned rows."""
+    dt = 1e-3
+    xo = rng.normal(0.0, 0.01, (n, 3))
+    vo = rng.normal(0.0, 1.0, (n, 3))
+    xo[rng.random((n, 3)) < 0.2] = 0.0
+    xo[rng.random((n, 3)) < 0.1] = -0.0
+    vo[rng.random((n, 3)) < 0.2] = -0.0
+    vo[rng.random((n, 3)) < 0.1] = 0.0
+    resting = rng.random(n) < 0.3
+    xo[resting, 1] = rng.choice([0.0, -0.0], size=int(resting.sum()))
+    vo[resting, 1] = 0.0
+    acc = rng.normal(0.0, 10.0, (n, 3))
+    acc[rng.random(n) < 0.5] = [0.0, -9.81, 0.0]
+    v = vo + dt * acc
+    x = xo + dt * v
+    x[rng.random((n, 3)) < 0.05] = rng.choice([0.0, -0.0])
+    v[rng.random((n, 3)) < 0.05] = -0.0
+    inv_mass = np.where(rng.random(n) < 0.05, 0.0, 1.0)
+    return xo, vo, x, v, inv_mass
+
+
+def _contact_planes(rng: np.random.Generator, count: int):
+    from animsim.collisions import ImpulsePlane
+
+    shapes = [
+        ([0.0, 0.0, 0.0], [0.0, 1.0, 0.0]),
+        ([1.0, 0.0, 0.0], [-1.0, 1.0, 0.0]),
+        ([0.0, 0.0, 0.003], [0.0, 0.0, -1.0]),
+    ]
+    planes = []
+    for point, normal in shapes[:count]:
+        nrm = np.array(normal) / np.linalg.norm(normal)
+        e, mu = float(rng.choice([0.0, 0.5, 1.0])), float(rng.choice([0.0, 0.3]))
+        planes.append(ImpulsePlane(np.array(point), nrm, e, mu))
+    return planes
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_numpy_plane_stage_equals_the_numba_kernel_bit_for_bit(seed, monkeypatch):
+    """The NumPy stage (blocks of rows, buffers, axis-normal candidates) computes every value
+    with the numba kernel's operations: the same bits, -0.0 included, for one and several
+    planes, with and without friction, over several blocks and with per-row step lengths."""
+    pytest.importorskip("numba")
+    from animsim import collisions
+    from animsim.elements import jit_kernel
+
+    monkeypatch.setattr(collisions, "BLOCK", 257)  # several blocks, the last one partial
+    kernel = jit_kernel(collisions._stage_kernel, stage=True)
+    rng = np.random.default_rng(seed)
+    for trial in range(12):
+        n = int(rng.integers(1, 1500))
+        xo, vo, x, v, inv_mass = _plane_contact_states(rng, n)
+        stage = collisions.PlaneColliders(_contact_planes(rng, 1 + trial % 3), inv_mass)
+        fp, ip = stage.numba_stage_params()
+        x1, v1, x2, v2 = x.copy(), v.copy(), x.copy(), v.copy()
+        with np.errstate(all="ignore"):
+            changed = stage.resolve(xo, vo, x1, v1, 1e-3)
+        assert changed == bool(kernel(xo, vo, x2, v2, 1e-3, inv_mass, fp, ip))
+        assert np.array_equal(x1.view(np.int64), x2.view(np.int64)), (seed, trial)
+        assert np.array_equal(v1.view(np.int64), v2.view(np.int64)), (seed, trial)
+        assert changed  # the states do reach the planes
+
+
+def test_numpy_plane_stage_per_row_steps_match_one_row_at_a_time():
+    """Newborns' per-row step lengths: each row as if collided alone with its own dt."""
+    from animsim import collisions
+
+    rng = np.random.default_rng(11)
+    xo, vo, x, v, inv_mass = _plane_contact_states(rng, 400)
+    dt = rng.uniform(1e-4, 1e-3, 400)
+    stage = collisions.PlaneColliders(_contact_planes(rng, 2), inv_mass)
+    x1, v1 = x.copy(), v.copy()
+    stage.resolve(xo, vo, x1, v1, dt)
+    for i in range(0, 400, 7):
+        xs, vs = x[i : i + 1].copy(), v[i : i + 1].copy()
+        collisions.PlaneColliders(stage.planes, inv_mass[i : i + 1]).resolve(
+            xo[i : i + 1], vo[i : i + 1], xs, vs, float(dt[i])
+        )
+        assert np.array_equal(xs.view(np.int64), x1[i : i + 1].view(np.int64))
+        assert np.array_equal(vs.view(np.int64), v1[i : i + 1].view(np.int64))
