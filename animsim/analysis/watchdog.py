@@ -68,6 +68,8 @@ class EnergyWatch:
         self.dynamics = compiled.dynamics
         terms = self.dynamics.terms
         self.mass = system.particle_mass  # rebound to the run's live masses by bind()
+        emitters = getattr(compiled, "emitters", None)
+        self._take_changed = None if emitters is None else emitters.take_changed
         self._movable = float(np.count_nonzero(self.mass))
         self.inv_mass = system.particle_inv_mass
         self.elastic = [t for t in terms if t.watch_role == ELASTIC]
@@ -148,16 +150,27 @@ class EnergyWatch:
         check at every step while the full checks keep their stride."""
         if self.alive_prev is None or state.particle_alive is None:
             return
-        born = state.particle_alive & ~self.alive_prev
-        if born.any():
+        alive = state.particle_alive
+        # The emitters name the rows born and dead since they were last asked (a step's
+        # few); only when they cannot is every row's flag compared with its last value.
+        changed = None if self._take_changed is None else self._take_changed(state)
+        if changed is None:
+            born = alive & ~self.alive_prev
+            idx = np.flatnonzero(born) if born.any() else None
+            np.copyto(self.alive_prev, alive)
+        else:
+            rows, dead = changed
+            now = alive[rows]
+            idx = rows[now & ~self.alive_prev[rows]]  # ascending, as flatnonzero finds them
+            self.alive_prev[dead] = alive[dead]
+            self.alive_prev[rows] = now
+        if idx is not None and len(idx):
             x = state.particle_position
-            idx = np.flatnonzero(born)
             vb = state.particle_velocity[idx]
             self.born_energy += float(0.5 * np.dot(self.mass[idx], np.einsum("ij,ij->i", vb, vb)))
             self.x_ref[idx] = x[idx]
             for t, u in zip(self.releasing, self.u_ref, strict=True):
                 u[idx] = t.per_particle_potential(x[idx], idx)
-        np.copyto(self.alive_prev, state.particle_alive)
 
     def snapshot(self) -> tuple[Any, ...] | None:
         """The books a replay from a checked state restores (None: they never change)."""
