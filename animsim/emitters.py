@@ -341,6 +341,24 @@ def _pool_births(
     return nd, n
 
 
+def _outside_box(x: np.ndarray, alive: np.ndarray, lo: np.ndarray, hi: np.ndarray, out: np.ndarray) -> int:
+    """The alive slots with a coordinate below lo or above hi (the kill box test), ascending,
+    into ``out``; how many. One pass instead of NumPy's six over (capacity, 3) arrays."""
+    n = 0
+    for i in range(x.shape[0]):
+        if alive[i] and (
+            x[i, 0] < lo[0]
+            or x[i, 0] > hi[0]
+            or x[i, 1] < lo[1]
+            or x[i, 1] > hi[1]
+            or x[i, 2] < lo[2]
+            or x[i, 2] > hi[2]
+        ):
+            out[n] = i
+            n += 1
+    return n
+
+
 #: the bookkeeping kernels compiled by numba (filled on first use of the numba backend)
 _NUMBA: dict[str, Any] = {}
 
@@ -364,7 +382,9 @@ def _numba_kernels() -> dict[str, Any]:
             f, f, f, f, f, i, i, i, sizes, q, qs, bounds, i, i, np.zeros(0, dtype=bool), i,
         )  # fmt: skip
         kill(np.zeros(0, dtype=np.int64), alive, f, f, xv, f, i, sizes, i)
-        _NUMBA["births"], _NUMBA["kill"] = births, kill
+        outside = numba.njit(cache=True)(_outside_box)
+        outside(xv, alive, np.zeros(3), np.zeros(3), i)
+        _NUMBA["births"], _NUMBA["kill"], _NUMBA["outside"] = births, kill, outside
     return _NUMBA
 
 
@@ -634,8 +654,8 @@ class Pool:
         self.color0 = parse_color(spec.color.start)
         self.color1 = parse_color(spec.color.end)
         kb = spec.kill_box
-        self.kill_lo = None if kb is None else np.array(kb.min)
-        self.kill_hi = None if kb is None else np.array(kb.max)
+        self.kill_lo = None if kb is None else np.array(kb.min, dtype=np.float64)
+        self.kill_hi = None if kb is None else np.array(kb.max, dtype=np.float64)
         cap = self.capacity
         # Per-slot bookkeeping (structure of arrays), shape (capacity,).
         self.slot_birth = np.zeros(cap)  # s
@@ -888,15 +908,32 @@ class Pool:
                 self._kill(old)
                 changed = True
         if self.kill_lo is not None and self.alive_count:
-            x = self.x
-            outside = ((x < self.kill_lo) | (x > self.kill_hi)).any(axis=1) & self.alive
-            out = np.flatnonzero(outside)
+            if self._kernels is not None:
+                count = self._kernels["outside"](self.x, self.alive, self.kill_lo, self.kill_hi, self._dying)
+                out = self._dying[:count].copy()
+            else:
+                out = np.flatnonzero(self._outside_box())
             if len(out):
                 self.died_kill_box += len(out)
                 self._kill(out)
                 changed = True
         self.peak_alive = max(self.peak_alive, self.alive_count)
         return changed
+
+    def _outside_box(self) -> np.ndarray:
+        """Alive slots with a coordinate outside the kill box, as a mask: column by column
+        into one boolean buffer (a quarter of ``((x < lo) | (x > hi)).any(axis=1)``'s time,
+        whose reduction over an inner axis of 3 dominated; the same booleans)."""
+        x, lo, hi = self.x, self.kill_lo, self.kill_hi
+        assert lo is not None and hi is not None
+        out = np.less(x[:, 0], lo[0])
+        scratch = np.empty_like(out)
+        out |= np.greater(x[:, 0], hi[0], out=scratch)
+        for c in (1, 2):
+            out |= np.less(x[:, c], lo[c], out=scratch)
+            out |= np.greater(x[:, c], hi[c], out=scratch)
+        out &= self.alive
+        return out
 
     def summary(self) -> dict[str, Any]:
         return {

@@ -216,3 +216,36 @@ def test_energy_books_of_births_match_a_full_comparison(backend: str) -> None:
     assert np.array_equal(books[0][1], books[1][1])
     assert np.array_equal(books[0][2], books[1][2])
     assert all(np.array_equal(a, b) for a, b in zip(books[0][3], books[1][3], strict=True))
+
+
+def test_kill_box_masks_match_the_plain_expression() -> None:
+    """The column-by-column mask and the numba kernel find exactly the slots the plain
+    ``((x < lo) | (x > hi)).any(axis=1) & alive`` finds, with NaN and on the faces."""
+    from animsim.emitters import _numba_kernels
+
+    rng = np.random.default_rng(5)
+    spec = m.Emitter.model_validate(
+        {
+            "name": "e",
+            "rate": 10.0,
+            "shape": {"type": "point", "position": [0.0, 0.0, 0.0]},
+            "lifetime": {"mean": 1.0},
+            "max_particles": 5000,
+            "kill_box": {"min": [-1.0, -2.0, -0.5], "max": [1.0, 0.5, 3.0]},
+        },
+        strict=False,
+    )
+    pool = Pool(spec, 0, 0, seed=0)
+    state = _state(5000)
+    pool.bind(state)
+    x = rng.normal(0.0, 1.5, (5000, 3))
+    x[rng.random((5000, 3)) < 0.02] = np.nan
+    faces = rng.random((5000, 3)) < 0.02
+    x[faces] = np.broadcast_to(pool.kill_hi, (5000, 3))[faces]
+    state.particle_position[:] = x
+    state.particle_alive[:] = rng.random(5000) < 0.8
+    plain = np.flatnonzero(((x < pool.kill_lo) | (x > pool.kill_hi)).any(axis=1) & state.particle_alive)
+    assert np.array_equal(np.flatnonzero(pool._outside_box()), plain)
+    out = np.empty(5000, dtype=np.int64)
+    n = _numba_kernels()["outside"](pool.x, pool.alive, pool.kill_lo, pool.kill_hi, out)
+    assert np.array_equal(out[:n], plain)
