@@ -77,6 +77,17 @@ Ids and order
     creation order: fixed particles first, then emitted ones by birth time
     (ties by emitter order).
 
+Bookkeeping on the numba backend
+    A step's births and deaths by age are one compiled call per pool instead
+    of about forty NumPy calls and two scans of every slot: the death times
+    wait in a queue of runs, one per step with births, each sorted by time,
+    so a step reads only the runs' heads and the entries due (a lazy
+    priority queue: an entry of a slot that died otherwise is skipped when
+    it comes up); the free slots are kept as a sorted list (dead slots merged
+    in, births taking its head) instead of being searched for. They choose
+    the same slots as the NumPy scans, in the same order, so both backends
+    give the same particles bit for bit.
+
 Random streams
     Every emitter has its own streams, seeded by ``np.random.SeedSequence``
     from (scene seed, a hash of the emitter's name): one for birth times and
@@ -93,7 +104,7 @@ from typing import Any
 
 import numpy as np
 
-from animsim.elements import StepStage
+from animsim.elements import StepStage, _compile_helpers, numba_helper
 from animsim.record import Frame
 from animsim.scene import models as m
 from animsim.system import State
@@ -117,6 +128,264 @@ REJECTION_EXTRA = 16
 EMITTER_STREAM_TAG = 0x656D_6974  # "emit"
 #: Words of the name hash mixed into the seed (4 x 32 bits).
 NAME_HASH_WORDS = 4
+#: The numba backend's death queue (Pool.use_numba): at most this many runs (one per
+#: step with births; more are merged into one), and rows for twice the pool (entries
+#: of slots already dead are dropped when the rows run out).
+QUEUE_RUNS = 1024
+QUEUE_SLACK = 64
+
+
+@numba_helper
+def _free_merge(free: np.ndarray, sizes: np.ndarray, slots: np.ndarray, scratch: np.ndarray) -> None:
+    """Sorted ``slots`` into the sorted free list free[sizes[2] : sizes[2] + sizes[1]]
+    (a merge of two sorted runs), which then starts at free[0]."""
+    head, count = sizes[2], sizes[1]
+    i, j, n = 0, 0, 0
+    while i < count or j < slots.shape[0]:
+        if j == slots.shape[0] or (i < count and free[head + i] < slots[j]):
+            scratch[n] = free[head + i]
+            i += 1
+        else:
+            scratch[n] = slots[j]
+            j += 1
+        n += 1
+    free[:n] = scratch[:n]
+    sizes[1], sizes[2] = n, 0
+
+
+def _pool_kill(
+    slots: np.ndarray,
+    alive: np.ndarray,
+    m: np.ndarray,
+    inv_m: np.ndarray,
+    v: np.ndarray,
+    slot_death: np.ndarray,
+    free: np.ndarray,
+    sizes: np.ndarray,
+    scratch: np.ndarray,
+) -> None:
+    """Pool._kill with the free list: the slots (ascending) die and join it."""
+    for s in slots:
+        alive[s] = False
+        m[s] = 0.0
+        inv_m[s] = 0.0
+        v[s, 0] = 0.0
+        v[s, 1] = 0.0
+        v[s, 2] = 0.0
+        slot_death[s] = np.inf
+    _free_merge(free, sizes, slots, scratch)
+
+
+@numba_helper
+def _queue_compact(
+    q: np.ndarray,
+    qs: np.ndarray,
+    bounds: np.ndarray,
+    sizes: np.ndarray,
+    alive: np.ndarray,
+    slot_serial: np.ndarray,
+    merge: bool,
+) -> None:
+    """Keep only the death queue's entries of alive slots (at most one per slot, so at most
+    the pool's size), in their runs; with ``merge``, as one run sorted by time."""
+    n = 0
+    runs = 0
+    for r in range(sizes[3]):
+        lo, hi = bounds[r, 1], bounds[r, 2]
+        bounds[runs, 0] = n
+        for e in range(lo, hi):
+            s = qs[e, 0]
+            if alive[s] and slot_serial[s] == qs[e, 1]:
+                q[n, 0] = q[e, 0]
+                qs[n, 0] = s
+                qs[n, 1] = qs[e, 1]
+                n += 1
+        if n == bounds[runs, 0]:
+            continue
+        bounds[runs, 1] = bounds[runs, 0]
+        bounds[runs, 2] = n
+        runs += 1
+    if merge and runs > 1:
+        order = np.argsort(q[:n, 0], kind="mergesort")
+        t = q[:n, 0][order]
+        a = qs[:n, 0][order]
+        b = qs[:n, 1][order]
+        q[:n, 0] = t
+        qs[:n, 0] = a
+        qs[:n, 1] = b
+        bounds[0, 0], bounds[0, 1], bounds[0, 2] = 0, 0, n
+        runs = 1
+    sizes[3] = runs
+    sizes[4] = n
+
+
+def _pool_births(
+    t1: float,
+    ev_time: np.ndarray,
+    ev_life: np.ndarray,
+    ev_pos: np.ndarray,
+    ev_vel: np.ndarray,
+    mass: float,
+    inv_mass: float,
+    alive_count: int,
+    born: int,
+    capacity: int,
+    x: np.ndarray,
+    v: np.ndarray,
+    alive: np.ndarray,
+    m: np.ndarray,
+    inv_m: np.ndarray,
+    slot_birth: np.ndarray,
+    slot_death: np.ndarray,
+    slot_lifetime: np.ndarray,
+    slot_serial: np.ndarray,
+    slot_table: np.ndarray,
+    free: np.ndarray,
+    sizes: np.ndarray,
+    q: np.ndarray,
+    qs: np.ndarray,
+    bounds: np.ndarray,
+    dying: np.ndarray,
+    scratch: np.ndarray,
+    keep: np.ndarray,
+    taken: np.ndarray,
+) -> tuple[int, int]:
+    """Pool.births in one call: (deaths by age, births kept).
+
+    The same steps as the NumPy scans: the slots due by t1 die, the events
+    find room by the same closed form (:meth:`Pool._accepted`), and the kept
+    ones take the lowest free slots in order. The due slots come from the
+    death queue: runs of (death time, slot, serial), one per step with
+    births, each sorted by time, so a step reads each run's head and the
+    entries that are due, never the whole pool. An entry whose slot died
+    otherwise (kill box) or was taken again is recognised by its serial and
+    skipped, as in a lazy priority queue. ``dying``, ``keep`` and ``taken``
+    receive the dead slots (ascending), the kept-events mask and the slots taken.
+    """
+    nd = 0
+    for r in range(sizes[3]):
+        h, end = bounds[r, 1], bounds[r, 2]
+        while h < end and q[h, 0] <= t1:
+            s = qs[h, 0]
+            if alive[s] and slot_serial[s] == qs[h, 1]:
+                dying[nd] = s
+                nd += 1
+            h += 1
+        bounds[r, 1] = h
+    if nd:
+        dying[:nd] = np.sort(dying[:nd])  # ascending slots, as a scan finds them
+    k = ev_time.shape[0]
+    if alive_count + k <= capacity:
+        for i in range(k):
+            keep[i] = True
+    else:
+        # kept_i = i + min(0, min_{j<=i} f_j - j), f_j = cap - A0 + D(b_j) (Pool._accepted)
+        deaths = np.sort(slot_death[dying[:nd]])
+        low = 0
+        prev = 0
+        for i in range(k):
+            f = capacity - alive_count + np.searchsorted(deaths, ev_time[i], side="right")
+            if i == 0 or f - (i + 1) < low:
+                low = f - (i + 1)
+            kept = (i + 1) + min(0, low)
+            keep[i] = kept - prev > 0
+            prev = kept
+    if nd:
+        for j in range(nd):
+            s = dying[j]
+            alive[s] = False
+            m[s] = 0.0
+            inv_m[s] = 0.0
+            v[s, 0] = 0.0
+            v[s, 1] = 0.0
+            v[s, 2] = 0.0
+            slot_death[s] = np.inf
+        _free_merge(free, sizes, dying[:nd], scratch)
+    n = 0
+    head = sizes[2]
+    for i in range(k):
+        if not keep[i]:
+            continue
+        s = free[head + n]
+        taken[n] = s
+        alive[s] = True
+        m[s] = mass
+        inv_m[s] = inv_mass
+        for c in range(3):
+            x[s, c] = ev_pos[i, c]
+            v[s, c] = ev_vel[i, c]
+        slot_birth[s] = ev_time[i]
+        slot_lifetime[s] = ev_life[i]
+        slot_death[s] = ev_time[i] + ev_life[i]
+        slot_serial[s] = born + n
+        slot_table[s] = -1
+        n += 1
+    sizes[1] -= n
+    sizes[2] = head + n
+    if n:
+        # the newborns' deaths as a new run, sorted by time (room made by compacting first)
+        runs_full = sizes[3] == bounds.shape[0]
+        if sizes[4] + n > q.shape[0] or runs_full:
+            _queue_compact(q, qs, bounds, sizes, alive, slot_serial, runs_full)
+        order = np.argsort(slot_death[taken[:n]], kind="mergesort")
+        e = sizes[4]
+        for j in range(n):
+            s = taken[order[j]]
+            q[e + j, 0] = slot_death[s]
+            qs[e + j, 0] = s
+            qs[e + j, 1] = slot_serial[s]
+        r = sizes[3]
+        bounds[r, 0], bounds[r, 1], bounds[r, 2] = e, e, e + n
+        sizes[3] = r + 1
+        sizes[4] = e + n
+    return nd, n
+
+
+def _outside_box(x: np.ndarray, alive: np.ndarray, lo: np.ndarray, hi: np.ndarray, out: np.ndarray) -> int:
+    """The alive slots with a coordinate below lo or above hi (the kill box test), ascending,
+    into ``out``; how many. One pass instead of NumPy's six over (capacity, 3) arrays."""
+    n = 0
+    for i in range(x.shape[0]):
+        if alive[i] and (
+            x[i, 0] < lo[0]
+            or x[i, 0] > hi[0]
+            or x[i, 1] < lo[1]
+            or x[i, 1] > hi[1]
+            or x[i, 2] < lo[2]
+            or x[i, 2] > hi[2]
+        ):
+            out[n] = i
+            n += 1
+    return n
+
+
+#: the bookkeeping kernels compiled by numba (filled on first use of the numba backend)
+_NUMBA: dict[str, Any] = {}
+
+
+def _numba_kernels() -> dict[str, Any]:
+    """The pool kernels compiled by numba (cached on disk), with their helper."""
+    if not _NUMBA:
+        import numba
+
+        _compile_helpers(globals())
+        births = numba.njit(cache=True)(_pool_births)
+        kill = numba.njit(cache=True)(_pool_kill)
+        # Compile (or load from the disk cache) now, before any run is timed: a call on a
+        # one-slot pool with no events and no deaths, with the types a pool passes.
+        f, i = np.zeros(1), np.zeros(1, dtype=np.int64)
+        xv, alive, none = np.zeros((1, 3)), np.zeros(1, dtype=bool), np.zeros(0)
+        sizes = np.zeros(5, dtype=np.int64)
+        q, qs, bounds = np.zeros((2, 1)), np.zeros((2, 2), dtype=np.int64), np.zeros((1, 3), dtype=np.int64)
+        births(
+            0.0, none, none, np.zeros((0, 3)), np.zeros((0, 3)), 1.0, 1.0, 0, 0, 1, xv, xv, alive,
+            f, f, f, f, f, i, i, i, sizes, q, qs, bounds, i, i, np.zeros(0, dtype=bool), i,
+        )  # fmt: skip
+        kill(np.zeros(0, dtype=np.int64), alive, f, f, xv, f, i, sizes, i)
+        outside = numba.njit(cache=True)(_outside_box)
+        outside(xv, alive, np.zeros(3), np.zeros(3), i)
+        _NUMBA["births"], _NUMBA["kill"], _NUMBA["outside"] = births, kill, outside
+    return _NUMBA
 
 
 def _name_words(name: str) -> list[int]:
@@ -385,8 +654,8 @@ class Pool:
         self.color0 = parse_color(spec.color.start)
         self.color1 = parse_color(spec.color.end)
         kb = spec.kill_box
-        self.kill_lo = None if kb is None else np.array(kb.min)
-        self.kill_hi = None if kb is None else np.array(kb.max)
+        self.kill_lo = None if kb is None else np.array(kb.min, dtype=np.float64)
+        self.kill_hi = None if kb is None else np.array(kb.max, dtype=np.float64)
         cap = self.capacity
         # Per-slot bookkeeping (structure of arrays), shape (capacity,).
         self.slot_birth = np.zeros(cap)  # s
@@ -394,7 +663,46 @@ class Pool:
         self.slot_lifetime = np.ones(cap)  # s
         self.slot_serial = np.zeros(cap, dtype=np.int64)  # n of the id <name>#<n>
         self.slot_table = np.full(cap, -1, dtype=np.int64)  # row in the id table, -1 = not yet recorded
+        # The numba backend's kernels (module docstring), set by use_numba; None: scans.
+        self._kernels: dict[str, Any] | None = None
+        self._stale = True  # the free list is to be built from the slots before the next step
+        # Slots born and slots dead since the energy books last asked (take_changed);
+        # None: not known (a fresh or restored pool), the books compare every slot.
+        self._born_rows: list[np.ndarray] | None = None
+        self._dead_rows: list[np.ndarray] = []
+        self._changed_count = 0
         self.reset_counters()
+
+    def use_numba(self) -> None:
+        """Births and deaths by numba kernels with a sorted free list (numba backend)."""
+        self._kernels = _numba_kernels()
+        cap = self.capacity
+        self._free = np.empty(cap, dtype=np.int64)  # free slots, ascending, from sizes[2]
+        # (unused, free count, free list start, runs, queue entries)
+        self._sizes = np.zeros(5, dtype=np.int64)
+        # The death queue: entries (time; slot, serial) in runs [start, head, end) of rows.
+        self._q = np.empty((2 * cap + QUEUE_SLACK, 1))
+        self._qs = np.empty((2 * cap + QUEUE_SLACK, 2), dtype=np.int64)
+        self._bounds = np.empty((QUEUE_RUNS, 3), dtype=np.int64)
+        self._dying = np.empty(cap, dtype=np.int64)
+        self._scratch = np.empty(cap, dtype=np.int64)
+        self._taken = np.empty(cap, dtype=np.int64)
+        self._stale = True
+
+    def _rebuild(self) -> None:
+        """The free list and the death queue from the slots (after bind, or after a replay
+        restored them)."""
+        free = np.flatnonzero(~self.alive)
+        self._free[: len(free)] = free
+        live = np.flatnonzero(self.alive)
+        live = live[np.argsort(self.slot_death[live], kind="stable")]
+        n = len(live)
+        self._q[:n, 0] = self.slot_death[live]
+        self._qs[:n, 0] = live
+        self._qs[:n, 1] = self.slot_serial[live]
+        self._bounds[0] = (0, 0, n)  # one run: every alive slot, by death time
+        self._sizes[:] = (0, len(free), 0, 1, n)
+        self._stale = False
 
     def reset_counters(self) -> None:
         self.born = 0
@@ -424,6 +732,8 @@ class Pool:
         self.slot_table[:] = -1
         self.stream.reset()
         self.reset_counters()
+        self._stale = True
+        self._born_rows = None
 
     #: the per-slot and counting fields a replay restores (the slots' alive flags and masses
     #: are the state's, restored with it; the id-table rows belong to recording and stay)
@@ -452,14 +762,48 @@ class Pool:
         for f, value in zip(self._COUNTERS, counters, strict=True):
             setattr(self, f, value)
         self.stream.restore(stream)
+        # The free list follows the state's alive flags, restored with the state:
+        # rebuilt at the next step. The energy books compare every slot once.
+        self._stale = True
+        self._born_rows = None
 
     def _kill(self, slots: np.ndarray) -> None:
+        self._note(slots, born=False)
+        self.alive_count -= len(slots)
+        if self._kernels is not None:
+            self._kernels["kill"](
+                np.sort(slots), self.alive, self.m, self.inv_m, self.v, self.slot_death,
+                self._free, self._sizes, self._scratch,
+            )  # fmt: skip
+            return
         self.alive[slots] = False
         self.m[slots] = 0.0
         self.inv_m[slots] = 0.0
         self.v[slots] = 0.0  # a dead slot must not drift
         self.slot_death[slots] = np.inf
-        self.alive_count -= len(slots)
+
+    def _note(self, slots: np.ndarray, born: bool) -> None:
+        """Remember slots whose alive flag changed, for the energy books (take_changed)."""
+        if self._born_rows is None:
+            return
+        (self._born_rows if born else self._dead_rows).append(slots)
+        self._changed_count += len(slots)
+        if self._changed_count > self.capacity:  # nobody is asking: comparing all is cheaper
+            self._born_rows = None
+
+    def take_changed(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(slots born, sorted and unique; slots dead, any order) since the last call, as
+        global rows; None when not known (then any slot may have changed)."""
+        born, dead = self._born_rows, self._dead_rows
+        self._born_rows, self._dead_rows, self._changed_count = [], [], 0
+        if born is None:
+            return None
+        if len(born) == 1:  # one step's births: the lowest free slots, ascending
+            b = born[0]
+        else:
+            b = np.unique(np.concatenate(born)) if born else np.zeros(0, dtype=np.int64)
+        d = np.concatenate(dead) if dead else np.zeros(0, dtype=np.int64)
+        return self.first + b, self.first + d
 
     def _accepted(self, events: Births, dying: np.ndarray) -> np.ndarray:
         """Boolean mask of the events that find room in the pool, at their exact times.
@@ -481,6 +825,8 @@ class Pool:
     def births(self, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
         """Take this step's births into free slots; return (global indices, birth times)."""
         events = self.stream.take(t1)
+        if self._kernels is not None:
+            return self._births_numba(events, t1)
         dying = np.flatnonzero(self.slot_death <= t1)
         keep = self._accepted(events, dying) if len(events) else np.zeros(0, dtype=bool)
         if len(dying):
@@ -505,6 +851,43 @@ class Pool:
         self.slot_death[slots] = events.time + events.lifetime
         self.slot_serial[slots] = self.born + np.arange(n)
         self.slot_table[slots] = -1
+        self._note(slots, born=True)
+        self.born += n
+        self.alive_count += n
+        self.kinetic_energy_born += (
+            0.5 * self.mass * float(np.einsum("ij,ij->", events.velocity, events.velocity))
+        )
+        return self.first + slots, events.time
+
+    def _births_numba(self, events: Births, t1: float) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`births` in one kernel call for the deaths by age, the room
+        test and the slots' fields; the counters here, as the scans do them."""
+        if self._stale:
+            self._rebuild()
+        k = len(events)
+        keep = np.empty(k, dtype=bool)
+        dead, n = self._kernels["births"](
+            t1, np.ascontiguousarray(events.time), np.ascontiguousarray(events.lifetime),
+            np.ascontiguousarray(events.position),
+            np.ascontiguousarray(events.velocity), self.mass, 1.0 / self.mass, self.alive_count,
+            self.born, self.capacity, self.x, self.v, self.alive, self.m, self.inv_m,
+            self.slot_birth, self.slot_death, self.slot_lifetime, self.slot_serial,
+            self.slot_table, self._free, self._sizes, self._q, self._qs, self._bounds,
+            self._dying, self._scratch, keep, self._taken,
+        )  # fmt: skip
+        if dead:
+            self.died_age += dead
+            self.alive_count -= dead
+            self._note(self._dying[:dead].copy(), born=False)
+        self.dropped += k - n
+        if n == 0:
+            return np.zeros(0, dtype=np.int64), np.zeros(0)
+        if n != k:
+            events = Births(
+                events.time[keep], events.position[keep], events.velocity[keep], events.lifetime[keep]
+            )
+        slots = self._taken[:n].copy()
+        self._note(slots, born=True)
         self.born += n
         self.alive_count += n
         self.kinetic_energy_born += (
@@ -515,6 +898,8 @@ class Pool:
     def deaths(self, t1: float, newborn: np.ndarray) -> bool:
         """Newborns that already reached their age limit, and anything outside the kill box."""
         changed = False
+        if self._kernels is not None and self._stale:
+            self._rebuild()
         if len(newborn):
             local = newborn - self.first
             old = local[self.slot_death[local] <= t1]
@@ -523,15 +908,32 @@ class Pool:
                 self._kill(old)
                 changed = True
         if self.kill_lo is not None and self.alive_count:
-            x = self.x
-            outside = ((x < self.kill_lo) | (x > self.kill_hi)).any(axis=1) & self.alive
-            out = np.flatnonzero(outside)
+            if self._kernels is not None:
+                count = self._kernels["outside"](self.x, self.alive, self.kill_lo, self.kill_hi, self._dying)
+                out = self._dying[:count].copy()
+            else:
+                out = np.flatnonzero(self._outside_box())
             if len(out):
                 self.died_kill_box += len(out)
                 self._kill(out)
                 changed = True
         self.peak_alive = max(self.peak_alive, self.alive_count)
         return changed
+
+    def _outside_box(self) -> np.ndarray:
+        """Alive slots with a coordinate outside the kill box, as a mask: column by column
+        into one boolean buffer (a quarter of ``((x < lo) | (x > hi)).any(axis=1)``'s time,
+        whose reduction over an inner axis of 3 dominated; the same booleans)."""
+        x, lo, hi = self.x, self.kill_lo, self.kill_hi
+        assert lo is not None and hi is not None
+        out = np.less(x[:, 0], lo[0])
+        scratch = np.empty_like(out)
+        out |= np.greater(x[:, 0], hi[0], out=scratch)
+        for c in (1, 2):
+            out |= np.less(x[:, c], lo[c], out=scratch)
+            out |= np.greater(x[:, c], hi[c], out=scratch)
+        out &= self.alive
+        return out
 
     def summary(self) -> dict[str, Any]:
         return {
@@ -568,6 +970,7 @@ class Emitters(StepStage):
         self.capacity = sum(p.capacity for p in pools)
         self.names = [p.name for p in pools]
         self._accel: np.ndarray | None = None
+        self._alive: np.ndarray | None = None  # the bound state's alive flags (take_changed)
         self._next_table = first_index
         kill = [p.name for p in pools if p.kill_lo is not None]
         self.labels = [
@@ -594,6 +997,28 @@ class Emitters(StepStage):
             p.bind(state)
         self._accel = np.zeros_like(state.particle_position)
         self._next_table = self.first_index
+        self._alive = state.particle_alive
+
+    def use_numba(self) -> None:
+        """The pools' births and deaths by numba kernels (numba backend; the same slots)."""
+        for p in self.pools:
+            if p._kernels is None:
+                p.use_numba()
+
+    def take_changed(self, state: State) -> tuple[np.ndarray, np.ndarray] | None:
+        """(rows born, sorted and unique; rows dead) since the last call, or None when not
+        known for ``state`` (then any row may have changed).
+
+        The energy books ask after every step, so they look at the few rows born or
+        dead instead of comparing every slot's alive flag with its last value.
+        """
+        parts = [p.take_changed() for p in self.pools]
+        if state.particle_alive is not self._alive or any(r is None for r in parts):
+            return None
+        if len(parts) == 1:
+            return parts[0]
+        # pools hold consecutive ranges in scene order: the born rows stay sorted when joined
+        return np.concatenate([r[0] for r in parts]), np.concatenate([r[1] for r in parts])  # type: ignore[index]
 
     def snapshot(self) -> list[tuple[Any, ...]]:
         """The pools' bookkeeping and random streams, for a replay from a checked state.

@@ -165,6 +165,7 @@ def _compile_numba(stepper: Any, state: State, notice: Callable[[str], None] | N
     emitters = getattr(stepper.compiled, "emitters", None)
     if emitters is not None:  # newborns fly on with the same force sum (a full evaluation a step)
         emitters.dynamics = integ.dynamics
+        emitters.use_numba()  # births and deaths in compiled calls (the same slots)
     if notice is not None and not _kernels_cached():
         notice("compiling numba kernels (first run only, cached afterwards)...")
     scratch = np.zeros_like(state.particle_position)
@@ -257,6 +258,7 @@ class Fused(_Base):
             dyn = self.compiled.dynamics
             forces = NumbaForces(dyn)
             emitters.dynamics = _NumbaDynamics(dyn, forces)
+            emitters.use_numba()  # births and deaths in compiled calls (the same slots)
             forces.acceleration(
                 state.particle_position,
                 state.particle_velocity,

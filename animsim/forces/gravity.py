@@ -20,6 +20,20 @@ def _kernel(x, v, t, out, mass, fp, ip):  # numba: KERNEL_SIGNATURE
         out[i, 2] += g2 * mi
 
 
+def _released_terms(x, x_ref, g, mass, out):  # numba: compiled by Gravity.released_numba
+    """out_i = m_i g.(x_i - x_ref_i) with dot3's operations in dot3's order,
+    ((d0 g0) + (d1 g1)) + d2 g2: the array Gravity.released sums, in one pass."""
+    g0, g1, g2 = g[0], g[1], g[2]
+    for i in range(x.shape[0]):
+        r = (x[i, 0] - x_ref[i, 0]) * g0
+        r = r + (x[i, 1] - x_ref[i, 1]) * g1
+        r = r + (x[i, 2] - x_ref[i, 2]) * g2
+        out[i] = mass[i] * r
+
+
+_RELEASED: list[Any] = []
+
+
 class Gravity(ForceElement):
     #: row i of its force reads only row i (the numba backend may evaluate it on a few rows)
     pointwise = True
@@ -36,6 +50,7 @@ class Gravity(ForceElement):
         # array against (3,) is several times slower than three strided axpys.
         self.axes = tuple(int(j) for j in np.flatnonzero(self.g))
         self.closed_form = {"gravity": self.g}
+        self._mass_copy: tuple[np.ndarray, np.ndarray] | None = None
 
     def bind(self, state: Any) -> None:
         self.mass = state.particle_mass
@@ -57,6 +72,23 @@ class Gravity(ForceElement):
         # dot3 and a plain sum, not np.dot / @: BLAS calls cost milliseconds when
         # its threads wait for busy cores, and the watchdog calls this every check
         return float((self.mass * dot3(x - x_ref, self.g)).sum())  # the method: np.sum adds a Python layer
+
+    def released_numba(self, x: np.ndarray, x_ref: np.ndarray, u_ref: np.ndarray) -> float:
+        """:meth:`released` with its per-particle terms from one compiled pass (the numba
+        backend's watchdog): the same numbers, summed by the same ``sum``, in a third of the
+        time at 1e5 particles (five NumPy passes and their temporaries otherwise)."""
+        if not _RELEASED:
+            import numba
+
+            _RELEASED.append(numba.njit(cache=True)(_released_terms))
+        mass = self.mass
+        if not mass.flags.writeable:  # the model's own (fixed) masses: one writable copy, so
+            if self._mass_copy is None or self._mass_copy[0] is not mass:  # one compiled version
+                self._mass_copy = (mass, mass.copy())
+            mass = self._mass_copy[1]
+        terms = np.empty(len(x))
+        _RELEASED[0](x, x_ref, self.g, mass, terms)
+        return float(terms.sum())
 
     numba_source = staticmethod(_kernel)
 

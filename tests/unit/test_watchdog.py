@@ -263,3 +263,22 @@ def test_an_emitter_run_checked_every_stride_fails_where_one_checked_every_step_
         np.testing.assert_array_equal(a.index, b.index)
         np.testing.assert_array_equal(a.position, b.position)
     np.testing.assert_array_equal(strided.final_state.particle_position, every.final_state.particle_position)
+
+
+def test_gravity_released_energy_from_compiled_terms_is_the_same_number() -> None:
+    """The numba backend's checks sum gravity's released energy from compiled per-particle
+    terms: the same float as the NumPy form, with the model's read-only masses too."""
+    pytest.importorskip("numba")
+    from animsim.forces.gravity import Gravity
+
+    rng = np.random.default_rng(3)
+    for n in (1, 7, 5000):
+        mass = rng.uniform(0.1, 2.0, n)
+        mass.flags.writeable = False
+        g = Gravity(np.array([0.3, -9.81, 1e-3]), mass)
+        x = rng.normal(0.0, 1e3, (n, 3))
+        x_ref = x + rng.normal(0.0, 1.0, (n, 3))
+        u = np.zeros(n)
+        assert g.released_numba(x, x_ref, u) == g.released(x, x_ref, u)
+        g.bind(type("S", (), {"particle_mass": mass.copy()})())
+        assert g.released_numba(x, x_ref, u) == g.released(x, x_ref, u)
