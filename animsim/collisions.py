@@ -70,6 +70,8 @@ class PlaneColliders(StepStage):
         self.dissipative = any(p.restitution < 1 or p.friction > 0 for p in planes)
 
     collides_newborns = True
+    #: each particle meets the planes by itself (its own rows of the step's start and end)
+    pointwise = True
     no_closed_form = "it has planes (collisions have no closed form here)"
 
     #: (N,) bool rows this stage may touch, or None for all (bodies have their own contacts)

@@ -97,6 +97,10 @@ class ForceElement:
     contact_stiffness: float = 0.0
     #: body-aware forces (springs to points of rigid bodies) set this
     acts_on_bodies: bool = False
+    #: row i of the force reads only row i of x, v and the masses (never another row, nor a
+    #: row's index into its parameters): its kernels may run on any rows alone, so the numba
+    #: backend evaluates newborns by themselves and steps whole scenes in cache-sized blocks
+    pointwise: bool = False
 
     def accumulate(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None:
         raise NotImplementedError  # pragma: no cover - every element defines its kernel
@@ -138,6 +142,9 @@ class StepStage:
     random: bool = False
     #: newborn particles (emitters) are collided with this stage's ``collide_subset`` too
     collides_newborns: bool = False
+    #: its numba stage changes row i from row i of its arguments alone (and says whether it
+    #: changed any), its parameters holding nothing per row: it may run on any block of rows
+    pointwise: bool = False
 
     def reset(self, state: Any) -> None:
         """Called at the start of every run (and replay) with the run's state."""
