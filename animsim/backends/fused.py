@@ -591,7 +591,7 @@ class NumbaForces:
         self.pinned = np.ascontiguousarray(np.flatnonzero(dynamics.system.particle_pinned), dtype=np.int64)
         self._copies: dict[int, np.ndarray] = {}
         self._acc: Any = None
-        self._pointwise = all(getattr(t, "pointwise", False) for t in dynamics.terms)
+        self._pointwise = all(t.pointwise for t in dynamics.terms)
 
     def acceleration(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> np.ndarray:
         d = self.dynamics
