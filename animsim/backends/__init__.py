@@ -100,7 +100,7 @@ def backend_line(compiled: Any, chosen: str, note: str) -> str:
                 "one step per call, births between calls" if between else "many steps per call"
             )
             if fused_in_blocks(compiled):
-                how += ", in blocks of particles (every force and collision acts on each particle alone)"
+                how += ", in blocks of particles (no particle acts on another)"
         line = f"backend: numba ({how})"
     elif chosen == BACKEND_REFERENCE:
         line = "backend: reference (generic bincount springs, the baseline)"
