@@ -177,6 +177,10 @@ class Colliders(StepStage):
     (inverse mass 0) are never moved.
     """
 
+    #: not pointwise: its fused stage's parameters hold every row's radius and active flag,
+    #: indexed by the row's place in the whole scene (a block of rows would read the wrong ones)
+    pointwise = False
+
     def __init__(
         self,
         shapes: list[Shape],

@@ -262,6 +262,8 @@ class PlaneColliders(StepStage):
         self.dissipative = any(p.restitution < 1 or p.friction > 0 for p in planes)
 
     collides_newborns = True
+    #: each particle meets the planes by itself (its own rows of the step's start and end)
+    pointwise = True
     no_closed_form = "it has planes (collisions have no closed form here)"
 
     #: (N,) bool rows this stage may touch, or None for all (bodies have their own contacts)
@@ -410,6 +412,21 @@ def _settle(pl: ImpulsePlane, x: np.ndarray, v: np.ndarray, buf: _Blocks) -> Non
 # --- the numba kernel: the same rule, particle by particle ---------------------------------
 # Operation for operation as PlaneColliders.resolve and _project above (the dot
 # products summed x, y, z), so the backends agree to rounding.
+#
+# Laid out for the processor's vector units: the rows of a run that are on or behind a
+# plane are copied into one small buffer, a coordinate per line (structure of arrays),
+# and each plane's response is computed for every copied row without a branch, then
+# kept only where the row hit (a select, not a jump); the guarded divisions are done
+# unguarded (np.true_divide: an infinity or NaN where the guard fails, never kept). Each
+# row still sees its planes in order, every hit before every projection, and gets the
+# same numbers: only which rows are computed side by side has changed. The rare nudge of
+# a projected point that rounding left behind its plane runs row by row afterwards, from
+# the same point. Measured on 512 rows and a ground plane, one thread, per row and step:
+# 23 -> 17 ns when every row rests on the plane, 12.8 -> 11.4 when a third does, 5.4 ->
+# 6.4 when none does (2 ns of each is copying the rows for the measurement).
+
+#: rows copied into the vector buffer at a time (12 coordinates x 128 rows, 12 KB)
+STAGE_RUN = 128
 
 
 @numba_helper
@@ -422,92 +439,160 @@ def _friction_scale(t0, t1, t2, dvn, mu):
     return 0.0
 
 
+@numba_helper
+def _run_hits(buf, w, c, n0, n1, n2, off, e0, mu, dt, touched):
+    """One plane's impulse on the first ``c`` rows of ``buf`` (lines 0-2 x, 3-5 v, 6-8 the
+    step's start x, 9-11 its v), in place where a row hit it; True if any did."""
+    any_hit = False
+    for j in range(c):
+        x0, x1, x2 = buf[0, j], buf[1, j], buf[2, j]
+        v0, v1, v2 = buf[3, j], buf[4, j], buf[5, j]
+        xo0, xo1, xo2 = buf[6, j], buf[7, j], buf[8, j]
+        vo0, vo1, vo2 = buf[9, j], buf[10, j], buf[11, j]
+        d1 = x0 * n0 + x1 * n1 + x2 * n2 - off
+        # behind the plane, or on it and moving in (NaN: no); never pinned or dead rows
+        hit = (not w[j] <= 0) & (d1 <= 0) & ((d1 < 0) | (v0 * n0 + v1 * n1 + v2 * n2 < 0))
+        d0 = max(xo0 * n0 + xo1 * n1 + xo2 * n2 - off, 0.0)
+        gap = d0 - d1
+        q = np.true_divide(d0, gap)  # computed for every row, kept where the guard holds
+        s = q if gap > 0 else 1.0
+        a0 = np.true_divide(v0 - vo0, dt)
+        a1 = np.true_divide(v1 - vo1, dt)
+        a2 = np.true_divide(v2 - vo2, dt)
+        xc0 = xo0 + s * (x0 - xo0)
+        xc1 = xo1 + s * (x1 - xo1)
+        xc2 = xo2 + s * (x2 - xo2)
+        vc0 = vo0 + s * (v0 - vo0)
+        vc1 = vo1 + s * (v1 - vo1)
+        vc2 = vo2 + s * (v2 - vo2)
+        vn = vc0 * n0 + vc1 * n1 + vc2 * n2
+        approaching = vn < 0
+        pressing = max(-(a0 * n0 + a1 * n1 + a2 * n2), 0.0)
+        resting = approaching & (-vn <= RESTING_STEPS * pressing * dt)
+        e = 0.0 if resting else e0
+        vn_new = -e * vn if approaching else vn
+        t0 = vc0 - vn * n0
+        t1 = vc1 - vn * n1
+        t2 = vc2 - vn * n2
+        # _friction_scale(t0, t1, t2, abs(vn_new - vn), mu), its branches as selects
+        speed = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+        scaled = np.true_divide(max(speed - mu * abs(vn_new - vn), 0.0), speed)
+        f = 1.0 if mu == 0.0 else (scaled if speed > 0 else 0.0)
+        vr0 = t0 * f + vn_new * n0
+        vr1 = t1 * f + vn_new * n1
+        vr2 = t2 * f + vn_new * n2
+        r = (1.0 - s) * dt
+        buf[0, j] = xc0 + r * vr0 + 0.5 * r * r * a0 if hit else x0
+        buf[1, j] = xc1 + r * vr1 + 0.5 * r * r * a1 if hit else x1
+        buf[2, j] = xc2 + r * vr2 + 0.5 * r * r * a2 if hit else x2
+        buf[3, j] = vr0 + r * a0 if hit else v0
+        buf[4, j] = vr1 + r * a1 if hit else v1
+        buf[5, j] = vr2 + r * a2 if hit else v2
+        touched[j] |= hit
+        any_hit |= hit
+    return any_hit
+
+
+@numba_helper
+def _run_projections(buf, c, n0, n1, n2, off, mu, touched, nudge):
+    """Put touched rows behind one plane onto it and stop their inward motion; ``nudge``
+    marks those rounding left behind it (True if any)."""
+    any_nudge = False
+    for j in range(c):
+        x0, x1, x2 = buf[0, j], buf[1, j], buf[2, j]
+        v0, v1, v2 = buf[3, j], buf[4, j], buf[5, j]
+        d = x0 * n0 + x1 * n1 + x2 * n2 - off
+        behind = touched[j] & (d < 0)
+        b0 = x0 - d * n0
+        b1 = x1 - d * n1
+        b2 = x2 - d * n2
+        again = behind & (b0 * n0 + b1 * n1 + b2 * n2 - off < 0)
+        nudge[j] = again
+        any_nudge |= again
+        vn = v0 * n0 + v1 * n1 + v2 * n2
+        inward = min(vn, 0.0)
+        t0 = v0 - vn * n0
+        t1 = v1 - vn * n1
+        t2 = v2 - vn * n2
+        # _friction_scale(t0, t1, t2, -inward, mu), its branches as selects
+        speed = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+        scaled = np.true_divide(max(speed - mu * -inward, 0.0), speed)
+        f = 1.0 if mu == 0.0 else (scaled if speed > 0 else 0.0)
+        buf[0, j] = b0 if behind else x0
+        buf[1, j] = b1 if behind else x1
+        buf[2, j] = b2 if behind else x2
+        buf[3, j] = t0 * f + (vn - inward) * n0 if behind else v0
+        buf[4, j] = t1 * f + (vn - inward) * n1 if behind else v1
+        buf[5, j] = t2 * f + (vn - inward) * n2 if behind else v2
+    return any_nudge
+
+
+@numba_helper
+def _run_nudges(buf, c, n0, n1, n2, off, nudge):
+    """Rounding can leave the projected point 1 ulp behind; nudge until it is not."""
+    for j in range(c):
+        if not nudge[j]:
+            continue
+        b0, b1, b2 = buf[0, j], buf[1, j], buf[2, j]
+        for _ in range(4):
+            db = b0 * n0 + b1 * n1 + b2 * n2 - off
+            if not db < 0:
+                break
+            b0 -= 2.0 * db * n0 + np.spacing(abs(b0)) * np.sign(n0)
+            b1 -= 2.0 * db * n1 + np.spacing(abs(b1)) * np.sign(n1)
+            b2 -= 2.0 * db * n2 + np.spacing(abs(b2)) * np.sign(n2)
+        buf[0, j], buf[1, j], buf[2, j] = b0, b1, b2
+
+
 def _stage_kernel(x_old, v_old, x, v, dt, inv_mass, fp, ip):
     count = int(fp[0])
+    m = x.shape[0]
+    buf = np.empty((13, STAGE_RUN))  # the rows' coordinates, and their inverse masses
+    w = buf[12]
+    rows = np.empty(STAGE_RUN, dtype=np.int64)
+    flags = np.empty((2, STAGE_RUN), dtype=np.bool_)
+    touched = flags[0]
+    nudge = flags[1]
     changed = False
-    for i in range(x.shape[0]):
-        if inv_mass[i] <= 0:
+    for lo in range(0, m, STAGE_RUN):
+        # The rows on or behind some plane (and movable) may hit one; no other row can:
+        # only a hit moves a row, and a row that hits one plane is in this list already.
+        c = 0
+        for i in range(lo, min(lo + STAGE_RUN, m)):
+            near = False
+            for k in range(count):
+                b = 1 + 6 * k
+                near |= x[i, 0] * fp[b] + x[i, 1] * fp[b + 1] + x[i, 2] * fp[b + 2] - fp[b + 3] <= 0
+            rows[c] = i
+            c += near & (not inv_mass[i] <= 0)
+        if c == 0:
             continue
-        touched = False
+        for j in range(c):
+            i = rows[j]
+            for k in range(3):
+                buf[k, j] = x[i, k]
+                buf[3 + k, j] = v[i, k]
+                buf[6 + k, j] = x_old[i, k]
+                buf[9 + k, j] = v_old[i, k]
+            w[j] = inv_mass[i]
+            touched[j] = False
+        hit = False
         for k in range(count):
-            base = 1 + 6 * k
-            n0, n1, n2, off, e0, mu = (
-                fp[base],
-                fp[base + 1],
-                fp[base + 2],
-                fp[base + 3],
-                fp[base + 4],
-                fp[base + 5],
-            )
-            d1 = x[i, 0] * n0 + x[i, 1] * n1 + x[i, 2] * n2 - off
-            if not d1 <= 0:  # NaN too, as the NumPy kernel's comparison
-                continue
-            if not (d1 < 0 or v[i, 0] * n0 + v[i, 1] * n1 + v[i, 2] * n2 < 0):
-                continue
-            touched = True
-            d0 = max(x_old[i, 0] * n0 + x_old[i, 1] * n1 + x_old[i, 2] * n2 - off, 0.0)
-            gap = d0 - d1
-            s = d0 / gap if gap > 0 else 1.0
-            a0 = (v[i, 0] - v_old[i, 0]) / dt
-            a1 = (v[i, 1] - v_old[i, 1]) / dt
-            a2 = (v[i, 2] - v_old[i, 2]) / dt
-            xc0 = x_old[i, 0] + s * (x[i, 0] - x_old[i, 0])
-            xc1 = x_old[i, 1] + s * (x[i, 1] - x_old[i, 1])
-            xc2 = x_old[i, 2] + s * (x[i, 2] - x_old[i, 2])
-            vc0 = v_old[i, 0] + s * (v[i, 0] - v_old[i, 0])
-            vc1 = v_old[i, 1] + s * (v[i, 1] - v_old[i, 1])
-            vc2 = v_old[i, 2] + s * (v[i, 2] - v_old[i, 2])
-            vn = vc0 * n0 + vc1 * n1 + vc2 * n2
-            approaching = vn < 0
-            pressing = max(-(a0 * n0 + a1 * n1 + a2 * n2), 0.0)
-            resting = approaching and (-vn <= RESTING_STEPS * pressing * dt)
-            e = 0.0 if resting else e0
-            vn_new = -e * vn if approaching else vn
-            t0 = vc0 - vn * n0
-            t1 = vc1 - vn * n1
-            t2 = vc2 - vn * n2
-            f = _friction_scale(t0, t1, t2, abs(vn_new - vn), mu)
-            vr0 = t0 * f + vn_new * n0
-            vr1 = t1 * f + vn_new * n1
-            vr2 = t2 * f + vn_new * n2
-            r = (1.0 - s) * dt
-            x[i, 0] = xc0 + r * vr0 + 0.5 * r * r * a0
-            x[i, 1] = xc1 + r * vr1 + 0.5 * r * r * a1
-            x[i, 2] = xc2 + r * vr2 + 0.5 * r * r * a2
-            v[i, 0] = vr0 + r * a0
-            v[i, 1] = vr1 + r * a1
-            v[i, 2] = vr2 + r * a2
-        if not touched:
+            p = fp[1 + 6 * k : 7 + 6 * k]  # normal, offset, restitution, friction
+            if _run_hits(buf, w, c, p[0], p[1], p[2], p[3], p[4], p[5], dt, touched):
+                hit = True
+        if not hit:
             continue
         changed = True
         for k in range(count):
-            base = 1 + 6 * k
-            n0, n1, n2, off, mu = fp[base], fp[base + 1], fp[base + 2], fp[base + 3], fp[base + 5]
-            d = x[i, 0] * n0 + x[i, 1] * n1 + x[i, 2] * n2 - off
-            if not d < 0:
-                continue
-            b0 = x[i, 0] - d * n0
-            b1 = x[i, 1] - d * n1
-            b2 = x[i, 2] - d * n2
-            for _ in range(4):
-                db = b0 * n0 + b1 * n1 + b2 * n2 - off
-                if not db < 0:
-                    break
-                b0 -= 2.0 * db * n0 + np.spacing(abs(b0)) * np.sign(n0)
-                b1 -= 2.0 * db * n1 + np.spacing(abs(b1)) * np.sign(n1)
-                b2 -= 2.0 * db * n2 + np.spacing(abs(b2)) * np.sign(n2)
-            x[i, 0] = b0
-            x[i, 1] = b1
-            x[i, 2] = b2
-            vn = v[i, 0] * n0 + v[i, 1] * n1 + v[i, 2] * n2
-            inward = min(vn, 0.0)
-            t0 = v[i, 0] - vn * n0
-            t1 = v[i, 1] - vn * n1
-            t2 = v[i, 2] - vn * n2
-            f = _friction_scale(t0, t1, t2, -inward, mu)
-            v[i, 0] = t0 * f + (vn - inward) * n0
-            v[i, 1] = t1 * f + (vn - inward) * n1
-            v[i, 2] = t2 * f + (vn - inward) * n2
+            p = fp[1 + 6 * k : 7 + 6 * k]
+            if _run_projections(buf, c, p[0], p[1], p[2], p[3], p[5], touched, nudge):
+                _run_nudges(buf, c, p[0], p[1], p[2], p[3], nudge)
+        for j in range(c):
+            i = rows[j]
+            for k in range(3):
+                x[i, k] = buf[k, j]
+                v[i, k] = buf[3 + k, j]
     return changed
 
 

@@ -101,6 +101,10 @@ class ForceElement:
     #: (row i reads only row i and the element holds no per-particle array), so the NumPy
     #: integrator may evaluate it a block of rows at a time (Dynamics.blocks)
     row_blocks: bool = False
+    #: row i of the force reads only row i of x, v and the masses (never another row, nor a
+    #: row's index into its parameters): its kernels may run on any rows alone, so the numba
+    #: backend evaluates newborns by themselves and steps whole scenes in cache-sized blocks
+    pointwise: bool = False
 
     def accumulate(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None:
         raise NotImplementedError  # pragma: no cover - every element defines its kernel
@@ -142,6 +146,9 @@ class StepStage:
     random: bool = False
     #: newborn particles (emitters) are collided with this stage's ``collide_subset`` too
     collides_newborns: bool = False
+    #: its numba stage changes row i from row i of its arguments alone (and says whether it
+    #: changed any), its parameters holding nothing per row: it may run on any block of rows
+    pointwise: bool = False
 
     def reset(self, state: Any) -> None:
         """Called at the start of every run (and replay) with the run's state."""

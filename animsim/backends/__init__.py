@@ -73,17 +73,34 @@ def fused_unsupported(compiled: Any) -> list[str]:
     return why
 
 
+def fused_in_blocks(compiled: Any) -> bool:
+    """True when the fused chunks may step ``compiled`` a block of particles at a time.
+
+    Every force and every fused stage must be pointwise (row i reads only row i, see
+    :mod:`animsim.elements`) and no row may be put on a keyframed path inside a step:
+    the particles are then independent, and each block runs a call's steps in the cache.
+    """
+    d = compiled.dynamics
+    if getattr(d, "drivers", ()):
+        return False
+    if not all(t.pointwise for t in d.terms):
+        return False
+    return all(st.pointwise for st in compiled.post_step if st.numba_stage_source is not None)
+
+
 def backend_line(compiled: Any, chosen: str, note: str) -> str:
     """The ``backend:`` line ``explain`` shows."""
     if chosen == BACKEND_NUMBA:
         why = fused_unsupported(compiled)
         between = any(getattr(st, "fused_between_steps", False) for st in compiled.post_step)
-        how = (
-            "element kernels fused with the integrator, "
-            + ("one step per call, births between calls" if between else "many steps per call")
-            if not why
-            else f"element kernels step by step ({', '.join(why)} need the step-by-step loop)"
-        )
+        if why:
+            how = f"element kernels step by step ({', '.join(why)} need the step-by-step loop)"
+        else:
+            how = "element kernels fused with the integrator, " + (
+                "one step per call, births between calls" if between else "many steps per call"
+            )
+            if fused_in_blocks(compiled):
+                how += ", in blocks of particles (no particle acts on another)"
         line = f"backend: numba ({how})"
     elif chosen == BACKEND_REFERENCE:
         line = "backend: reference (generic bincount springs, the baseline)"

@@ -201,8 +201,12 @@ def _grid_kernel(x, v, t, out, mass, fp, ip):
     Grids are padded to three dimensions (a strand is 1 x 1 x n).
     ip = [blocks, BLOCK_INTS per block, S_o, N, a (S_o), b (S_o), ptr (N+1), inc (2 S_o)];
     fp = [damped, (rest, ks, kd) (count each) per block, rest, ks, kd (S_o each)].
-    (Loops index slices from 0: numba then knows no index is negative and drops its
-    wraparound test, which would keep LLVM from vectorising them.)
+    (The spring and gather loops index the per-axis arrays by offsets, not through
+    slices: every slice is an array view whose reference count numba takes and drops,
+    about 18 per block and row, which cost more than the springs themselves. The
+    offsets are unsigned, so numba adds no test for a negative index and LLVM
+    vectorises the loops. One evaluation on cloth 32: 78 us with slices, 49 with
+    signed offsets, 24 with unsigned ones.)
     """
     damped = fp[0] > 0
     nblocks = ip[0]
@@ -268,51 +272,45 @@ def _grid_kernel(x, v, t, out, mass, fp, ip):
                         j = (r0 * b1 + r1) * b2
                         a = row * n2 + ip[g + 6]
                         b = a + ip[g + 13]
-                        xa0 = x0[a : a + b2]
-                        xa1 = x1[a : a + b2]
-                        xa2 = x2[a : a + b2]
-                        xb0 = x0[b : b + b2]
-                        xb1 = x1[b : b + b2]
-                        xb2 = x2[b : b + b2]
-                        rest = fp[qb + j : qb + j + b2]
-                        ks = fp[qb + nb + j : qb + nb + j + b2]
-                        ring = ((m - k) * depth + row % depth) * n2
-                        g0 = f0[ring : ring + b2]
-                        g1 = f1[ring : ring + b2]
-                        g2 = f2[ring : ring + b2]
+                        # unsigned offsets, not slices (see the docstring)
+                        ua = np.uint64(a)
+                        ub = np.uint64(b)
+                        ur = np.uint64(qb + j)  # rest lengths, then ks, then kd
+                        uk = np.uint64(qb + nb + j)
+                        ud = np.uint64(qb + 2 * nb + j)
+                        uf = np.uint64(((m - k) * depth + row % depth) * n2)
                         if damped:
-                            kd = fp[qb + 2 * nb + j : qb + 2 * nb + j + b2]
-                            va0 = v0[a : a + b2]
-                            va1 = v1[a : a + b2]
-                            va2 = v2[a : a + b2]
-                            vb0 = v0[b : b + b2]
-                            vb1 = v1[b : b + b2]
-                            vb2 = v2[b : b + b2]
-                            for i in range(b2):
-                                d0 = xa0[i] - xb0[i]
-                                d1 = xa1[i] - xb1[i]
-                                d2 = xa2[i] - xb2[i]
+                            for i0 in range(b2):
+                                i = np.uint64(i0)
+                                d0 = x0[ua + i] - x0[ub + i]
+                                d1 = x1[ua + i] - x1[ub + i]
+                                d2 = x2[ua + i] - x2[ub + i]
                                 length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
                                 inv = 1.0 / length if length > 0.0 else 0.0
-                                mag = (length - rest[i]) * ks[i]
-                                dot = (va0[i] - vb0[i]) * d0 + (va1[i] - vb1[i]) * d1 + (va2[i] - vb2[i]) * d2
-                                mag += dot * kd[i] * inv
+                                mag = (length - fp[ur + i]) * fp[uk + i]
+                                dot = (
+                                    (v0[ua + i] - v0[ub + i]) * d0
+                                    + (v1[ua + i] - v1[ub + i]) * d1
+                                    + (v2[ua + i] - v2[ub + i]) * d2
+                                )
+                                mag += dot * fp[ud + i] * inv
                                 mag *= inv
-                                g0[i] = d0 * mag
-                                g1[i] = d1 * mag
-                                g2[i] = d2 * mag
+                                f0[uf + i] = d0 * mag
+                                f1[uf + i] = d1 * mag
+                                f2[uf + i] = d2 * mag
                         else:  # the same without the damping terms
-                            for i in range(b2):
-                                d0 = xa0[i] - xb0[i]
-                                d1 = xa1[i] - xb1[i]
-                                d2 = xa2[i] - xb2[i]
+                            for i0 in range(b2):
+                                i = np.uint64(i0)
+                                d0 = x0[ua + i] - x0[ub + i]
+                                d1 = x1[ua + i] - x1[ub + i]
+                                d2 = x2[ua + i] - x2[ub + i]
                                 length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
                                 inv = 1.0 / length if length > 0.0 else 0.0
-                                mag = (length - rest[i]) * ks[i]
+                                mag = (length - fp[ur + i]) * fp[uk + i]
                                 mag *= inv
-                                g0[i] = d0 * mag
-                                g1[i] = d1 * mag
-                                g2[i] = d2 * mag
+                                f0[uf + i] = d0 * mag
+                                f1[uf + i] = d1 * mag
+                                f2[uf + i] = d2 * mag
                     qb += 3 * nb
             done = row - lag  # the row to gather: all its springs are computed
             if done < 0:
@@ -332,34 +330,24 @@ def _grid_kernel(x, v, t, out, mass, fp, ip):
                 r0 = c0 - ip[g + 4]
                 r1 = c1 - ip[g + 5]
                 if 0 <= r0 < b0 and 0 <= r1 < b1:  # lo ends of the block in this row: -f
-                    src = ((m - k) * depth + done % depth) * n2
-                    dst = ip[g + 6]
-                    t0 = a0[dst : dst + b2]
-                    t1 = a1[dst : dst + b2]
-                    t2 = a2[dst : dst + b2]
-                    e0 = f0[src : src + b2]
-                    e1 = f1[src : src + b2]
-                    e2 = f2[src : src + b2]
-                    for i in range(b2):
-                        t0[i] -= e0[i]
-                        t1[i] -= e1[i]
-                        t2[i] -= e2[i]
+                    src = np.uint64(((m - k) * depth + done % depth) * n2)
+                    dst = np.uint64(ip[g + 6])
+                    for i0 in range(b2):
+                        i = np.uint64(i0)
+                        a0[dst + i] -= f0[src + i]
+                        a1[dst + i] -= f1[src + i]
+                        a2[dst + i] -= f2[src + i]
                 r0 -= ip[g + 10]
                 r1 -= ip[g + 11]
                 if 0 <= r0 < b0 and 0 <= r1 < b1:  # hi ends: +f, of springs whose lo ends are in row `back`
                     back = done - (ip[g + 10] * n1 + ip[g + 11])
-                    src = ((m - k) * depth + back % depth) * n2
-                    dst = ip[g + 6] + ip[g + 12]
-                    t0 = a0[dst : dst + b2]
-                    t1 = a1[dst : dst + b2]
-                    t2 = a2[dst : dst + b2]
-                    e0 = f0[src : src + b2]
-                    e1 = f1[src : src + b2]
-                    e2 = f2[src : src + b2]
-                    for i in range(b2):
-                        t0[i] += e0[i]
-                        t1[i] += e1[i]
-                        t2[i] += e2[i]
+                    src = np.uint64(((m - k) * depth + back % depth) * n2)
+                    dst = np.uint64(ip[g + 6] + ip[g + 12])
+                    for i0 in range(b2):
+                        i = np.uint64(i0)
+                        a0[dst + i] += f0[src + i]
+                        a1[dst + i] += f1[src + i]
+                        a2[dst + i] += f2[src + i]
             for i in range(n2):
                 orow[i, 0] = a0[i]
                 orow[i, 1] = a1[i]
