@@ -6,13 +6,17 @@ law is the aerodynamic drag of the CSE 3541 notes ("Opposing forces").
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import scipy.sparse as sp
 
 from animsim.elements import DISSIPATIVE, BuildContext, ForceElement, register
 from animsim.forces.jacobian import diagonal_blocks, scaled_identity
 from animsim.scene import models as m
 from animsim.vec import dot3
+
+if TYPE_CHECKING:  # SciPy loads only when implicit Euler asks for a Jacobian
+    import scipy.sparse as sp
 
 
 def _drag_kernel(x, v, t, out, mass, fp, ip):

@@ -11,8 +11,12 @@ Simulation", SIGGRAPH 1998, section 5).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import scipy.sparse as sp
+
+if TYPE_CHECKING:  # SciPy loads only when implicit Euler asks for a Jacobian
+    import scipy.sparse as sp
 
 AXES = np.arange(3)
 
@@ -26,9 +30,13 @@ def block_pattern(p: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]
 
 def diagonal_blocks(index: np.ndarray, blocks: np.ndarray, n: int) -> sp.csr_matrix:
     """A (3n, 3n) matrix with the 3x3 ``blocks`` (k, 3, 3) on the diagonal at particles ``index``."""
+    import scipy.sparse as sp
+
     rows, cols = block_pattern(index, index)
     return sp.csr_matrix((blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * n, 3 * n))
 
 
 def scaled_identity(coef: float, n: int) -> sp.csr_matrix:
+    import scipy.sparse as sp
+
     return sp.identity(3 * n, format="csr") * coef

@@ -11,12 +11,16 @@ stiffness counts in the stability analysis like any spring's.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import scipy.sparse as sp
 
 from animsim.elements import ELASTIC, ForceElement
 from animsim.forces.jacobian import diagonal_blocks
 from animsim.vec import dot3
+
+if TYPE_CHECKING:  # SciPy loads only when implicit Euler asks for a Jacobian
+    import scipy.sparse as sp
 
 
 def _kernel(x, v, t, out, mass, fp, ip):

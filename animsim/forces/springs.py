@@ -14,13 +14,15 @@ end indices; ``out[idx] += f`` would apply a repeated index only once.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import scipy.sparse as sp
 
 from animsim.elements import ELASTIC, ForceElement
 from animsim.vec import dot3
+
+if TYPE_CHECKING:  # SciPy loads only when implicit Euler asks for a Jacobian
+    import scipy.sparse as sp
 
 prange = range  # numba's prange once the kernel is compiled (see animsim.elements.jit_kernel)
 
@@ -234,6 +236,8 @@ class Springs(ForceElement):
         (duplicates, such as two springs on one pair, add up as the derivative of a
         sum should).
         """
+        import scipy.sparse as sp
+
         size = 3 * self.n
         if self._jac is None:
             self._jac = self._jacobian_layout()
@@ -274,5 +278,7 @@ class Springs(ForceElement):
         places = place[which.reshape(4, ns)]  # (4, S, 3, 3)
         rows_t = np.ascontiguousarray(places.transpose(2, 3, 1, 0)).reshape(-1)
         signs = np.tile([1.0, -1.0, -1.0, 1.0], 9 * ns)
+        import scipy.sparse as sp
+
         gather_t = sp.csr_matrix((signs, rows_t, np.arange(0, 36 * ns + 1, 4)), shape=(9 * ns, nnz))
         return gather_t.T.tocsr(), indices, indptr  # CSR: a product gathers, it does not scatter

@@ -12,14 +12,16 @@ Euler takes it exactly.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import scipy.sparse as sp
 
 from animsim.elements import UNKNOWN, BuildContext, ForceElement, register
 from animsim.forces.jacobian import diagonal_blocks
 from animsim.scene import models as m
+
+if TYPE_CHECKING:  # SciPy loads only when implicit Euler asks for a Jacobian
+    import scipy.sparse as sp
 
 
 def _kernel(x, v, t, out, mass, fp, ip):

@@ -8,12 +8,16 @@ scene asks for it.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import scipy.sparse as sp
 
 from animsim.elements import INJECTING, BuildContext, ForceElement, register
 from animsim.forces.jacobian import scaled_identity
 from animsim.scene import models as m
+
+if TYPE_CHECKING:  # SciPy loads only when implicit Euler asks for a Jacobian
+    import scipy.sparse as sp
 
 
 def _kernel(x, v, t, out, mass, fp, ip):

@@ -53,15 +53,16 @@ from __future__ import annotations
 import functools
 import math
 import warnings
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from animsim.dynamics import Dynamics
 from animsim.integrators.base import Integrator
 from animsim.system import State
+
+if TYPE_CHECKING:  # SciPy's sparse modules load when a run steps with implicit Euler
+    import scipy.sparse as sp
 
 #: relative residual at which conjugate gradients stops; far below the method's own error
 CG_RTOL = 1e-10
@@ -205,6 +206,8 @@ class ImplicitEuler(Integrator):
         if dtype is not np.float64:
             return None
         with warnings.catch_warnings():
+            import scipy.sparse.linalg as spla
+
             warnings.simplefilter("ignore", spla.MatrixRankWarning)
             # A is symmetric: order A + A^T and pivot on the diagonal (SuperLU's symmetric mode).
             lu = spla.splu(
@@ -332,6 +335,8 @@ class ImplicitEuler(Integrator):
         # reports as an unstable run with its fix; SciPy's own warning would
         # only repeat that, without the where and why.
         with warnings.catch_warnings():
+            import scipy.sparse.linalg as spla
+
             warnings.simplefilter("ignore", spla.MatrixRankWarning)
             dv = spla.spsolve(a_mat.tocsc(), rhs)
         self.direct_solves += 1
@@ -490,7 +495,7 @@ class _Assembly:
             union = _diagonal(np.ones(n))
             for m in given:
                 # all entries positive: nothing cancels, nothing dropped
-                union = union + sp.csr_matrix((np.ones(m.nnz), m.indices, m.indptr), shape=(n, n))
+                union = union + _csr((np.ones(m.nnz), m.indices, m.indptr), shape=(n, n))
             union.sum_duplicates()
             union.sort_indices()
             self.indptr = union.indptr.astype(np.int64)
@@ -513,7 +518,7 @@ class _Assembly:
         self.base = np.zeros(len(keys))
         self.base[where] = np.where(free, m_dof, 1.0)
         self.work = np.zeros(len(keys))
-        self.matrix = sp.csr_matrix((np.zeros(len(keys)), self.indices, self.indptr), shape=(n, n))
+        self.matrix = _csr((np.zeros(len(keys)), self.indices, self.indptr), shape=(n, n))
         self._band: _BandLayout | bool | None = False  # False: not computed yet
         self._cholesky: _SparseCholesky | None = None
 
@@ -609,4 +614,11 @@ def _diagonal(values: np.ndarray) -> sp.csr_matrix:
     """A diagonal CSR matrix, built directly (scipy.sparse.diags is slow for a per-step call)."""
     n = len(values)
     index = np.arange(n + 1)
-    return sp.csr_matrix((values, index[:-1], index), shape=(n, n))
+    return _csr((values, index[:-1], index), shape=(n, n))
+
+
+def _csr(*args: Any, **kwargs: Any) -> sp.csr_matrix:
+    """scipy.sparse.csr_matrix, imported on first use (the module loads with every run)."""
+    import scipy.sparse as sp
+
+    return sp.csr_matrix(*args, **kwargs)

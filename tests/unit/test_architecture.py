@@ -101,3 +101,40 @@ def test_every_command_is_one_call_into_the_api():
             if m not in OUTPUT_MODULES and m.rpartition(".")[0] not in OUTPUT_MODULES
         }
         assert not extra, (name, extra)
+
+
+LAZY_PROBE = """
+import sys
+import animsim
+scene = animsim.loads('''
+duration: 0.05
+dt: 0.01
+integrator: {integrator}
+particles:
+  - {{id: a, pinned: true, position: [0, 0, 0]}}
+  - {{id: b, mass: 1, position: [1.2, 0, 0]}}
+springs: [{{between: [a, b], ks: 50, rest: 1.0}}]
+forces: [{{type: gravity}}, {{type: drag, k: 0.1}}]
+''')
+t = animsim.simulate(scene, backend="numpy")
+assert t.status == "ok", t.status
+print(sorted(m for m in sys.modules if m.startswith("scipy.sparse")))
+"""
+
+
+@pytest.mark.parametrize(("integrator", "loaded"), [("symplectic_euler", False), ("implicit_euler", True)])
+def test_scipy_sparse_loads_only_for_implicit_euler(integrator: str, loaded: bool) -> None:
+    """Heavy imports are lazy: a run with an explicit method never imports SciPy's sparse
+    modules (about 0.1 s of every command's start), one with implicit Euler does."""
+    import subprocess
+    import sys
+
+    out = subprocess.run(
+        [sys.executable, "-c", LAZY_PROBE.format(integrator=integrator)],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        check=True,
+    )
+    modules = ast.literal_eval(out.stdout.strip().splitlines()[-1])  # the printed list of names
+    assert bool(modules) is loaded, modules
