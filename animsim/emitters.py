@@ -153,6 +153,7 @@ def _free_merge(free: np.ndarray, sizes: np.ndarray, slots: np.ndarray, scratch:
     sizes[1], sizes[2] = n, 0
 
 
+@numba_helper
 def _pool_kill(
     slots: np.ndarray,
     alive: np.ndarray,
@@ -291,16 +292,7 @@ def _pool_births(
             keep[i] = kept - prev > 0
             prev = kept
     if nd:
-        for j in range(nd):
-            s = dying[j]
-            alive[s] = False
-            m[s] = 0.0
-            inv_m[s] = 0.0
-            v[s, 0] = 0.0
-            v[s, 1] = 0.0
-            v[s, 2] = 0.0
-            slot_death[s] = np.inf
-        _free_merge(free, sizes, dying[:nd], scratch)
+        _pool_kill(dying[:nd], alive, m, inv_m, v, slot_death, free, sizes, scratch)
     n = 0
     head = sizes[2]
     for i in range(k):
@@ -370,7 +362,7 @@ def _numba_kernels() -> dict[str, Any]:
 
         _compile_helpers(globals())
         births = numba.njit(cache=True)(_pool_births)
-        kill = numba.njit(cache=True)(_pool_kill)
+        kill = globals()["_pool_kill"]  # compiled above, as a helper of the births kernel
         # Compile (or load from the disk cache) now, before any run is timed: a call on a
         # one-slot pool with no events and no deaths, with the types a pool passes.
         f, i = np.zeros(1), np.zeros(1, dtype=np.int64)
