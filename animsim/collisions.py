@@ -430,16 +430,6 @@ STAGE_RUN = 128
 
 
 @numba_helper
-def _friction_scale(t0, t1, t2, dvn, mu):
-    if mu == 0.0:
-        return 1.0
-    speed = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
-    if speed > 0:
-        return max(speed - mu * dvn, 0.0) / speed
-    return 0.0
-
-
-@numba_helper
 def _run_hits(buf, w, c, n0, n1, n2, off, e0, mu, dt, touched):
     """One plane's impulse on the first ``c`` rows of ``buf`` (lines 0-2 x, 3-5 v, 6-8 the
     step's start x, 9-11 its v), in place where a row hit it; True if any did."""
@@ -474,7 +464,7 @@ def _run_hits(buf, w, c, n0, n1, n2, off, e0, mu, dt, touched):
         t0 = vc0 - vn * n0
         t1 = vc1 - vn * n1
         t2 = vc2 - vn * n2
-        # _friction_scale(t0, t1, t2, abs(vn_new - vn), mu), its branches as selects
+        # Coulomb friction, max(|t| - mu dvn, 0) / |t| (1 without friction, 0 at rest), as selects
         speed = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
         scaled = np.true_divide(max(speed - mu * abs(vn_new - vn), 0.0), speed)
         f = 1.0 if mu == 0.0 else (scaled if speed > 0 else 0.0)
@@ -514,7 +504,7 @@ def _run_projections(buf, c, n0, n1, n2, off, mu, touched, nudge):
         t0 = v0 - vn * n0
         t1 = v1 - vn * n1
         t2 = v2 - vn * n2
-        # _friction_scale(t0, t1, t2, -inward, mu), its branches as selects
+        # the same friction scale with dvn = -inward, as selects
         speed = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
         scaled = np.true_divide(max(speed - mu * -inward, 0.0), speed)
         f = 1.0 if mu == 0.0 else (scaled if speed > 0 else 0.0)

@@ -539,6 +539,12 @@ class Births:
         tail = Births(self.time[k:], self.position[k:], self.velocity[k:], self.lifetime[k:])
         return head, tail
 
+    def kept(self, keep: np.ndarray, n: int) -> Births:
+        """The events where ``keep`` (bool, ``n`` of them True) holds; itself when all do."""
+        if n == len(self):
+            return self
+        return Births(self.time[keep], self.position[keep], self.velocity[keep], self.lifetime[keep])
+
     @staticmethod
     def concat(parts: Sequence[Births]) -> Births:
         if len(parts) == 1:
@@ -828,10 +834,7 @@ class Pool:
         self.dropped += len(events) - n
         if n == 0:
             return np.zeros(0, dtype=np.int64), np.zeros(0)
-        if n != len(events):
-            events = Births(
-                events.time[keep], events.position[keep], events.velocity[keep], events.lifetime[keep]
-            )
+        events = events.kept(keep, n)
         slots = np.flatnonzero(~self.alive)[:n]
         self.alive[slots] = True
         self.m[slots] = self.mass
@@ -843,6 +846,12 @@ class Pool:
         self.slot_death[slots] = events.time + events.lifetime
         self.slot_serial[slots] = self.born + np.arange(n)
         self.slot_table[slots] = -1
+        return self._booked(slots, events)
+
+    def _booked(self, slots: np.ndarray, events: Births) -> tuple[np.ndarray, np.ndarray]:
+        """The counters and the energy brought in by ``events``, born into ``slots`` (whose
+        fields are set); (global indices, birth times), what :meth:`births` returns."""
+        n = len(slots)
         self._note(slots, born=True)
         self.born += n
         self.alive_count += n
@@ -874,18 +883,8 @@ class Pool:
         self.dropped += k - n
         if n == 0:
             return np.zeros(0, dtype=np.int64), np.zeros(0)
-        if n != k:
-            events = Births(
-                events.time[keep], events.position[keep], events.velocity[keep], events.lifetime[keep]
-            )
-        slots = self._taken[:n].copy()
-        self._note(slots, born=True)
-        self.born += n
-        self.alive_count += n
-        self.kinetic_energy_born += (
-            0.5 * self.mass * float(np.einsum("ij,ij->", events.velocity, events.velocity))
-        )
-        return self.first + slots, events.time
+        events = events.kept(keep, n)
+        return self._booked(self._taken[:n].copy(), events)
 
     def deaths(self, t1: float, newborn: np.ndarray) -> bool:
         """Newborns that already reached their age limit, and anything outside the kill box."""

@@ -735,12 +735,9 @@ class FusedStepper:
 
     def advance(self, state: Any, times: np.ndarray, dts: np.ndarray) -> tuple[int, int, bool]:
         """len(dts) steps from times[0]; (steps taken, force evaluations, failed)."""
-        if self.blocked:
-            return self._advance_blocked(state, times, dts)
         d = self.compiled.dynamics
         c, a, b = self.tab
-        xs, vs, a0, a1, xo, vo = self.work
-        args = (
+        common = (
             state.particle_position,
             state.particle_velocity,
             times,
@@ -760,57 +757,17 @@ class FusedStepper:
             self.stages,
             self.stage_fps,
             self.stage_ips,
-            self.kx,
-            self.kv,
-            xs,
-            vs,
-            a0,
-            a1,
-            xo,
-            vo,
-            self.a0_valid,
-            self.stage_owner is not None,
         )
+        has_stage = self.stage_owner is not None
+        if self.blocked:  # work: a0 and the rows saved at the call's start (x, v, a0)
+            kernel = blocked_chunk
+            args = (*common, *self.work, self.a0_valid, has_stage, BLOCK)
+        else:  # work: xs, vs, a0, a1, xo, vo
+            kernel = fused_chunk
+            args = (*common, self.kx, self.kv, *self.work, self.a0_valid, has_stage)
         if self._chunk is None:
-            result = fused_chunk(*args)  # compiles or loads; then the overload is called directly
-            self._chunk = _FastCall(fused_chunk, args)
-        else:
-            result = self._chunk(*args)
-        taken, evals, changed, self.a0_valid, failed = result
-        self.changed_steps += int(changed)
-        if changed:
-            state.revision += 1
-        return int(taken), int(evals), bool(failed)
-
-    def _advance_blocked(self, state: Any, times: np.ndarray, dts: np.ndarray) -> tuple[int, int, bool]:
-        d = self.compiled.dynamics
-        c, a, b = self.tab
-        args = (
-            state.particle_position,
-            state.particle_velocity,
-            times,
-            dts,
-            self.method,
-            c,
-            a,
-            b,
-            self.kernels,
-            self.fps,
-            self.ips,
-            _live(d.mass, self._copies),
-            _live(d.inv_mass, self._copies),
-            self.pinned,
-            self.stages,
-            self.stage_fps,
-            self.stage_ips,
-            *self.work,
-            self.a0_valid,
-            self.stage_owner is not None,
-            BLOCK,
-        )
-        if self._chunk is None:
-            result = blocked_chunk(*args)
-            self._chunk = _FastCall(blocked_chunk, args)
+            result = kernel(*args)  # compiles or loads; then the overload is called directly
+            self._chunk = _FastCall(kernel, args)
         else:
             result = self._chunk(*args)
         taken, evals, changed, self.a0_valid, failed = result
