@@ -260,6 +260,17 @@ def numba_helper(fn: Callable[..., Any]) -> Callable[..., Any]:
     return fn
 
 
+def live_array(a: np.ndarray, cache: dict[int, np.ndarray]) -> np.ndarray:
+    """``a`` as numba's signature wants it: the model's read-only arrays never change, so a
+    writable copy made once stands for them; a state's own (writable) arrays pass as they are."""
+    if a.flags.writeable:
+        return a
+    got = cache.get(id(a))
+    if got is None:
+        got = cache[id(a)] = a.copy()
+    return got
+
+
 def _compile_helpers(namespace: dict[str, Any]) -> None:
     import numba
 

@@ -28,6 +28,7 @@ import numpy as np
 from numba import njit
 from numba.core.errors import NumbaExperimentalFeatureWarning
 
+from animsim.elements import live_array
 from animsim.integrators.base import (
     FUSED_EULER_AVERAGE as EULER_AVERAGE,
 )
@@ -578,17 +579,6 @@ def _element_tables(terms: Any) -> tuple[tuple[Any, ...], Any, Any]:
     return _addresses(kernels), fps, ips
 
 
-def _live(a: np.ndarray, cache: dict[int, np.ndarray]) -> np.ndarray:
-    """``a`` as numba's signature wants it: the model's read-only arrays never change, so a
-    writable copy made once stands for them; a state's own (writable) arrays pass as they are."""
-    if a.flags.writeable:
-        return a
-    got = cache.get(id(a))
-    if got is None:
-        got = cache[id(a)] = a.copy()
-    return got
-
-
 class NumbaForces:
     """Dynamics.acceleration through the elements' numba kernels (see the module docstring).
 
@@ -609,9 +599,9 @@ class NumbaForces:
         d.evaluations += 1
         for drive in getattr(d, "drivers", ()):  # keyframed rows on their path (animsim.keyframes)
             drive.drive(t, x, v)
-        mass = _live(d.mass, self._copies)
+        mass = live_array(d.mass, self._copies)
         if not self.others:
-            inv_mass = _live(d.inv_mass, self._copies)
+            inv_mass = live_array(d.inv_mass, self._copies)
             args = (x, v, float(t), out, self.kernels, self.fps, self.ips, mass, inv_mass, self.pinned)
             if self._acc is None:
                 _acc(*args)  # compiles or loads the kernel; then its overload is called directly
@@ -749,8 +739,8 @@ class FusedStepper:
             self.kernels,
             self.fps,
             self.ips,
-            _live(d.mass, self._copies),
-            _live(d.inv_mass, self._copies),
+            live_array(d.mass, self._copies),
+            live_array(d.inv_mass, self._copies),
             self.pinned,
             # a tuple of addresses, so numba types them as first-class functions (by
             # signature), not as these dispatchers: the cached kernel then serves every stage

@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from animsim.elements import RELEASING, BuildContext, ForceElement, register
+from animsim.elements import RELEASING, BuildContext, ForceElement, live_array, register
 from animsim.scene import models as m
 from animsim.vec import dot3
 
@@ -50,7 +50,7 @@ class Gravity(ForceElement):
         # array against (3,) is several times slower than three strided axpys.
         self.axes = tuple(int(j) for j in np.flatnonzero(self.g))
         self.closed_form = {"gravity": self.g}
-        self._mass_copy: tuple[np.ndarray, np.ndarray] | None = None
+        self._copies: dict[int, np.ndarray] = {}  # see live_array
 
     def bind(self, state: Any) -> None:
         self.mass = state.particle_mass
@@ -81,11 +81,7 @@ class Gravity(ForceElement):
             import numba
 
             _RELEASED.append(numba.njit(cache=True)(_released_terms))
-        mass = self.mass
-        if not mass.flags.writeable:  # the model's own (fixed) masses: one writable copy, so
-            if self._mass_copy is None or self._mass_copy[0] is not mass:  # one compiled version
-                self._mass_copy = (mass, mass.copy())
-            mass = self._mass_copy[1]
+        mass = live_array(self.mass, self._copies)  # one compiled version for every mass array
         terms = np.empty(len(x))
         _RELEASED[0](x, x_ref, self.g, mass, terms)
         return float(terms.sum())
