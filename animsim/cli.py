@@ -1105,13 +1105,13 @@ def _sigterm_as_interrupt(signum: int, frame: Any) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     """Run the app; every AnimsimError becomes a message and an exit status, never a traceback."""
-    # Outside a run's step loop (loading, compiling, assembling an NPZ), SIGTERM
-    # unwinds like Ctrl-C, so temporary files are removed and the status is 130
-    # instead of the process vanishing mid-write.
     from animsim.startup import pause_collector, resume_collector
 
     if argv is None:  # the process's own command line, not a call from Python with arguments
         pause_collector()  # during start-up (animsim.startup)
+    # Outside a run's step loop (loading, compiling, assembling an NPZ), SIGTERM
+    # unwinds like Ctrl-C, so temporary files are removed and the status is 130
+    # instead of the process vanishing mid-write.
     old_term = None
     if (
         threading.current_thread() is threading.main_thread()
