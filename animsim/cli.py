@@ -107,11 +107,18 @@ def _version(value: bool) -> None:
 
 @app.callback()
 def _root(
+    ctx: typer.Context,
     version: Annotated[
         bool, typer.Option("--version", callback=_version, is_eager=True, help="Print the version and exit.")
     ] = False,
 ) -> None:
     """animsim: write a scene in YAML, simulate it, compare integrators, render it."""
+    if ctx.invoked_subcommand != "run":
+        # only run's start-up keeps Python's collector paused (until its first step, see
+        # animsim.startup); the other commands' work (rendering, many runs) collects as usual
+        from animsim.startup import resume_collector
+
+        resume_collector()
 
 
 # --- shared options ---------------------------------------------------------------
@@ -1098,6 +1105,10 @@ def _sigterm_as_interrupt(signum: int, frame: Any) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     """Run the app; every AnimsimError becomes a message and an exit status, never a traceback."""
+    from animsim.startup import pause_collector, resume_collector
+
+    if argv is None:  # the process's own command line, not a call from Python with arguments
+        pause_collector()  # during start-up (animsim.startup)
     # Outside a run's step loop (loading, compiling, assembling an NPZ), SIGTERM
     # unwinds like Ctrl-C, so temporary files are removed and the status is 130
     # instead of the process vanishing mid-write.
@@ -1110,6 +1121,7 @@ def main(argv: list[str] | None = None) -> None:
     try:
         _main(argv)
     finally:
+        resume_collector()  # a command that ran no simulation
         if old_term is not None:
             signal.signal(signal.SIGTERM, old_term)
 

@@ -87,8 +87,6 @@ def build(scene: m.Scene, system: Any, backend: str, springs: Any | None, positi
     ``springs``: the scene's spring element (tearing switches broken ones off in it);
     ``positions``: the initial positions (a structure's pins move relative to them).
     """
-    from animsim.keyframes import KeyframeDrive, PathEvaluator, make_paths
-
     out = Built()
     radius = particle_radius(scene, system)
     out.radius = radius
@@ -123,7 +121,9 @@ def build(scene: m.Scene, system: Any, backend: str, springs: Any | None, positi
                 which.append(path)
                 rows.append(first + li)
                 base.append(positions[first + li])
-    if rows:
+    if rows:  # the keyframes module loads only for a scene that has some
+        from animsim.keyframes import KeyframeDrive, make_paths
+
         drive = KeyframeDrive(
             np.array(rows), np.array(which), np.array(base), make_paths(keys, smooth), numba
         )
@@ -184,7 +184,11 @@ def build(scene: m.Scene, system: Any, backend: str, springs: Any | None, positi
                 motion_smooth.append(c.motion.interpolation == "smooth")
             else:
                 moving.append(-1)
-        evaluator = PathEvaluator(make_paths(motion_keys, motion_smooth), numba) if motion_keys else None
+        evaluator = None
+        if motion_keys:
+            from animsim.keyframes import PathEvaluator, make_paths
+
+            evaluator = PathEvaluator(make_paths(motion_keys, motion_smooth), numba)
         colliders = Colliders(
             shapes,
             system.particle_inv_mass,

@@ -308,6 +308,13 @@ def jit_kernel(fn: Callable[..., Any], *, parallel: bool = False, stage: bool = 
             target = pytypes.FunctionType(fn.__code__, fn.__globals__, fn.__name__ + "_parallel")
             target.__qualname__ = fn.__qualname__ + "_parallel"
             target.__module__ = fn.__module__
-        got = numba.njit(sig, cache=True, parallel=parallel)(target)
+        got = numba.njit(cache=True, parallel=parallel)(target)
+        # numba.njit(sig) would compile (or load) at once, through numba's full start-up
+        # of its compiler even for a disk-cache hit: load_cached skips that on a hit
+        from animsim.backends.numba_cache import load_cached
+
+        if not load_cached(got, sig):
+            got.compile(sig)
+        got.disable_compile()  # the one signature, as njit(sig) (no other types slip in)
         _JITTED[key] = got
     return got

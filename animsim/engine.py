@@ -209,6 +209,9 @@ def run(
     guard = guard or Guard(compiled, dt=stepper.largest_dt)
     # Compiling numba kernels (first run on a machine) is not run time.
     compile_seconds = stepper.prepare(state, notice)
+    from animsim.startup import resume_collector
+
+    resume_collector()  # start-up is over (animsim.startup): collect as usual from here
     record = compiled.record_steps
     next_rec = 0
     dyn.evaluations = 0

@@ -57,6 +57,20 @@ class Clock:
             return self.dt
         return self.duration - (self.steps - 1) * self.dt
 
+    def times(self) -> np.ndarray:
+        """``time(i)`` for i = 0 .. steps as one array: the same operations on the same
+        numbers, so the same bits (a Python loop over 20,000 steps took 4 ms of a run's start)."""
+        i = np.arange(self.steps + 1, dtype=np.float64)
+        t = self.duration * i / self.steps if self.divides else i * self.dt
+        t[-1] = self.duration
+        return t
+
+    def step_sizes(self) -> np.ndarray:
+        """``step_size(i)`` for i = 0 .. steps - 1 as one array."""
+        sizes = np.full(self.steps, self.dt)
+        sizes[-1] = self.step_size(self.steps - 1)
+        return sizes
+
 
 #: frames per second recorded when a scene has no ``record`` rule: an animation's
 #: rate, so a fine dt does not multiply the output (a 3 s cloth at dt = 0.001

@@ -235,8 +235,8 @@ class Fused(_Base):
     def __init__(self, compiled: Any):
         super().__init__(compiled, numba=True)
         clock = compiled.clock
-        self.times = np.array([clock.time(i) for i in range(clock.steps + 1)])
-        self.dts = np.array([clock.step_size(i) for i in range(clock.steps)])
+        self.times = clock.times()
+        self.dts = clock.step_sizes()
         self.fused: Any = None
         self.between = tuple(st for st in self.stages if st.numba_stage_source is None)
 

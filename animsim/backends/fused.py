@@ -28,6 +28,7 @@ import numpy as np
 from numba import njit
 from numba.core.errors import NumbaExperimentalFeatureWarning
 
+from animsim.backends.numba_cache import load_cached
 from animsim.elements import live_array
 from animsim.integrators.base import (
     FUSED_EULER_AVERAGE as EULER_AVERAGE,
@@ -535,11 +536,17 @@ class _FastCall:
     def __init__(self, dispatcher: Any, args: tuple[Any, ...]):
         self.dispatcher = dispatcher
         self.entry = None
+        self.types: tuple[Any, ...] | None = None
         try:
-            types = tuple(dispatcher.typeof_pyval(a) for a in args)
-            cres = dispatcher.overloads.get(types)
+            self.types = tuple(dispatcher.typeof_pyval(a) for a in args)
         except Exception:  # any typing trouble: keep the dispatcher
-            cres = None
+            return
+        # a disk-cache hit loads here, without numba's start-up of its compiler (numba_cache)
+        load_cached(dispatcher, self.types)
+        self._find()
+
+    def _find(self) -> None:
+        cres = self.dispatcher.overloads.get(self.types)
         if cres is not None:
             self.entry = cres.entry_point
 
@@ -547,7 +554,10 @@ class _FastCall:
         entry = self.entry
         if entry is not None and _plain(args[0]) and _plain(args[1]):
             return entry(*args)
-        return self.dispatcher(*args)
+        result = self.dispatcher(*args)  # compiles on a cache miss
+        if entry is None and self.types is not None:
+            self._find()
+        return result
 
 
 def _plain(a: np.ndarray) -> bool:
@@ -603,11 +613,9 @@ class NumbaForces:
         if not self.others:
             inv_mass = live_array(d.inv_mass, self._copies)
             args = (x, v, float(t), out, self.kernels, self.fps, self.ips, mass, inv_mass, self.pinned)
-            if self._acc is None:
-                _acc(*args)  # compiles or loads the kernel; then its overload is called directly
+            if self._acc is None:  # loads (or compiles) the kernel; then calls its overload directly
                 self._acc = _FastCall(_acc, args)
-            else:
-                self._acc(*args)
+            self._acc(*args)
             return out
         # Mixed: sum every force first (numba kernels, then NumPy ones), then divide.
         out.fill(0.0)
@@ -644,10 +652,8 @@ class NumbaForces:
             _NO_ROWS,
         )
         if self._acc is None:
-            _acc(*args)
             self._acc = _FastCall(_acc, args)
-        else:
-            self._acc(*args)
+        self._acc(*args)
         return out
 
 
@@ -755,11 +761,9 @@ class FusedStepper:
         else:  # work: xs, vs, a0, a1, xo, vo
             kernel = fused_chunk
             args = (*common, self.kx, self.kv, *self.work, self.a0_valid, has_stage)
-        if self._chunk is None:
-            result = kernel(*args)  # compiles or loads; then the overload is called directly
+        if self._chunk is None:  # loads (or compiles) the chunk; then calls its overload directly
             self._chunk = _FastCall(kernel, args)
-        else:
-            result = self._chunk(*args)
+        result = self._chunk(*args)
         taken, evals, changed, self.a0_valid, failed = result
         self.changed_steps += int(changed)
         if changed:

@@ -58,6 +58,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from animsim.dynamics import Dynamics
+from animsim.integrators import register
 from animsim.integrators.base import Integrator
 from animsim.system import State
 
@@ -97,6 +98,7 @@ SPARSE_CHOLESKY = True
 LU_MAX_DOF = 60_000
 
 
+@register
 class ImplicitEuler(Integrator):
     name = "implicit_euler"
     order = 1

@@ -232,3 +232,65 @@ emitters:
     for a, b in zip(frames["numba"][0], frames["numpy"][0], strict=True):
         assert a.new_ids == b.new_ids
         np.testing.assert_allclose(a.position, b.position, rtol=0, atol=1e-9)
+
+
+STARTUP_PROBE = """
+import json, sys
+from animsim.cli import main
+try:
+    main(["run", sys.argv[1], "-o", sys.argv[2], "-q", "--backend", "numba"])
+except SystemExit as exc:
+    assert not exc.code, exc.code
+import numba
+from animsim import elements
+from animsim.backends import fused
+kernels = [*elements._JITTED.values()]
+kernels += [d for d in vars(fused).values() if isinstance(d, numba.core.dispatcher.Dispatcher)]
+used = [d for d in kernels if d.overloads]
+print(json.dumps({
+    "modules": sorted(m for m in sys.modules if m.startswith(("numba.np.linalg", "scipy.linalg"))),
+    "loaded": sorted(f"{d.py_func.__module__}.{d.py_func.__qualname__}" for d in used),
+    "hits": sum(sum(d.stats.cache_hits.values()) for d in used),
+    "misses": sum(sum(d.stats.cache_misses.values()) for d in used),
+}))
+"""
+
+
+def test_a_second_process_loads_its_kernels_from_the_disk_cache_without_numbas_compiler(tmp_path):
+    """Start-up of a one-particle numba run: the kernels it needs (its one force, the empty
+    stage, the chunk) come from numba's disk cache, and nothing more is set up. Loading
+    through numba's own path first initialises its whole compiler (every implementation,
+    SciPy's linalg among them: a quarter of the command's start); a kernel that compiles
+    again in every process would show as a cache miss."""
+    import json
+    import subprocess
+    import sys
+
+    from tests.conftest import ROOT
+
+    scene = tmp_path / "tiny.yaml"
+    scene.write_text(
+        "duration: 0.1\ndt: 0.001\nrecord: {every: 10}\n"
+        "particles: [{id: p, mass: 1, position: [0, 0, 0]}]\nforces: [{type: gravity}]\n"
+    )
+
+    def probe() -> dict:
+        out = subprocess.run(
+            [sys.executable, "-c", STARTUP_PROBE, str(scene), str(tmp_path / "o.csv")],
+            capture_output=True,
+            text=True,
+            cwd=ROOT,
+            timeout=600,
+            check=True,
+        )
+        return json.loads(out.stdout.strip().splitlines()[-1])
+
+    probe()  # the first run on a machine compiles and writes the cache
+    got = probe()
+    assert got["misses"] == 0, got
+    assert got["hits"] == len(got["loaded"]) >= 3, got
+    # of the elements' kernels, only the one of the scene's one force
+    assert [k for k in got["loaded"] if not k.startswith("animsim.backends.")] == [
+        "animsim.forces.gravity._kernel"
+    ], got
+    assert got["modules"] == [], got

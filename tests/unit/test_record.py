@@ -26,6 +26,17 @@ def test_step_count_and_last_step(duration, dt, steps, last):
     assert sum(c.step_size(i) for i in range(steps)) == pytest.approx(duration, rel=1e-12)
 
 
+@pytest.mark.parametrize(
+    ("duration", "dt"), [(2.0, 1e-4), (1.0, 0.3), (1.0, 0.03), (2 * np.pi, 0.01), (0.1, 0.1), (3.7, 0.0013)]
+)
+def test_the_arrays_of_times_and_step_sizes_are_the_loop_values_to_the_bit(duration, dt):
+    c = Clock.make(duration, dt)
+    times = [c.time(i) for i in range(c.steps + 1)]
+    sizes = [c.step_size(i) for i in range(c.steps)]
+    assert c.times().tolist() == times
+    assert c.step_sizes().tolist() == sizes
+
+
 def test_even_grid_prints_cleanly():
     c = Clock.make(0.5, 0.1)
     assert [c.time(i) for i in range(6)] == [0.0, 0.1, 0.2, 0.3, 0.4, 0.5]
