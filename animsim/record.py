@@ -57,6 +57,20 @@ class Clock:
             return self.dt
         return self.duration - (self.steps - 1) * self.dt
 
+    def all_times(self) -> np.ndarray:
+        """[time(i) for i in 0..steps], the same numbers from array arithmetic (a float64
+        product and quotient of the same operands round as Python's do; i < 2^53 is exact)."""
+        i = np.arange(self.steps + 1, dtype=np.float64)
+        t = self.duration * i / self.steps if self.divides else i * self.dt
+        t[-1] = self.duration
+        return t
+
+    def all_step_sizes(self) -> np.ndarray:
+        """[step_size(i) for i in 0..steps-1]."""
+        h = np.full(self.steps, self.dt)
+        h[-1] = self.step_size(self.steps - 1)
+        return h
+
 
 #: frames per second recorded when a scene has no ``record`` rule: an animation's
 #: rate, so a fine dt does not multiply the output (a 3 s cloth at dt = 0.001
