@@ -964,16 +964,7 @@ class FusedStepper:
 
         no_u = np.zeros(0)
         u_refs = _array_tuple(list(watch.u_ref) if releasing else [no_u], np.float64)
-        books = np.array(
-            [
-                watch.h0,
-                watch.floor,
-                float(watch.wind_power),
-                watch._movable,
-                watch.born_energy,
-                watch.allowance * (1.0 - CHECK_MARGIN),
-            ]
-        )
+        books = np.array([*watch.budget_constants(), watch.allowance * (1.0 - CHECK_MARGIN)])
         n = self.compiled.system.particle_count
         stages = self.kx.shape[0]
         if self.blocked:  # the blocked chunk's Verlet acceleration is shared, so either may go on
