@@ -189,6 +189,37 @@ def test_a_tiny_stable_run_is_checked_inside_and_equals_the_python_checks(integr
     assert python[2].calls >= 2000 // CHECK_STRIDE
 
 
+BOUNCE = """
+duration: 3.0
+dt: 0.002
+integrator: {integrator}
+record: {{every: 10}}
+particles:
+  - {{id: a, mass: 1, position: [0, 1, 0], velocity: [0.3, 0, 0]}}
+  - {{id: b, mass: 2, position: [0.2, 1.5, 0.1]}}
+springs:
+  - {{between: [a, b], ks: 200, kd: 0.5, rest: 0.5}}
+forces:
+  - {{type: gravity}}
+planes:
+  - {{point: [0, 0, 0], normal: [0, 1, 0], restitution: 0.7, friction: 0.3}}
+colliders:
+  - {{type: sphere, center: [0.6, 0, 0], radius: 0.4}}
+"""
+
+
+@pytest.mark.parametrize("integrator", ["symplectic_euler", "verlet"])
+def test_collisions_in_the_chunks_keep_the_checks_inside_and_the_bits(integrator, monkeypatch):
+    text = BOUNCE.format(integrator=integrator)
+    inside = _run(text, "numba")
+    python = _run(text, "numba", inside=False, monkeypatch=monkeypatch)
+    assert inside[0].status == STATUS_OK and inside[0].meta.get("energy_end") is not None
+    _assert_identical(inside, python)
+    assert inside[2].calls == 0
+    heights = inside[1].positions()[:, :, 1]
+    assert heights.min() < 0.05  # they reached the plane
+
+
 def test_a_check_in_the_margin_is_decided_by_python(monkeypatch):
     """A compiled check whose growth is within the margin of the allowance stops the chunk and
     Python's check decides; with a margin of everything every check goes to Python and passes."""
