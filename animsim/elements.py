@@ -9,6 +9,9 @@ this?":
 
 * energy: ``potential(x)`` (None when not conservative) and ``watch_role``,
   how the watchdog books it (:mod:`animsim.analysis.watchdog`);
+* compiled energy (numba backend): ``numba_energy_source``, the element's share of the
+  watchdog's sums as a kernel of :func:`energy_signature` (an elastic element's potential,
+  a releasing one's released energy), so the fused stepper can check inside its chunks;
 * stability: ``stiffness_rows(inv_mass, k_rows, c_rows)`` adds the element's
   stiffness (N/m) and damping (N s/m) per particle row
   (:mod:`animsim.analysis.stability`);
@@ -91,6 +94,11 @@ class ForceElement:
     numba_source: Callable[..., None] | None = None
     #: compile the kernel with numba's parallel loops (``prange``)
     numba_parallel: bool = False
+    #: the plain Python function numba compiles into this element's energy kernel
+    #: (:func:`energy_signature`): for an ELASTIC element its potential (what ``potential``
+    #: returns), for a RELEASING one the energy released since the watchdog opened its books
+    #: (what ``released`` returns); None when it has none (the watchdog then checks in Python)
+    numba_energy_source: Callable[..., float] | None = None
     #: which part of the energy plots its potential belongs to (gravitational, spring, other)
     energy_part: str = "other"
     #: stiffness (N/m) of a contact that may act on any particle (penalty planes), for the stability notes
@@ -125,6 +133,17 @@ class ForceElement:
     def numba_params(self) -> tuple[np.ndarray, np.ndarray]:
         """(float parameters, integer parameters) for ``numba_kernel``."""
         return np.zeros(0), np.zeros(0, dtype=np.int64)
+
+    @property
+    def numba_energy_kernel(self) -> Callable[..., float] | None:
+        """The compiled energy kernel (compiles, or loads from the disk cache, on first use)."""
+        if self.numba_energy_source is None:
+            return None
+        return jit_kernel(self.numba_energy_source, energy=True)
+
+    def numba_energy_params(self) -> tuple[np.ndarray, np.ndarray]:
+        """(float parameters, integer parameters) for ``numba_energy_kernel`` (the force's own)."""
+        return self.numba_params()
 
     def bind(self, state: Any) -> None:
         """Called once per run with the live state (elements that read state arrays keep them)."""
@@ -251,6 +270,23 @@ def stage_signature() -> Any:
     )
 
 
+@functools.cache
+def energy_signature() -> Any:
+    """(x f8[:,::1], x_ref f8[:,::1], u_ref f8[::1], mass f8[::1], fp f8[::1], ip i64[::1]) -> f8.
+
+    An element's share of the watchdog's energy sums at positions ``x``
+    (:mod:`animsim.analysis.watchdog`): an elastic element's potential energy (J), which
+    ignores ``x_ref`` and ``u_ref``; a releasing element's energy released since the books
+    opened, U(x_ref) - U(x) (J), with ``x_ref`` the positions the books were opened at and
+    ``u_ref`` its per-particle potential there (as ``released`` takes them).
+    """
+    from numba import types
+
+    a2 = types.float64[:, ::1]
+    a1 = types.float64[::1]
+    return types.float64(a2, a2, a1, a1, a1, types.int64[::1])
+
+
 def numba_helper(fn: Callable[..., Any]) -> Callable[..., Any]:
     """Mark a module-level function a numba kernel calls; it is compiled with the kernel.
 
@@ -280,12 +316,15 @@ def _compile_helpers(namespace: dict[str, Any]) -> None:
             namespace[name] = numba.njit(cache=True)(obj)
 
 
-_JITTED: dict[tuple[Callable[..., Any], bool, bool], Any] = {}
+_JITTED: dict[tuple[Callable[..., Any], bool, bool, bool], Any] = {}
 
 
-def jit_kernel(fn: Callable[..., Any], *, parallel: bool = False, stage: bool = False) -> Any:
-    """``fn`` compiled by numba with the uniform element signature (imported lazily, cached on disk)."""
-    key = (fn, parallel, stage)
+def jit_kernel(
+    fn: Callable[..., Any], *, parallel: bool = False, stage: bool = False, energy: bool = False
+) -> Any:
+    """``fn`` compiled by numba with the uniform element signature (imported lazily, cached on
+    disk): a force kernel's, a stage's (``stage``) or an energy kernel's (``energy``)."""
+    key = (fn, parallel, stage, energy)
     got = _JITTED.get(key)
     if got is None:
         import types as pytypes
@@ -297,7 +336,7 @@ def jit_kernel(fn: Callable[..., Any], *, parallel: bool = False, stage: bool = 
         # First-class function types are how the fused stepper calls any element;
         # numba still labels them experimental.
         warnings.filterwarnings("ignore", category=NumbaExperimentalFeatureWarning)
-        sig = stage_signature() if stage else kernel_signature()
+        sig = energy_signature() if energy else stage_signature() if stage else kernel_signature()
         _compile_helpers(fn.__globals__)
         target = fn
         if parallel:

@@ -252,6 +252,10 @@ def run(
         # emitters' streams are restored with the state for a replay.
         births = state.particle_alive is not None
         one = 1 if (births or not replayable) else None
+        # A stepper may run the checks itself between record steps (the numba backend's
+        # fused chunks on small scenes: one call per frame instead of one per stride); its
+        # checks are these, at the same steps, deciding as guard.check does.
+        inside = stepper.check_inside(guard)
         pending: list[tuple[int, Frame | None, State | None]] = []
         k = 0  # position on the nominal clock (== steps taken, except with adaptive steps)
         checked = 0
@@ -259,8 +263,34 @@ def run(
             while k < steps:
                 while next_rec < len(record) and record[next_rec] <= k:  # never aim behind us
                     next_rec += 1
-                goal = min(int(record[next_rec]) if next_rec < len(record) else steps, checked + stride)
-                k, failure, nonfinite = stepper.advance(state, k, goal, max_steps=one)
+                goal = int(record[next_rec]) if next_rec < len(record) else steps
+                verified = False  # the stepper checked the state at k and it passed
+                if inside:
+                    # Several frames a call: the stepper copies the states at the record
+                    # positions before the goal (observers read whole states: one a call).
+                    ahead = min(next_rec + (1 if observers else stepper.shots_per_call), len(record))
+                    if ahead > next_rec:
+                        goal = int(record[ahead - 1])
+                    rec = record[next_rec : ahead - 1] if ahead > next_rec else record[:0]
+                    k, passed, nonfinite, shots = stepper.advance_checked(
+                        state, k, goal, checked, stride, rec
+                    )
+                    if passed > checked:  # as the check at `passed` would have: frames out, good state
+                        frames += _flush(pending, sinks, observers, None)
+                        checked = passed
+                        verified = passed == k
+                        if last_good is not None:
+                            stepper.good_state(last_good)
+                            books = _snapshot(compiled, guard)
+                    for at, x_at, v_at in shots:  # frames passed on the way, in order
+                        next_rec += 1
+                        if at <= checked:
+                            frames += _emit_arrays(compiled, at, x_at, v_at, sinks)
+                        else:  # to wait for the next check, as a frame between checks does
+                            pending.append((at, _arrays_frame(compiled, at, x_at.copy(), v_at.copy()), None))
+                else:
+                    goal = min(goal, checked + stride)
+                    k, failure, nonfinite = stepper.advance(state, k, goal, max_steps=one)
                 if births:
                     guard.book(state)
                 if failure is not None:  # the stepper itself gave up (adaptive: below dt_min)
@@ -271,7 +301,7 @@ def run(
                 if recording:
                     next_rec += 1
                 interrupted = stop is not None and stop()
-                check_now = (
+                check_now = not verified and (
                     k - checked >= stride
                     or not replayable
                     or k == steps
@@ -279,7 +309,10 @@ def run(
                     or interrupted
                     or len(pending) >= MAX_PENDING_FRAMES
                 )
-                if recording and not check_now:
+                if verified and recording:
+                    _emit(compiled, state, sinks, observers)
+                    frames += 1
+                if recording and not check_now and not verified:
                     pending.append(
                         (
                             state.step,
@@ -428,6 +461,25 @@ def _frame_copy(compiled: Compiled, state: State) -> Frame:
         state,
         copy=True,
     )
+
+
+def _arrays_frame(compiled: Compiled, step: int, x: np.ndarray, v: np.ndarray) -> Frame:
+    """The frame of a state a stepper copied on its way (a run without emitters, bodies or
+    tearing springs, whose frames hold positions and velocities only)."""
+    return Frame(
+        step=step, time=compiled.clock.time(step), index=_all_index(compiled), position=x, velocity=v
+    )
+
+
+def _emit_arrays(
+    compiled: Compiled, step: int, x: np.ndarray, v: np.ndarray, sinks: Sequence[FrameSink]
+) -> int:
+    """Write the frame of a copied state that passed a check (as _emit); 1, the frame count."""
+    if sinks:
+        frame = _arrays_frame(compiled, step, x, v)
+        for sink in sinks:
+            sink.write(frame)
+    return 1
 
 
 def finish(

@@ -8,6 +8,7 @@ contender beside the plain-NumPy peer) and :mod:`benchmarks.fountain`. Wall time
 is printed beside every CPU figure. Run from the project root::
 
     NUMBA_NUM_THREADS=1 python -m benchmarks.cpu_goals tiny
+    NUMBA_NUM_THREADS=1 python -m benchmarks.cpu_goals tiny numba
     python -m benchmarks.cpu_goals particles 100000 1000000
     python -m benchmarks.cpu_goals fountain numba
 
@@ -36,18 +37,18 @@ def best(fn: Callable[[], None], repeat: int) -> tuple[float, float]:
     return min(cpu), min(wall)
 
 
-def tiny(repeat: int = 5) -> None:
+def tiny(backend: str = "numpy", repeat: int = 5) -> None:
     from animsim.engine import run
     from benchmarks.suite import TINY_STEPS, NullSink, _compile, tiny_scene
 
     for spring in (False, True):
         for integrator in ("symplectic_euler", "rk4"):
-            compiled = _compile(tiny_scene(integrator, spring), "numpy")
+            compiled = _compile(tiny_scene(integrator, spring), backend)
             run(compiled, [NullSink()])
             cpu, wall = best(lambda c=compiled: run(c, [NullSink()]), repeat)
             what = "spring pendulum" if spring else "1 particle"
             print(
-                f"tiny, {what}, {integrator}: {cpu / TINY_STEPS * 1e6:.2f} us/step CPU "
+                f"tiny, {backend}, {what}, {integrator}: {cpu / TINY_STEPS * 1e6:.2f} us/step CPU "
                 f"({wall / TINY_STEPS * 1e6:.2f} wall)"
             )
 
@@ -101,7 +102,7 @@ def fountain(backend: str, steps: int = 300, repeat: int = 2) -> None:
 def main(argv: list[str]) -> int:
     what = argv[0] if argv else "tiny"
     if what == "tiny":
-        tiny()
+        tiny(argv[1] if len(argv) > 1 else "numpy")
     elif what == "particles":
         for n in map(int, argv[1:] or ["100000", "1000000"]):
             particles(n)

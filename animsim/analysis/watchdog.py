@@ -216,6 +216,12 @@ class EnergyWatch:
             + self.floor
         )
 
+    def budget_constants(self) -> tuple[float, float, float, float, float]:
+        """(h0, floor, wind power per particle, movable particles, born energy): the terms of
+        :meth:`budget` besides the released energy and the time, for compiled checks of a run
+        without births (whose books never change)."""
+        return self.h0, self.floor, float(self.wind_power), self._movable, self.born_energy
+
     def growth(self, state: Any) -> tuple[float, float, float]:
         """(H, B, H/B) at ``state``."""
         h = self.watched(state)

@@ -58,6 +58,11 @@ def _no_stage(x_old, v_old, x, v, dt, inv_mass, fp, ip):
     return False
 
 
+def _no_energy(x, x_ref, u_ref, mass, fp, ip):
+    """Stands in when a scene has no elastic (or no releasing) element: adds 0.0, exactly."""
+    return 0.0
+
+
 @njit(cache=True)
 def _acc(x, v, t, out, kernels, fps, ips, mass, inv_mass, pinned):
     """out = F(x, v, t) / m, pinned rows 0 (Dynamics.acceleration)."""
@@ -201,6 +206,165 @@ def fused_chunk(
         if not _finite(x, v):
             return step + 1, evals, changed_steps, a0_valid, True
     return steps, evals, changed_steps, a0_valid, False
+
+
+#: a compiled check passes only below (1 - CHECK_MARGIN) times the watchdog's allowance; a
+#: growth in the band up to the allowance stops the chunk and Python's check decides. The
+#: compiled sums add in particle order where NumPy adds pairwise or through BLAS, so the two
+#: growths differ by rounding (about 1e-15 relative, more only where released energies of
+#: opposite signs cancel); the band makes both checks decide alike wherever they differ by
+#: less than it, instead of only away from the threshold's knife edge.
+CHECK_MARGIN = 1e-6
+
+
+@njit(cache=True, error_model="numpy")
+def _energy_passes(x, v, t, mass, elastic, efps, eips, releasing, rfps, rips, u_refs, x_ref, no_u, books):
+    """The watchdog's energy test (EnergyWatch.growth, Guard.check) at a finite state at time t:
+    H = kinetic + the elastic elements' potentials, B = h0 + max(released, 0) + wind power *
+    movable * t + born + floor, passing when H / B <= ``limit`` (NaN does not pass).
+
+    books = [h0, floor, wind power per particle, movable particles, born energy, limit]: the
+    watchdog's constants for a run without births, in the order EnergyWatch.budget adds them.
+    """
+    s = 0.0
+    for i in range(x.shape[0]):
+        s += mass[i] * ((v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1]) + v[i, 2] * v[i, 2])
+    h = 0.5 * s
+    for k in range(len(elastic)):
+        h += elastic[k](x, x_ref, no_u, mass, efps[k], eips[k])
+    released = 0.0
+    for k in range(len(releasing)):
+        released += releasing[k](x, x_ref, u_refs[k], mass, rfps[k], rips[k])
+    # max(released, 0.0) as Python's max decides it (NaN stays NaN)
+    gained = 0.0 if released < 0.0 else released
+    b = books[0] + gained + books[2] * books[3] * t + books[4] + books[1]
+    return h / b <= books[5]
+
+
+@njit(cache=True)
+def checked_chunk(
+    x,
+    v,
+    times,
+    dts,
+    method,
+    tab_c,
+    tab_a,
+    tab_b,
+    kernels,
+    fps,
+    ips,
+    mass,
+    inv_mass,
+    pinned,
+    stage_fns,
+    stage_fps,
+    stage_ips,
+    kx,
+    kv,
+    xs,
+    vs,
+    a0,
+    a1,
+    xo,
+    vo,
+    a0_valid,
+    has_stage,
+    k0,
+    checked,
+    stride,
+    last,
+    energy,
+    elastic,
+    efps,
+    eips,
+    releasing,
+    rfps,
+    rips,
+    u_refs,
+    x_ref,
+    no_u,
+    books,
+    x_good,
+    v_good,
+    rec,
+    shot_x,
+    shot_v,
+):
+    """fused_chunk over len(dts) steps from clock position ``k0`` with the watchdog's checks
+    inside: at every position ``checked`` + j ``stride`` and at ``last`` (the clock's end),
+    as the loop would check, the energy test (``energy``: it is on) runs and a passing state
+    is copied to ``x_good``, ``v_good``. The steps themselves are fused_chunk's calls.
+
+    ``times`` are the clock's times at positions k0 .. k0 + len(dts) (one more than steps).
+    At the positions ``rec`` (ascending, after k0) the state is copied to ``shot_x[r]``,
+    ``shot_v[r]`` (the frames recorded there).
+
+    Returns (steps taken, force evaluations, steps a collision changed, Verlet's cache still
+    valid, the position of the last passed check (``checked`` if none), stopped, states
+    copied to the shots), where stopped means the state is where a check did not pass or
+    after a non-finite step.
+    """
+    steps = dts.shape[0]
+    evals = 0
+    changed = 0
+    j = 0
+    r = 0
+    while j < steps:
+        due = checked + stride
+        e = min(steps, due - k0)
+        if last - k0 < e:
+            e = last - k0
+        if r < rec.shape[0] and rec[r] - k0 < e:
+            e = rec[r] - k0
+        taken, ev, ch, a0_valid, bad = fused_chunk(
+            x,
+            v,
+            times[j:],
+            dts[j:e],
+            method,
+            tab_c,
+            tab_a,
+            tab_b,
+            kernels,
+            fps,
+            ips,
+            mass,
+            inv_mass,
+            pinned,
+            stage_fns,
+            stage_fps,
+            stage_ips,
+            kx,
+            kv,
+            xs,
+            vs,
+            a0,
+            a1,
+            xo,
+            vo,
+            a0_valid,
+            has_stage,
+        )
+        evals += ev
+        changed += ch
+        j += taken
+        if bad:
+            return j, evals, changed, a0_valid, checked, True, r
+        k = k0 + j
+        if r < rec.shape[0] and k == rec[r]:
+            shot_x[r] = x
+            shot_v[r] = v
+            r += 1
+        if k == due or k == last:  # noqa: SIM109 - plain comparisons in compiled code
+            if energy and not _energy_passes(
+                x, v, times[j], mass, elastic, efps, eips, releasing, rfps, rips, u_refs, x_ref, no_u, books
+            ):
+                return j, evals, changed, a0_valid, checked, True, r
+            x_good[:] = x
+            v_good[:] = v
+            checked = k
+    return steps, evals, changed, a0_valid, checked, False, r
 
 
 #: rows per block of the blocked chunk: a block's position, velocity, acceleration and
@@ -519,10 +683,10 @@ class _Address(numba.types.WrapperAddressProtocol):
         return self._signature
 
 
-def _addresses(dispatchers: Any, stage: bool = False) -> tuple[Any, ...]:
-    from animsim.elements import kernel_signature, stage_signature
+def _addresses(dispatchers: Any, stage: bool = False, energy: bool = False) -> tuple[Any, ...]:
+    from animsim.elements import energy_signature, kernel_signature, stage_signature
 
-    sig = stage_signature() if stage else kernel_signature()
+    sig = energy_signature() if energy else stage_signature() if stage else kernel_signature()
     return tuple(_Address(d, sig) for d in dispatchers)
 
 
@@ -699,6 +863,9 @@ class FusedStepper:
         #: rows are independent (animsim.backends.fused_in_blocks): blocked_chunk steps them
         self.blocked = fused_in_blocks(compiled)
         pinned = compiled.system.particle_pinned
+        #: the pinned rows' indices, as the plain chunk (and the checked one) takes them
+        self.plain_pinned = np.ascontiguousarray(np.flatnonzero(pinned), dtype=np.int64)
+        self._checks: Any = None
         if self.blocked:
             # per-row pinned flags for the blocks; Verlet's cached acceleration, and room to
             # save each block's rows (position, velocity, that acceleration) at a call's start
@@ -706,7 +873,7 @@ class FusedStepper:
             self.kx = self.kv = np.zeros((stages, 0, 3))
             self.work = tuple(np.zeros((n, 3)) for _ in range(4))  # a0, x, v and a0 saved
         else:
-            self.pinned = np.ascontiguousarray(np.flatnonzero(pinned), dtype=np.int64)
+            self.pinned = self.plain_pinned
             self.kx = np.zeros((stages, n, 3))
             self.kv = np.zeros((stages, n, 3))
             self.work = tuple(np.zeros((n, 3)) for _ in range(6))  # xs, vs, a0, a1, xo, vo
@@ -769,6 +936,128 @@ class FusedStepper:
         if changed:
             state.revision += 1
         return int(taken), int(evals), bool(failed)
+
+    def check_inside(self, watch: Any) -> bool:
+        """Take the watchdog's checks into the chunks (:meth:`advance_checked`) for the books of
+        ``watch`` (an opened :class:`animsim.analysis.watchdog.EnergyWatch`), when every
+        element its energy test sums has a compiled energy kernel; False leaves them to Python.
+
+        Only for a run without births (the books never change after they opened) and
+        without rigid bodies (the fused stepper has none).
+        """
+        self._checks = None
+        if watch.alive_prev is not None:
+            return False
+        energy = watch.disabled is None
+        elastic: list[Any] = watch.elastic if energy else []
+        releasing: list[Any] = watch.releasing if energy else []
+        if any(t.numba_energy_source is None for t in (*elastic, *releasing)):
+            return False
+        from animsim.elements import jit_kernel
+
+        none = jit_kernel(_no_energy, energy=True)
+
+        def table(terms: list[Any]) -> tuple[Any, ...]:
+            kernels = [t.numba_energy_kernel for t in terms] or [none]
+            params = [t.numba_energy_params() for t in terms] or [(np.zeros(0), np.zeros(0, dtype=np.int64))]
+            return (
+                _addresses(kernels, energy=True),
+                _array_tuple([p[0] for p in params], np.float64),
+                _array_tuple([p[1] for p in params], np.int64),
+            )
+
+        no_u = np.zeros(0)
+        u_refs = _array_tuple(list(watch.u_ref) if releasing else [no_u], np.float64)
+        books = np.array([*watch.budget_constants(), watch.allowance * (1.0 - CHECK_MARGIN)])
+        n = self.compiled.system.particle_count
+        stages = self.kx.shape[0]
+        if self.blocked:  # the blocked chunk's Verlet acceleration is shared, so either may go on
+            a0 = self.work[0]
+            work = (np.zeros((n, 3)), np.zeros((n, 3)), a0, *(np.zeros((n, 3)) for _ in range(3)))
+            kx, kv = np.zeros((stages, n, 3)), np.zeros((stages, n, 3))
+        else:
+            work, kx, kv = self.work, self.kx, self.kv
+        self._checks = (
+            (kx, kv, *work),
+            (
+                energy,
+                *table(elastic),
+                *table(releasing),
+                u_refs,
+                np.ascontiguousarray(watch.x_ref),
+                no_u,
+                books,
+            ),
+            (np.zeros((n, 3)), np.zeros((n, 3))),
+        )
+        self._checked_call: Any = None
+        return True
+
+    def advance_checked(
+        self,
+        state: Any,
+        k0: int,
+        times: np.ndarray,
+        dts: np.ndarray,
+        checked: int,
+        stride: int,
+        last: int,
+        rec: np.ndarray,
+        shots: tuple[np.ndarray, np.ndarray],
+    ) -> tuple[int, int, int, bool, int]:
+        """len(dts) steps from clock position k0 with the watchdog's checks inside
+        (:func:`checked_chunk`; ``times`` has one more entry than ``dts``), copying the
+        states at the positions ``rec`` into ``shots``; (steps taken, force evaluations,
+        the position of the last passed check, stopped, states copied)."""
+        d = self.compiled.dynamics
+        c, a, b = self.tab
+        work, books, good = self._checks
+        args = (
+            state.particle_position,
+            state.particle_velocity,
+            times,
+            dts,
+            self.method,
+            c,
+            a,
+            b,
+            self.kernels,
+            self.fps,
+            self.ips,
+            live_array(d.mass, self._copies),
+            live_array(d.inv_mass, self._copies),
+            self.plain_pinned,
+            self.stages,
+            self.stage_fps,
+            self.stage_ips,
+            *work,
+            self.a0_valid,
+            self.stage_owner is not None,
+            k0,
+            checked,
+            stride,
+            last,
+            *books,
+            *good,
+            rec,
+            *shots,
+        )
+        if self._checked_call is None:
+            result = checked_chunk(*args)
+            self._checked_call = _FastCall(checked_chunk, args)
+        else:
+            result = self._checked_call(*args)
+        taken, evals, changed, self.a0_valid, passed, stopped, copied = result
+        self.changed_steps += int(changed)
+        if changed:
+            state.revision += 1
+        return int(taken), int(evals), int(passed), bool(stopped), int(copied)
+
+    def good_state(self, dest: Any) -> None:
+        """Copy the positions and velocities of the last passed check into ``dest``."""
+        x_good, v_good = self._checks[2]
+        dest.particle_position[...] = x_good
+        dest.particle_velocity[...] = v_good
 
 
 __all__ = ["FusedStepper", "NumbaForces", "numba"]

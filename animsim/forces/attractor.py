@@ -29,6 +29,21 @@ def _kernel(x, v, t, out, mass, fp, ip):
             out[i, 2] += s * r2
 
 
+def _released_energy(x, x_ref, u_ref, mass, fp, ip):  # numba: ENERGY_SIGNATURE
+    """U(x_ref) - U(x) = sum (u_ref_i - U_i(x)), U_i = -gm m_i / sqrt(|x_i - c|^2 + eps^2) where
+    that root is positive, else 0 (per_particle_potential's terms, summed in particle order)."""
+    c0, c1, c2, gm, eps2 = fp[0], fp[1], fp[2], fp[3], fp[4]
+    total = 0.0
+    for i in range(x.shape[0]):
+        r0 = x[i, 0] - c0
+        r1 = x[i, 1] - c1
+        r2 = x[i, 2] - c2
+        d = np.sqrt(((r0 * r0 + r1 * r1) + r2 * r2) + eps2)
+        u = -gm * mass[i] / d if d > 0 else 0.0
+        total += u_ref[i] - u
+    return total
+
+
 class Attractor(ForceElement):
     #: row i of its force reads only row i (the numba backend may evaluate it on a few rows)
     pointwise = True
@@ -70,6 +85,7 @@ class Attractor(ForceElement):
         return float(np.sum(u_ref - self.per_particle_potential(x)))
 
     numba_source = staticmethod(_kernel)
+    numba_energy_source = staticmethod(_released_energy)
 
     def numba_params(self) -> tuple[np.ndarray, np.ndarray]:
         return np.concatenate([self.center, [self.gm, self.eps2]]), np.zeros(0, dtype=np.int64)

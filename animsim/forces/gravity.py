@@ -31,6 +31,19 @@ def _released_terms(x, x_ref, g, mass, out):  # numba: compiled by Gravity.relea
         out[i] = mass[i] * r
 
 
+def _released_energy(x, x_ref, u_ref, mass, fp, ip):  # numba: ENERGY_SIGNATURE
+    """U(x_ref) - U(x) = sum m_i g.(x_i - x_ref_i), each term as _released_terms makes it,
+    summed in particle order (the watchdog's checks inside the fused chunks)."""
+    g0, g1, g2 = fp[0], fp[1], fp[2]
+    total = 0.0
+    for i in range(x.shape[0]):
+        r = (x[i, 0] - x_ref[i, 0]) * g0
+        r = r + (x[i, 1] - x_ref[i, 1]) * g1
+        r = r + (x[i, 2] - x_ref[i, 2]) * g2
+        total += mass[i] * r
+    return total
+
+
 _RELEASED: list[Any] = []
 
 
@@ -87,6 +100,7 @@ class Gravity(ForceElement):
         return float(terms.sum())
 
     numba_source = staticmethod(_kernel)
+    numba_energy_source = staticmethod(_released_energy)
 
     def numba_params(self) -> tuple[np.ndarray, np.ndarray]:
         return self.g.copy(), np.zeros(0, dtype=np.int64)

@@ -38,6 +38,17 @@ def _kernel(x, v, t, out, mass, fp, ip):
             out[i, 2] += push * n2
 
 
+def _energy(x, x_ref, u_ref, mass, fp, ip):  # numba: ENERGY_SIGNATURE
+    """The potential 1/2 k sum min(d_i, 0)^2, d_i = (x_i - p).n (PenaltyPlane.potential)."""
+    p0, p1, p2, n0, n1, n2, k = fp[0], fp[1], fp[2], fp[3], fp[4], fp[5], fp[6]
+    total = 0.0
+    for i in range(x.shape[0]):
+        d = (x[i, 0] - p0) * n0 + (x[i, 1] - p1) * n1 + (x[i, 2] - p2) * n2
+        if not d >= 0.0:  # NaN too, as np.minimum(d, 0) keeps it
+            total += d * d
+    return 0.5 * k * total
+
+
 class PenaltyPlane(ForceElement):
     """Built by the plane module (:mod:`animsim.collisions`) for planes with ``response: penalty``."""
 
@@ -62,6 +73,7 @@ class PenaltyPlane(ForceElement):
         c_rows += self.c * inv_mass
 
     numba_source = staticmethod(_kernel)
+    numba_energy_source = staticmethod(_energy)
 
     def numba_params(self) -> tuple[np.ndarray, np.ndarray]:
         return np.concatenate([self.p, self.n, [self.k, self.c]]), np.zeros(0, dtype=np.int64)

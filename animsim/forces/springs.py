@@ -79,6 +79,24 @@ def _kernel(x, v, t, out, mass, fp, ip):
         out[i, 2] += f2
 
 
+def _energy(x, x_ref, u_ref, mass, fp, ip):  # numba: ENERGY_SIGNATURE
+    """The potential sum 1/2 ks (|L| - R)^2 (Springs.potential), summed in spring order.
+
+    fp = [rest (S), ks (S)]; ip = [S, a (S), b (S)] (Springs.numba_energy_params).
+    """
+    ns = ip[0]
+    total = 0.0
+    for s in range(ns):
+        a = ip[1 + s]
+        b = ip[1 + ns + s]
+        d0 = x[a, 0] - x[b, 0]
+        d1 = x[a, 1] - x[b, 1]
+        d2 = x[a, 2] - x[b, 2]
+        stretch = np.sqrt((d0 * d0 + d1 * d1) + d2 * d2) - fp[s]
+        total += fp[ns + s] * (stretch * stretch)
+    return 0.5 * total
+
+
 #: springs from which the numba kernel runs its loops in parallel; below, a
 #: parallel region's start-up costs more than it saves
 PARALLEL_MIN_SPRINGS = 20_000
@@ -145,6 +163,14 @@ class Springs(ForceElement):
             rows += np.bincount(b, weights=coef * (ib + cross), minlength=n)
 
     numba_source = staticmethod(_kernel)
+    numba_energy_source = staticmethod(_energy)
+
+    def numba_energy_params(self) -> tuple[np.ndarray, np.ndarray]:
+        """All the springs' rest lengths, stiffnesses and ends, in _energy's layout (grid
+        springs too: they are Springs over the full spring set)."""
+        fp = np.concatenate([self.rest, self.ks]).astype(np.float64)
+        ip = np.concatenate([[len(self.a)], self.a, self.b]).astype(np.int64)
+        return fp, ip
 
     def numba_params(self) -> tuple[np.ndarray, np.ndarray]:
         ns, n = len(self.a), self.n
