@@ -1042,11 +1042,9 @@ class FusedStepper:
             rec,
             *shots,
         )
-        if self._checked_call is None:
-            result = checked_chunk(*args)
+        if self._checked_call is None:  # loads (or compiles) the chunk; then calls its overload
             self._checked_call = _FastCall(checked_chunk, args)
-        else:
-            result = self._checked_call(*args)
+        result = self._checked_call(*args)
         taken, evals, changed, self.a0_valid, passed, stopped, copied = result
         self.changed_steps += int(changed)
         if changed:
