@@ -435,6 +435,10 @@ def _settle(pl: ImpulsePlane, x: np.ndarray, v: np.ndarray, buf: _Blocks) -> Non
 
 #: rows copied into the vector buffer at a time (12 coordinates x 128 rows, 12 KB)
 STAGE_RUN = 128
+#: the rule runs over a multiple of this many buffer rows (the vector loop's width: four
+#: float64 in the 256-bit registers the compiler uses), so no row is left to the loop's slow
+#: one-row-at-a-time tail; the rows added have a zero inverse mass, so they never hit
+VECTOR_ROWS = 4
 
 
 @numba_inline_helper
@@ -677,12 +681,15 @@ def _stage_kernel(x_old, v_old, x, v, dt, inv_mass, fp, ip):
                 buf[6 + k, j] = x_old[i, k]
                 buf[9 + k, j] = v_old[i, k]
             buf[12, j] = inv_mass[i]
+        width = min((c + VECTOR_ROWS - 1) // VECTOR_ROWS * VECTOR_ROWS, STAGE_RUN)
+        for j in range(c, width):
+            buf[12, j] = 0.0
         if count == 1:
-            hit, again = _run_one_plane(buf, c, n0, n1, n2, off, e0, mu, dt, nudge)
+            hit, again = _run_one_plane(buf, width, n0, n1, n2, off, e0, mu, dt, nudge)
             if again:
-                _run_nudges(buf, c, n0, n1, n2, off, nudge)
+                _run_nudges(buf, width, n0, n1, n2, off, nudge)
         else:
-            hit = _planes_hit(buf, c, fp, dt, touched, nudge)
+            hit = _planes_hit(buf, width, fp, dt, touched, nudge)
         if not hit:
             continue
         changed = True
