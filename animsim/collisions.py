@@ -426,25 +426,26 @@ def _settle(pl: ImpulsePlane, x: np.ndarray, v: np.ndarray, buf: _Blocks) -> Non
 # 23 -> 17 ns when every row rests on the plane, 12.8 -> 11.4 when a third does, 5.4 ->
 # 6.4 when none does (2 ns of each is copying the rows for the measurement).
 #
-# The rule of one row is written once (_hit_row, _settle_row) and the loops call it: the
-# compiler inlines it into each loop. ``friction`` is a constant at every call (True or
-# False), so numba compiles a loop for each and drops the frictionless loop's square root
-# and division (its factor is exactly 1: t * 1.0 is t). A single plane, the common case,
-# hits and settles each row in one pass while its numbers are in registers (with several
-# planes every hit comes before every settling, as above).
+# The rule of one row is written once (_hit_row, _settle_row) and the loops call it:
+# numba copies it into each loop (numba_inline_helper; a call would keep the loop off the
+# vector units). ``friction`` is False exactly when the plane's friction is 0 (the factor
+# is then 1, and t * 1.0 is t); where it is a constant at the call (the ground's loops,
+# _run_one_plane) the frictionless loop has no square root or division at all. A single
+# plane, the common case, hits and settles each row in one pass while its numbers are in
+# registers (with several planes every hit comes before every settling, as above).
 
 #: rows copied into the vector buffer at a time (12 coordinates x 128 rows, 12 KB)
 STAGE_RUN = 128
 #: the rule runs over a multiple of this many buffer rows (the vector loop's width: four
 #: float64 in the 256-bit registers the compiler uses), so no row is left to the loop's slow
-#: one-row-at-a-time tail; the rows added have a zero inverse mass, so they never hit
+#: one-row-at-a-time tail; the rows added are at x = NaN, so they never hit
 VECTOR_ROWS = 4
 
 
 @numba_inline_helper
 def _friction_scale(t0, t1, t2, mu, dvn, friction):
     """Coulomb's factor max(|t| - mu dvn, 0) / |t| on the tangential velocity t (0 at rest),
-    as selects; exactly 1 without friction (``friction``: a compile-time constant)."""
+    as selects; exactly 1 without friction (``friction`` False)."""
     if friction:
         speed = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
         scaled = np.true_divide(max(speed - mu * dvn, 0.0), speed)
@@ -453,11 +454,11 @@ def _friction_scale(t0, t1, t2, mu, dvn, friction):
 
 
 @numba_inline_helper
-def _hit_row(x0, x1, x2, v0, v1, v2, xo0, xo1, xo2, vo0, vo1, vo2, w, n0, n1, n2, off, e0, mu, dt, friction):
+def _hit_row(x0, x1, x2, v0, v1, v2, xo0, xo1, xo2, vo0, vo1, vo2, n0, n1, n2, off, e0, mu, dt, friction):
     """One row's impulse on one plane: (hit, x, v) with x, v unchanged where it did not hit."""
     d1 = x0 * n0 + x1 * n1 + x2 * n2 - off
-    # behind the plane, or on it and moving in (NaN: no); never pinned or dead rows
-    hit = (not w <= 0) & (d1 <= 0) & ((d1 < 0) | (v0 * n0 + v1 * n1 + v2 * n2 < 0))
+    # behind the plane, or on it and moving in (NaN: no); pinned and dead rows never come here
+    hit = (d1 <= 0) & ((d1 < 0) | (v0 * n0 + v1 * n1 + v2 * n2 < 0))
     d0 = max(xo0 * n0 + xo1 * n1 + xo2 * n2 - off, 0.0)
     gap = d0 - d1
     q = np.true_divide(d0, gap)  # computed for every row, kept where the guard holds
@@ -526,14 +527,14 @@ def _settle_row(x0, x1, x2, v0, v1, v2, touched, n0, n1, n2, off, mu, friction):
 @numba_helper
 def _run_hits(buf, c, n0, n1, n2, off, e0, mu, dt, touched, friction):
     """One plane's impulse on the first ``c`` rows of ``buf`` (lines 0-2 x, 3-5 v, 6-8 the
-    step's start x, 9-11 its v, 12 the inverse mass), in place where a row hit it; True if
+    step's start x, 9-11 its v), in place where a row hit it; True if
     any did."""
     any_hit = False
     for j in range(c):
         hit, buf[0, j], buf[1, j], buf[2, j], buf[3, j], buf[4, j], buf[5, j] = _hit_row(
             buf[0, j], buf[1, j], buf[2, j], buf[3, j], buf[4, j], buf[5, j],
             buf[6, j], buf[7, j], buf[8, j], buf[9, j], buf[10, j], buf[11, j],
-            buf[12, j], n0, n1, n2, off, e0, mu, dt, friction,
+            n0, n1, n2, off, e0, mu, dt, friction,
         )  # fmt: skip
         touched[j] |= hit
         any_hit |= hit
@@ -565,7 +566,7 @@ def _run_plane(buf, c, n0, n1, n2, off, e0, mu, dt, nudge, friction):
         hit, x0, x1, x2, v0, v1, v2 = _hit_row(
             buf[0, j], buf[1, j], buf[2, j], buf[3, j], buf[4, j], buf[5, j],
             buf[6, j], buf[7, j], buf[8, j], buf[9, j], buf[10, j], buf[11, j],
-            buf[12, j], n0, n1, n2, off, e0, mu, dt, friction,
+            n0, n1, n2, off, e0, mu, dt, friction,
         )  # fmt: skip
         buf[0, j], buf[1, j], buf[2, j], buf[3, j], buf[4, j], buf[5, j], again = _settle_row(
             x0, x1, x2, v0, v1, v2, hit, n0, n1, n2, off, mu, friction
@@ -578,24 +579,18 @@ def _run_plane(buf, c, n0, n1, n2, off, e0, mu, dt, nudge, friction):
 
 @numba_helper
 def _run_one_plane(buf, c, n0, n1, n2, off, e0, mu, dt, nudge):
-    """_run_plane compiled for this plane's friction (none or some), and for the ground of a
-    y-up or z-up scene with its normal's components as constants: the compiler then drops
-    the products by 1.0 and the differences of +0.0 (x * 1.0 and x - 0.0 are x to the bit;
-    it rewrites nothing that could change a bit), about a sixth of a resting row's work.
-    A component -0.0 is not +0.0 here (its products keep their signs)."""
+    """_run_plane, compiled apart for the ground of a y-up scene, with and without friction:
+    its normal's components are constants there, so the compiler drops the products by 1.0
+    and the differences of +0.0 (x * 1.0 and x - 0.0 are x to the bit; it rewrites nothing
+    that could change a bit), and without friction the square roots and divisions. A
+    component -0.0 is not +0.0 here (its products keep their signs). Each copy costs
+    compile time (the kernel is compiled once and cached on disk), so other planes share one."""
     unsigned = math.copysign(1.0, n0) > 0 and math.copysign(1.0, n2) > 0
-    if unsigned and n0 == 0.0 and n1 == 1.0 and n2 == 0.0:  # y up
+    if unsigned and n0 == 0.0 and n1 == 1.0 and n2 == 0.0:
         if mu == 0.0:
             return _run_plane(buf, c, 0.0, 1.0, 0.0, off, e0, mu, dt, nudge, False)
         return _run_plane(buf, c, 0.0, 1.0, 0.0, off, e0, mu, dt, nudge, True)
-    unsigned = math.copysign(1.0, n0) > 0 and math.copysign(1.0, n1) > 0
-    if unsigned and n0 == 0.0 and n1 == 0.0 and n2 == 1.0:  # z up
-        if mu == 0.0:
-            return _run_plane(buf, c, 0.0, 0.0, 1.0, off, e0, mu, dt, nudge, False)
-        return _run_plane(buf, c, 0.0, 0.0, 1.0, off, e0, mu, dt, nudge, True)
-    if mu == 0.0:
-        return _run_plane(buf, c, n0, n1, n2, off, e0, mu, dt, nudge, False)
-    return _run_plane(buf, c, n0, n1, n2, off, e0, mu, dt, nudge, True)
+    return _run_plane(buf, c, n0, n1, n2, off, e0, mu, dt, nudge, mu != 0.0)
 
 
 @numba_helper
@@ -625,28 +620,22 @@ def _planes_hit(buf, c, fp, dt, touched, nudge):
         touched[j] = False
     for k in range(count):
         p = fp[1 + 6 * k : 7 + 6 * k]  # normal, offset, restitution, friction
-        if p[5] == 0.0:
-            got = _run_hits(buf, c, p[0], p[1], p[2], p[3], p[4], p[5], dt, touched, False)
-        else:
-            got = _run_hits(buf, c, p[0], p[1], p[2], p[3], p[4], p[5], dt, touched, True)
-        hit |= got
+        hit |= _run_hits(buf, c, p[0], p[1], p[2], p[3], p[4], p[5], dt, touched, p[5] != 0.0)
     if not hit:
         return False
     for k in range(count):
         p = fp[1 + 6 * k : 7 + 6 * k]
-        if p[5] == 0.0:
-            again = _run_projections(buf, c, p[0], p[1], p[2], p[3], p[5], touched, nudge, False)
-        else:
-            again = _run_projections(buf, c, p[0], p[1], p[2], p[3], p[5], touched, nudge, True)
-        if again:
+        if _run_projections(buf, c, p[0], p[1], p[2], p[3], p[5], touched, nudge, p[5] != 0.0):
             _run_nudges(buf, c, p[0], p[1], p[2], p[3], nudge)
     return True
 
 
 def _stage_kernel(x_old, v_old, x, v, dt, inv_mass, fp, ip):
     count = int(fp[0])
+    if count == 0:
+        return False
     m = x.shape[0]
-    buf = np.empty((13, STAGE_RUN))  # the rows' coordinates, and their inverse masses
+    buf = np.empty((12, STAGE_RUN))  # the rows' coordinates
     rows = np.empty(STAGE_RUN, dtype=np.int64)
     flags = np.empty((2, STAGE_RUN), dtype=np.bool_)
     touched = flags[0]
@@ -680,10 +669,9 @@ def _stage_kernel(x_old, v_old, x, v, dt, inv_mass, fp, ip):
                 buf[3 + k, j] = v[i, k]
                 buf[6 + k, j] = x_old[i, k]
                 buf[9 + k, j] = v_old[i, k]
-            buf[12, j] = inv_mass[i]
         width = min((c + VECTOR_ROWS - 1) // VECTOR_ROWS * VECTOR_ROWS, STAGE_RUN)
         for j in range(c, width):
-            buf[12, j] = 0.0
+            buf[0, j] = np.nan
         if count == 1:
             hit, again = _run_one_plane(buf, width, n0, n1, n2, off, e0, mu, dt, nudge)
             if again:
