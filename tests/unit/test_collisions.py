@@ -209,9 +209,9 @@ def test_numpy_plane_stage_equals_the_numba_kernel_bit_for_bit(seed, monkeypatch
     ],
 )
 def test_one_plane_kernel_for_the_ground_equals_the_numpy_stage_bit_for_bit(normal):
-    """A single plane runs a kernel compiled with a y-up or z-up normal as constants; a normal
-    with a -0.0 component, or another axis, runs the general one. All give the NumPy stage's
-    bits (a -0.0 component keeps the signs of its products)."""
+    """A single plane runs a kernel compiled with the y-up ground's normal as constants; z up,
+    a normal with a -0.0 component, or another axis run the general one. All give the NumPy
+    stage's bits (a -0.0 component keeps the signs of its products)."""
     pytest.importorskip("numba")
     from animsim import collisions
     from animsim.elements import jit_kernel
