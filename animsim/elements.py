@@ -296,6 +296,16 @@ def numba_helper(fn: Callable[..., Any]) -> Callable[..., Any]:
     return fn
 
 
+def numba_inline_helper(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """:func:`numba_helper` whose body numba copies into each caller (``inline="always"``).
+
+    For a rule of one row called in a loop: the compiler's own inlining leaves a long
+    function as a call, and a call in a loop keeps the loop from using the vector units.
+    """
+    fn._numba_inline = True  # type: ignore[attr-defined]
+    return numba_helper(fn)
+
+
 def live_array(a: np.ndarray, cache: dict[int, np.ndarray]) -> np.ndarray:
     """``a`` as numba's signature wants it: the model's read-only arrays never change, so a
     writable copy made once stands for them; a state's own (writable) arrays pass as they are."""
@@ -313,7 +323,8 @@ def _compile_helpers(namespace: dict[str, Any]) -> None:
     for name, obj in list(namespace.items()):
         # a dispatcher from an earlier call answers for its function's attributes too
         if getattr(obj, "_numba_helper", False) and not isinstance(obj, numba.core.dispatcher.Dispatcher):
-            namespace[name] = numba.njit(cache=True)(obj)
+            inline = "always" if getattr(obj, "_numba_inline", False) else "never"
+            namespace[name] = numba.njit(cache=True, inline=inline)(obj)
 
 
 _JITTED: dict[tuple[Callable[..., Any], bool, bool, bool], Any] = {}

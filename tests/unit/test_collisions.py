@@ -197,6 +197,46 @@ def test_numpy_plane_stage_equals_the_numba_kernel_bit_for_bit(seed, monkeypatch
         assert changed  # the states do reach the planes
 
 
+@pytest.mark.parametrize(
+    "normal",
+    [
+        [0.0, 1.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [-0.0, 1.0, 0.0],
+        [0.0, 1.0, -0.0],
+        [-0.0, -0.0, 1.0],
+        [0.0, -1.0, 0.0],
+    ],
+)
+def test_one_plane_kernel_for_the_ground_equals_the_numpy_stage_bit_for_bit(normal):
+    """A single plane runs a kernel compiled with the y-up ground's normal as constants; z up,
+    a normal with a -0.0 component, or another axis run the general one. All give the NumPy
+    stage's bits (a -0.0 component keeps the signs of its products)."""
+    pytest.importorskip("numba")
+    from animsim import collisions
+    from animsim.elements import jit_kernel
+
+    kernel = jit_kernel(collisions._stage_kernel, stage=True)
+    rng = np.random.default_rng(7)
+    for trial in range(8):
+        n = int(rng.integers(1, 700))
+        xo, vo, x, v, inv_mass = _plane_contact_states(rng, n)
+        up = int(np.flatnonzero(np.asarray(normal) != 0)[0])
+        if up != 1:  # rest the drops on this plane instead of the y = 0 one
+            for a in (xo, vo, x, v):
+                a[:, [1, up]] = a[:, [up, 1]]
+        point = [0.0, 0.0, 0.0] if trial % 2 == 0 else list(rng.normal(0.0, 0.002, 3))
+        plane = collisions.ImpulsePlane(np.array(point), np.array(normal), 0.5, [0.0, 0.3][trial % 3 == 2])
+        stage = collisions.PlaneColliders([plane], inv_mass)
+        fp, ip = stage.numba_stage_params()
+        x1, v1, x2, v2 = x.copy(), v.copy(), x.copy(), v.copy()
+        with np.errstate(all="ignore"):
+            changed = stage.resolve(xo, vo, x1, v1, 1e-3)
+        assert changed == bool(kernel(xo, vo, x2, v2, 1e-3, inv_mass, fp, ip))
+        assert np.array_equal(x1.view(np.int64), x2.view(np.int64)), (normal, trial)
+        assert np.array_equal(v1.view(np.int64), v2.view(np.int64)), (normal, trial)
+
+
 def test_numpy_plane_stage_per_row_steps_match_one_row_at_a_time():
     """Newborns' per-row step lengths: each row as if collided alone with its own dt."""
     from animsim import collisions
