@@ -20,12 +20,13 @@ Imported only when numba is in use.
 from __future__ import annotations
 
 import time
+import types
 import warnings
 from typing import Any
 
 import numba
 import numpy as np
-from numba import njit
+from numba import njit, prange
 from numba.core.errors import NumbaExperimentalFeatureWarning
 
 from animsim.elements import live_array
@@ -209,6 +210,11 @@ def fused_chunk(
 #: the calls into the element kernels more often, larger ones leave the cache)
 BLOCK = 512
 
+#: blocks from which a call runs them on several threads (when numba has more than one):
+#: below it, the threads' start and finish in every call cost more than the blocks they
+#: share; measured on this 2-core machine (see ``blocked_chunk_parallel``)
+PARALLEL_MIN_BLOCKS = 8
+
 
 @njit(cache=True)
 def _acc_block(x, v, t, out, kernels, fps, ips, mass, inv_mass, pinned):
@@ -263,7 +269,7 @@ def _block_steps(
     stage_fps,
     stage_ips,
     has_stage,
-    changed_at,
+    changed,
     scratch,
     kx,
     kv,
@@ -271,8 +277,9 @@ def _block_steps(
     """Steps s0..s1-1 of one block of rows (x, v, a0, mass, ... are the block's slices).
 
     The arithmetic of each row is fused_chunk's, operation for operation. ``fresh``:
-    Verlet evaluates its first acceleration (its cache is not valid). A step some stage
-    changed is marked in ``changed_at``. Returns (steps run, the last was not finite).
+    Verlet evaluates its first acceleration (its cache is not valid). ``changed[step - s0]``
+    says whether a stage changed one of the block's rows at that step. Returns (steps run,
+    the last was not finite).
     """
     m = x.shape[0]
     acc = scratch[0, :m]
@@ -339,16 +346,100 @@ def _block_steps(
                     _axpy(x, dt * tab_b[j], kx[j, :m])
                     _axpy(v, dt * tab_b[j], kv[j, :m])
         if has_stage:
+            hit = False
             for s in range(len(stage_fns)):
                 if stage_fns[s](xo, vo, x, v, dt, inv_mass, stage_fps[s], stage_ips[s]):
-                    changed_at[step] = True
+                    hit = True
+            changed[step - s0] = hit
         if not _all_finite(x, v):
             return step + 1 - s0, True
     return s1 - s0, False
 
 
 @njit(cache=True)
-def blocked_chunk(
+def _one_block(
+    b,
+    block,
+    x,
+    v,
+    a0,
+    x_save,
+    v_save,
+    a0_save,
+    restore,
+    save,
+    times,
+    dts,
+    s0,
+    s1,
+    fresh,
+    method,
+    tab_c,
+    tab_a,
+    tab_b,
+    kernels,
+    fps,
+    ips,
+    mass,
+    inv_mass,
+    pinned,
+    stage_fns,
+    stage_fps,
+    stage_ips,
+    has_stage,
+    changed,
+):
+    """Block ``b`` (rows b * block onward) through steps s0..s1-1, with work arrays of its
+    own (so blocks may run on different threads at once). ``save``: keep its rows first, so
+    it can be put back; ``restore``: put its kept rows back first. Returns _block_steps'."""
+    lo = b * block
+    hi = min(lo + block, x.shape[0])
+    if restore:
+        x[lo:hi] = x_save[lo:hi]
+        v[lo:hi] = v_save[lo:hi]
+        if method == VERLET:
+            a0[lo:hi] = a0_save[lo:hi]
+    elif save:
+        x_save[lo:hi] = x[lo:hi]
+        v_save[lo:hi] = v[lo:hi]
+        if method == VERLET:
+            a0_save[lo:hi] = a0[lo:hi]
+    m = hi - lo
+    stages = tab_b.shape[0]
+    scratch = np.empty((6, m, 3))
+    kx = np.empty((stages, m, 3))
+    kv = np.empty((stages, m, 3))
+    return _block_steps(
+        x[lo:hi],
+        v[lo:hi],
+        a0[lo:hi],
+        times,
+        dts,
+        s0,
+        s1,
+        fresh,
+        method,
+        tab_c,
+        tab_a,
+        tab_b,
+        kernels,
+        fps,
+        ips,
+        mass[lo:hi],
+        inv_mass[lo:hi],
+        pinned[lo:hi],
+        stage_fns,
+        stage_fps,
+        stage_ips,
+        has_stage,
+        changed[b],
+        scratch,
+        kx,
+        kv,
+    )
+
+
+def _blocked_chunk(
     x,
     v,
     times,
@@ -379,46 +470,49 @@ def blocked_chunk(
 
     Rows are independent, so each block of ``block`` rows runs all the call's steps while
     it sits in the cache: one pass over the arrays per call instead of several per step.
-    What couples the rows is kept: a step counts as changed when a stage changed any row,
-    and the chunk stops after the first step at which any row is not finite (the blocks
-    that ran past it are put back and run again up to it, from their saved rows). Verlet
-    re-evaluates every row's acceleration after a step a stage changed (a global
-    decision), so with a stage it goes one step at a time over all blocks.
+    The blocks do not depend on each other within a call, so ``blocked_chunk_parallel``
+    runs them on several threads (``prange``; ``blocked_chunk`` is the same code on one):
+    each block writes its own rows, its own work arrays and its own row of ``changed``.
+    What couples the rows is settled after the blocks, in block order: a step counts as
+    changed when a stage changed any block's row at it, and the chunk stops after the first
+    step at which any row is not finite (the blocks that ran past it are put back and run
+    again up to it, from their saved rows). Verlet re-evaluates every row's acceleration
+    after a step a stage changed (a global decision), so with a stage it goes one step at
+    a time over all blocks.
 
     Returns what fused_chunk returns.
     """
     n = x.shape[0]
     steps = dts.shape[0]
     stages = tab_b.shape[0]
-    changed_at = np.zeros(steps, dtype=np.bool_)
-    scratch = np.empty((6, block, 3))
-    kx = np.empty((stages, block, 3))
-    kv = np.empty((stages, block, 3))
+    nblocks = (n + block - 1) // block
     span = 1 if (method == VERLET and has_stage) else steps
+    save = span > 1  # a span of one step is never run past
+    changed = np.zeros((nblocks, max(span, 1)), dtype=np.bool_)  # per block, per step of the span
+    ran = np.zeros(nblocks, dtype=np.int64)
+    bad = np.zeros(nblocks, dtype=np.bool_)
     evals = 0
     changed_steps = 0
     s0 = 0
     while s0 < steps:
         s1 = min(s0 + span, steps)
-        limit = s1  # every block runs up to here; a block not finite earlier lowers it
-        failed = False
-        redo = 0  # blocks before this row ran past ``limit``
         fresh = not a0_valid
-        for lo in range(0, n, block):
-            hi = min(lo + block, n)
-            if span > 1:
-                x_save[lo:hi] = x[lo:hi]
-                v_save[lo:hi] = v[lo:hi]
-                if method == VERLET:
-                    a0_save[lo:hi] = a0[lo:hi]
-            ran, bad = _block_steps(
-                x[lo:hi],
-                v[lo:hi],
-                a0[lo:hi],
+        for b in prange(nblocks):
+            r, f = _one_block(
+                b,
+                block,
+                x,
+                v,
+                a0,
+                x_save,
+                v_save,
+                a0_save,
+                False,
+                save,
                 times,
                 dts,
                 s0,
-                limit,
+                s1,
                 fresh,
                 method,
                 tab_c,
@@ -427,57 +521,58 @@ def blocked_chunk(
                 kernels,
                 fps,
                 ips,
-                mass[lo:hi],
-                inv_mass[lo:hi],
-                pinned[lo:hi],
+                mass,
+                inv_mass,
+                pinned,
                 stage_fns,
                 stage_fps,
                 stage_ips,
                 has_stage,
-                changed_at,
-                scratch,
-                kx,
-                kv,
+                changed,
             )
-            if bad:
+            ran[b] = r
+            bad[b] = f
+        limit = s1  # the step after the first one at which some row is not finite
+        failed = False
+        for b in range(nblocks):
+            if bad[b]:
                 failed = True
-                if s0 + ran < limit:
-                    limit = s0 + ran
-                    redo = lo
-        for lo in range(0, redo, block):
-            hi = min(lo + block, n)
-            x[lo:hi] = x_save[lo:hi]
-            v[lo:hi] = v_save[lo:hi]
-            if method == VERLET:
-                a0[lo:hi] = a0_save[lo:hi]
-            _block_steps(
-                x[lo:hi],
-                v[lo:hi],
-                a0[lo:hi],
-                times,
-                dts,
-                s0,
-                limit,
-                fresh,
-                method,
-                tab_c,
-                tab_a,
-                tab_b,
-                kernels,
-                fps,
-                ips,
-                mass[lo:hi],
-                inv_mass[lo:hi],
-                pinned[lo:hi],
-                stage_fns,
-                stage_fps,
-                stage_ips,
-                has_stage,
-                changed_at,
-                scratch,
-                kx,
-                kv,
-            )
+                limit = min(limit, s0 + ran[b])
+        if failed:  # the blocks that ran past it go back and run up to it
+            for b in prange(nblocks):
+                if s0 + ran[b] > limit:
+                    _one_block(
+                        b,
+                        block,
+                        x,
+                        v,
+                        a0,
+                        x_save,
+                        v_save,
+                        a0_save,
+                        True,
+                        False,
+                        times,
+                        dts,
+                        s0,
+                        limit,
+                        fresh,
+                        method,
+                        tab_c,
+                        tab_a,
+                        tab_b,
+                        kernels,
+                        fps,
+                        ips,
+                        mass,
+                        inv_mass,
+                        pinned,
+                        stage_fns,
+                        stage_fps,
+                        stage_ips,
+                        has_stage,
+                        changed,
+                    )
         for step in range(s0, limit):  # fused_chunk's counts, step by step
             if method == VERLET:
                 evals += 1 if a0_valid else 2
@@ -486,13 +581,34 @@ def blocked_chunk(
                 evals += stages
             else:
                 evals += 1
-            if changed_at[step]:
+            hit = False
+            for b in range(nblocks):  # every block ran this step (limit is the earliest end)
+                if changed[b, step - s0]:
+                    hit = True
+                    break
+            if hit:
                 changed_steps += 1
                 a0_valid = False
         if failed:
             return limit, evals, changed_steps, a0_valid, True
         s0 = s1
     return steps, evals, changed_steps, a0_valid, False
+
+
+def _twin(fn: Any, name: str) -> Any:
+    """``fn`` under another name, so numba's disk cache keeps its own entry for each build."""
+    twin = types.FunctionType(fn.__code__, fn.__globals__, name)
+    twin.__qualname__ = name
+    twin.__module__ = fn.__module__
+    twin.__doc__ = fn.__doc__
+    return twin
+
+
+#: the blocks one after another on the calling thread (numba runs ``prange`` as ``range``)
+blocked_chunk = njit(cache=True)(_twin(_blocked_chunk, "blocked_chunk"))
+#: the blocks on numba's threads; compiled (or loaded) only when a run first uses it, and
+#: only then does numba start its thread pool
+blocked_chunk_parallel = njit(cache=True, parallel=True)(_twin(_blocked_chunk, "blocked_chunk_parallel"))
 
 
 class _Address(numba.types.WrapperAddressProtocol):
@@ -704,12 +820,16 @@ class FusedStepper:
             self.kx = np.zeros((stages, n, 3))
             self.kv = np.zeros((stages, n, 3))
             self.work = tuple(np.zeros((n, 3)) for _ in range(6))  # xs, vs, a0, a1, xo, vo
+        #: enough blocks to share among numba's threads (when it has several): the blocked
+        #: chunk's calls then run them in parallel (blocked_chunk_parallel)
+        self.parallel_blocks = self.blocked and -(-n // BLOCK) >= PARALLEL_MIN_BLOCKS
         self.a0_valid = False
         work = n + compiled.system.spring_count
         self.max_steps_per_call = max(1, MAX_WORK_PER_CALL // max(work, 1))
         self.compile_seconds = 0.0
         self._copies: dict[int, np.ndarray] = {}
-        self._chunk: Any = None
+        #: the chunk kernels this stepper has called, each called directly from then on
+        self._chunks: dict[Any, _FastCall] = {}
         #: steps a collision changed, over every call so far
         self.changed_steps = 0
 
@@ -752,14 +872,19 @@ class FusedStepper:
         if self.blocked:  # work: a0 and the rows saved at the call's start (x, v, a0)
             kernel = blocked_chunk
             args = (*common, *self.work, self.a0_valid, has_stage, BLOCK)
+            # numba's thread count is asked only for scenes big enough to use it: asking
+            # starts numba's thread pool, which a small scene's run should not wait for
+            if self.parallel_blocks and numba.get_num_threads() > 1:
+                kernel = blocked_chunk_parallel
         else:  # work: xs, vs, a0, a1, xo, vo
             kernel = fused_chunk
             args = (*common, self.kx, self.kv, *self.work, self.a0_valid, has_stage)
-        if self._chunk is None:
+        call = self._chunks.get(kernel)
+        if call is None:
             result = kernel(*args)  # compiles or loads; then the overload is called directly
-            self._chunk = _FastCall(kernel, args)
+            self._chunks[kernel] = _FastCall(kernel, args)
         else:
-            result = self._chunk(*args)
+            result = call(*args)
         taken, evals, changed, self.a0_valid, failed = result
         self.changed_steps += int(changed)
         if changed:
