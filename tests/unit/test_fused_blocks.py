@@ -254,41 +254,87 @@ def test_the_two_blocks_collide_apart(monkeypatch):
     assert counts["both"] < counts["bouncing"] + counts["falling"], counts
 
 
+def _crowd(count: int, seed: int):
+    """SCENE's forces and planes on ``count`` particles (a strand without springs) thrown
+    from random places above, on and below the ground's level."""
+    head = SCENE.split("particles:\n")[0]
+    text = head + (
+        f"structures: [{{type: strand, id: s, start: [0, 0, 0], end: [1, 0, 0], count: {count}, mass: 0.5}}]\n"
+    )
+    compiled = _compiled(text)
+    rng = np.random.default_rng(seed)
+    compiled.initial.particle_position[:] = rng.uniform([-1, -0.02, -1], [1, 0.3, 1], (count, 3))
+    compiled.initial.particle_velocity[:] = rng.uniform(-2, 2, (count, 3))
+    return compiled
+
+
+@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="one thread")
+@pytest.mark.parametrize("threads", [2], indirect=True)
+def test_many_blocks_on_two_threads_at_once(threads, monkeypatch):
+    """Blocks long enough (64 rows, 40 steps a call) that both threads step one at the same
+    time: work arrays shared between blocks would give other bits here (a race, so not
+    every time; it did on each of a few tries)."""
+    monkeypatch.setattr(fused_module, "BLOCK", 64)
+    compiled = _crowd(64 * 40, 3)
+    calls, blocked, _ = _advance_all(compiled, monkeypatch, chunk=40)
+    assert sum(c[0] for c in calls) == compiled.clock.steps and blocked.changed_steps > 0
+
+
+def _two_unstable(first: int, integrator: str, light: str = "2e-6") -> tuple[object, int]:
+    """SCENE with strong drag and two light particles, rows 9 (second block) and 42 (alone in
+    the last block): the one of mass ``light`` in row ``first`` overflows first, the other
+    (1e-3) later; the scene, and the row of the other one."""
+    other = 42 if first == 9 else 9
+    text = SCENE.replace("{type: drag, k: 0.05}", "{type: drag, k: 2.0}")
+    lines = text.rstrip("\n").split("\n")[:-1]  # without p42
+    rows = {first: ("light", light), other: ("later", "1e-3")}
+    start = next(k for k, line in enumerate(lines) if "id: p0," in line)
+    lines.append("")
+    for row, (name, mass) in rows.items():
+        lines[start + row] = (
+            f"  - {{id: {name}, mass: {mass}, position: [0.1, 1.0, 0.1], velocity: [0, 1, 0]}}"
+        )
+    return _compiled("\n".join(lines) + "\n", integrator), other
+
+
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
 @pytest.mark.parametrize("threads", THREADS, indirect=True)
+@pytest.mark.parametrize("first", [42, 9])
 @pytest.mark.parametrize("integrator", FIXED_STEP)
-def test_the_first_step_not_finite_is_the_same_wherever_it_falls(integrator, threads, monkeypatch):
-    """Strong drag makes two light particles unstable: the lighter one, the scene's last row
-    (alone in the last block), overflows first, in the middle of a call, while the other
-    rows stay finite; the other one (row 9, in the second block) would overflow a few steps
-    later in the same call (checked below). So the blocks that ran past the first step not
-    finite (all of them, on several threads; the earlier ones, on one) are put back and run
-    again up to it, the second block too though it failed itself."""
+def test_the_first_step_not_finite_is_the_same_wherever_it_falls(integrator, first, threads, monkeypatch):
+    """Strong drag makes two light particles unstable: the lighter one (row ``first``: the
+    last block, or the second) overflows first, in the middle of a call, while the other
+    rows stay finite; the other one would overflow a few steps later in the same call
+    (checked below). So the blocks that ran past the first step not finite (all the others,
+    on several threads; on one, those before it) are put back and run again up to it, the
+    other failing block too, and the chunk stops at the earlier of the two failures
+    whichever block is first."""
     monkeypatch.setattr(fused_module, "BLOCK", SMALL_BLOCK)
-    text = SCENE.replace("{type: drag, k: 0.05}", "{type: drag, k: 2.0}")
-    last = text.rstrip("\n").rsplit("\n", 1)[0]
-    text = last + "\n  - {id: light, mass: 2e-6, position: [0.1, 1.0, 0.1], velocity: [0, 1, 0]}\n"
-    lines = text.split("\n")
-    i = next(k for k, line in enumerate(lines) if "id: p9," in line)
-    lines[i] = "  - {id: later, mass: 1e-3, position: [-0.1, 1.0, 0.1], velocity: [0, 1, 0]}"
-    compiled = _compiled("\n".join(lines), integrator)
+    compiled, other = _two_unstable(first, integrator)
     calls, _, state = _advance_all(compiled, monkeypatch, chunk=40)
     assert calls[-1][2]  # it blew up, at the same step on all three
     steps = sum(c[0] for c in calls)
     assert 0 < steps < compiled.clock.steps and steps % 40 != 0, steps  # inside a call
-    x = state.particle_position
-    assert not np.isfinite(x[42]).all() and np.isfinite(x[9]).all() and np.isfinite(x[:42]).all()
-    later = _compiled("\n".join(lines).replace("mass: 2e-6", "mass: 1.0"), integrator)
-    later_calls, _, _ = _advance_all(later, monkeypatch, chunk=40)
+    finite = np.isfinite(np.hstack([state.particle_position, state.particle_velocity])).all(axis=1)
+    assert not finite[first] and finite[np.arange(43) != first].all()
+    later, _ = _two_unstable(first, integrator, light="1.0")  # only the other one fails
+    later_calls, _, later_state = _advance_all(later, monkeypatch, chunk=40)
     later_steps = sum(c[0] for c in later_calls)
-    assert later_calls[-1][2] and steps < later_steps < steps - steps % 40 + 40, (steps, later_steps)
+    assert later_calls[-1][2]
+    assert not np.isfinite(
+        np.hstack([later_state.particle_position, later_state.particle_velocity])[other]
+    ).all()
+    assert steps < later_steps < steps - steps % 40 + 40, (steps, later_steps)
     state = compiled.fresh_state()
     assert np.isfinite(state.particle_position).all()
 
 
+@pytest.mark.parametrize("threads", THREADS, indirect=True)
 @pytest.mark.parametrize("integrator", FIXED_STEP)
-def test_blocked_runs_equal_numpy_frames(integrator, monkeypatch):
+def test_blocked_runs_equal_numpy_frames(integrator, threads, monkeypatch):
+    """Whole runs: the stepper picks the parallel build itself when numba has two threads."""
     monkeypatch.setattr(fused_module, "BLOCK", SMALL_BLOCK)
+    monkeypatch.setattr(fused_module, "PARALLEL_MIN_BLOCKS", 2)
     frames = {}
     for backend in ("numba", "numpy"):
         scene = load_scene_text(SCENE).scene.model_copy(update={"integrator": integrator})
@@ -322,3 +368,76 @@ def test_blocks_are_chosen_for_pointwise_scenes_only():
     sphere = _compiled(SCENE + "colliders: [{type: sphere, center: [0, -1, 0], radius: 0.5}]\n")
     assert isinstance(make_stepper(sphere), Fused)  # static colliders fuse, not in blocks
     assert not fused_in_blocks(sphere) and not fused_module.FusedStepper(sphere).blocked
+
+
+@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="one thread")
+@pytest.mark.parametrize("threads", [2], indirect=True)
+def test_the_parallel_build_runs_for_enough_blocks_and_threads(threads, monkeypatch):
+    """From PARALLEL_MIN_BLOCKS blocks on, and only while numba has several threads."""
+    monkeypatch.setattr(fused_module, "BLOCK", SMALL_BLOCK)
+    clock_times = np.array([0.0, 0.002, 0.004])
+    dts = np.full(2, 0.002)
+    for blocks, count, wanted in (
+        (fused_module.PARALLEL_MIN_BLOCKS, 2, fused_module.blocked_chunk_parallel),
+        (fused_module.PARALLEL_MIN_BLOCKS, 1, fused_module.blocked_chunk),
+        (fused_module.PARALLEL_MIN_BLOCKS - 1, 2, fused_module.blocked_chunk),
+    ):
+        compiled = _crowd(SMALL_BLOCK * blocks, 1)
+        compiled.dynamics.bind(compiled.fresh_state())
+        stepper = fused_module.FusedStepper(compiled)
+        numba.set_num_threads(count)
+        stepper.advance(compiled.fresh_state(), clock_times, dts)
+        assert list(stepper._chunks) == [wanted], (blocks, count)
+
+
+def test_threads_is_numba_thread_count_during_a_run_only():
+    """compile_scene(threads=) holds numba's threads during the run, then gives them back."""
+    from animsim.errors import UsageError
+
+    before = numba.get_num_threads()
+    seen = []
+    compiled = compile_scene(load_scene_text(SCENE).scene, "t", backend="numba", threads=1)
+    run(compiled, [], observers=[lambda state: seen.append(numba.get_num_threads())])
+    assert seen and set(seen) == {1} and numba.get_num_threads() == before
+    for bad in (0, -1, 1.5, True):
+        with pytest.raises(UsageError, match="threads"):
+            compile_scene(load_scene_text(SCENE).scene, "t", backend="numba", threads=bad)
+    too_many = compile_scene(
+        load_scene_text(SCENE).scene, "t", backend="numba", threads=numba.config.NUMBA_NUM_THREADS + 1
+    )
+    with pytest.raises(UsageError, match="NUMBA_NUM_THREADS"):
+        run(too_many, [])
+    assert numba.get_num_threads() == before
+    numpy = compile_scene(load_scene_text(SCENE).scene, "t", backend="numpy", threads=1)
+    run(numpy, [], observers=[lambda state: seen.append(numba.get_num_threads())])
+    assert seen[-1] == before  # NumPy runs leave numba alone
+
+
+SMALL_RUN = """
+import numba.np.ufunc.parallel as pool
+from animsim.backends import fused
+from animsim.compile import compile_scene
+from animsim.engine import run
+from animsim.scene.loader import load_scene_text
+
+text = "duration: 0.1\\ndt: 0.001\\nforces: [{type: gravity}]\\n"
+text += "planes: [{point: [0, 0, 0], normal: [0, 1, 0]}]\\nparticles: [{id: p, mass: 1, position: [0, 1, 0]}]\\n"
+compiled = compile_scene(load_scene_text(text).scene, "t", backend="numba")
+assert "in blocks" in compiled.stages[-1], compiled.stages
+assert run(compiled, []).status == "ok"
+print(bool(fused.blocked_chunk.overloads), bool(fused.blocked_chunk_parallel.overloads), pool._is_initialized)
+"""
+
+
+def test_a_small_scene_neither_loads_the_parallel_build_nor_starts_threads():
+    """A one-particle run (one block) starts no faster with the parallel build around: the
+    build is not loaded and numba's thread pool not started."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    out = subprocess.run(
+        [sys.executable, "-c", SMALL_RUN], capture_output=True, text=True, cwd=root, check=True
+    )
+    assert out.stdout.split() == ["True", "False", "False"], out
