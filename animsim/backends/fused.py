@@ -478,7 +478,8 @@ def _blocked_chunk(
     step at which any row is not finite (the blocks that ran past it are put back and run
     again up to it, from their saved rows). Verlet re-evaluates every row's acceleration
     after a step a stage changed (a global decision), so with a stage it goes one step at
-    a time over all blocks.
+    a time over all blocks (on several threads, one parallel loop per step, not per call).
+    numba gives each thread an equal run of consecutive blocks.
 
     Returns what fused_chunk returns.
     """
