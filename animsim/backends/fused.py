@@ -210,10 +210,13 @@ def fused_chunk(
 #: the calls into the element kernels more often, larger ones leave the cache)
 BLOCK = 512
 
-#: blocks from which a call runs them on several threads (when numba has more than one):
-#: below it, the threads' start and finish in every call cost more than the blocks they
-#: share; measured on this 2-core machine (see ``blocked_chunk_parallel``)
-PARALLEL_MIN_BLOCKS = 8
+#: blocks from which a call runs them on several threads (when numba has more than one).
+#: Measured on a quiet 2-core machine, particles with a plane, 16 steps a call (the
+#: watchdog's stride), M particle-steps/s wall, 1 thread / 2: one block 35.7 / 35.4 (and
+#: twice the CPU time: the idle thread waits), two 39.6 / 72.4, three 39.3 / 56.8, four
+#: 38.9 / 72.7, sixteen 39.3 / 76.9. On cores busy with other work a parallel call waits
+#: for the slowest thread, which costs more at any size (compile_scene's ``threads``).
+PARALLEL_MIN_BLOCKS = 2
 
 
 @njit(cache=True)
