@@ -12,7 +12,10 @@ re-implemented:
 * :class:`FusedStepper` runs many steps per call for the fixed-step explicit
   methods: the integrator's arithmetic (the same operations, in the same
   order, as :mod:`animsim.integrators`), the element kernels and the
-  collision stage, stopping after the first step that is not finite.
+  collision stage, stopping after the first step that is not finite. When no
+  particle acts on another, it steps them a cache-sized block at a time
+  (``blocked_chunk``), and from two blocks on shares the blocks among numba's
+  threads (``blocked_chunk_parallel``), with the same bits on any thread count.
 
 Imported only when numba is in use.
 """
