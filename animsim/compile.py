@@ -48,7 +48,7 @@ class Compiled:
     left_out: list[str] = field(default_factory=list)
     conservative: bool = False
     backend: str = "numpy"  # the backend that steps it (animsim.backends)
-    threads: int | None = None  # numba threads (None: numba's default)
+    threads: int | None = None  # numba's threads for a run (None: its default; engine.run applies it)
     adaptive: AdaptiveSpec | None = None  # step doubling, when the scene asks for it
 
     @property
@@ -147,12 +147,17 @@ def compile_scene(
     *,
     record_times: np.ndarray | None = None,
 ) -> Compiled:
-    """Compile ``scene`` for ``backend`` (see :mod:`animsim.backends`; ``threads``: numba's).
+    """Compile ``scene`` for ``backend`` (see :mod:`animsim.backends`).
+
+    ``threads``: at most this many of numba's threads step the run (see
+    :func:`animsim.backends.numba_threads`); None leaves numba's default, every core.
 
     ``record_times``: record exactly the steps that end at these times (references
     and sweeps compare runs there) instead of the scene's ``record`` schedule;
     a time no step lands on is a RuntimeError.
     """
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
+        raise UsageError(f"threads: must be a whole number >= 1 (or None for every core), not {threads!r}")
     stages: list[str] = []
     left_out: list[str] = []
 

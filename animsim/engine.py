@@ -196,7 +196,37 @@ def run(
     ``stop`` is polled between stretches of steps (Ctrl-C handling sets it);
     the frames so far are kept and the status is ``interrupted``.
     ``notice`` hears one-line messages meant for a person (numba compiling).
+
+    On the numba backend, ``compiled.threads`` (when set) is numba's thread count for
+    the run, and numba's own count is put back after it.
     """
+    from animsim.backends import numba_threads
+
+    with numba_threads(compiled):
+        return _run(
+            compiled,
+            sinks,
+            stop=stop,
+            progress=progress,
+            guard=guard,
+            meta_extra=meta_extra,
+            observers=observers,
+            notice=notice,
+        )
+
+
+def _run(
+    compiled: Compiled,
+    sinks: Sequence[FrameSink],
+    *,
+    stop: Callable[[], bool] | None,
+    progress: Callable[[int, int], None] | None,
+    guard: Guard | None,
+    meta_extra: dict[str, Any] | None,
+    observers: Sequence[Callable[[State], None]],
+    notice: Callable[[str], None] | None,
+) -> RunResult:
+    """run's loop (see run)."""
     from animsim.steppers import make_stepper
 
     state = compiled.fresh_state()

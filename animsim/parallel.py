@@ -8,7 +8,8 @@ depend on where it ran.
 * ``jobs=1`` and no scheduler: a plain loop in this process (the default; the
   quietest for timings).
 * ``jobs=N``: a :class:`concurrent.futures.ProcessPoolExecutor` with the
-  ``spawn`` start method. Spawn (not fork) because forking a process that
+  ``spawn`` start method, each worker given its share of the cores for numba's
+  threads (unless ``NUMBA_NUM_THREADS`` is set). Spawn (not fork) because forking a process that
   holds threads (BLAS pools, rich, a Dask client) can deadlock, and it behaves
   the same on Linux, macOS and Windows. ``fn`` and the cases must therefore be
   picklable: a module-level function and plain data.
@@ -30,6 +31,7 @@ the first failure is raised after every case has finished or failed.
 from __future__ import annotations
 
 import multiprocessing
+import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any, TypeVar
@@ -125,7 +127,12 @@ def _map_processes(
 ) -> list[R]:
     context = multiprocessing.get_context("spawn")
     workers = min(jobs, len(cases))
-    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+    # numba steps large particle systems on every core it may use; several workers each
+    # using every core would wait on each other's threads, so each gets its share
+    share = str(max(1, (os.cpu_count() or 1) // workers))
+    with ProcessPoolExecutor(
+        max_workers=workers, mp_context=context, initializer=_numba_threads, initargs=(share,)
+    ) as pool:
         futures = [pool.submit(fn, c) for c in cases]
         for _ in as_completed(futures):
             tick()
@@ -136,6 +143,11 @@ def _map_processes(
             except Exception as exc:  # the case raised, or its worker died
                 outcomes.append((False, exc))
     return _collect(cases, outcomes, on_error)
+
+
+def _numba_threads(share: str) -> None:
+    """In a worker, before numba loads: its thread count, unless NUMBA_NUM_THREADS says one."""
+    os.environ.setdefault("NUMBA_NUM_THREADS", share)
 
 
 def _import_distributed() -> Any:

@@ -61,14 +61,15 @@ GROUND = """planes:
 
 
 def steps_per_second(
-    steps: int, ground: bool, backend: str = "numpy", cpu: bool = False
+    steps: int, ground: bool, backend: str = "numpy", cpu: bool = False, threads: int | None = None
 ) -> tuple[float, dict]:
     """Steady-state steps/s of the fountain on ``backend`` (wall clock, or this process's CPU
-    time with ``cpu``), and the run's emitter summary."""
+    time with ``cpu``) with numba's thread count ``threads`` (None: numba's default), and
+    the run's emitter summary."""
     warm_steps = round(WARMUP / DT)
     loaded = load_scene_text(SCENE.replace("PLANES_HERE", GROUND if ground else ""))
     scene = with_overrides(loaded.scene, duration=(warm_steps + steps) * DT)
-    compiled = compile_scene(scene, loaded.name, backend=backend)
+    compiled = compile_scene(scene, loaded.name, backend=backend, threads=threads)
     clock = time.process_time if cpu else time.perf_counter
     marks: dict[int, float] = {}
 

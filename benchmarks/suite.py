@@ -245,9 +245,13 @@ def numpy_contender(compiled, label: str, note: str = "") -> Contender:
     return Contender(label, call, stride, note)
 
 
-def numba_contender(compiled, label: str) -> Contender:
+def numba_contender(compiled, label: str, threads: int = 1) -> Contender:
     """The engine's numba stepper (fused chunks where the scene allows, else step by step),
-    advancing STEPS_PER_FRAME steps per call as the loop does between frames."""
+    advancing STEPS_PER_FRAME steps per call as the loop does between frames, with numba's
+    thread count ``threads`` during each call (as ``compile_scene(threads=)`` holds it
+    during a run) and the process's count put back after it."""
+    import numba
+
     from animsim.steppers import make_stepper
 
     state = compiled.fresh_state()
@@ -259,12 +263,24 @@ def numba_contender(compiled, label: str) -> Contender:
     end = stepper.end
 
     def call() -> None:
-        k = state.step
-        if k + STEPS_PER_FRAME > end:  # start the clock over (the state keeps moving)
-            k = state.step = 0
-        stepper.advance(state, k, k + STEPS_PER_FRAME)
+        before = numba.get_num_threads()
+        numba.set_num_threads(threads)
+        try:
+            k = state.step
+            if k + STEPS_PER_FRAME > end:  # start the clock over (the state keeps moving)
+                k = state.step = 0
+            stepper.advance(state, k, k + STEPS_PER_FRAME)
+        finally:
+            numba.set_num_threads(before)
 
     return Contender(label, call, STEPS_PER_FRAME, f"{STEPS_PER_FRAME} steps per call")
+
+
+def numba_cores() -> int:
+    """The threads numba may run here (every core, or NUMBA_NUM_THREADS)."""
+    import numba
+
+    return int(numba.config.NUMBA_NUM_THREADS)
 
 
 def peer_contenders(workload: str, n: int, notes: list[str]) -> list[Contender]:
@@ -309,6 +325,11 @@ def bench_cloth(settings: Settings) -> Table:
             )
         if use_numba:
             contenders.append(numba_contender(_compile(cloth_scene(n), "numba"), "animsim numba, 1 thread"))
+            table.notes.append(
+                "animsim numba runs cloth on one thread whatever the thread count: its springs join "
+                "neighbouring particles, so it is not stepped in independent blocks of particles "
+                "(only the particle systems below are), and a thread contender would time the same code"
+            )
         sample(contenders, settings)
         add_rows(
             table, f"cloth {n} ({springs:,} springs)", contenders, "peer: plain NumPy (bincount scatter)"
@@ -337,10 +358,13 @@ def bench_particles(settings: Settings) -> Table:
         compiled.initial.particle_velocity[:] = prob.v0
         contenders.append(numpy_contender(compiled, "animsim numpy (default)"))
         if use_numba:
-            fast = _compile(particles_scene(n), "numba")
-            fast.initial.particle_position[:] = prob.x0
-            fast.initial.particle_velocity[:] = prob.v0
-            contenders.append(numba_contender(fast, "animsim numba, 1 thread"))
+            cores = numba_cores()
+            for threads in (1, cores) if cores > 1 else (1,):
+                fast = _compile(particles_scene(n), "numba")  # its own state and stepper
+                fast.initial.particle_position[:] = prob.x0
+                fast.initial.particle_velocity[:] = prob.v0
+                label = "animsim numba, 1 thread" if threads == 1 else f"animsim numba, {threads} threads"
+                contenders.append(numba_contender(fast, label, threads=threads))
         sample(contenders, settings)
         for c in contenders:
             c.rates = [r * n / 1e6 for r in c.rates]
@@ -532,14 +556,23 @@ def bench_fountain(settings: Settings) -> Table:
         1.0,
     )
     steps = 100 if settings is QUICK else 300
-    backends = ["numpy"] + (["numba"] if numba_ok(table.notes) else [])
+    # (backend, numba's threads): the fountain's particles are stepped in blocks, which run
+    # on several threads when numba has them
+    ways: list[tuple[str, int | None]] = [("numpy", None)]
+    if numba_ok(table.notes):
+        cores = numba_cores()
+        ways += [("numba", 1)] + ([("numba", cores)] if cores > 1 else [])
     for ground, label in ((True, "with a ground plane (restitution, friction)"), (False, "no plane")):
+        runs: dict[tuple[str, int | None], list[tuple[float, dict]]] = {way: [] for way in ways}
+        for _ in range(max(2, settings.samples // 2)):  # whole runs, round robin
+            for backend, threads in ways:
+                runs[backend, threads].append(F.steps_per_second(steps, ground, backend, threads=threads))
         contenders = []
-        for backend in backends:
-            runs = [F.steps_per_second(steps, ground, backend) for _ in range(max(2, settings.samples // 2))]
-            alive = runs[-1][1]["per_emitter"]["fountain"]["alive"]
-            c = Contender(f"animsim {backend}, {label}", lambda: None, 1, f"{alive:,} alive")
-            c.rates = [r for r, _ in runs]
+        for (backend, threads), done in runs.items():
+            alive = done[-1][1]["per_emitter"]["fountain"]["alive"]
+            how = "" if threads is None else (" 1 thread," if threads == 1 else f" {threads} threads,")
+            c = Contender(f"animsim {backend},{how} {label}", lambda: None, 1, f"{alive:,} alive")
+            c.rates = [r for r, _ in done]
             contenders.append(c)
         add_rows(table, f"fountain {F.PARTICLES:.0e}", contenders, None)
     table.notes.append(

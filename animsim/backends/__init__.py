@@ -21,6 +21,8 @@ must not cost numba's import when the answer is NumPy.
 from __future__ import annotations
 
 import importlib.util
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 from animsim.errors import UsageError
@@ -52,6 +54,31 @@ def choose_backend(requested: str) -> tuple[str, str]:
             return BACKEND_NUMBA, "auto: numba is installed"
         return BACKEND_NUMPY, f"auto: numba is not installed ({INSTALL_HINT})"
     return requested, ""
+
+
+@contextmanager
+def numba_threads(compiled: Any) -> Iterator[None]:
+    """numba's thread count is ``compiled.threads`` inside the block, then what it was.
+
+    It bounds the threads that step large particle systems in blocks and sum the springs
+    of very large scenes. Nothing happens when the scene runs on NumPy or leaves numba its
+    default (every core, or ``NUMBA_NUM_THREADS``): numba is then not even imported.
+    """
+    threads = compiled.threads
+    if threads is None or compiled.backend != BACKEND_NUMBA:
+        yield
+        return
+    import numba
+
+    most = numba.config.NUMBA_NUM_THREADS
+    if threads > most:
+        raise UsageError(f"threads: {threads} is more than numba may start here ({most}, NUMBA_NUM_THREADS)")
+    before = numba.get_num_threads()
+    numba.set_num_threads(threads)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(before)
 
 
 def fused_unsupported(compiled: Any) -> list[str]:

@@ -6,6 +6,11 @@ all of a call's steps on one block of rows before the next (animsim.backends.fus
 and of the NumPy backend, count the same force evaluations and the same steps a collision
 changed, and stop after the same first non-finite step, however the blocks fall. The
 blocks are made a few rows long here so that every scene has many block boundaries.
+
+The blocks of a call may run on several threads (``blocked_chunk_parallel``, the same code
+with numba's parallel loop): every comparison runs three steppers side by side, the
+one-pass-per-step chunk, the blocked chunk on one thread and its parallel build (with
+numba's thread count 1 and 2), and asks for the same bits from all three.
 """
 
 from __future__ import annotations
@@ -21,6 +26,8 @@ from animsim.record import MemorySink
 from animsim.scene.loader import load_scene_text
 
 pytest.importorskip("numba")
+
+import numba
 
 from animsim.backends import fused as fused_module  # after the skip: it imports numba
 
@@ -82,21 +89,51 @@ def _compiled(text: str, integrator: str | None = None):
     return compile_scene(scene, "t", backend="numba")
 
 
-def _stepper(compiled, blocked: bool, monkeypatch):
+#: the kernels compared: one pass over every row per step, the blocked chunk, its parallel build
+PLAIN, SERIAL, PARALLEL = "plain", "serial", "parallel"
+#: numba's thread counts the parallel build is run with (2 needs two threads allowed)
+THREADS = [
+    1,
+    pytest.param(2, marks=pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="one thread")),
+]
+
+
+@pytest.fixture
+def threads(request):
+    """numba's thread count for the test (its parameter), put back after it."""
+    before = numba.get_num_threads()
+    numba.set_num_threads(request.param)
+    yield request.param
+    numba.set_num_threads(before)
+
+
+def _stepper(compiled, kind: str, monkeypatch):
     with monkeypatch.context() as m:
-        if not blocked:
+        if kind == PLAIN:
             m.setattr(animsim.backends, "fused_in_blocks", lambda compiled: False)
         stepper = fused_module.FusedStepper(compiled)
-    assert stepper.blocked == blocked
+    assert stepper.blocked == (kind != PLAIN)
+    # the build is chosen in _call, whatever numba's thread count and the scene's blocks
+    stepper.parallel_blocks = False
     state = compiled.fresh_state()
     return stepper, state
 
 
-def _advance_both(compiled, monkeypatch, chunk: int) -> list[tuple]:
-    """Step the scene with both chunks, ``chunk`` steps per call; the per-call results."""
-    compiled.dynamics.bind(compiled.fresh_state())  # equal masses; both states keep their own
-    blocked, s_blocked = _stepper(compiled, True, monkeypatch)
-    plain, s_plain = _stepper(compiled, False, monkeypatch)
+def _call(kind: str, stepper, state, times, dts):
+    """One call of ``stepper``, with the parallel build of the blocked chunk if ``kind`` says so."""
+    if kind != PARALLEL:
+        return stepper.advance(state, times, dts)
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(fused_module, "blocked_chunk", fused_module.blocked_chunk_parallel)
+        return stepper.advance(state, times, dts)
+
+
+def _advance_all(compiled, monkeypatch, chunk: int) -> tuple[list[tuple], object]:
+    """Step the scene with the three kernels, ``chunk`` steps per call; the per-call results
+    (equal for all three) and the parallel build's stepper."""
+    compiled.dynamics.bind(compiled.fresh_state())  # equal masses; every state keeps its own
+    runs = {kind: _stepper(compiled, kind, monkeypatch) for kind in (PLAIN, SERIAL, PARALLEL)}
+    plain, s_plain = runs[PLAIN]
     clock = compiled.clock
     times = np.array([clock.time(i) for i in range(clock.steps + 1)])
     dts = np.array([clock.step_size(i) for i in range(clock.steps)])
@@ -104,63 +141,200 @@ def _advance_both(compiled, monkeypatch, chunk: int) -> list[tuple]:
     k = 0
     while k < clock.steps:
         end = min(clock.steps, k + chunk)
-        got = blocked.advance(s_blocked, times[k:end], dts[k:end])
-        want = plain.advance(s_plain, times[k:end], dts[k:end])
-        assert got == want, k
-        assert (blocked.changed_steps, blocked.a0_valid) == (plain.changed_steps, plain.a0_valid)
-        assert s_blocked.revision == s_plain.revision
-        for a, b in (
-            (s_blocked.particle_position, s_plain.particle_position),
-            (s_blocked.particle_velocity, s_plain.particle_velocity),
-        ):
-            assert a.tobytes() == b.tobytes(), k  # the same bits, NaNs included
-        calls.append(got)
-        if got[2]:  # not finite: the loop stops here
+        want = _call(PLAIN, plain, s_plain, times[k:end], dts[k:end])
+        for kind in (SERIAL, PARALLEL):
+            stepper, state = runs[kind]
+            got = _call(kind, stepper, state, times[k:end], dts[k:end])
+            assert got == want, (kind, k)
+            assert (stepper.changed_steps, stepper.a0_valid) == (plain.changed_steps, plain.a0_valid), (
+                kind,
+                k,
+            )
+            assert state.revision == s_plain.revision, (kind, k)
+            for a, b in (
+                (state.particle_position, s_plain.particle_position),
+                (state.particle_velocity, s_plain.particle_velocity),
+            ):
+                assert a.tobytes() == b.tobytes(), (kind, k)  # the same bits, NaNs included
+            if stepper.method == fused_module.VERLET and stepper.a0_valid:
+                assert stepper.work[0].tobytes() == plain.work[2].tobytes(), (kind, k)  # its cached force
+        calls.append(want)
+        if want[2]:  # not finite: the loop stops here
             break
-        k += got[0]
-    return calls, blocked
+        k += want[0]
+    assert list(runs[PARALLEL][0]._chunks) == [fused_module.blocked_chunk_parallel]
+    return calls, runs[PARALLEL][0], runs[PARALLEL][1]
 
 
+@pytest.mark.parametrize("threads", THREADS, indirect=True)
 @pytest.mark.parametrize("integrator", FIXED_STEP)
-def test_blocks_give_the_bits_counts_and_changed_steps_of_one_pass_per_step(integrator, monkeypatch):
+def test_blocks_give_the_bits_counts_and_changed_steps_of_one_pass_per_step(integrator, threads, monkeypatch):
     monkeypatch.setattr(fused_module, "BLOCK", SMALL_BLOCK)
     compiled = _compiled(SCENE, integrator)
-    calls, blocked = _advance_both(compiled, monkeypatch, chunk=40)
+    calls, blocked, _ = _advance_all(compiled, monkeypatch, chunk=40)
     assert sum(c[0] for c in calls) == compiled.clock.steps
     assert blocked.changed_steps > 0  # the planes did something
     assert not any(c[2] for c in calls)
 
 
-def test_a_block_longer_than_the_scene_and_the_default_block(monkeypatch):
+@pytest.mark.parametrize("threads", THREADS, indirect=True)
+def test_a_block_longer_than_the_scene_and_the_default_block(threads, monkeypatch):
     """The default block (one short block) and a block of exactly the scene's rows."""
     compiled = _compiled(SCENE)
-    _advance_both(compiled, monkeypatch, chunk=150)
+    _advance_all(compiled, monkeypatch, chunk=150)
     monkeypatch.setattr(fused_module, "BLOCK", 43)
-    _advance_both(compiled, monkeypatch, chunk=150)
+    _advance_all(compiled, monkeypatch, chunk=150)
+
+
+def _in_the_air(count: int, seed: int) -> list[str]:
+    """Particles far above every plane: none reaches one within SCENE's 0.3 s."""
+    rng = np.random.default_rng(seed)
+    lines = []
+    for i in range(count):
+        x, z = (float(c) for c in rng.uniform(-0.5, 0.5, 2))
+        y = float(rng.uniform(3.0, 4.0))
+        vel = [float(c) for c in rng.uniform(-0.5, 0.5, 3)]
+        mass = float(rng.uniform(0.2, 2.0))
+        lines.append(
+            f"  - {{id: p{i}, mass: {mass!r}, position: [{x!r}, {y!r}, {z!r}], "
+            f"velocity: [{vel[0]!r}, {vel[1]!r}, {vel[2]!r}]}}"
+        )
+    return lines
+
+
+#: rows of SOME_BLOCKS that meet the ground: row 16 (block 2 of 7 rows) bounces from the
+#: start, lower each time, and comes to rest on it late; row 38 (block 5) falls 3 mm and
+#: comes to rest early
+BOUNCING, FALLING = 16, 38
+
+
+def _some_blocks(bouncing: bool = True, falling: bool = True) -> str:
+    lines = _in_the_air(43, 5)
+    if bouncing:
+        lines[BOUNCING] = (
+            "  - {id: bouncing, mass: 0.7, position: [0.1, 0.01, 0.2], velocity: [0.3, -1.0, 0.2]}"
+        )
+    if falling:
+        lines[FALLING] = "  - {id: falling, mass: 1.3, position: [-0.2, 0.003, 0.1], velocity: [0, 0, 0]}"
+    return SCENE.split("particles:\n")[0] + "particles:\n" + "\n".join(lines) + "\n"
+
+
+@pytest.mark.parametrize("threads", THREADS, indirect=True)
+@pytest.mark.parametrize("integrator", ["symplectic_euler", "verlet", "rk4"])
+def test_steps_a_collision_changed_are_counted_over_every_block(integrator, threads, monkeypatch):
+    """Only two blocks meet a plane, at steps that differ and steps they share: a step
+    counts once when either block's particle was changed (the union over the blocks, not
+    their sum nor one block's count), and Verlet's next force is evaluated again."""
+    monkeypatch.setattr(fused_module, "BLOCK", SMALL_BLOCK)
+    compiled = _compiled(_some_blocks(), integrator)
+    calls, blocked, state = _advance_all(compiled, monkeypatch, chunk=40)
+    assert sum(c[0] for c in calls) == compiled.clock.steps
+    # not every step (the bouncing particle is in the air between its first bounces), and
+    # not only the steps of one of the two blocks: see test_the_two_blocks_collide_apart
+    assert 0 < blocked.changed_steps < compiled.clock.steps
+    assert state.particle_position[BOUNCING, 1] < 0.05 and state.particle_position[FALLING, 1] < 0.05
+
+
+def test_the_two_blocks_collide_apart(monkeypatch):
+    """What the test above relies on: each of the two particles alone (the other in the
+    air) makes fewer steps changed than both, and together fewer than the sum (they
+    share steps)."""
+    monkeypatch.setattr(fused_module, "BLOCK", SMALL_BLOCK)
+    counts = {}
+    for which, text in (
+        ("both", _some_blocks()),
+        ("bouncing", _some_blocks(falling=False)),
+        ("falling", _some_blocks(bouncing=False)),
+        ("neither", _some_blocks(bouncing=False, falling=False)),
+    ):
+        _, blocked, _ = _advance_all(_compiled(text), monkeypatch, chunk=40)
+        counts[which] = blocked.changed_steps
+    assert counts["neither"] == 0, counts
+    assert 0 < counts["bouncing"] < counts["both"] and 0 < counts["falling"] < counts["both"], counts
+    assert counts["both"] < counts["bouncing"] + counts["falling"], counts
+
+
+def _crowd(count: int, seed: int):
+    """SCENE's forces and planes on ``count`` particles (a strand without springs) thrown
+    from random places above, on and below the ground's level."""
+    head = SCENE.split("particles:\n")[0]
+    text = head + (
+        f"structures: [{{type: strand, id: s, start: [0, 0, 0], end: [1, 0, 0], count: {count}, mass: 0.5}}]\n"
+    )
+    compiled = _compiled(text)
+    rng = np.random.default_rng(seed)
+    compiled.initial.particle_position[:] = rng.uniform([-1, -0.02, -1], [1, 0.3, 1], (count, 3))
+    compiled.initial.particle_velocity[:] = rng.uniform(-2, 2, (count, 3))
+    return compiled
+
+
+@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="one thread")
+@pytest.mark.parametrize("threads", [2], indirect=True)
+def test_many_blocks_on_two_threads_at_once(threads, monkeypatch):
+    """Blocks long enough (64 rows, 40 steps a call) that both threads step one at the same
+    time: work arrays shared between blocks would give other bits here (a race, so not
+    every time; it did on each of a few tries)."""
+    monkeypatch.setattr(fused_module, "BLOCK", 64)
+    compiled = _crowd(64 * 40, 3)
+    calls, blocked, _ = _advance_all(compiled, monkeypatch, chunk=40)
+    assert sum(c[0] for c in calls) == compiled.clock.steps and blocked.changed_steps > 0
+
+
+def _two_unstable(first: int, integrator: str, light: str = "2e-6") -> tuple[object, int]:
+    """SCENE with strong drag and two light particles, rows 9 (second block) and 42 (alone in
+    the last block): the one of mass ``light`` in row ``first`` overflows first, the other
+    (1e-3) later; the scene, and the row of the other one."""
+    other = 42 if first == 9 else 9
+    text = SCENE.replace("{type: drag, k: 0.05}", "{type: drag, k: 2.0}")
+    lines = text.rstrip("\n").split("\n")[:-1]  # without p42
+    rows = {first: ("light", light), other: ("later", "1e-3")}
+    start = next(k for k, line in enumerate(lines) if "id: p0," in line)
+    lines.append("")
+    for row, (name, mass) in rows.items():
+        lines[start + row] = (
+            f"  - {{id: {name}, mass: {mass}, position: [0.1, 1.0, 0.1], velocity: [0, 1, 0]}}"
+        )
+    return _compiled("\n".join(lines) + "\n", integrator), other
 
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
+@pytest.mark.parametrize("threads", THREADS, indirect=True)
+@pytest.mark.parametrize("first", [42, 9])
 @pytest.mark.parametrize("integrator", FIXED_STEP)
-def test_the_first_step_not_finite_is_the_same_wherever_it_falls(integrator, monkeypatch):
-    """Strong drag on one very light particle, the scene's last row (alone in the last
-    block), is unstable (k dt / m = 1,000): it overflows in the middle of a call while the
-    other rows stay finite, so the earlier blocks have run past its step and are put back."""
+def test_the_first_step_not_finite_is_the_same_wherever_it_falls(integrator, first, threads, monkeypatch):
+    """Strong drag makes two light particles unstable: the lighter one (row ``first``: the
+    last block, or the second) overflows first, in the middle of a call, while the other
+    rows stay finite; the other one would overflow a few steps later in the same call
+    (checked below). So the blocks that ran past the first step not finite (all the others,
+    on several threads; on one, those before it) are put back and run again up to it, the
+    other failing block too, and the chunk stops at the earlier of the two failures
+    whichever block is first."""
     monkeypatch.setattr(fused_module, "BLOCK", SMALL_BLOCK)
-    text = SCENE.replace("{type: drag, k: 0.05}", "{type: drag, k: 2.0}")
-    last = text.rstrip("\n").rsplit("\n", 1)[0]
-    text = last + "\n  - {id: light, mass: 2e-6, position: [0.1, 1.0, 0.1], velocity: [0, 1, 0]}\n"
-    compiled = _compiled(text, integrator)
-    calls, _ = _advance_both(compiled, monkeypatch, chunk=40)
-    assert calls[-1][2]  # it blew up, at the same step on both
+    compiled, other = _two_unstable(first, integrator)
+    calls, _, state = _advance_all(compiled, monkeypatch, chunk=40)
+    assert calls[-1][2]  # it blew up, at the same step on all three
     steps = sum(c[0] for c in calls)
     assert 0 < steps < compiled.clock.steps and steps % 40 != 0, steps  # inside a call
+    finite = np.isfinite(np.hstack([state.particle_position, state.particle_velocity])).all(axis=1)
+    assert not finite[first] and finite[np.arange(43) != first].all()
+    later, _ = _two_unstable(first, integrator, light="1.0")  # only the other one fails
+    later_calls, _, later_state = _advance_all(later, monkeypatch, chunk=40)
+    later_steps = sum(c[0] for c in later_calls)
+    assert later_calls[-1][2]
+    assert not np.isfinite(
+        np.hstack([later_state.particle_position, later_state.particle_velocity])[other]
+    ).all()
+    assert steps < later_steps < steps - steps % 40 + 40, (steps, later_steps)
     state = compiled.fresh_state()
     assert np.isfinite(state.particle_position).all()
 
 
+@pytest.mark.parametrize("threads", THREADS, indirect=True)
 @pytest.mark.parametrize("integrator", FIXED_STEP)
-def test_blocked_runs_equal_numpy_frames(integrator, monkeypatch):
+def test_blocked_runs_equal_numpy_frames(integrator, threads, monkeypatch):
+    """Whole runs: the stepper picks the parallel build itself when numba has two threads."""
     monkeypatch.setattr(fused_module, "BLOCK", SMALL_BLOCK)
+    monkeypatch.setattr(fused_module, "PARALLEL_MIN_BLOCKS", 2)
     frames = {}
     for backend in ("numba", "numpy"):
         scene = load_scene_text(SCENE).scene.model_copy(update={"integrator": integrator})
@@ -194,3 +368,76 @@ def test_blocks_are_chosen_for_pointwise_scenes_only():
     sphere = _compiled(SCENE + "colliders: [{type: sphere, center: [0, -1, 0], radius: 0.5}]\n")
     assert isinstance(make_stepper(sphere), Fused)  # static colliders fuse, not in blocks
     assert not fused_in_blocks(sphere) and not fused_module.FusedStepper(sphere).blocked
+
+
+@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="one thread")
+@pytest.mark.parametrize("threads", [2], indirect=True)
+def test_the_parallel_build_runs_for_enough_blocks_and_threads(threads, monkeypatch):
+    """From PARALLEL_MIN_BLOCKS blocks on, and only while numba has several threads."""
+    monkeypatch.setattr(fused_module, "BLOCK", SMALL_BLOCK)
+    clock_times = np.array([0.0, 0.002, 0.004])
+    dts = np.full(2, 0.002)
+    for blocks, count, wanted in (
+        (fused_module.PARALLEL_MIN_BLOCKS, 2, fused_module.blocked_chunk_parallel),
+        (fused_module.PARALLEL_MIN_BLOCKS, 1, fused_module.blocked_chunk),
+        (fused_module.PARALLEL_MIN_BLOCKS - 1, 2, fused_module.blocked_chunk),
+    ):
+        compiled = _crowd(SMALL_BLOCK * blocks, 1)
+        compiled.dynamics.bind(compiled.fresh_state())
+        stepper = fused_module.FusedStepper(compiled)
+        numba.set_num_threads(count)
+        stepper.advance(compiled.fresh_state(), clock_times, dts)
+        assert list(stepper._chunks) == [wanted], (blocks, count)
+
+
+def test_threads_is_numba_thread_count_during_a_run_only():
+    """compile_scene(threads=) holds numba's threads during the run, then gives them back."""
+    from animsim.errors import UsageError
+
+    before = numba.get_num_threads()
+    seen = []
+    compiled = compile_scene(load_scene_text(SCENE).scene, "t", backend="numba", threads=1)
+    run(compiled, [], observers=[lambda state: seen.append(numba.get_num_threads())])
+    assert seen and set(seen) == {1} and numba.get_num_threads() == before
+    for bad in (0, -1, 1.5, True):
+        with pytest.raises(UsageError, match="threads"):
+            compile_scene(load_scene_text(SCENE).scene, "t", backend="numba", threads=bad)
+    too_many = compile_scene(
+        load_scene_text(SCENE).scene, "t", backend="numba", threads=numba.config.NUMBA_NUM_THREADS + 1
+    )
+    with pytest.raises(UsageError, match="NUMBA_NUM_THREADS"):
+        run(too_many, [])
+    assert numba.get_num_threads() == before
+    numpy = compile_scene(load_scene_text(SCENE).scene, "t", backend="numpy", threads=1)
+    run(numpy, [], observers=[lambda state: seen.append(numba.get_num_threads())])
+    assert seen[-1] == before  # NumPy runs leave numba alone
+
+
+SMALL_RUN = """
+import numba.np.ufunc.parallel as pool
+from animsim.backends import fused
+from animsim.compile import compile_scene
+from animsim.engine import run
+from animsim.scene.loader import load_scene_text
+
+text = "duration: 0.1\\ndt: 0.001\\nforces: [{type: gravity}]\\n"
+text += "planes: [{point: [0, 0, 0], normal: [0, 1, 0]}]\\nparticles: [{id: p, mass: 1, position: [0, 1, 0]}]\\n"
+compiled = compile_scene(load_scene_text(text).scene, "t", backend="numba")
+assert "in blocks" in compiled.stages[-1], compiled.stages
+assert run(compiled, []).status == "ok"
+print(bool(fused.blocked_chunk.overloads), bool(fused.blocked_chunk_parallel.overloads), pool._is_initialized)
+"""
+
+
+def test_a_small_scene_neither_loads_the_parallel_build_nor_starts_threads():
+    """A one-particle run (one block) starts no faster with the parallel build around: the
+    build is not loaded and numba's thread pool not started."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    out = subprocess.run(
+        [sys.executable, "-c", SMALL_RUN], capture_output=True, text=True, cwd=root, check=True
+    )
+    assert out.stdout.split() == ["True", "False", "False"], out

@@ -30,6 +30,17 @@ def test_processes_keep_case_order() -> None:
     assert map_cases(math.factorial, CASES, jobs=2) == EXPECTED
 
 
+def test_process_workers_share_the_cores_among_numba_threads(monkeypatch) -> None:
+    """Each of N workers may start cores // N numba threads, unless the user set a count."""
+    import os
+
+    monkeypatch.delenv("NUMBA_NUM_THREADS", raising=False)
+    share = str(max(1, (os.cpu_count() or 1) // 2))
+    assert map_cases(os.getenv, ["NUMBA_NUM_THREADS"] * 2, jobs=2) == [share, share]
+    monkeypatch.setenv("NUMBA_NUM_THREADS", "1")
+    assert map_cases(os.getenv, ["NUMBA_NUM_THREADS"] * 2, jobs=2) == ["1", "1"]
+
+
 def test_a_failing_case_is_a_result_not_a_lost_map() -> None:
     cases = [4.0, -1.0, 9.0]  # sqrt(-1) raises ValueError
     want = [2.0, "failed -1.0: ValueError", 3.0]

@@ -259,13 +259,15 @@ planes: [{point: [0, -0.5, 0], normal: [0, 1, 0], restitution: 0.5}]
     state = c.fresh_state()
     stepper.prepare(state, None)
     stepper.advance(state, 0, 5)
-    assert stepper.fused._chunk.entry is not None  # the fast call is really taken
+    (call,) = stepper.fused._chunks.values()  # one kernel: the springs' fused chunk
+    assert call.entry is not None  # the fast call is really taken
     # the dispatcher's own call, on a fresh run
     c2 = compile_scene(load_scene_text(text).scene, "t", backend="numba")
     s2 = make_stepper(c2)
     st2 = c2.fresh_state()
     s2.prepare(st2, None)
-    s2.fused._chunk.entry = None
+    (call2,) = s2.fused._chunks.values()
+    call2.entry = None
     s2.advance(st2, 0, c2.clock.steps)
     assert np.array_equal(st2.particle_position, fast.final_state.particle_position)
     assert np.array_equal(st2.particle_velocity, fast.final_state.particle_velocity)
