@@ -45,19 +45,3 @@ def put_rows(a: np.ndarray, idx: np.ndarray, values: np.ndarray) -> None:
         np.put(a.view(_ROW).reshape(-1), idx, vals.view(_ROW).reshape(-1))
     else:
         a[idx] = values
-
-
-def outer3(s: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """``s[:, None] * n`` for (k,) s and a vector n (3,), column by column: broadcasting
-    with an inner axis of 3 runs NumPy's loop 3 elements at a time, several times slower;
-    the products are the same."""
-    out = np.empty((len(s), 3))
-    for j in range(3):
-        np.multiply(s, n[j], out=out[:, j])
-    return out
-
-
-def rep3(s: np.ndarray) -> np.ndarray:
-    """(k,) -> (k, 3) with s on every column, so ``rep3(s) * a`` multiplies an (k, 3) array
-    row by row at full speed (the same products as ``s[:, None] * a``)."""
-    return np.repeat(s[:, None], 3, axis=1)

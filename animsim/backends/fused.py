@@ -1026,11 +1026,11 @@ class FusedStepper:
         self.compile_seconds = time.perf_counter() - t0
         return self.compile_seconds
 
-    def advance(self, state: Any, times: np.ndarray, dts: np.ndarray) -> tuple[int, int, bool]:
-        """len(dts) steps from times[0]; (steps taken, force evaluations, failed)."""
+    def _common(self, state: Any, times: np.ndarray, dts: np.ndarray, pinned: np.ndarray) -> tuple[Any, ...]:
+        """The arguments every chunk kernel starts with (state, clock, method, elements, stages)."""
         d = self.compiled.dynamics
         c, a, b = self.tab
-        common = (
+        return (
             state.particle_position,
             state.particle_velocity,
             times,
@@ -1044,13 +1044,17 @@ class FusedStepper:
             self.ips,
             live_array(d.mass, self._copies),
             live_array(d.inv_mass, self._copies),
-            self.pinned,
+            pinned,
             # a tuple of addresses, so numba types them as first-class functions (by
             # signature), not as these dispatchers: the cached kernel then serves every stage
             self.stages,
             self.stage_fps,
             self.stage_ips,
         )
+
+    def advance(self, state: Any, times: np.ndarray, dts: np.ndarray) -> tuple[int, int, bool]:
+        """len(dts) steps from times[0]; (steps taken, force evaluations, failed)."""
+        common = self._common(state, times, dts, self.pinned)
         has_stage = self.stage_owner is not None
         if self.blocked:  # work: a0 and the rows saved at the call's start (x, v, a0)
             kernel = blocked_chunk
@@ -1144,27 +1148,9 @@ class FusedStepper:
         (:func:`checked_chunk`; ``times`` has one more entry than ``dts``), copying the
         states at the positions ``rec`` into ``shots``; (steps taken, force evaluations,
         the position of the last passed check, stopped, states copied)."""
-        d = self.compiled.dynamics
-        c, a, b = self.tab
         work, books, good = self._checks
         args = (
-            state.particle_position,
-            state.particle_velocity,
-            times,
-            dts,
-            self.method,
-            c,
-            a,
-            b,
-            self.kernels,
-            self.fps,
-            self.ips,
-            live_array(d.mass, self._copies),
-            live_array(d.inv_mass, self._copies),
-            self.plain_pinned,
-            self.stages,
-            self.stage_fps,
-            self.stage_ips,
+            *self._common(state, times, dts, self.plain_pinned),
             *work,
             self.a0_valid,
             self.stage_owner is not None,
