@@ -115,6 +115,19 @@ def fused_in_blocks(compiled: Any) -> bool:
     return all(st.pointwise for st in compiled.post_step if st.numba_stage_source is not None)
 
 
+def _block_cores(compiled: Any) -> str:
+    """How many of numba's threads share the blocks (animsim.backends.fused.FusedStepper)."""
+    from animsim.backends.fused import BLOCK, PARALLEL_MIN_BLOCKS
+
+    n = compiled.system.particle_count
+    if -(-n // BLOCK) < PARALLEL_MIN_BLOCKS:
+        return f" on one thread (below {PARALLEL_MIN_BLOCKS * BLOCK:,} particles)"
+    import numba
+
+    threads = compiled.threads if compiled.threads is not None else numba.get_num_threads()
+    return f" shared among {threads} thread{'s' if threads != 1 else ''}"
+
+
 def backend_line(compiled: Any, chosen: str, note: str) -> str:
     """The ``backend:`` line ``explain`` shows."""
     if chosen == BACKEND_NUMBA:
@@ -127,7 +140,7 @@ def backend_line(compiled: Any, chosen: str, note: str) -> str:
                 "one step per call, births between calls" if between else "many steps per call"
             )
             if fused_in_blocks(compiled):
-                how += ", in blocks of particles (no particle acts on another)"
+                how += ", in blocks of particles (no particle acts on another)" + _block_cores(compiled)
         line = f"backend: numba ({how})"
     elif chosen == BACKEND_REFERENCE:
         line = "backend: reference (generic bincount springs, the baseline)"

@@ -441,3 +441,19 @@ def test_a_small_scene_neither_loads_the_parallel_build_nor_starts_threads():
         [sys.executable, "-c", SMALL_RUN], capture_output=True, text=True, cwd=root, check=True
     )
     assert out.stdout.split() == ["True", "False", "False"], out
+
+
+def test_explain_says_whether_the_blocks_share_the_cores(monkeypatch: pytest.MonkeyPatch) -> None:
+    from animsim.backends import backend_line
+
+    compiled = _compiled(SCENE)
+    n = compiled.system.particle_count
+    monkeypatch.setattr(fused_module, "PARALLEL_MIN_BLOCKS", -(-n // fused_module.BLOCK) + 1)
+    assert "in blocks of particles (no particle acts on another) on one thread" in backend_line(
+        compiled, "numba", ""
+    )
+    monkeypatch.setattr(fused_module, "PARALLEL_MIN_BLOCKS", 1)
+    compiled.threads = 2
+    assert "shared among 2 threads" in backend_line(compiled, "numba", "")
+    compiled.threads = 1
+    assert "shared among 1 thread)" in backend_line(compiled, "numba", "")
