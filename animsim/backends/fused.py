@@ -14,8 +14,9 @@ re-implemented:
   order, as :mod:`animsim.integrators`), the element kernels and the
   collision stage, stopping after the first step that is not finite. When no
   particle acts on another, it steps them a cache-sized block at a time
-  (``blocked_chunk``), and from two blocks on shares the blocks among numba's
-  threads (``blocked_chunk_parallel``), with the same bits on any thread count.
+  (``blocked_chunk``), and from PARALLEL_MIN_BLOCKS blocks on may share the blocks
+  among numba's threads (``blocked_chunk_parallel``), with the same bits on any
+  thread count; :class:`BuildChooser` times both and keeps the faster.
 
 Imported only when numba is in use.
 """
@@ -781,8 +782,8 @@ def _twin(fn: Any, name: str) -> Any:
 
 #: the blocks one after another on the calling thread (numba runs ``prange`` as ``range``)
 blocked_chunk = njit(cache=True)(_twin(_blocked_chunk, "blocked_chunk"))
-#: the blocks on numba's threads; compiled (or loaded) only when a run first uses it, and
-#: only then does numba start its thread pool
+#: the blocks on numba's threads; compiled (or loaded) only for a scene with enough blocks
+#: while numba has several threads, and only then does numba start its thread pool
 blocked_chunk_parallel = njit(cache=True, parallel=True)(_twin(_blocked_chunk, "blocked_chunk_parallel"))
 
 
@@ -951,6 +952,53 @@ class NumbaForces:
 _NO_ROWS = np.zeros(0, dtype=np.int64)
 
 
+#: calls timed on each blocked build before the faster one is kept
+TRIAL_CALLS = 3
+#: calls between two trials of the build not kept, so a change of the machine's load is followed
+RETRY_EVERY = 64
+
+
+class BuildChooser:
+    """Which blocked build (one thread or numba's threads) runs the next call: the faster.
+
+    A parallel call waits for its slowest thread. On idle cores two threads halve a
+    call's time; on cores busy with other work the wait for a descheduled thread can
+    cost milliseconds a call: the 4,500-particle fountain (one step per call) ran in
+    0.25 s on one thread and 1.9 s on two while another job kept both cores busy. Both
+    builds give the same bits, so the stepper times them (wall clock, what the user
+    waits for): the first calls alternate until each build has TRIAL_CALLS timings, the
+    build with the lower time per step (the mean of its last TRIAL_CALLS calls: a best
+    time would favour the build whose times scatter, the threaded one on a busy machine) is
+    kept, and every RETRY_EVERY calls one call tries the other build again.
+    """
+
+    def __init__(self) -> None:
+        self.recent: dict[bool, list[float]] = {True: [], False: []}
+        self.calls = 0
+        #: the build kept (True: numba's threads)
+        self.parallel = True
+
+    def pick(self) -> bool:
+        """True when the next call should run on numba's threads."""
+        on, off = len(self.recent[True]), len(self.recent[False])
+        if on < TRIAL_CALLS or off < TRIAL_CALLS:
+            return on <= off
+        if self.calls % RETRY_EVERY == 0:
+            return not self.parallel
+        return self.parallel
+
+    def record(self, parallel: bool, seconds: float, steps: int) -> None:
+        """Book a call of ``steps`` steps that took ``seconds`` on that build."""
+        if steps <= 0:
+            return
+        self.calls += 1
+        times = self.recent[parallel]
+        times.append(seconds / steps)
+        del times[:-TRIAL_CALLS]
+        if len(self.recent[True]) >= TRIAL_CALLS and len(self.recent[False]) >= TRIAL_CALLS:
+            self.parallel = sum(self.recent[True]) < sum(self.recent[False])
+
+
 class FusedStepper:
     """Many fixed steps per numba call (see the module docstring)."""
 
@@ -1006,6 +1054,8 @@ class FusedStepper:
         #: enough blocks to share among numba's threads (when it has several): the blocked
         #: chunk's calls then run them in parallel (blocked_chunk_parallel)
         self.parallel_blocks = self.blocked and -(-n // BLOCK) >= PARALLEL_MIN_BLOCKS
+        #: which of the two builds runs a call, by timing them (BuildChooser)
+        self.chooser = BuildChooser()
         self.a0_valid = False
         work = n + compiled.system.spring_count
         self.max_steps_per_call = max(1, MAX_WORK_PER_CALL // max(work, 1))
@@ -1022,9 +1072,18 @@ class FusedStepper:
     def warm_up(self, state: Any) -> float:
         """Compile (or load from the disk cache) every kernel with a zero-step call; its seconds."""
         t0 = time.perf_counter()
-        self.advance(state, np.array([state.time]), np.zeros(0))
+        no_steps = (state, np.array([state.time]), np.zeros(0))
+        self._advance(*no_steps, False)
+        if self._threaded():  # both blocked builds: the run times them and may switch
+            self._advance(*no_steps, True)
         self.compile_seconds = time.perf_counter() - t0
         return self.compile_seconds
+
+    def _threaded(self) -> bool:
+        """Whether the blocked chunk may share its blocks among threads for this call."""
+        # numba's thread count is asked only for scenes big enough to use it: asking
+        # starts numba's thread pool, which a small scene's run should not wait for
+        return self.parallel_blocks and numba.get_num_threads() > 1
 
     def _common(self, state: Any, times: np.ndarray, dts: np.ndarray, pinned: np.ndarray) -> tuple[Any, ...]:
         """The arguments every chunk kernel starts with (state, clock, method, elements, stages)."""
@@ -1054,23 +1113,28 @@ class FusedStepper:
 
     def advance(self, state: Any, times: np.ndarray, dts: np.ndarray) -> tuple[int, int, bool]:
         """len(dts) steps from times[0]; (steps taken, force evaluations, failed)."""
+        return self._advance(state, times, dts, self._threaded() and self.chooser.pick())
+
+    def _advance(
+        self, state: Any, times: np.ndarray, dts: np.ndarray, threaded: bool
+    ) -> tuple[int, int, bool]:
+        """advance, on numba's threads when ``threaded`` (blocked scenes only)."""
         common = self._common(state, times, dts, self.pinned)
         has_stage = self.stage_owner is not None
         if self.blocked:  # work: a0 and the rows saved at the call's start (x, v, a0)
-            kernel = blocked_chunk
+            kernel = blocked_chunk_parallel if threaded else blocked_chunk
             args = (*common, *self.work, self.a0_valid, has_stage, BLOCK)
-            # numba's thread count is asked only for scenes big enough to use it: asking
-            # starts numba's thread pool, which a small scene's run should not wait for
-            if self.parallel_blocks and numba.get_num_threads() > 1:
-                kernel = blocked_chunk_parallel
         else:  # work: xs, vs, a0, a1, xo, vo
             kernel = fused_chunk
             args = (*common, self.kx, self.kv, *self.work, self.a0_valid, has_stage)
         call = self._chunks.get(kernel)
         if call is None:  # loads (or compiles) the chunk; then calls its overload directly
             call = self._chunks[kernel] = _FastCall(kernel, args)
+        t0 = time.perf_counter()
         result = call(*args)
         taken, evals, changed, self.a0_valid, failed = result
+        if self._threaded():
+            self.chooser.record(kernel is blocked_chunk_parallel, time.perf_counter() - t0, int(taken))
         self.changed_steps += int(changed)
         if changed:
             state.revision += 1

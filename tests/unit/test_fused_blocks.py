@@ -457,3 +457,59 @@ def test_explain_says_whether_the_blocks_share_the_cores(monkeypatch: pytest.Mon
     assert "shared among 2 threads" in backend_line(compiled, "numba", "")
     compiled.threads = 1
     assert "shared among 1 thread)" in backend_line(compiled, "numba", "")
+
+
+def test_the_chooser_keeps_the_faster_build_and_follows_a_change_of_load():
+    """Both builds are timed first; the one with the lower time per step is kept; every
+    RETRY_EVERY calls the other is tried again, and kept once it is faster."""
+    chooser = fused_module.BuildChooser()
+    trial = fused_module.TRIAL_CALLS
+    picks = []
+    for _ in range(2 * trial):  # the trials alternate, threads first
+        parallel = chooser.pick()
+        picks.append(parallel)
+        chooser.record(parallel, 8e-3 if parallel else 1e-3, 4)  # busy cores: threads wait
+    assert picks == [True, False] * trial
+    assert chooser.parallel is False
+    tried = []
+    for _ in range(3 * fused_module.RETRY_EVERY):
+        parallel = chooser.pick()
+        tried.append(parallel)
+        chooser.record(parallel, 8e-3 if parallel else 1e-3, 4)
+    # one call in RETRY_EVERY tries the threads again (and they stay slower)
+    assert sum(tried) == 3 and chooser.parallel is False
+    chooser.record(True, 0.0, 0)  # a call that took no step is not a timing
+    assert len(chooser.recent[True]) == trial
+    # the other jobs end: the threads are now twice as fast; after enough retries they win
+    for _ in range(trial * fused_module.RETRY_EVERY + 1):
+        parallel = chooser.pick()
+        chooser.record(parallel, 0.5e-3 if parallel else 1e-3, 4)
+    assert chooser.parallel is True and chooser.pick() is True
+
+
+@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="one thread")
+@pytest.mark.parametrize("threads", [2], indirect=True)
+def test_both_builds_load_before_the_run_and_switching_keeps_the_bits(threads, monkeypatch):
+    """warm_up loads both builds (none compiles inside the timed run), and a run whose calls
+    switch between them steps the same bits as one that never shares the blocks."""
+    monkeypatch.setattr(fused_module, "BLOCK", SMALL_BLOCK)
+    compiled = _crowd(SMALL_BLOCK * fused_module.PARALLEL_MIN_BLOCKS, 5)
+    ref_state = compiled.fresh_state()
+    compiled.dynamics.bind(ref_state)
+    times = np.arange(41) * 0.002
+    dts = np.full(40, 0.002)
+    serial = fused_module.FusedStepper(compiled)
+    for k in range(0, 40, 4):
+        serial._advance(ref_state, times[k : k + 5], dts[k : k + 4], False)
+    state = compiled.fresh_state()
+    compiled.dynamics.bind(state)
+    stepper = fused_module.FusedStepper(compiled)
+    stepper.warm_up(state)
+    assert set(stepper._chunks) == {fused_module.blocked_chunk, fused_module.blocked_chunk_parallel}
+    used = []
+    for k in range(0, 40, 4):
+        used.append(stepper.chooser.pick())
+        stepper.advance(state, times[k : k + 5], dts[k : k + 4])
+    assert True in used and False in used
+    assert np.array_equal(state.particle_position.view(np.int64), ref_state.particle_position.view(np.int64))
+    assert np.array_equal(state.particle_velocity.view(np.int64), ref_state.particle_velocity.view(np.int64))
