@@ -956,6 +956,11 @@ _NO_ROWS = np.zeros(0, dtype=np.int64)
 TRIAL_CALLS = 3
 #: calls between two trials of the build not kept, so a change of the machine's load is followed
 RETRY_EVERY = 64
+#: after the trials, the other build is kept only when it is this much faster (its median
+#: time per step over its last TRIAL_CALLS calls against the kept build's): on idle cores
+#: two threads run about 1.4-2x faster, on busy ones one thread 4-8x, while single calls
+#: of a run on a shared machine scatter by tens of percent
+SWITCH_MARGIN = 1.25
 
 
 class BuildChooser:
@@ -967,9 +972,9 @@ class BuildChooser:
     0.25 s on one thread and 1.9 s on two while another job kept both cores busy. Both
     builds give the same bits, so the stepper times them (wall clock, what the user
     waits for): the first calls alternate until each build has TRIAL_CALLS timings, the
-    build with the lower time per step (the mean of its last TRIAL_CALLS calls: a best
-    time would favour the build whose times scatter, the threaded one on a busy machine) is
-    kept, and every RETRY_EVERY calls one call tries the other build again.
+    build with the lower time per step (the median of its last TRIAL_CALLS calls) is
+    kept, and every RETRY_EVERY calls one call tries the other build again, which is then
+    kept only if it is SWITCH_MARGIN times faster.
     """
 
     def __init__(self) -> None:
@@ -996,7 +1001,13 @@ class BuildChooser:
         times.append(seconds / steps)
         del times[:-TRIAL_CALLS]
         if len(self.recent[True]) >= TRIAL_CALLS and len(self.recent[False]) >= TRIAL_CALLS:
-            self.parallel = sum(self.recent[True]) < sum(self.recent[False])
+            on, off = float(np.median(self.recent[True])), float(np.median(self.recent[False]))
+            if self.calls <= 2 * TRIAL_CALLS:  # the trials: the faster
+                self.parallel = on < off
+            elif self.parallel:  # a change needs a clear margin (timings of calls scatter)
+                self.parallel = not off * SWITCH_MARGIN < on
+            else:
+                self.parallel = on * SWITCH_MARGIN < off
 
 
 class FusedStepper:

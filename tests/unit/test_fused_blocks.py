@@ -513,3 +513,23 @@ def test_both_builds_load_before_the_run_and_switching_keeps_the_bits(threads, m
     assert True in used and False in used
     assert np.array_equal(state.particle_position.view(np.int64), ref_state.particle_position.view(np.int64))
     assert np.array_equal(state.particle_velocity.view(np.int64), ref_state.particle_velocity.view(np.int64))
+
+
+def test_the_chooser_switches_only_for_a_clear_margin():
+    """Timings of single calls scatter: after the trials a build close to the kept one's
+    speed (within SWITCH_MARGIN) does not take over; a clearly faster one does."""
+    chooser = fused_module.BuildChooser()
+    for _ in range(2 * fused_module.TRIAL_CALLS):
+        parallel = chooser.pick()
+        chooser.record(parallel, 1.1e-3 if parallel else 1e-3, 1)
+    assert chooser.parallel is False  # the trials: the faster, however close
+    near = 1e-3 / (0.9 * fused_module.SWITCH_MARGIN)  # faster, but not by the margin
+    for _ in range(4 * fused_module.RETRY_EVERY):
+        parallel = chooser.pick()
+        chooser.record(parallel, near if parallel else 1e-3, 1)
+    assert chooser.parallel is False
+    clear = 1e-3 / (1.1 * fused_module.SWITCH_MARGIN)
+    for _ in range(4 * fused_module.RETRY_EVERY):
+        parallel = chooser.pick()
+        chooser.record(parallel, clear if parallel else 1e-3, 1)
+    assert chooser.parallel is True
