@@ -974,7 +974,8 @@ class BuildChooser:
     waits for): the first calls alternate until each build has TRIAL_CALLS timings, the
     build with the lower time per step (the median of its last TRIAL_CALLS calls) is
     kept, and every RETRY_EVERY calls one call tries the other build again, which is then
-    kept only if it is SWITCH_MARGIN times faster.
+    kept only if that call was SWITCH_MARGIN times faster (a wrong switch on one lucky call
+    is undone once the new build's median over its next calls shows it).
     """
 
     def __init__(self) -> None:
@@ -985,9 +986,8 @@ class BuildChooser:
 
     def pick(self) -> bool:
         """True when the next call should run on numba's threads."""
-        on, off = len(self.recent[True]), len(self.recent[False])
-        if on < TRIAL_CALLS or off < TRIAL_CALLS:
-            return on <= off
+        if self.calls < 2 * TRIAL_CALLS:  # the trials alternate, threads first
+            return len(self.recent[True]) <= len(self.recent[False])
         if self.calls % RETRY_EVERY == 0:
             return not self.parallel
         return self.parallel
@@ -998,11 +998,14 @@ class BuildChooser:
             return
         self.calls += 1
         times = self.recent[parallel]
+        trials = self.calls <= 2 * TRIAL_CALLS
+        if not trials and parallel != self.parallel:
+            times.clear()  # a retry of the other build: its old timings are of another load
         times.append(seconds / steps)
         del times[:-TRIAL_CALLS]
-        if len(self.recent[True]) >= TRIAL_CALLS and len(self.recent[False]) >= TRIAL_CALLS:
+        if min(len(self.recent[True]), len(self.recent[False])) >= (TRIAL_CALLS if trials else 1):
             on, off = float(np.median(self.recent[True])), float(np.median(self.recent[False]))
-            if self.calls <= 2 * TRIAL_CALLS:  # the trials: the faster
+            if trials:  # the faster
                 self.parallel = on < off
             elif self.parallel:  # a change needs a clear margin (timings of calls scatter)
                 self.parallel = not off * SWITCH_MARGIN < on

@@ -478,8 +478,9 @@ def test_the_chooser_keeps_the_faster_build_and_follows_a_change_of_load():
         chooser.record(parallel, 8e-3 if parallel else 1e-3, 4)
     # one call in RETRY_EVERY tries the threads again (and they stay slower)
     assert sum(tried) == 3 and chooser.parallel is False
+    booked = list(chooser.recent[True]), chooser.calls
     chooser.record(True, 0.0, 0)  # a call that took no step is not a timing
-    assert len(chooser.recent[True]) == trial
+    assert (chooser.recent[True], chooser.calls) == booked
     # the other jobs end: the threads are now twice as fast; after enough retries they win
     for _ in range(trial * fused_module.RETRY_EVERY + 1):
         parallel = chooser.pick()
