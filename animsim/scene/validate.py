@@ -86,14 +86,19 @@ def partial_scene(body: dict[str, Any]) -> tuple[Scene, bool]:
         fields[name] = items
     for name in ("duration", "dt"):
         value = body.get(name, Scene.model_fields[name].default)
-        ok = (
-            isinstance(value, int | float)
-            and not isinstance(value, bool)
-            and math.isfinite(value)
-            and value > 0
-        )
-        fields[name] = value if ok else None
+        fields[name] = value if _positive_number(value) else None
     return Scene.model_construct(**fields), ids_complete
+
+
+def _positive_number(value: Any) -> bool:
+    """A finite number above zero; an int beyond a float's range is not (the model's own
+    validation then says it is too large)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return False
+    try:
+        return math.isfinite(value) and value > 0
+    except OverflowError:  # math.isfinite converts an int to a float first
+        return False
 
 
 def _salvage_particle(raw: Any) -> Unvalidated | None:
