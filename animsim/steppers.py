@@ -318,14 +318,13 @@ class Fused(_Base):
         (:meth:`animsim.backends.fused.FusedStepper.check_inside`)."""
         from animsim.engine import Guard
 
-        self.checks_inside = (
+        return (
             type(guard).check is Guard.check
             and not self.between
             and self.replayable
             and self.compiled.system.particle_count <= CHECKS_INSIDE_UP_TO
             and self.fused.check_inside(guard.watch)
         )
-        return self.checks_inside
 
     def advance_checked(
         self, state: State, k: int, goal: int, checked: int, stride: int, rec: np.ndarray
