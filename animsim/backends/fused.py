@@ -50,6 +50,13 @@ from animsim.integrators.base import (
 
 warnings.filterwarnings("ignore", category=NumbaExperimentalFeatureWarning)
 
+#: numba's reference counting off (``_nrt``) in the compiled step loops, which take every
+#: array from their caller and allocate none: with it on, each call into an element kernel
+#: (a first-class function) was wrapped in an atomic increment and decrement of each of
+#: its six arrays' counts, which the compiler could not pair off across the call, about
+#: 85 ns a call: most of a tiny scene's step (_acc on one particle 111 -> 23 ns)
+COUNTED = False
+
 #: largest (particles + springs) x steps one call may do, so Ctrl-C and the
 #: progress bar are served about every few tenths of a second
 MAX_WORK_PER_CALL = 20_000_000
@@ -68,7 +75,16 @@ def _no_energy(x, x_ref, u_ref, mass, fp, ip):
     return 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=COUNTED)
+def _copy(dst, src):
+    """dst[:] = src for (N, 3) arrays: an array assignment may need numba's reference
+    counting (for a temporary when the two overlap), which the step loops run without."""
+    for i in range(dst.shape[0]):
+        for k in range(3):
+            dst[i, k] = src[i, k]
+
+
+@njit(cache=True, _nrt=COUNTED)
 def _acc(x, v, t, out, kernels, fps, ips, mass, inv_mass, pinned):
     """out = F(x, v, t) / m, pinned rows 0 (Dynamics.acceleration)."""
     out[:] = 0.0
@@ -85,14 +101,28 @@ def _acc(x, v, t, out, kernels, fps, ips, mass, inv_mass, pinned):
         out[p, 2] = 0.0
 
 
-@njit(cache=True)
+#: rows from which _all_finite tests the numbers as one flat run: reshaping an array in
+#: compiled code costs about 60 ns (the views' reference counts), more than testing a
+#: few rows one number at a time (about 2 ns a row), against 0.5 ns a row flat
+FLAT_FINITE_FROM = 32
+
+
+@njit(cache=True, _nrt=COUNTED)
 def _all_finite(x, v):
-    """Every number of x and v is finite, without a branch per number: x * 0 is NaN exactly
-    when x is not finite, so x * 0 == 0 says x is finite. The flags are and-ed, a reduction
-    the compiler may reorder and so runs four lanes at a time; a sum of the products (NaN
-    when any is) is a chain of dependent float additions it may not reorder: 1.7 against 0.5 ns a row, and with it the
-    1e6-particle benchmark 57 against 65 M particle-steps/s on one thread (cloth 32 gains
-    5 %: a branch per number before)."""
+    """Every number of x and v is finite: x * 0 is NaN exactly when x is not finite, so
+    x * 0 == 0 says x is finite. From FLAT_FINITE_FROM rows the flags of the flat arrays
+    are and-ed without a branch, a reduction the compiler may reorder and so runs four
+    lanes at a time; a sum of the products (NaN when any is) is a chain of dependent
+    float additions it may not reorder: 1.7 against 0.5 ns a row, and with it the
+    1e6-particle benchmark 57 against 65 M particle-steps/s on one thread (cloth 32
+    gains 5 % over a branch per number)."""
+    n = x.shape[0]
+    if n < FLAT_FINITE_FROM:
+        for i in range(n):
+            for k in range(3):
+                if not (x[i, k] * 0.0 == 0.0 and v[i, k] * 0.0 == 0.0):
+                    return False
+        return True
     xf = x.reshape(x.size)
     vf = v.reshape(v.size)
     ok = True
@@ -101,14 +131,14 @@ def _all_finite(x, v):
     return ok
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=COUNTED)
 def _axpy(y, c, z):
     for i in range(y.shape[0]):
         for k in range(3):
             y[i, k] += c * z[i, k]
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=COUNTED)
 def fused_chunk(
     x,
     v,
@@ -152,8 +182,8 @@ def fused_chunk(
         t = times[step]
         dt = dts[step]
         if has_stage:  # the step's start, for the collision stage; without one, no copies
-            xo[:] = x
-            vo[:] = v
+            _copy(xo, x)
+            _copy(vo, v)
         if method == SYMPLECTIC_EULER:
             _acc(x, v, t, a0, kernels, fps, ips, mass, inv_mass, pinned)
             evals += 1
@@ -185,22 +215,22 @@ def fused_chunk(
             for i in range(x.shape[0]):
                 for k in range(3):
                     v[i, k] += half * (a0[i, k] + a1[i, k])
-            a0[:] = a1
+            _copy(a0, a1)
             a0_valid = True
         else:  # RUNGE_KUTTA: the engine of runge_kutta.RungeKutta
             stages = tab_b.shape[0]
             for j in range(stages):
                 if j == 0:
-                    kx[0][:] = v
+                    _copy(kx[0], v)
                     _acc(x, v, t, kv[0], kernels, fps, ips, mass, inv_mass, pinned)
                 else:
-                    xs[:] = x
-                    vs[:] = v
+                    _copy(xs, x)
+                    _copy(vs, v)
                     for m in range(j):
                         if tab_a[j, m] != 0.0:
                             _axpy(xs, dt * tab_a[j, m], kx[m])
                             _axpy(vs, dt * tab_a[j, m], kv[m])
-                    kx[j][:] = vs
+                    _copy(kx[j], vs)
                     _acc(xs, vs, t + tab_c[j] * dt, kv[j], kernels, fps, ips, mass, inv_mass, pinned)
                 evals += 1
             for j in range(stages):
@@ -229,7 +259,7 @@ def fused_chunk(
 CHECK_MARGIN = 1e-6
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=COUNTED)
 def _energy_passes(x, v, t, mass, elastic, efps, eips, releasing, rfps, rips, u_refs, x_ref, no_u, books):
     """The watchdog's energy test (EnergyWatch.growth, Guard.check) at a finite state at time t:
     H = kinetic + the elastic elements' potentials, B = h0 + max(released, 0) + wind power *
@@ -253,7 +283,7 @@ def _energy_passes(x, v, t, mass, elastic, efps, eips, releasing, rfps, rips, u_
     return h / b <= books[5]
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=COUNTED)
 def checked_chunk(
     x,
     v,
@@ -365,16 +395,16 @@ def checked_chunk(
             return j, evals, changed, a0_valid, checked, True, r
         k = k0 + j
         if r < rec.shape[0] and k == rec[r]:
-            shot_x[r] = x
-            shot_v[r] = v
+            _copy(shot_x[r], x)
+            _copy(shot_v[r], v)
             r += 1
         if k == due or k == last:  # noqa: SIM109 - plain comparisons in compiled code
             if energy and not _energy_passes(
                 x, v, times[j], mass, elastic, efps, eips, releasing, rfps, rips, u_refs, x_ref, no_u, books
             ):
                 return j, evals, changed, a0_valid, checked, True, r
-            x_good[:] = x
-            v_good[:] = v
+            _copy(x_good, x)
+            _copy(v_good, v)
             checked = k
     return steps, evals, changed, a0_valid, checked, False, r
 
@@ -398,7 +428,7 @@ BLOCK = 512
 PARALLEL_MIN_BLOCKS = 8
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=COUNTED)
 def _acc_block(x, v, t, out, kernels, fps, ips, mass, inv_mass, pinned):
     """out = F(x, v, t) / m on rows of pointwise forces (``pinned``: those rows' flags), as _acc."""
     out[:] = 0.0
@@ -415,7 +445,7 @@ def _acc_block(x, v, t, out, kernels, fps, ips, mass, inv_mass, pinned):
             out[i, 2] = 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=COUNTED)
 def _block_steps(
     x,
     v,
@@ -463,8 +493,8 @@ def _block_steps(
         t = t_all[step]
         dt = dts[step]
         if has_stage:
-            xo[:] = x
-            vo[:] = v
+            _copy(xo, x)
+            _copy(vo, v)
         if method == SYMPLECTIC_EULER:
             _acc_block(x, v, t, acc, kernels, fps, ips, mass, inv_mass, pinned)
             xf = x.reshape(3 * m)
@@ -494,22 +524,22 @@ def _block_steps(
             for i in range(m):
                 for k in range(3):
                     v[i, k] += half * (a0[i, k] + a1[i, k])
-            a0[:] = a1
+            _copy(a0, a1)
         else:  # RUNGE_KUTTA
             for j in range(stages):
                 kxj = kx[j, :m]
                 kvj = kv[j, :m]
                 if j == 0:
-                    kxj[:] = v
+                    _copy(kxj, v)
                     _acc_block(x, v, t, kvj, kernels, fps, ips, mass, inv_mass, pinned)
                 else:
-                    xs[:] = x
-                    vs[:] = v
+                    _copy(xs, x)
+                    _copy(vs, v)
                     for q in range(j):
                         if tab_a[j, q] != 0.0:
                             _axpy(xs, dt * tab_a[j, q], kx[q, :m])
                             _axpy(vs, dt * tab_a[j, q], kv[q, :m])
-                    kxj[:] = vs
+                    _copy(kxj, vs)
                     _acc_block(xs, vs, t + tab_c[j] * dt, kvj, kernels, fps, ips, mass, inv_mass, pinned)
             for j in range(stages):
                 if tab_b[j] != 0.0:
