@@ -107,7 +107,7 @@ import numpy as np
 from animsim.elements import StepStage, _compile_helpers, numba_helper
 from animsim.record import Frame
 from animsim.scene import models as m
-from animsim.system import State
+from animsim.system import State, kept_copies
 
 #: The rate noise (``rate_spread``) is held for this span of simulated time, s.
 RATE_NOISE_WINDOW = 0.1
@@ -661,6 +661,7 @@ class Pool:
         self.slot_lifetime = np.ones(cap)  # s
         self.slot_serial = np.zeros(cap, dtype=np.int64)  # n of the id <name>#<n>
         self.slot_table = np.full(cap, -1, dtype=np.int64)  # row in the id table, -1 = not yet recorded
+        self._kept: list[np.ndarray] | None = None  # the last snapshot's arrays (snapshot)
         # The numba backend's kernels (module docstring), set by use_numba; None: scans.
         self._kernels: dict[str, Any] | None = None
         self._stale = True  # the free list is to be built from the slots before the next step
@@ -747,8 +748,11 @@ class Pool:
     )
 
     def snapshot(self) -> tuple[Any, ...]:
+        """The pool's books for a replay; only the latest snapshot is valid (the next one
+        reuses its arrays: the loop restores only from the last passing check)."""
+        self._kept = kept_copies(self._kept, [getattr(self, f) for f in self._SLOT_FIELDS])
         return (
-            [getattr(self, f).copy() for f in self._SLOT_FIELDS],
+            self._kept,
             [getattr(self, f) for f in self._COUNTERS],
             self.stream.snapshot(),
         )

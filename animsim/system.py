@@ -139,3 +139,20 @@ class State:
             np.copyto(self.body_orientation, src.body_orientation)
             np.copyto(self.body_angular_velocity, src.body_angular_velocity)
         self.time, self.step, self.revision = src.time, src.step, src.revision
+
+
+def kept_copies(kept: list[np.ndarray] | None, arrays: list[np.ndarray]) -> list[np.ndarray]:
+    """Copies of ``arrays`` written into ``kept`` (the last call's copies) where their shapes
+    and types still match, else made anew: a replay's snapshot of the books is taken at
+    every passing check, and only the latest is ever restored, so its buffers are reused
+    instead of allocating (and first touching) a fresh 100,000-slot array each time."""
+    if kept is None or len(kept) != len(arrays):
+        return [a.copy() for a in arrays]
+    out = []
+    for buf, a in zip(kept, arrays, strict=True):
+        if buf.shape == a.shape and buf.dtype == a.dtype:
+            np.copyto(buf, a)
+            out.append(buf)
+        else:
+            out.append(a.copy())
+    return out

@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 
 from animsim.elements import DISSIPATIVE, ELASTIC, INJECTING, RELEASING
+from animsim.system import kept_copies
 
 #: the energy may reach this multiple of its budget before the run is called unstable
 BLOWUP_FACTOR = 100.0
@@ -130,6 +131,7 @@ class EnergyWatch:
         self.u_ref = [t.per_particle_potential(x) for t in self.releasing]
         self.alive_prev = None if state.particle_alive is None else state.particle_alive.copy()
         self.born_energy = 0.0
+        self._kept: list[np.ndarray] | None = None  # the last snapshot's arrays (snapshot)
         self.h0 = self.watched(state)
 
     def kinetic(self, v: np.ndarray) -> float:
@@ -189,7 +191,10 @@ class EnergyWatch:
         """The books a replay from a checked state restores (None: they never change)."""
         if self.alive_prev is None:
             return None
-        return self.born_energy, self.x_ref.copy(), [u.copy() for u in self.u_ref], self.alive_prev.copy()
+        # only the latest snapshot is valid: the next one reuses its arrays (kept_copies)
+        self._kept = kept_copies(self._kept, [self.x_ref, self.alive_prev, *self.u_ref])
+        x_ref, alive_prev, *u_ref = self._kept
+        return self.born_energy, x_ref, u_ref, alive_prev
 
     def restore(self, snap: tuple[Any, ...] | None) -> None:
         if snap is None:
