@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from animsim.elements import ELASTIC, ForceElement
-from animsim.vec import dot3
+from animsim.vec import dot3, take_rows
 
 if TYPE_CHECKING:  # SciPy loads only when implicit Euler asks for a Jacobian
     import scipy.sparse as sp
@@ -184,7 +184,8 @@ class Springs(ForceElement):
         return fp, ip
 
     def _geometry(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        d = x[self.a] - x[self.b]
+        # rows gathered with np.take (take_rows): the same values as x[self.a], faster
+        d = take_rows(x, self.a) - take_rows(x, self.b)
         length = np.sqrt(dot3(d, d))
         # 1/|L|, and 0 for a spring with coincident ends (no direction, no force)
         inv = np.zeros_like(length)
@@ -195,7 +196,7 @@ class Springs(ForceElement):
         d, length, inv = self._geometry(x)
         magnitude = self.ks * (length - self.rest)
         if self.has_damping:
-            dv = v[self.a] - v[self.b]
+            dv = take_rows(v, self.a) - take_rows(v, self.b)
             magnitude += self.kd * dot3(dv, d) * inv
         # force on a = -magnitude * unit; on b the opposite
         scale = -magnitude * inv
