@@ -710,15 +710,15 @@ def plot(
 ) -> Path:
     """Draw particle paths, the energy split into its parts, or phase portraits (PNG, SVG,
     PDF): ``animsim plot``. ``source`` is a scene (simulated first) or a trajectory file."""
-    from animsim.export.pictures import figure_format, plot_trajectory
+    from animsim.export.pictures import AXES, VIEW_NAMES, figure_format, plot_trajectory
     from animsim.export.trajectory import is_trajectory, read_trajectory
 
     out, src = Path(output), Path(source)
     if kind not in PLOT_KINDS:
         raise UsageError(f"--kind {kind!r}: choose one of {', '.join(PLOT_KINDS)}")
     figure_format(out)
-    if view is not None and view not in ("xy", "xz", "yz"):
-        raise UsageError(f"--view {view!r}: plot takes xy, xz or yz")
+    if view is not None and view not in AXES:
+        raise UsageError(f"--view {view!r}: plot takes {VIEW_NAMES}")
     _check_output(out, src)
     from_file = is_trajectory(src)
     if kind != "phase" and (integrators is not None or particles is not None):
@@ -767,7 +767,11 @@ def plot(
     else:
         assert compiled is not None
         traj, name = simulate(compiled).frames_long, compiled.name
-    plot_trajectory(traj, out, view=view, title=name)
+    from animsim.render import view_up
+
+    plot_trajectory(
+        traj, out, view=view, title=name, up=None if compiled is None else view_up(compiled.scene)
+    )
     return out
 
 

@@ -581,8 +581,9 @@ def render(
         str | None,
         typer.Option(
             "--view",
-            help="xy, xz, yz (orthographic) or 3d (perspective); default: the two axes along which "
-            "the motion is widest.",
+            help="xy, xz, yz, zy (orthographic: the across axis, then the up one) or 3d "
+            "(perspective); default: from the side, up drawn upward, when gravity points down y or z "
+            "(from above when the motion is flat), else the two axes along which it is widest.",
         ),
     ] = None,
     size: Annotated[
@@ -1061,7 +1062,8 @@ def plot(
         Path | None, typer.Option("--scene", help="The scene of a trajectory (needed for --kind energy).")
     ] = None,
     view: Annotated[
-        str | None, typer.Option("--view", help="xy, xz or yz; default: the two widest axes.")
+        str | None,
+        typer.Option("--view", help="xy, xz, yz or zy; default: chosen as render chooses it."),
     ] = None,
     integrator: Annotated[str | None, typer.Option(help="Override the scene's integrator.")] = None,
     dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,

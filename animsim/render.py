@@ -50,10 +50,11 @@ DEFAULT_LONG_SIDE = 480
 MAX_ASPECT = 16 / 9
 
 
-def _with_view(opts: RenderOptions, lo: np.ndarray, hi: np.ndarray) -> RenderOptions:
+def _with_view(opts: RenderOptions, lo: np.ndarray, hi: np.ndarray, up: str | None = None) -> RenderOptions:
     """``opts`` with a view and a size: as asked, else chosen from the motion's bounds.
 
-    The view is the widest pair of axes, as ``animsim plot`` picks it; the
+    The view is chosen as ``animsim plot`` picks it (:func:`pick_view`: the side
+    view when gravity gives an ``up`` axis, else the widest pair of axes); the
     size is DEFAULT_LONG_SIDE on the longer side and shaped like the motion
     (within MAX_ASPECT), so what moves fills the picture instead of a square
     of empty ground.
@@ -63,7 +64,7 @@ def _with_view(opts: RenderOptions, lo: np.ndarray, hi: np.ndarray) -> RenderOpt
     from animsim.export.pictures import AXES, pick_view
 
     finite = bool(np.isfinite(lo).all() and np.isfinite(hi).all())
-    view = opts.view or (pick_view(lo, hi) if finite else "xy")
+    view = opts.view or (pick_view(lo, hi, up) if finite else "xy")
     size = opts.size
     if size is None:
         size = f"{DEFAULT_LONG_SIDE}x{DEFAULT_LONG_SIDE}"
@@ -135,6 +136,17 @@ def _bounds(lo: np.ndarray, hi: np.ndarray, planes: list[tuple[np.ndarray, np.nd
     if not pts:
         pts = [np.zeros(3)]
     return bounds_from_positions(np.stack(pts))
+
+
+def view_up(scene: Any) -> str | None:
+    """The axis a default view draws upward: y or z when the scene's gravity points down one
+    of them (its largest component), else None (no gravity: no up to keep)."""
+    for f in getattr(scene, "forces", ()):
+        if f.type == "gravity":
+            g = np.abs(np.asarray(f.g, dtype=np.float64))
+            k = int(np.argmax(g))
+            return "xyz"[k] if g[k] > 0 and k > 0 else None
+    return None
 
 
 def _up_axis(scene: Any) -> str:
@@ -227,7 +239,7 @@ def render_scene(
     if first.status == "interrupted":
         return RenderResult(frames=0, outputs=[], status="interrupted")
     bounds = _bounds(bounds_sink.lo, bounds_sink.hi, planes)
-    opts = _with_view(opts, bounds_sink.lo, bounds_sink.hi)
+    opts = _with_view(opts, bounds_sink.lo, bounds_sink.hi, view_up(compiled.scene))
     sinks = _sinks(gif, mp4, opts, bounds, planes, _up_axis(compiled.scene), progress)
     result = run(compiled, sinks, stop=stop)
     return RenderResult(
@@ -292,7 +304,7 @@ def render_trajectory(
         extra = _extras_for(compiled, traj.ids)
     lo, hi = traj.bounds()
     bounds = _bounds(lo, hi, planes)
-    opts = _with_view(opts, lo, hi)
+    opts = _with_view(opts, lo, hi, None if compiled is None else view_up(compiled.scene))
     sinks = _sinks(gif, mp4, opts, bounds, planes, up, progress)
     header = TrajectoryHeader(
         scene_name="trajectory", ids=[], spring_index=spring_index, has_emitters=False, extra=extra

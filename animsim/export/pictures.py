@@ -19,7 +19,14 @@ from animsim.errors import UsageError
 FIGURE_SUFFIXES = {".png": "png", ".svg": "svg", ".pdf": "pdf"}
 # Trails of more particles than this make a grey smear; draw an even subset.
 MAX_TRAILS = 400
-AXES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}
+#: the axis-aligned views, (horizontal axis, vertical axis) of the picture; "zy" is the side view
+#: of a y-up scene looking along x, so that up stays up whichever horizontal axis is wider
+AXES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2), "zy": (2, 1)}
+VIEW_NAMES = "xy, xz, yz or zy"
+#: a scene with gravity along y or z is drawn from the side (up drawn upward) unless its
+#: vertical extent is below this fraction of its wider horizontal one and is the smallest of
+#: the three: then it is something flat, seen from above
+SIDE_VIEW_MIN_HEIGHT = 0.25
 #: up to this many paths, each gets its own colour and its particle's name in the legend
 NAMED_PATHS = 10
 #: the part of the sequential colour map used for many paths (its last fifth is too pale on white)
@@ -61,20 +68,40 @@ def save_figure(fig: Any, path: Path) -> None:
     out.commit()
 
 
-def pick_view(lo: np.ndarray, hi: np.ndarray) -> str:
-    """The axis-aligned view showing the two largest extents."""
-    ext = np.asarray(hi) - np.asarray(lo)
-    a, b = sorted(np.argsort(ext)[-2:])
-    return {(0, 1): "xy", (0, 2): "xz", (1, 2): "yz"}[(int(a), int(b))]
+def pick_view(lo: np.ndarray, hi: np.ndarray, up: str | None = None) -> str:
+    """The axis-aligned view a picture of motion within ``lo``..``hi`` gets by default.
+
+    Without an up axis (no gravity along y or z): the two largest extents. With
+    one, the side view, the up axis drawn upward and the wider horizontal axis
+    across (a fountain, falling sand, a swinging cloth: gravity points down the
+    picture), unless the motion is flat, its height the smallest extent and
+    under SIDE_VIEW_MIN_HEIGHT of its width: then the top view (a cloth lying
+    flat, a galaxy's disc).
+    """
+    ext = np.asarray(hi, dtype=np.float64) - np.asarray(lo, dtype=np.float64)
+    a, b = sorted(int(k) for k in np.argsort(ext, kind="stable")[-2:])
+    widest = {(0, 1): "xy", (0, 2): "xz", (1, 2): "yz"}[(a, b)]
+    if up not in ("y", "z"):
+        return widest
+    u = "xyz".index(up)
+    h1, h2 = (k for k in range(3) if k != u)
+    across = h2 if ext[h2] > ext[h1] else h1
+    flat = u not in (a, b) and ext[u] < SIDE_VIEW_MIN_HEIGHT * ext[across]
+    if flat:
+        return "xz" if up == "y" else "xy"
+    return "xyz"[across] + up
 
 
-def plot_trajectory(traj: Any, path: Path, *, view: str | None = None, title: str = "") -> None:
-    """Paths of the particles (trails) and their final positions."""
+def plot_trajectory(
+    traj: Any, path: Path, *, view: str | None = None, title: str = "", up: str | None = None
+) -> None:
+    """Paths of the particles (trails) and their final positions (``up``: the scene's up axis,
+    for the default view, :func:`pick_view`)."""
     plt = _pyplot()
     lo, hi = traj.bounds()
-    view = view or pick_view(lo, hi)
+    view = view or pick_view(lo, hi, up)
     if view not in AXES:
-        raise UsageError(f"--view {view!r}: plot takes xy, xz or yz")
+        raise UsageError(f"--view {view!r}: plot takes {VIEW_NAMES}")
     a, b = AXES[view]
     fig, ax = plt.subplots(figsize=(6.4, 6.0))
     order = np.argsort(traj.particle, kind="stable")

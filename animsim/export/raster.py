@@ -181,8 +181,9 @@ def to_rgb8(image: Canvas | np.ndarray) -> np.ndarray:
 # Bounds and cameras
 # --------------------------------------------------------------------------
 
-View = Literal["xy", "xz", "yz", "3d"]
-VIEWS: tuple[str, ...] = ("xy", "xz", "yz", "3d")
+View = Literal["xy", "xz", "yz", "zy", "3d"]
+#: orthographic views name the picture's horizontal axis, then its vertical one
+VIEWS: tuple[str, ...] = ("xy", "xz", "yz", "zy", "3d")
 AXES = "xyz"
 
 BOUNDS_MARGIN = 0.05  # fraction of the largest extent added on every side
@@ -281,15 +282,16 @@ class Camera:
 
 
 class OrthoCamera(Camera):
-    """Orthographic view ``xy``, ``xz`` or ``yz`` that fits the bounds' two axes.
+    """Orthographic view ``xy``, ``xz``, ``yz`` or ``zy`` (horizontal axis, then vertical) that fits
+    the bounds' two axes.
 
     One scale for both axes (no distortion): the larger of the two extents
     relative to the image fills it, and the bounds' centre is the image centre.
     """
 
     def __init__(self, view: str, bounds: Bounds, size: tuple[int, int]):
-        if view not in ("xy", "xz", "yz"):
-            raise ValueError(f"orthographic view must be xy, xz or yz, got {view!r}")
+        if view not in ("xy", "xz", "yz", "zy"):
+            raise ValueError(f"orthographic view must be xy, xz, yz or zy, got {view!r}")
         lo, hi = check_bounds(bounds)
         self.width, self.height = _check_size(size)
         self.view = view

@@ -208,6 +208,24 @@ def test_render_picks_the_widest_view_like_plot(tmp_path) -> None:
     assert "view xz" in r.stdout
 
 
+def test_render_shows_a_fountain_from_the_side(tmp_path) -> None:
+    # Its drops spread wider over the ground than they rise, but a top view would show a disc of
+    # dots: with gravity down y the picture keeps y upward, so the jet rises up the picture.
+    from PIL import Image
+
+    gif = tmp_path / "f.gif"
+    r = run_cli("render", SCENES / "fountain.yaml", "--duration", "1", "--gif", gif)
+    assert r.returncode == 0, r.stderr
+    assert "view xy" in r.stdout
+    with Image.open(gif) as im:
+        im.seek(im.n_frames - 1)
+        frame = np.asarray(im.convert("L"), dtype=np.float64)
+    # the jet is a bright column in the middle third, rising well above the lowest fifth
+    column = frame[:, frame.shape[1] // 3 : 2 * frame.shape[1] // 3]
+    lit_rows = np.flatnonzero((column > column.min() + 40).any(axis=1))
+    assert lit_rows.size and lit_rows.min() < 0.5 * frame.shape[0]
+
+
 def test_plot_names_a_few_paths_and_draws_them_in_their_colour(tmp_path) -> None:
     svg = tmp_path / "b.svg"
     r = run_cli("plot", SCENES / "bouncing_balls.yaml", "-o", svg, "--duration", "0.5")

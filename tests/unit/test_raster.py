@@ -142,6 +142,8 @@ def test_bounds_ignore_nan_and_give_a_box_to_a_still_point():
         ("xz", (2.0, 0.0, 0.0), (50.0, 100.0), 0.0),
         ("yz", (2.0, 1.0, 3.0), (25.0, 25.0), -2.0),
         ("yz", (0.0, 4.0, 4.0), (100.0, 0.0), 0.0),
+        ("zy", (1.0, 1.0, 3.0), (75.0, 75.0), -1.0),  # z across, y up
+        ("zy", (2.0, 4.0, 0.0), (0.0, 0.0), -2.0),
     ],
 )
 def test_orthographic_views_map_known_points(view, point, pixel, depth):
