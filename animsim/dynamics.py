@@ -116,18 +116,21 @@ class Dynamics:
         t: float,
         out: np.ndarray,
         then: Callable[[slice, np.ndarray], None],
+        rows_per_block: int | None = None,
     ) -> None:
         """:meth:`acceleration` a block of rows at a time (only when :attr:`blocks`), calling
         ``then(rows, a_rows)`` after each block, while its rows are still in cache (the
-        integrator's update). One evaluation."""
+        integrator's update). One evaluation. ``rows_per_block``: at most (and by default)
+        BLOCK_ROWS."""
         self.evaluations += 1
         f0, inv3, n = self._f0, self._inv3, len(x)
         if not self._uniform_known:  # once per run (_constants forgets it)
             self._uniform = _uniform_rows(f0, inv3)
             self._uniform_known = True
         uniform = self._uniform
-        for lo in range(0, n, BLOCK_ROWS):
-            rows = slice(lo, min(lo + BLOCK_ROWS, n))
+        rows_per_block = BLOCK_ROWS if rows_per_block is None else min(rows_per_block, BLOCK_ROWS)
+        for lo in range(0, n, rows_per_block):
+            rows = slice(lo, min(lo + rows_per_block, n))
             a = out[rows]
             if uniform is not None:  # every row the same: the same values from cache
                 a[...] = uniform[0][: len(a)]

@@ -149,6 +149,18 @@ class _Base:
         self.check_stride = CHECK_STRIDE if self.replayable else 1
         self._x_old = np.empty((n, 3))
         self._v_old = np.empty((n, 3))
+        #: the one post-step stage, when it can meet the rows a block at a time inside the
+        #: integrator's step (``block_session``; pointwise) and the integrator offers that
+        only = self.stages[0] if len(self.stages) == 1 else None
+        self._block_stage = (
+            only
+            if only is not None
+            and not numba
+            and only.pointwise
+            and hasattr(only, "block_session")
+            and compiled.integrator.block_stages
+            else None
+        )
 
     def prepare(self, state: State, notice: Callable[[str], None] | None) -> float:
         self.forget()
@@ -171,6 +183,16 @@ class _Base:
     def _one(self, state: State, dt: float, t1: float) -> None:
         """One integrator step of dt ending at t1, then the post-step stages."""
         t0 = state.time
+        if self._block_stage is not None and self.compiled.integrator.dynamics.blocks:
+            # the only stage meets each block of rows inside the integrator's step, while the
+            # block is in cache (the same values: each row meets it by itself)
+            session = self._block_stage.block_session(state, dt)
+            if session is not None:
+                self.compiled.integrator.step(state, dt, session)
+                if session.finish():
+                    state.revision += 1
+                state.time = t1
+                return
         if self.stages:
             np.copyto(self._x_old, state.particle_position)
             np.copyto(self._v_old, state.particle_velocity)

@@ -17,14 +17,46 @@ def dot3(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> np.ndar
     ``b`` is either another array of a's shape or one vector (3,).
     """
     if b.ndim == 1:
-        r = np.multiply(a[..., 0], b[0], out=out)
-        r += a[..., 1] * b[1]
-        r += a[..., 2] * b[2]
+        # A component of exactly 1 (an axis-aligned normal) is added without its product:
+        # x * 1 is x in IEEE arithmetic, zeros, infinities and NaNs included, so the sums are
+        # the same bits. (Not for -1: r - x picks between two NaNs as r + x * -1 may not.)
+        if b[0] == 1.0:
+            r = np.positive(a[..., 0], out=out)
+        else:
+            r = np.multiply(a[..., 0], b[0], out=out)
+        for j in (1, 2):
+            if b[j] == 1.0:
+                r += a[..., j]
+            else:
+                r += a[..., j] * b[j]
         return r
     p = a * b
     r = np.add(p[..., 0], p[..., 1], out=out)
     r += p[..., 2]
     return r
+
+
+def sub_scaled(
+    a: np.ndarray, s: np.ndarray, c: float, out: np.ndarray, tmp: np.ndarray, where: np.ndarray | bool = True
+) -> None:
+    """out = a - s * c (where ``where``), ``tmp`` a scratch of s's shape; the product is
+    skipped for c = 1, with the same bits (see :func:`dot3`)."""
+    if c == 1.0:
+        np.subtract(a, s, out=out, where=where)
+    else:
+        np.multiply(s, c, out=tmp)
+        np.subtract(a, tmp, out=out, where=where)
+
+
+def add_scaled(
+    a: np.ndarray, s: np.ndarray, c: float, out: np.ndarray, tmp: np.ndarray, where: np.ndarray | bool = True
+) -> None:
+    """out = a + s * c (where ``where``), as :func:`sub_scaled`."""
+    if c == 1.0:
+        np.add(a, s, out=out, where=where)
+    else:
+        np.multiply(s, c, out=tmp)
+        np.add(a, tmp, out=out, where=where)
 
 
 def take_rows(a: np.ndarray, idx: np.ndarray) -> np.ndarray:

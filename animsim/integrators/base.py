@@ -35,6 +35,12 @@ class Integrator(ABC):
     evaluations_per_step: ClassVar[int]
     description: ClassVar[str]
 
+    #: whether ``step(state, dt, stage)`` runs a post-step stage a block of rows at a time
+    #: (its ``before(rows)`` and ``after(rows)`` around each block's update) when the
+    #: dynamics steps in blocks (:attr:`Dynamics.blocks`); the stepper then skips its
+    #: whole-array copies of the step's start
+    block_stages: ClassVar[bool] = False
+
     def __init__(self, dynamics: Dynamics):
         self.dynamics = dynamics
 

@@ -13,6 +13,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from animsim.bodies.integrate import step as body_step
@@ -42,7 +44,9 @@ class SymplecticEuler(Integrator):
     def numba_chunk_kind(self) -> tuple[int, None]:
         return FUSED_SYMPLECTIC_EULER, None
 
-    def step(self, state: State, dt: float) -> None:
+    block_stages = True
+
+    def step(self, state: State, dt: float, stage: Any = None) -> None:
         if state.body_orientation is not None:  # rigid bodies: (q, omega) advance too
             return body_step(self, state, dt)
         x, v = state.particle_position, state.particle_velocity
@@ -55,6 +59,15 @@ class SymplecticEuler(Integrator):
                 np.multiply(v[rows], dt, out=a)
                 x[rows] += a
 
+            if stage is not None:  # a post-step stage meets each block while it is in cache
+
+                def update_and_stage(rows: slice, a: np.ndarray) -> None:
+                    stage.before(rows)
+                    update(rows, a)
+                    stage.after(rows)
+
+                dyn.acceleration_blocks(x, v, state.time, self._a, update_and_stage, stage.block_rows)
+                return
             dyn.acceleration_blocks(x, v, state.time, self._a, update)
             return
         a = dyn.acceleration(x, v, state.time, self._a)
