@@ -172,12 +172,24 @@ def _map_dask(
     if not isinstance(scheduler, str):  # a Client the caller owns (and closes)
         return _gather(distributed, scheduler, fn, cases, on_error, tick)
     if scheduler == LOCAL_SCHEDULER:
+        from dask.system import CPU_COUNT
+
+        # One worker process per core unless --jobs says how many, and each its share of
+        # the cores for numba's threads, as the process pool's workers get theirs (a
+        # NUMBA_NUM_THREADS the user set reaches the workers as it is).
+        workers = jobs if jobs > 1 else max(1, CPU_COUNT // THREADS_PER_WORKER)
+        env = (
+            {}
+            if "NUMBA_NUM_THREADS" in os.environ
+            else {"NUMBA_NUM_THREADS": str(max(1, CPU_COUNT // workers))}
+        )
         # dashboard_address=None: no web server, no port to collide with.
         with (
             distributed.LocalCluster(
-                n_workers=jobs if jobs > 1 else None,
+                n_workers=workers,
                 threads_per_worker=THREADS_PER_WORKER,
                 dashboard_address=None,
+                env=env,
             ) as cluster,
             distributed.Client(cluster) as client,
         ):

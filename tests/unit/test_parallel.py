@@ -7,6 +7,7 @@ can unpickle them without importing this test module.
 from __future__ import annotations
 
 import math
+import os
 import sys
 
 import pytest
@@ -39,6 +40,18 @@ def test_process_workers_share_the_cores_among_numba_threads(monkeypatch) -> Non
     assert map_cases(os.getenv, ["NUMBA_NUM_THREADS"] * 2, jobs=2) == [share, share]
     monkeypatch.setenv("NUMBA_NUM_THREADS", "1")
     assert map_cases(os.getenv, ["NUMBA_NUM_THREADS"] * 2, jobs=2) == ["1", "1"]
+
+
+def test_local_dask_workers_share_the_cores_among_numba_threads(monkeypatch) -> None:
+    """The local Dask cluster's worker processes get their share of the cores as well."""
+    pytest.importorskip("distributed")
+    from dask.system import CPU_COUNT
+
+    monkeypatch.delenv("NUMBA_NUM_THREADS", raising=False)
+    share = str(max(1, CPU_COUNT // 2))
+    assert map_cases(os.getenv, ["NUMBA_NUM_THREADS"] * 2, jobs=2, scheduler="local") == [share, share]
+    monkeypatch.setenv("NUMBA_NUM_THREADS", "1")
+    assert map_cases(os.getenv, ["NUMBA_NUM_THREADS"] * 2, jobs=2, scheduler="local") == ["1", "1"]
 
 
 def test_a_failing_case_is_a_result_not_a_lost_map() -> None:
