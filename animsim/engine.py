@@ -227,18 +227,13 @@ def _run(
     notice: Callable[[str], None] | None,
 ) -> RunResult:
     """run's loop (see run)."""
-    from animsim.steppers import make_stepper
+    from animsim.steppers import start
 
-    state = compiled.fresh_state()
-    dyn = compiled.dynamics
-    stepper = make_stepper(compiled)
-    clock = compiled.clock
-    dyn.bind(state)
-    for stage in compiled.post_step:
-        stage.reset(state)
-    guard = guard or Guard(compiled, dt=stepper.largest_dt)
     # Compiling numba kernels (first run on a machine) is not run time.
-    compile_seconds = stepper.prepare(state, notice)
+    state, stepper, compile_seconds = start(compiled, notice)
+    dyn = compiled.dynamics
+    clock = compiled.clock
+    guard = guard or Guard(compiled, dt=stepper.largest_dt)
     from animsim.startup import resume_collector
 
     resume_collector()  # start-up is over (animsim.startup): collect as usual from here

@@ -118,6 +118,18 @@ def next_step(h: float, distance: float, dt_min: float, dt_max: float) -> tuple[
     return h, False
 
 
+def start(compiled: Any, notice: Callable[[str], None] | None = None) -> tuple[State, Any, float]:
+    """What a run starts from: a fresh state, the elements bound to it and the stages reset,
+    and the stepper prepared (numba's kernels compiled or loaded): (state, stepper, seconds
+    spent compiling, which are not run time)."""
+    state = compiled.fresh_state()
+    stepper = make_stepper(compiled)
+    compiled.dynamics.bind(state)
+    for stage in compiled.post_step:
+        stage.reset(state)
+    return state, stepper, stepper.prepare(state, notice)
+
+
 def make_stepper(compiled: Any) -> Any:
     """The stepper for ``compiled`` on its backend (chosen once, at compile time)."""
     numba = compiled.backend == "numba"

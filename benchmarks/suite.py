@@ -226,14 +226,9 @@ def numpy_contender(compiled, label: str, note: str = "") -> Contender:
     advances ``check_stride`` steps (integrate, then the post-step stages), then one check,
     as ``engine.run`` does."""
     from animsim.engine import Guard
-    from animsim.steppers import make_stepper
+    from animsim.steppers import start
 
-    state = compiled.fresh_state()
-    compiled.dynamics.bind(state)
-    for stage in compiled.post_step:
-        stage.reset(state)
-    stepper = make_stepper(compiled)
-    stepper.prepare(state, None)
+    state, stepper, _ = start(compiled)
     guard = Guard(compiled, dt=stepper.largest_dt)
     guard.start(state)
     stride, end = stepper.check_stride, stepper.end
@@ -256,14 +251,9 @@ def numba_contender(compiled, label: str, threads: int = 1) -> Contender:
     import numba
 
     from animsim.backends import fused
-    from animsim.steppers import make_stepper
+    from animsim.steppers import start
 
-    state = compiled.fresh_state()
-    compiled.dynamics.bind(state)
-    for stage in compiled.post_step:
-        stage.reset(state)
-    stepper = make_stepper(compiled)
-    stepper.prepare(state, None)
+    state, stepper, _ = start(compiled)
     end = stepper.end
 
     def call() -> None:

@@ -16,7 +16,7 @@ from animsim import collisions
 from animsim import dynamics as dyn_module
 from animsim.compile import compile_scene
 from animsim.scene.loader import load_scene_text
-from animsim.steppers import make_stepper
+from animsim.steppers import start
 from animsim.vec import add_scaled, dot3, sub_scaled
 
 COUNT = 5003
@@ -62,12 +62,7 @@ def _run(planes: str, blocks_on: bool, monkeypatch) -> tuple[np.ndarray, np.ndar
     x0, v0 = _start(11)
     compiled.initial.particle_position[:] = x0
     compiled.initial.particle_velocity[:] = v0
-    state = compiled.fresh_state()
-    compiled.dynamics.bind(state)
-    for stage in compiled.post_step:
-        stage.reset(state)
-    stepper = make_stepper(compiled)
-    stepper.prepare(state, None)
+    state, stepper, _ = start(compiled)
     if not blocks_on:
         stepper._block_stage = None
     assert compiled.dynamics.blocks
