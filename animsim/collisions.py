@@ -409,6 +409,8 @@ class PlaneColliders(StepStage):
         self.dissipative = any(p.restitution < 1 or p.friction > 0 for p in planes)
 
     collides_newborns = True
+    #: what ``explain`` calls it when it meets the step's blocks of rows
+    block_name = "plane"
     #: each particle meets the planes by itself (its own rows of the step's start and end)
     pointwise = True
     no_closed_form = "it has planes (collisions have no closed form here)"
@@ -485,12 +487,16 @@ class PlaneColliders(StepStage):
             self._project(x, v, np.unique(np.concatenate(touched)))
         return True
 
+    def meets_blocks(self) -> bool:
+        """Whether :meth:`block_session` serves: one plane (several each see the one before
+        it), no bodies, the NumPy rule."""
+        return len(self.planes) == 1 and self.point_rows is None and not self.numba
+
     def block_session(self, state: Any, dt: float) -> _Capture | None:
         """The plane applied a block of rows at a time inside the integrator's step (its
         ``before``/``after`` around each block's update, then ``finish``), or None where
-        only :meth:`apply` serves: several planes (each sees the one before it), bodies,
-        the numba kernel."""
-        if len(self.planes) != 1 or self.point_rows is not None or self.numba:
+        only :meth:`apply` serves (:meth:`meets_blocks`)."""
+        if not self.meets_blocks():
             return None
         if self._capture is None:
             self._capture = _Capture(CAPTURE_ROWS)

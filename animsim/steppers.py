@@ -118,6 +118,19 @@ def next_step(h: float, distance: float, dt_min: float, dt_max: float) -> tuple[
     return h, False
 
 
+def block_stage(compiled: Any) -> Any:
+    """The scene's one post-step stage when the NumPy step may run it a block of rows at a
+    time inside the integrator's step (a pointwise stage that offers it, ``meets_blocks``,
+    and an integrator that steps in blocks), else None. Whether a step then runs in blocks
+    is decided per step (:attr:`Dynamics.blocks`)."""
+    stages = compiled.post_step
+    only = stages[0] if len(stages) == 1 else None
+    if only is None or not only.pointwise or not compiled.integrator.block_stages:
+        return None
+    meets = getattr(only, "meets_blocks", None)
+    return only if meets is not None and meets() else None
+
+
 def start(compiled: Any, notice: Callable[[str], None] | None = None) -> tuple[State, Any, float]:
     """What a run starts from: a fresh state, the elements bound to it and the stages reset,
     and the stepper prepared (numba's kernels compiled or loaded): (state, stepper, seconds
@@ -161,18 +174,9 @@ class _Base:
         self.check_stride = CHECK_STRIDE if self.replayable else 1
         self._x_old = np.empty((n, 3))
         self._v_old = np.empty((n, 3))
-        #: the one post-step stage, when it can meet the rows a block at a time inside the
-        #: integrator's step (``block_session``; pointwise) and the integrator offers that
-        only = self.stages[0] if len(self.stages) == 1 else None
-        self._block_stage = (
-            only
-            if only is not None
-            and not numba
-            and only.pointwise
-            and hasattr(only, "block_session")
-            and compiled.integrator.block_stages
-            else None
-        )
+        #: the one post-step stage, when it meets the rows a block at a time inside the
+        #: integrator's step (:func:`block_stage`)
+        self._block_stage = None if numba else block_stage(compiled)
 
     def prepare(self, state: State, notice: Callable[[str], None] | None) -> float:
         self.forget()

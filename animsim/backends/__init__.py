@@ -146,4 +146,11 @@ def backend_line(compiled: Any, chosen: str, note: str) -> str:
         line = "backend: reference (generic bincount springs, the baseline)"
     else:
         line = "backend: numpy"
+        if compiled.integrator.block_stages and compiled.dynamics.blocks:
+            from animsim.steppers import block_stage
+
+            stage = block_stage(compiled)
+            line += " (a block of particles at a time while it is in cache: no particle acts on another" + (
+                f"; the {stage.block_name} meets each block inside the step)" if stage is not None else ")"
+            )
     return line + (f"; {note}" if note else "")

@@ -114,3 +114,22 @@ def test_unit_components_skip_their_products_with_the_same_bits() -> None:
                 got = np.full(20000, 7.0)
                 fn(d, s, c, got, np.empty(20000), where=keep)
                 assert np.array_equal(got.view(np.int64), want.view(np.int64)), (fn.__name__, c)
+
+
+@pytest.mark.parametrize(
+    ("planes", "integrator", "says"),
+    [
+        (PLANES["ground"], "symplectic_euler", "; the plane meets each block inside the step)"),
+        (PLANES["two planes"], "symplectic_euler", "no particle acts on another)"),
+        (PLANES["ground"], "rk4", None),  # whole arrays: no blocks to tell of
+    ],
+)
+def test_explain_says_how_the_numpy_step_goes(planes, integrator, says, monkeypatch) -> None:
+    monkeypatch.setattr(dyn_module, "BLOCKS_FROM", 2000)
+    text = _scene(planes) + f"integrator: {integrator}\n"
+    compiled = compile_scene(load_scene_text(text).scene, "plane blocks", backend="numpy")
+    line = next(s for s in compiled.stages if s.startswith("backend:"))
+    if says is None:
+        assert line == "backend: numpy"
+    else:
+        assert line.startswith("backend: numpy (a block of particles at a time") and line.endswith(says)
