@@ -424,8 +424,20 @@ class PlaneColliders(StepStage):
     def collide_subset(
         self, x_old: np.ndarray, v_old: np.ndarray, x: np.ndarray, v: np.ndarray, dt: np.ndarray
     ) -> None:
-        """Collide a few newborn particles (all movable) over their own step lengths ``dt`` (k,)."""
-        PlaneColliders(self.planes, np.ones(len(x))).resolve(x_old, v_old, x, v, dt)
+        """Collide a few newborn particles (all movable) over their own step lengths ``dt`` (k,).
+
+        One collider for the newborns is kept between steps, with its buffers: a fountain's
+        births ask every step, and most steps none of them reaches a plane."""
+        k = len(x)
+        sub = self._newborns
+        if sub is None or len(sub._ones) < k:
+            sub = self._newborns = PlaneColliders(self.planes, np.ones(0))
+            sub._ones = np.ones(max(k, 256))
+        sub.inv_mass = sub._ones[:k]
+        sub.resolve(x_old, v_old, x, v, dt)
+
+    _newborns: PlaneColliders | None = None
+    _ones: np.ndarray
 
     def apply(
         self, state: Any, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, dt: float
@@ -466,11 +478,11 @@ class PlaneColliders(StepStage):
         """
         touched: list[np.ndarray] = []
         single = len(self.planes) == 1
-        blocks = self._buffers(min(BLOCK, len(x)))
         for pl in self.planes:
             cand = _candidates(x, pl)
             if cand.size == 0:
                 continue
+            blocks = self._buffers(min(BLOCK, len(x)))
             project = self if single else None
             hits = [
                 blocks.collide(pl, x_old, v_old, x, v, dt, self.inv_mass, cand[i : i + BLOCK], project)
