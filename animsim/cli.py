@@ -686,7 +686,7 @@ def view(
         typer.Option("--integrators", help="Comma-separated methods: one panel per method, played in step."),
     ] = None,
     fps: Annotated[float, typer.Option("--fps", help="Frames per second recorded for playback.")] = 25.0,
-    view: Annotated[str, typer.Option("--view", help="The view it opens with: 3d, xy, xz or yz.")] = "3d",
+    view: Annotated[str, typer.Option("--view", help="The view it opens with: 3d, xy, xz, yz or zy.")] = "3d",
     scene: Annotated[
         Path | None,
         typer.Option("--scene", help="The scene of a trajectory, for springs, pins, planes and energy."),
@@ -701,7 +701,7 @@ def view(
     """Write one self-contained HTML page that plays the animation (opens offline, in any current browser).
 
     Play and pause, a time slider, playback speed, a 3D view to orbit, pan and
-    zoom (and xy, xz, yz views), springs, planes, pinned particles, colour and
+    zoom (and xy, xz, yz, zy views), springs, planes, pinned particles, colour and
     size over life, and an energy plot whose cursor follows the time. With
     --integrators the scene runs once per method, the panels side by side.
     """

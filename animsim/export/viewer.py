@@ -41,7 +41,7 @@ SHAPE_KINDS = ("plane", "sphere", "box", "capsule")
 QUANT_MAX = 65534  # positions are quantised to 0..QUANT_MAX
 QUANT_DEAD = 65535  # ... and this code marks a particle that is not alive
 ZLIB_LEVEL = 6
-VIEWS = ("3d", "xy", "xz", "yz")
+VIEWS = ("3d", "xy", "xz", "yz", "zy")
 #: energy values are written with this many significant digits (the plot is 120 px tall)
 ENERGY_DIGITS = 7
 
@@ -380,7 +380,7 @@ def panels_html(
     """A complete HTML page playing ``panels`` side by side, in step.
 
     ``up``: the scene's up axis (``y`` or ``z``) for the 3D camera; ``view``:
-    the view it opens with (``3d``, ``xy``, ``xz``, ``yz``); ``duration``:
+    the view it opens with (``3d``, ``xy``, ``xz``, ``yz``, ``zy``); ``duration``:
     the length of the time line (default: the longest panel's last time).
     """
     if not panels:

@@ -322,3 +322,48 @@ def test_torn_springs_are_not_drawn(browser, tmp_path):
         intact = run.spring_intact(float(run.times[-1]), springs)
         assert intact is not None and shown == int(intact.sum()) < springs
         assert severe(browser) == []
+
+
+@pytest.mark.parametrize(
+    ("view", "along", "moves"),
+    [
+        ("zy", (0, 0, 1), "right"),
+        ("zy", (0, 1, 0), "up"),
+        ("xz", (1, 0, 0), "right"),
+        ("xz", (0, 0, 1), "up"),
+    ],
+)
+def test_flat_views_draw_their_first_axis_across_and_the_second_up(browser, tmp_path, view, along, moves):
+    """As `animsim render` draws them: a particle moving along the view's first axis moves
+    right on the picture, one moving along its second axis moves up."""
+    from animsim.export.viewer import viewer_html
+
+    t = np.arange(3) * 0.1
+    path = np.array(along, dtype=np.float64) * (t[:, None] - 0.1)  # from -0.1 to +0.1 along the axis
+    still = np.full((3, 3), 0.3)  # a second particle, so the frame has a size
+    page = tmp_path / f"{view}.html"
+    page.write_text(
+        viewer_html(t, np.stack([path, still], axis=1), energies=None, view=view), encoding="utf-8"
+    )
+    open_page(browser, page)
+
+    def dots(k: int) -> list[np.ndarray]:
+        """The (row, column) centres of the frame's two dots (WebGL's rows: bottom up)."""
+        set_frame(browser, k)
+        img = pixels(browser, 0)
+        pts = np.array(np.nonzero(np.any(img[..., :3] != img[0, 0, :3], axis=2)), dtype=np.float64)
+        apart = np.abs(pts - pts[:, :1]).max(axis=0) > 10  # the ink far from the first pixel's dot
+        assert apart.any() and (~apart).any(), "expected two dots"
+        return [pts[:, ~apart].mean(axis=1), pts[:, apart].mean(axis=1)]
+
+    start, end = dots(0), dots(2)
+    # the still particle's dot is at the same place in both frames; the other one moved
+    stayed = [(i, j) for i in range(2) for j in range(2) if np.abs(start[i] - end[j]).max() < 1.5]
+    assert len(stayed) == 1
+    i, j = stayed[0]
+    drow, dcol = end[1 - j] - start[1 - i]
+    if moves == "right":
+        assert dcol > 3 and abs(drow) < 2, (drow, dcol)
+    else:  # up: rows count up from the bottom of the picture
+        assert drow > 3 and abs(dcol) < 2, (drow, dcol)
+    assert severe(browser) == []

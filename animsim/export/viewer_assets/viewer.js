@@ -293,9 +293,10 @@ void main() { o = u_col; }`;
       return { mvp: mul(proj, lookAt(eye, c, up)), proj };
     }
     // Each flat view looks from the positive side of its third axis, the first axis to the
-    // right and the second up (as `animsim render` draws them). For xz that is a mirror image
-    // (looking down +y with z up puts x to the left), so its x is flipped back.
-    const setup = { xy: [Z, Y, 1], xz: [Y, Z, -1], yz: [X, Z, 1] }[camera.view];
+    // right and the second up (as `animsim render` draws them). For xz and zy that is a mirror
+    // image (looking down +y with z up puts x to the left; looking down -x with y up puts z to
+    // the left), so their first axis is flipped back.
+    const setup = { xy: [Z, Y, 1], xz: [Y, Z, -1], yz: [X, Z, 1], zy: [X, Y, -1] }[camera.view];
     const eye = add(c, scale3(setup[0], 3 * R));
     const half = (1.08 * R) / camera.zoom;
     const proj = ortho(half * Math.max(aspect, 1), half / Math.min(aspect, 1), 0.01 * R, 6 * R);
@@ -313,7 +314,7 @@ void main() { o = u_col; }`;
       right = norm(cross(scale3(dir, -1), world.up));
       up = cross(right, scale3(dir, -1));
     } else {
-      const setup = { xy: [X, Y], xz: [X, Z], yz: [Y, Z] }[camera.view];
+      const setup = { xy: [X, Y], xz: [X, Z], yz: [Y, Z], zy: [Z, Y] }[camera.view];
       right = setup[0]; up = setup[1];
     }
     const metresPerPx = (2.16 * world.radius) / camera.zoom / height;
