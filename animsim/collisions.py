@@ -313,7 +313,7 @@ class _Capture:
 
     def __init__(self, block_rows: int):
         self.block_rows = block_rows
-        rows = BLOCK + block_rows  # a flush leaves fewer than BLOCK, and a block adds at most its rows
+        rows = BLOCK + block_rows  # fewer than BLOCK wait between blocks, and a block adds at most its rows
         self.idx = np.empty(rows, dtype=np.intp)
         self.inv_mass = np.empty(rows)
         self.xh, self.vh, self.xo, self.vo = (np.empty((rows, 3)) for _ in range(4))
@@ -348,34 +348,32 @@ class _Capture:
         np.take(self.owner.inv_mass[rows], cand, out=self.inv_mass[c:e])
         self.count = e
         if e >= BLOCK:  # a full block of contacts: meet the plane, keep the rest for the next
-            self._flush(BLOCK)
+            self._meet(BLOCK)
             rest = slice(BLOCK, e)
             for buf in (self.idx, self.inv_mass, self.xh, self.vh, self.xo, self.vo):
                 buf[: e - BLOCK] = buf[rest]
             self.count = e - BLOCK
 
-    def _flush(self, count: int) -> None:
-        """Meet the plane with the first ``count`` candidates taken."""
-        owner = self.owner
-        blocks = owner._buffers(BLOCK)
-        for i in range(0, count, BLOCK):
-            j = min(i + BLOCK, count)
-            hit = blocks.collide_gathered(
-                self.plane,
-                self.idx[i:j],
-                (self.xh[i:j], self.vh[i:j], self.xo[i:j], self.vo[i:j]),
-                self.x,
-                self.v,
-                self.dt,
-                self.inv_mass[i:j],
-                owner,
-            )
-            self.changed |= hit.size > 0
+    def _meet(self, k: int) -> None:
+        """Meet the plane with the first ``k`` candidates taken (at most BLOCK: ``after`` meets
+        it whenever BLOCK are waiting)."""
+        rows = slice(0, k)
+        hit = self.owner._buffers(BLOCK).collide_gathered(
+            self.plane,
+            self.idx[rows],
+            (self.xh[rows], self.vh[rows], self.xo[rows], self.vo[rows]),
+            self.x,
+            self.v,
+            self.dt,
+            self.inv_mass[rows],
+            self.owner,
+        )
+        self.changed |= hit.size > 0
 
     def finish(self) -> bool:
         """Meet the plane with the candidates left; whether any row changed in this step."""
         if self.count:
-            self._flush(self.count)
+            self._meet(self.count)
             self.count = 0
         self.owner = self.x = self.v = None  # type: ignore[assignment]
         return self.changed
@@ -429,15 +427,15 @@ class PlaneColliders(StepStage):
         One collider for the newborns is kept between steps, with its buffers: a fountain's
         births ask every step, and most steps none of them reaches a plane."""
         k = len(x)
-        sub = self._newborns
-        if sub is None or len(sub._ones) < k:
-            sub = self._newborns = PlaneColliders(self.planes, np.ones(0))
-            sub._ones = np.ones(max(k, 256))
-        sub.inv_mass = sub._ones[:k]
-        sub.resolve(x_old, v_old, x, v, dt)
+        if self._newborns is None:
+            self._newborns = PlaneColliders(self.planes, np.ones(0))
+        if len(self._newborn_ones) < k:
+            self._newborn_ones = np.ones(max(k, 256))
+        self._newborns.inv_mass = self._newborn_ones[:k]
+        self._newborns.resolve(x_old, v_old, x, v, dt)
 
     _newborns: PlaneColliders | None = None
-    _ones: np.ndarray
+    _newborn_ones: np.ndarray = np.ones(0)  # inverse masses of the newborns: all movable
 
     def apply(
         self, state: Any, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, dt: float
@@ -504,12 +502,10 @@ class PlaneColliders(StepStage):
         it), no bodies, the NumPy rule."""
         return len(self.planes) == 1 and self.point_rows is None and not self.numba
 
-    def block_session(self, state: Any, dt: float) -> _Capture | None:
+    def block_session(self, state: Any, dt: float) -> _Capture:
         """The plane applied a block of rows at a time inside the integrator's step (its
-        ``before``/``after`` around each block's update, then ``finish``), or None where
-        only :meth:`apply` serves (:meth:`meets_blocks`)."""
-        if not self.meets_blocks():
-            return None
+        ``before``/``after`` around each block's update, then ``finish``); only where
+        :meth:`meets_blocks` (``steppers.block_stage``)."""
         if self._capture is None:
             self._capture = _Capture(CAPTURE_ROWS)
         self.inv_mass = state.particle_inv_mass

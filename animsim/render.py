@@ -151,11 +151,7 @@ def view_up(scene: Any) -> str | None:
 
 def _up_axis(scene: Any) -> str:
     """z-up when the scene's gravity points down z, else y-up (the language's default)."""
-    for f in getattr(scene, "forces", ()):
-        if f.type == "gravity":
-            g = np.abs(np.asarray(f.g))
-            return "z" if g[2] > max(g[0], g[1]) else "y"
-    return "y"
+    return view_up(scene) or "y"
 
 
 def validate(gif: Path | None, mp4: Path | None, opts: RenderOptions) -> tuple[int, int]:

@@ -203,12 +203,11 @@ class _Base:
             # the only stage meets each block of rows inside the integrator's step, while the
             # block is in cache (the same values: each row meets it by itself)
             session = self._block_stage.block_session(state, dt)
-            if session is not None:
-                self.compiled.integrator.step(state, dt, session)
-                if session.finish():
-                    state.revision += 1
-                state.time = t1
-                return
+            self.compiled.integrator.step(state, dt, session)
+            if session.finish():
+                state.revision += 1
+            state.time = t1
+            return
         if self.stages:
             np.copyto(self._x_old, state.particle_position)
             np.copyto(self._v_old, state.particle_velocity)
