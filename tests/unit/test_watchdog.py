@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from animsim.compile import compile_scene, with_overrides
-from animsim.engine import STATUS_OK, STATUS_UNSTABLE, Guard, run
+from animsim.engine import REPLAY_COPY_EVERY, STATUS_OK, STATUS_UNSTABLE, Guard, run
 from animsim.record import MemorySink
 from animsim.scene.loader import load_scene_text
 from animsim.steppers import CHECK_STRIDE
@@ -77,6 +77,31 @@ def test_first_failing_step_is_exact_when_checks_are_strided():
     assert with_sinks.frames == with_sinks.failure.step
     assert without.failure.step % CHECK_STRIDE != 0  # it really was found by the replay
     assert without.steps_taken == without.failure.step
+
+
+def test_the_replay_checks_only_the_steps_after_the_last_passing_check():
+    """The state kept for a replay may be older than the last passing check (it is copied
+    every REPLAY_COPY_EVERY steps); the replay checks only the steps after that check, so a
+    step the run never checked, before a check it passed, cannot become the failure."""
+    from animsim.engine import Failure
+
+    assert 2 * CHECK_STRIDE < REPLAY_COPY_EVERY  # the kept state is step 0 below
+    seen: list[int] = []
+
+    class Swing(Guard):
+        """Fails at step 20 (between two checks the run passes) and from step 40 on."""
+
+        def check(self, state):
+            seen.append(state.step)
+            if state.step == 20 or state.step >= 40:
+                return Failure(step=state.step, time=state.time, particle="bob", reason="test")
+            return None
+
+    c = compiled_from(STIFF.replace("ks: 1.0e7", "ks: 1.0"), duration=1.0)
+    r = run(c, [], guard=Swing(c))
+    assert r.status == STATUS_UNSTABLE
+    assert r.failure.step == 40  # not 20, and not 48 (the check that failed)
+    assert seen == [16, 32, 48, 33, 34, 35, 36, 37, 38, 39, 40]
 
 
 def test_a_particle_sitting_still_far_away_is_not_unstable():
@@ -240,14 +265,17 @@ def test_an_emitter_scene_never_writes_the_failing_frame():
     assert r.failure.step in recorded  # the failing step's own frame was due, and is not written
 
 
-def test_an_emitter_run_checked_every_stride_fails_where_one_checked_every_step_does(monkeypatch):
+@pytest.mark.parametrize("floor", ["-0.3", "-5.0"])
+def test_an_emitter_run_checked_every_stride_fails_where_one_checked_every_step_does(monkeypatch, floor):
     """Births no longer force a check at every step: the emitters' streams are restored with
     the state, so the replay draws the same births, and newborns are booked at their birth
     step. The first failing step, its particle, its numbers and the frames written are those
-    of a run checked at every step."""
+    of a run checked at every step. The lower floor fails after step 64, so its replay starts
+    from a state kept some checks before the last passing one."""
     import animsim.steppers as steppers
 
-    text = EMITTER.replace("record: {fps: 10}", "") + STIFF_FLOOR
+    text = EMITTER.replace("record: {fps: 10}", "").replace("duration: 1.0", "duration: 3.0")
+    text += STIFF_FLOOR.replace("-0.3", floor)
     strided_sink = MemorySink()
     strided = run(compiled_from(text), [strided_sink])
     monkeypatch.setattr(steppers, "CHECK_STRIDE", 1)
@@ -255,6 +283,7 @@ def test_an_emitter_run_checked_every_stride_fails_where_one_checked_every_step_
     every = run(compiled_from(text), [every_sink])
     assert strided.status == every.status == STATUS_UNSTABLE
     assert strided.failure.step % CHECK_STRIDE != 0  # found by the replay, inside a stride
+    assert (strided.failure.step > REPLAY_COPY_EVERY + CHECK_STRIDE) == (floor == "-5.0")
     assert strided.failure == every.failure
     assert strided.meta["emitters"] == every.meta["emitters"]  # the pools' counts, restored too
     assert len(strided_sink.frames) == len(every_sink.frames) > 0
