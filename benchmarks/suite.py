@@ -80,6 +80,8 @@ class Table:
     scale: float  # rate (steps/s) -> shown unit
     rows: list[tuple[str, str, str, str, str]] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    #: (workload, contender label) -> the median shown in the table, for the goals section
+    figures: dict[tuple[str, str], float] = field(default_factory=dict)
 
 
 def in_tree(module: str) -> bool:
@@ -164,6 +166,7 @@ def add_rows(table: Table, workload: str, contenders: list[Contender], baseline:
         ratio = f"{np.median(c.rates) / base_median:.2f}x" if base_median else ""
         label = c.label + (f" ({c.note})" if c.note else "")
         table.rows.append((workload, label, _fmt(med), f"{_fmt(p10)} - {_fmt(p90)}", ratio))
+        table.figures[workload, c.label] = float(med)
 
 
 def _fmt(x: float) -> str:
@@ -661,6 +664,7 @@ def bench_stiff(settings: Settings) -> Table:
     base = rows[0][2]
     for integrator, dt, rate, meta in rows:
         extra = meta.get("solver", "")
+        table.figures[f"stiff cloth {n}", integrator] = rate
         table.rows.append(
             (
                 f"stiff cloth {n}",
@@ -678,6 +682,113 @@ def bench_stiff(settings: Settings) -> Table:
     return table
 
 
+def _figure(tables: list[Table], title: str, workload: str, label: str) -> float | None:
+    """The median this run measured for the first contender whose table title, workload and
+    label start with these (None when the run did not time it)."""
+    for t in tables:
+        if not t.title.startswith(title):
+            continue
+        for (w, lab), value in t.figures.items():
+            if w.startswith(workload) and lab.startswith(label):
+                return value
+    return None
+
+
+#: where the log appended below says what was measured and tried for a goal not met
+_FOUNTAIN_LOG = (
+    '"The fountain on numba, fifth round: medians, replay copies, and where a step goes" and '
+    '"The fountain on numba: births, deaths and checks around the physics"'
+)
+_IMPLICIT_LOG = '"Implicit Euler: a sparse Cholesky (CHOLMOD) for the stiff steps"'
+
+
+def goals_section(tables: list[Table]) -> list[str]:
+    """The speed goals animsim holds itself to, each with this run's figure: met, or how far
+    from it and where the log says what was tried. Goals whose workloads this run did not
+    time are left out."""
+    rows: list[tuple[str, str, str, str]] = []
+
+    def at_most(goal: str, value: float | None, limit: float, unit: str) -> None:
+        if value is None:
+            return
+        met = value <= limit
+        status = "met" if met else f"not met: {value / limit:.2f} times the goal"
+        rows.append((goal, f"{_fmt(value)} {unit}", status, "-"))
+
+    at_most(
+        "tiny scene on NumPy, symplectic Euler: at most 3 us a step",
+        _figure(tables, "Tiny scenes", "1 particle, gravity, symplectic_euler", "animsim numpy"),
+        3.0,
+        "us",
+    )
+    at_most(
+        "tiny scene on NumPy, rk4: at most 15 us a step",
+        _figure(tables, "Tiny scenes", "1 particle, gravity, rk4", "animsim numpy"),
+        15.0,
+        "us",
+    )
+
+    def ratio(goal: str, ours: float | None, peer: float | None, least: float, what: str, log: str) -> None:
+        if ours is None or peer is None:
+            return
+        r = ours / peer
+        status = "met" if r >= least else f"not met: {least / r:.2f}x short"
+        rows.append(
+            (goal, f"{r:.2f}x ({_fmt(ours)} against {_fmt(peer)} {what})", status, "-" if r >= least else log)
+        )
+
+    ratio(
+        "numba cloth 128 x 128, one thread: at least 1.5x Warp on the CPU",
+        _figure(tables, "Cloth", "cloth 128 ", "animsim numba, 1 thread"),
+        _figure(tables, "Cloth", "cloth 128 ", "peer: Warp CPU"),
+        1.5,
+        "steps/s",
+        "-",
+    )
+    ratio(
+        "NumPy, 1e6 particles with a ground plane: at least 1.0x the plain NumPy peer",
+        _figure(tables, "Particles with gravity", "1e+06 particles", "animsim numpy"),
+        _figure(tables, "Particles with gravity", "1e+06 particles", "peer: plain NumPy"),
+        1.0,
+        "M particle-steps/s",
+        "-",
+    )
+    fountain = [  # every numba thread count the run timed, with the plane
+        (label.split(",")[1].strip(), value)
+        for t in tables
+        if t.title.startswith("Particle system")
+        for (w, label), value in t.figures.items()
+        if w.startswith("fountain") and label.startswith("animsim numba,") and "ground plane" in label
+    ]
+    if fountain:
+        best = max(v for _, v in fountain)
+        figure = ", ".join(f"{_fmt(v)} on {how}" for how, v in fountain)
+        met = best >= 1500
+        status = "met" if met else f"not met: the best is {1500 / best:.2f}x short"
+        rows.append(
+            (
+                "numba, 100,000-slot fountain with its ground plane: at least 1,500 steps/s",
+                f"{figure} (steps/s)",
+                status,
+                "-" if met else _FOUNTAIN_LOG,
+            )
+        )
+    ratio(
+        "implicit Euler on the stiff cloth: at least 10x symplectic Euler's simulated s per s",
+        _figure(tables, "Stiff cloth", "stiff cloth", "implicit_euler"),
+        _figure(tables, "Stiff cloth", "stiff cloth", "symplectic_euler"),
+        10.0,
+        "simulated s per s",
+        _IMPLICIT_LOG,
+    )
+    if not rows:
+        return []
+    out = ["## Speed goals, from this run", "", "| goal | this run | status | what was tried |"]
+    out.append("| --- | --- | --- | --- |")
+    out += [f"| {' | '.join(r)} |" for r in rows]
+    return [*out, ""]
+
+
 def render_markdown(tables: list[Table], header: list[str], start_lines: list[str], elapsed: float) -> str:
     out = [
         "# animsim benchmarks",
@@ -691,6 +802,7 @@ def render_markdown(tables: list[Table], header: list[str], start_lines: list[st
         *header,
         f"- load average at end: {' '.join(f'{x:.2f}' for x in os.getloadavg())}; suite took {elapsed:.0f} s",
         "",
+        *goals_section(tables),
     ]
     for t in tables:
         out += [f"## {t.title}", ""]
