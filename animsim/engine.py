@@ -85,6 +85,8 @@ class Guard:
 
         self.compiled = compiled
         self.watch = EnergyWatch(compiled, dt if dt is not None else compiled.clock.dt)
+        #: a compiled test that is True only where check passes (the stepper's quick_check)
+        self.quick: Callable[[State], bool] | None = None
 
     def start(self, state: State) -> None:
         """Open the energy books at the run's initial state."""
@@ -103,6 +105,8 @@ class Guard:
         self.watch.restore(snap)
 
     def check(self, state: State) -> Failure | None:
+        if self.quick is not None and self.quick(state):
+            return None  # passes: finite, and the energy test below its margin
         x, v = state.particle_position, state.particle_velocity
         # One reduction each instead of an (N, 3) boolean array: a NaN or inf
         # anywhere makes the sum non-finite.
@@ -288,6 +292,8 @@ def _run(
         # fused chunks on small scenes: one call per frame instead of one per stride); its
         # checks are these, at the same steps, deciding as guard.check does.
         inside = stepper.check_inside(guard)
+        if not inside:  # the checks stay here: the stepper may pass the clear ones compiled
+            guard.quick = stepper.quick_check(guard)
         pending: list[tuple[int, Frame | None, State | None]] = []
         k = 0  # position on the nominal clock (== steps taken, except with adaptive steps)
         checked = 0

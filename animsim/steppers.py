@@ -33,6 +33,9 @@ The protocol (every stepper):
     once, after the watchdog's books opened: whether the stepper runs ``guard``'s checks
     itself (the numba backend's fused chunks on small scenes); then the loop calls
     ``advance_checked`` instead of ``advance`` (a replay still calls ``advance``).
+``quick_check(guard) -> callable or None``
+    once, when the checks stay in Python: a compiled test of a state that is True only
+    where ``guard.check`` passes it (numba backend); ``guard.check`` then returns at once.
 ``advance_checked(state, k, goal, checked, stride, rec) -> (k, passed, stopped, shots)``
     ``advance`` toward ``goal`` that checks the state as the loop would (at every
     ``checked`` + j ``stride`` and at ``end``, deciding as ``guard.check``); ``passed``
@@ -192,6 +195,9 @@ class _Base:
 
     def check_inside(self, guard: Any) -> bool:
         return False
+
+    def quick_check(self, guard: Any) -> Callable[[State], bool] | None:
+        return None
 
     def summary(self) -> dict[str, Any]:
         return {}
@@ -362,6 +368,11 @@ class Fused(_Base):
             and self.compiled.system.particle_count <= CHECKS_INSIDE_UP_TO
             and self.fused.check_inside(guard.watch)
         )
+
+    def quick_check(self, guard: Any) -> Callable[[State], bool] | None:
+        """A compiled stand-in for ``guard``'s checks that stay in Python
+        (:meth:`animsim.backends.fused.FusedStepper.quick_check`)."""
+        return self.fused.quick_check(guard.watch)
 
     def advance_checked(
         self, state: State, k: int, goal: int, checked: int, stride: int, rec: np.ndarray

@@ -5,6 +5,10 @@ check that does not pass (and every non-finite state) back to Python's check and
 replay, so a run with them is the run without them, to the bit: the same frames,
 the same first failing step and the same report. These tests compare the two and
 the NumPy backend, and make sure the compiled path is really taken.
+
+Where the checks stay in Python (births, large scenes), a compiled test of the state
+(``quick_check``) passes the clear ones and leaves the rest to Python's check; the
+last tests compare runs with and without it in the same way.
 """
 
 from __future__ import annotations
@@ -96,21 +100,39 @@ def _compiled(text: str, backend: str, integrator: str | None = None):
 
 
 class _Counting(Guard):
-    """The watchdog, counting the checks Python runs (its ``check`` stays Guard's own)."""
+    """The watchdog, counting the checks Python runs (its ``check`` stays Guard's own), and
+    the energy tests it computes in NumPy (``sums``: those the quick check did not pass)."""
 
     def __init__(self, compiled):
         super().__init__(compiled)
         self.calls = 0
+        self.sums = 0
         plain = self.check
+        growth = self.watch.growth
 
         def counted(state):
             self.calls += 1
             return plain(state)
 
+        def summed(state):
+            self.sums += 1
+            return growth(state)
+
         self.check = counted  # an instance attribute: type(self).check is still Guard.check
+        self.watch.growth = summed
 
 
-def _run(text: str, backend: str, *, inside: bool = True, integrator: str | None = None, monkeypatch=None):
+def _run(
+    text: str,
+    backend: str,
+    *,
+    inside: bool = True,
+    quick: bool = False,
+    integrator: str | None = None,
+    monkeypatch=None,
+):
+    """A run with the checks inside the chunks; with ``inside=False``, the checks in Python,
+    passed by the compiled quick check first when ``quick``."""
     compiled = _compiled(text, backend, integrator)
     sink = MemorySink()
     guard = _Counting(compiled)
@@ -119,6 +141,8 @@ def _run(text: str, backend: str, *, inside: bool = True, integrator: str | None
     else:
         with monkeypatch.context() as m:
             m.setattr(Fused, "check_inside", lambda self, guard: False)
+            if not quick:
+                m.setattr(Fused, "quick_check", lambda self, guard: None)
             result = run(compiled, [sink], guard=guard)
     return result, sink, guard
 
@@ -137,9 +161,10 @@ def _assert_identical(a, b) -> None:
         assert repr(ra.failure.as_dict()) == repr(rb.failure.as_dict())  # NaN growths too
     assert [f.step for f in sa.frames] == [f.step for f in sb.frames]
     assert [f.time for f in sa.frames] == [f.time for f in sb.frames]
-    if sa.frames:
-        assert sa.positions().tobytes() == sb.positions().tobytes()
-        assert sa.velocities().tobytes() == sb.velocities().tobytes()
+    for fa, fb in zip(sa.frames, sb.frames, strict=True):  # frames of emitter runs differ in size
+        assert fa.position.tobytes() == fb.position.tobytes()
+        assert fa.velocity.tobytes() == fb.velocity.tobytes()
+        assert fa.index.tobytes() == fb.index.tobytes()
     for name in ("particle_position", "particle_velocity"):
         assert getattr(ra.final_state, name).tobytes() == getattr(rb.final_state, name).tobytes()
     assert ra.final_state.time == rb.final_state.time
@@ -330,3 +355,82 @@ def test_compiled_energies_equal_the_watchdogs_numpy_sums(grid):
             want = t.released(x, x_ref, u_ref)
             scale = abs(want) + float(np.abs(u_ref).sum())
             assert abs(got - want) <= 1e-12 * scale
+
+
+#: a fountain over a stiff penalty floor: births every step (the checks stay in Python), and
+#: a blow-up among the emitted particles deep inside the run
+FOUNTAIN = """
+duration: 3.0
+dt: 0.01
+seed: 4
+forces:
+  - {type: gravity}
+emitters:
+  - name: jet
+    rate: 300
+    shape: {type: disc, center: [0, 0.5, 0], normal: [0, 1, 0], radius: 0.1}
+    velocity: {mean: [0, 2, 0], spread: 0.3}
+    lifetime: {mean: 2.0, spread: 0.2}
+    mass: 0.001
+    max_particles: 400
+planes:
+  - {point: [0, FLOOR, 0], normal: [0, 1, 0], response: PLANE}
+"""
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+@pytest.mark.parametrize(
+    "text",
+    [
+        STIFF,
+        EULER,
+        NONFINITE,
+        CALM.format(integrator="rk4"),
+        FOUNTAIN.replace("FLOOR", "-0.2").replace("PLANE", "impulse, restitution: 0.5, friction: 0.2"),
+        FOUNTAIN.replace("FLOOR", "-4.0").replace("PLANE", "penalty, stiffness: 1.0e9"),
+    ],
+    ids=["stiff-symplectic", "euler", "nonfinite", "calm", "fountain", "fountain-blow-up"],
+)
+def test_checks_left_to_python_pass_compiled_and_decide_as_pythons(text, monkeypatch):
+    """The quick check passes the checks that clearly pass and leaves the others to Python:
+    the run is the run without it, to the bit, and Python summed the energy only where
+    the quick check did not pass (at a failure, in the replay)."""
+    quick = _run(text, "numba", inside=False, quick=True, monkeypatch=monkeypatch)
+    python = _run(text, "numba", inside=False, monkeypatch=monkeypatch)
+    _assert_identical(quick, python)
+    assert quick[0].meta.get("emitters") == python[0].meta.get("emitters")
+    assert quick[2].calls == python[2].calls  # the same checks, at the same steps
+    if quick[0].status == STATUS_OK:
+        assert quick[2].sums == 0 and quick[2].calls > 10
+    elif python[2].sums:  # Python sums where a check failed and in the replay after the last pass
+        assert quick[2].sums < python[2].sums
+    else:  # a state that is not finite: Python's own test found it, with no energy sums
+        assert "not finite" in quick[0].failure.reason
+
+
+def test_a_quick_check_in_the_margin_or_at_a_non_finite_state_leaves_it_to_python(monkeypatch):
+    """The quick check is True only below (1 - CHECK_MARGIN) times the allowance and at a
+    finite state: with a margin of everything, or with a NaN, Python decides every check."""
+    import animsim.backends.fused as fused
+
+    text = FOUNTAIN.replace("FLOOR", "-0.2").replace("PLANE", "impulse")
+    with monkeypatch.context() as m:
+        m.setattr(fused, "CHECK_MARGIN", 1.0)
+        deferred = _run(text, "numba", inside=False, quick=True, monkeypatch=monkeypatch)
+    python = _run(text, "numba", inside=False, monkeypatch=monkeypatch)
+    _assert_identical(deferred, python)
+    assert deferred[2].sums == python[2].sums == python[2].calls > 10
+
+    compiled = _compiled(text, "numba")
+    from animsim.steppers import start
+
+    state, stepper, _ = start(compiled, None)
+    guard = Guard(compiled)
+    guard.start(state)
+    quick = stepper.quick_check(guard)
+    assert quick is not None and quick(state)
+    state.particle_velocity[3, 1] = np.nan
+    assert not quick(state)
+    state.particle_velocity[3, 1] = 0.0
+    state.particle_position[0, 0] = np.inf
+    assert not quick(state)
