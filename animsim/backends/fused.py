@@ -1233,7 +1233,6 @@ class FusedStepper:
         releasing: list[Any] = watch.releasing if energy else []
         if any(t.numba_energy_source is None for t in (*elastic, *releasing)):
             return False
-        table = _energy_table
         no_u = np.zeros(0)
         u_refs = _array_tuple(list(watch.u_ref) if releasing else [no_u], np.float64)
         books = np.array([*watch.budget_constants(), watch.allowance * (1.0 - CHECK_MARGIN)])
@@ -1249,8 +1248,8 @@ class FusedStepper:
             (kx, kv, *work),
             (
                 energy,
-                *table(elastic),
-                *table(releasing),
+                *_energy_table(elastic),
+                *_energy_table(releasing),
                 u_refs,
                 np.ascontiguousarray(watch.x_ref),
                 no_u,

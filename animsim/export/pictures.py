@@ -15,14 +15,15 @@ import numpy as np
 
 from animsim.atomic import AtomicFile
 from animsim.errors import UsageError
+from animsim.export.raster import ORTHO_VIEWS
 
 FIGURE_SUFFIXES = {".png": "png", ".svg": "svg", ".pdf": "pdf"}
 # Trails of more particles than this make a grey smear; draw an even subset.
 MAX_TRAILS = 400
-#: the axis-aligned views, (horizontal axis, vertical axis) of the picture; "zy" is the side view
-#: of a y-up scene looking along x, so that up stays up whichever horizontal axis is wider
-AXES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2), "zy": (2, 1)}
-VIEW_NAMES = "xy, xz, yz or zy"
+#: the axis-aligned views, (horizontal axis, vertical axis) of the picture ("zy": the side view
+#: of a y-up scene looking along x, so that up stays up whichever horizontal axis is wider)
+AXES = {v: ("xyz".index(v[0]), "xyz".index(v[1])) for v in ORTHO_VIEWS}
+VIEW_NAMES = ", ".join(ORTHO_VIEWS[:-1]) + " or " + ORTHO_VIEWS[-1]
 #: a scene with gravity along y or z is drawn from the side (up drawn upward) unless its
 #: vertical extent is below this fraction of its wider horizontal one and is the smallest of
 #: the three: then it is something flat, seen from above

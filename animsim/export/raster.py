@@ -182,8 +182,10 @@ def to_rgb8(image: Canvas | np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------
 
 View = Literal["xy", "xz", "yz", "zy", "3d"]
-#: orthographic views name the picture's horizontal axis, then its vertical one
-VIEWS: tuple[str, ...] = ("xy", "xz", "yz", "zy", "3d")
+#: orthographic views name the picture's horizontal axis, then its vertical one ("zy" is the
+#: side view of a y-up scene looking along x); render, plot and the viewer offer these
+ORTHO_VIEWS: tuple[str, ...] = ("xy", "xz", "yz", "zy")
+VIEWS: tuple[str, ...] = (*ORTHO_VIEWS, "3d")
 AXES = "xyz"
 
 BOUNDS_MARGIN = 0.05  # fraction of the largest extent added on every side
@@ -290,8 +292,8 @@ class OrthoCamera(Camera):
     """
 
     def __init__(self, view: str, bounds: Bounds, size: tuple[int, int]):
-        if view not in ("xy", "xz", "yz", "zy"):
-            raise ValueError(f"orthographic view must be xy, xz, yz or zy, got {view!r}")
+        if view not in ORTHO_VIEWS:
+            raise ValueError(f"orthographic view must be one of {', '.join(ORTHO_VIEWS)}, got {view!r}")
         lo, hi = check_bounds(bounds)
         self.width, self.height = _check_size(size)
         self.view = view

@@ -37,11 +37,13 @@ from typing import Any
 
 import numpy as np
 
+from animsim.export.raster import ORTHO_VIEWS
+
 SHAPE_KINDS = ("plane", "sphere", "box", "capsule")
 QUANT_MAX = 65534  # positions are quantised to 0..QUANT_MAX
 QUANT_DEAD = 65535  # ... and this code marks a particle that is not alive
 ZLIB_LEVEL = 6
-VIEWS = ("3d", "xy", "xz", "yz", "zy")
+VIEWS = ("3d", *ORTHO_VIEWS)
 #: energy values are written with this many significant digits (the plot is 120 px tall)
 ENERGY_DIGITS = 7
 
