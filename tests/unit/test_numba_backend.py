@@ -296,3 +296,25 @@ def test_a_second_process_loads_its_kernels_from_the_disk_cache_without_numbas_c
         "animsim.forces.gravity._released_energy",
     ], got
     assert got["modules"] == [], got
+
+
+@pytest.mark.parametrize("g", [(0.0, -9.81, 0.0), (1.5, 0.0, -2.0), (0.0, 0.0, 0.0)])
+def test_gravity_kernel_equals_accumulate_to_the_bit_signed_zeros_included(g):
+    """An earlier force may leave -0.0 in a column gravity does not pull along; NumPy's
+    accumulate skips that column, and so must the compiled kernel (0.0 * m added to -0.0
+    would give +0.0)."""
+    from animsim.forces.gravity import Gravity
+
+    rng = np.random.default_rng(7)
+    mass = rng.uniform(0.5, 2.0, 9)
+    mass[3] = 0.0  # a pinned row or a dead slot
+    x = rng.normal(size=(9, 3))
+    start = rng.normal(size=(9, 3))
+    start[::2] = -0.0
+    term = Gravity(np.array(g), mass)
+    ref = start.copy()
+    term.accumulate(x, x, 0.0, ref)
+    out = start.copy()
+    fp, ip = term.numba_params()
+    term.numba_kernel(x, x, 0.0, out, mass, fp, ip)
+    assert out.tobytes() == ref.tobytes()
