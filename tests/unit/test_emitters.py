@@ -130,6 +130,20 @@ def test_keyframe_jump_and_hold():
     assert abs(len(t) - 500) < 4 * np.sqrt(500)
 
 
+@pytest.mark.parametrize("spec", [50_000.0, 0.0, [[0.0, 7.5], [1.0, 7.5], [1.0, 7.5], [3.0, 7.5]]])
+def test_a_constant_rate_gives_the_interpolations_numbers_without_it(spec):
+    """A constant schedule answers without interpolating; its rates and bounds must be the
+    interpolation's, bit for bit, before, at, between and after its keyframes, or the
+    births (thinned against them) would change."""
+    sched = RateSchedule.from_spec(spec)
+    assert sched.constant
+    t = np.array([-1.0, 0.0, 1e-300, 0.5, 1.0, 2.0, 3.0, 1e9])
+    assert sched(t).tobytes() == sched._interpolate(t).tobytes()
+    for a, b in [(-1.0, -0.5), (0.0, 0.05), (0.9, 1.1), (2.0, 3.0), (5.0, 6.0)]:
+        assert sched.max_over(a, b) == sched._max_interpolated(a, b)
+    assert not RateSchedule.from_spec([[0.0, 1.0], [1.0, 2.0]]).constant
+
+
 def test_birth_times_do_not_depend_on_how_time_is_taken():
     whole = BirthStream(emitter(rate=700.0, rate_spread=100.0), 3).take(2.0)
     pieces = BirthStream(emitter(rate=700.0, rate_spread=100.0), 3)
