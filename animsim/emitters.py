@@ -109,6 +109,7 @@ from animsim.elements import StepStage, _compile_helpers, numba_helper
 from animsim.record import Frame
 from animsim.scene import models as m
 from animsim.system import State, kept_copies
+from animsim.vec import put_rows
 
 #: The rate noise (``rate_spread``) is held for this span of simulated time, s.
 RATE_NOISE_WINDOW = 0.1
@@ -1074,21 +1075,26 @@ class Emitters(StepStage):
         """x += r v0 + r^2/2 a0, v += r a0 for the rest r of the birth step; then planes."""
         x, v = state.particle_position, state.particle_velocity
         assert self._accel is not None
-        rows = getattr(self.dynamics, "acceleration_rows", None)
-        if rows is not None:  # numba: the newborns' rows only, where every force allows it
-            a = rows(x, v, t_mid, idx)
+        move = getattr(self.dynamics, "move_rows", None)
+        moved = None if move is None else move(x, v, t_mid, idx, rest)
+        if moved is not None:  # numba: one compiled call on the newborns' rows
+            x0, v0, x1, v1 = moved
         else:
-            # One evaluation over every slot: the NumPy force terms hold per-particle arrays
-            # (mass) of the full system, so they cannot be evaluated on a subset.
-            a = self.dynamics.acceleration(x, v, t_mid, self._accel)[idx]
-        x0, v0 = x[idx], v[idx]
-        r = rest[:, None]
-        x1 = x0 + r * v0 + (0.5 * r * r) * a
-        v1 = v0 + r * a
+            rows = getattr(self.dynamics, "acceleration_rows", None)
+            if rows is not None:  # numba: the newborns' rows only, as far as the forces allow
+                a = rows(x, v, t_mid, idx)
+            else:
+                # One evaluation over every slot: the NumPy force terms hold per-particle
+                # arrays (mass) of the full system, so they cannot be evaluated on a subset.
+                a = self.dynamics.acceleration(x, v, t_mid, self._accel)[idx]
+            x0, v0 = x[idx], v[idx]
+            r = rest[:, None]
+            x1 = x0 + r * v0 + (0.5 * r * r) * a
+            v1 = v0 + r * a
         for stage in self.colliders:
             stage.collide_subset(x0, v0, x1, v1, rest)
-        x[idx] = x1
-        v[idx] = v1
+        put_rows(x, idx, x1)
+        put_rows(v, idx, v1)
 
     def frame(self, compiled: Any, state: State) -> Frame:
         """The alive particles in creation order, with age, size and colour of the emitted ones."""

@@ -266,6 +266,7 @@ class _NumbaDynamics:
         self._dynamics = dynamics
         self.acceleration = forces.acceleration
         self.acceleration_rows = forces.acceleration_rows
+        self.move_rows = forces.move_rows
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._dynamics, name)

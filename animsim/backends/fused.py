@@ -994,9 +994,66 @@ class NumbaForces:
         self._acc(*args)
         return out
 
+    def move_rows(
+        self, x: np.ndarray, v: np.ndarray, t: float, rows: np.ndarray, rest: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+        """(x0, v0, x1, v1) for newborn ``rows``: their positions and velocities, and both
+        after the rest ``rest`` (k,) of their birth step at the acceleration of time ``t``
+        (_moved_rows), in one compiled call; None where :meth:`acceleration_rows` would
+        evaluate every row. The arrays are this object's buffers, valid until the next call.
+
+        One call for about a dozen NumPy calls and four gathers: a fountain's 250 newborns
+        a step, 49 -> 30 us (about 20 of it the rows' cache misses, measured by calling
+        twice)."""
+        d = self.dynamics
+        if self.others or getattr(d, "drivers", ()) or not self._pointwise:
+            return None
+        d.evaluations += 1
+        k = len(rows)
+        if self._rows_buf is None or self._rows_buf.shape[1] < k:
+            self._rows_buf = np.empty((5, max(k, 256), 3))
+            self._rows_mass = np.empty((2, max(k, 256)))
+        x0, v0, a, x1, v1 = (b[:k] for b in self._rows_buf)
+        m, im = self._rows_mass[0, :k], self._rows_mass[1, :k]
+        args = (
+            x, v, float(t), np.ascontiguousarray(rows, dtype=np.int64), np.ascontiguousarray(rest),
+            self.kernels, self.fps, self.ips, live_array(d.mass, self._copies),
+            live_array(d.inv_mass, self._copies), _NO_ROWS, x0, v0, a, m, im, x1, v1,
+        )  # fmt: skip
+        if self._move is None:
+            self._move = _FastCall(_moved_rows, args)
+        self._move(*args)
+        return x0, v0, x1, v1
+
+    _rows_buf: np.ndarray | None = None
+    _rows_mass: np.ndarray = np.empty((2, 0))
+    _move: Any = None
+
 
 #: no pinned rows (newborns are pool slots, never pinned)
 _NO_ROWS = np.zeros(0, dtype=np.int64)
+
+
+@njit(cache=True, _nrt=COUNTED)
+def _moved_rows(x, v, t, rows, rest, kernels, fps, ips, mass, inv_mass, pinned, x0, v0, a, m, im, x1, v1):
+    """Rows ``rows`` of x and v gathered (x0, v0), their acceleration at t on those rows
+    alone (a, as _acc gives it), and x1 = x0 + r v0 + (r^2/2) a, v1 = v0 + r a for each row's
+    rest r of its birth step: Emitters._move_newborns' NumPy operations, in their order."""
+    k = rows.shape[0]
+    for j in range(k):
+        i = rows[j]
+        m[j] = mass[i]
+        im[j] = inv_mass[i]
+        for c in range(3):
+            x0[j, c] = x[i, c]
+            v0[j, c] = v[i, c]
+    _acc(x0, v0, t, a, kernels, fps, ips, m, im, pinned)
+    for j in range(k):
+        r = rest[j]
+        h = 0.5 * r * r
+        for c in range(3):
+            x1[j, c] = x0[j, c] + r * v0[j, c] + h * a[j, c]
+            v1[j, c] = v0[j, c] + r * a[j, c]
 
 
 #: calls timed on each blocked build before the faster one is kept

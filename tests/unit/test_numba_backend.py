@@ -318,3 +318,25 @@ def test_gravity_kernel_equals_accumulate_to_the_bit_signed_zeros_included(g):
     fp, ip = term.numba_params()
     term.numba_kernel(x, x, 0.0, out, mass, fp, ip)
     assert out.tobytes() == ref.tobytes()
+
+
+def test_newborns_move_in_one_compiled_call_with_the_numpy_numbers():
+    """move_rows (an emitter's newborns on numba) gives what Emitters._move_newborns' NumPy
+    expressions give from a full evaluation, bit for bit, on rows in any order."""
+    from animsim.backends.fused import NumbaForces
+
+    text = PARTICLES.replace("  - {id: d, position: [0, 1, 1], velocity: [0.5, 0, 0], pinned: true}\n", "")
+    compiled = compile_scene(load_scene_text(text).scene, "t")
+    dyn = compiled.dynamics
+    forces = NumbaForces(dyn)
+    rng = np.random.default_rng(11)
+    x = rng.normal(size=(3, 3))
+    v = rng.normal(size=(3, 3))
+    rows = np.array([2, 0, 1])
+    rest = np.array([0.003, 1e-4, 0.0017])
+    x0, v0, x1, v1 = (a.copy() for a in forces.move_rows(x, v, 0.25, rows, rest))
+    a = dyn.acceleration(x, v, 0.25, np.zeros_like(x))[rows]
+    r = rest[:, None]
+    assert x0.tobytes() == x[rows].tobytes() and v0.tobytes() == v[rows].tobytes()
+    assert x1.tobytes() == (x[rows] + r * v[rows] + (0.5 * r * r) * a).tobytes()
+    assert v1.tobytes() == (v[rows] + r * a).tobytes()
