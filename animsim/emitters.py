@@ -510,7 +510,8 @@ def _inside_unit_ball(rng: np.random.Generator, n: int, dim: int, acceptance: fl
     while have < n:
         want = n - have
         batch = rng.uniform(-1.0, 1.0, (int(want * REJECTION_MARGIN / acceptance) + REJECTION_EXTRA, dim))
-        keep = batch[np.einsum("ij,ij->i", batch, batch) <= 1.0][:want]
+        # np.compress: the rows a boolean index would pick, at a sixth of its time on rows
+        keep = np.compress(np.einsum("ij,ij->i", batch, batch) <= 1.0, batch, axis=0)[:want]
         out[have : have + len(keep)] = keep
         have += len(keep)
     return out
@@ -557,7 +558,12 @@ class Births:
         """The events where ``keep`` (bool, ``n`` of them True) holds; itself when all do."""
         if n == len(self):
             return self
-        return Births(self.time[keep], self.position[keep], self.velocity[keep], self.lifetime[keep])
+        return Births(
+            self.time[keep],
+            np.compress(keep, self.position, axis=0),
+            np.compress(keep, self.velocity, axis=0),
+            self.lifetime[keep],
+        )
 
     @staticmethod
     def concat(parts: Sequence[Births]) -> Births:
