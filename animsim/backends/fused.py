@@ -514,7 +514,7 @@ def _block_steps(
     for step in range(s0, s1):
         t = t_all[step]
         dt = dts[step]
-        if has_stage:
+        if has_stage and method != SYMPLECTIC_EULER:
             _copy(xo, x)
             _copy(vo, v)
         if method == SYMPLECTIC_EULER:
@@ -522,9 +522,20 @@ def _block_steps(
             xf = x.reshape(3 * m)
             vf = v.reshape(3 * m)
             af = acc.reshape(3 * m)
-            for i in range(3 * m):
-                vf[i] += af[i] * dt
-                xf[i] += vf[i] * dt
+            if has_stage:
+                # the step's start kept for the stage in the update's own pass (the kernels
+                # write only acc, so x and v are still the start here)
+                xof = xo.reshape(3 * m)
+                vof = vo.reshape(3 * m)
+                for i in range(3 * m):
+                    xof[i] = xf[i]
+                    vof[i] = vf[i]
+                    vf[i] += af[i] * dt
+                    xf[i] += vf[i] * dt
+            else:
+                for i in range(3 * m):
+                    vf[i] += af[i] * dt
+                    xf[i] += vf[i] * dt
         elif method == EULER_AVERAGE:
             _acc_block(x, v, t, acc, kernels, fps, ips, mass, inv_mass, pinned)
             half = 0.5 * dt
