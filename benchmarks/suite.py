@@ -696,7 +696,9 @@ def _figure(tables: list[Table], title: str, workload: str, label: str) -> float
 
 #: where the log appended below says what was measured and tried for a goal not met
 _FOUNTAIN_LOG = (
-    '"The fountain on numba, fifth round: medians, replay copies, and where a step goes" and '
+    "\"The fountain on numba, sixth round: the plane's rows, gravity's stores, the newborns in "
+    'one call", "The fountain on numba, fifth round: medians, replay copies, and where a step '
+    'goes" and '
     '"The fountain on numba: births, deaths and checks around the physics"'
 )
 _IMPLICIT_LOG = '"Implicit Euler: a sparse Cholesky (CHOLMOD) for the stiff steps"'
