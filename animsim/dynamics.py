@@ -95,6 +95,12 @@ class Dynamics:
             self._a0 = a0
 
     @property
+    def constant_acceleration(self) -> np.ndarray | None:
+        """a = F/m when every force is constant and no row is driven (what :meth:`acceleration`
+        copies out at every call), else None; a new array whenever the masses are rebound."""
+        return None if self.drivers else self._a0
+
+    @property
     def blocks(self) -> bool:
         """Whether :meth:`acceleration_blocks` may evaluate a block of rows at a time: a fixed
         population of many particles, none pinned or driven, every non-constant force
