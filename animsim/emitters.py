@@ -1087,7 +1087,7 @@ class Emitters(StepStage):
             x0, v0, x1, v1 = moved
         else:
             rows = getattr(self.dynamics, "acceleration_rows", None)
-            if rows is not None:  # numba: the newborns' rows only, as far as the forces allow
+            if rows is not None:  # numba, with a force that reads other rows: gathered from all
                 a = rows(x, v, t_mid, idx)
             else:
                 # One evaluation over every slot: the NumPy force terms hold per-particle
