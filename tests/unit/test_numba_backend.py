@@ -342,11 +342,25 @@ def test_newborns_move_in_one_compiled_call_with_the_numpy_numbers():
     assert v1.tobytes() == (v[rows] + r * a).tobytes()
 
 
-def test_newborns_that_cross_the_plane_in_their_birth_step_match_numpy_to_the_bit():
+#: a spring beside the emitter: a force that reads other rows, so the newborns take the
+#: full evaluation on numba (move_rows declines) instead of their own rows
+PENDULUM = """
+particles:
+  - {id: a, pinned: true, position: [0, 1, 0]}
+  - {id: b, mass: 0.5, position: [0.3, 0.8, 0]}
+springs: [{between: [a, b], ks: 50, kd: 0.1}]
+"""
+
+
+@pytest.mark.parametrize("extra", ["", PENDULUM], ids=["own-rows", "full-evaluation"])
+def test_newborns_that_cross_the_plane_in_their_birth_step_match_numpy_to_the_bit(extra):
     """Born just above the ground and moving down: their birth step's rest moves them
-    (move_rows on numba) and the plane meets them there (the NumPy rule on the rows it
-    returns); every frame equals the NumPy backend's, bit for bit, and none is behind it."""
-    text = """
+    (move_rows on numba, or the gathered full evaluation beside a spring) and the plane
+    meets them there; every frame equals the NumPy backend's, bit for bit, and none is
+    behind the plane."""
+    text = (
+        extra
+        + """
 duration: 0.2
 dt: 0.01
 seed: 3
@@ -361,15 +375,24 @@ emitters:
     mass: 0.001
     max_particles: 500
 """
+    )
+    from animsim.backends.fused import NumbaForces
+
     runs = {}
     for backend in ("numpy", "numba"):
         compiled = compile_scene(load_scene_text(text).scene, "t", backend=backend)
         sink = MemorySink()
         assert run(compiled, [sink]).status == "ok"
         runs[backend] = sink.frames
+    state = compiled.fresh_state()
+    one = np.array([state.particle_position.shape[0] - 1])
+    declined = NumbaForces(compiled.dynamics).move_rows(
+        state.particle_position, state.particle_velocity, 0.0, one, np.array([0.001])
+    )
+    assert (declined is None) == bool(extra)  # which path the newborns took
     assert len(runs["numba"]) == len(runs["numpy"]) > 5
     for a, b in zip(runs["numba"], runs["numpy"], strict=True):
         assert a.position.tobytes() == b.position.tobytes()
         assert a.velocity.tobytes() == b.velocity.tobytes()
         assert len(a.position) == 0 or a.position[:, 1].min() >= 0.0
-    assert len(runs["numba"][-1].position) > 100
+    assert len(runs["numba"][-1].position) > 100 + (2 if extra else 0)
