@@ -1086,13 +1086,10 @@ class Emitters(StepStage):
         if moved is not None:  # numba: one compiled call on the newborns' rows
             x0, v0, x1, v1 = moved
         else:
-            rows = getattr(self.dynamics, "acceleration_rows", None)
-            if rows is not None:  # numba, with a force that reads other rows: gathered from all
-                a = rows(x, v, t_mid, idx)
-            else:
-                # One evaluation over every slot: the NumPy force terms hold per-particle
-                # arrays (mass) of the full system, so they cannot be evaluated on a subset.
-                a = self.dynamics.acceleration(x, v, t_mid, self._accel)[idx]
+            # One evaluation over every slot: the NumPy force terms hold per-particle arrays
+            # (mass) of the full system, so they cannot be evaluated on a subset, and on numba
+            # a force that reads other rows (or a driven row) needs them all too.
+            a = self.dynamics.acceleration(x, v, t_mid, self._accel)[idx]
             x0, v0 = x[idx], v[idx]
             r = rest[:, None]
             x1 = x0 + r * v0 + (0.5 * r * r) * a

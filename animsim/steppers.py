@@ -265,7 +265,6 @@ class _NumbaDynamics:
     def __init__(self, dynamics: Any, forces: Any):
         self._dynamics = dynamics
         self.acceleration = forces.acceleration
-        self.acceleration_rows = forces.acceleration_rows
         self.move_rows = forces.move_rows
 
     def __getattr__(self, name: str) -> Any:

@@ -978,40 +978,15 @@ class NumbaForces:
             out[self.pinned] = 0.0
         return out
 
-    def acceleration_rows(self, x: np.ndarray, v: np.ndarray, t: float, rows: np.ndarray) -> np.ndarray:
-        """a = F/m on ``rows`` only, (len(rows), 3): the same numbers as those rows of a full
-        evaluation when every force is pointwise (row i reads only row i) and no row is driven
-        or pinned (an emitter's newborns); else a full evaluation, gathered."""
-        d = self.dynamics
-        if self.others or getattr(d, "drivers", ()) or not self._pointwise:
-            full = np.zeros_like(x)
-            return self.acceleration(x, v, t, full)[rows]
-        d.evaluations += 1
-        out = np.zeros((len(rows), 3))
-        args = (
-            np.ascontiguousarray(x[rows]),
-            np.ascontiguousarray(v[rows]),
-            float(t),
-            out,
-            self.kernels,
-            self.fps,
-            self.ips,
-            np.ascontiguousarray(d.mass[rows]),
-            np.ascontiguousarray(d.inv_mass[rows]),
-            _NO_ROWS,
-        )
-        if self._acc is None:
-            self._acc = _FastCall(_acc, args)
-        self._acc(*args)
-        return out
-
     def move_rows(
         self, x: np.ndarray, v: np.ndarray, t: float, rows: np.ndarray, rest: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
         """(x0, v0, x1, v1) for newborn ``rows``: their positions and velocities, and both
         after the rest ``rest`` (k,) of their birth step at the acceleration of time ``t``
-        (_moved_rows), in one compiled call; None where :meth:`acceleration_rows` would
-        evaluate every row. The arrays are this object's buffers, valid until the next call.
+        (_moved_rows), in one compiled call. None unless those rows can be evaluated alone:
+        every force pointwise (row i reads only row i), none left to NumPy, no row driven;
+        the caller then evaluates every row. The arrays are this object's buffers, valid
+        until the next call.
 
         One call for about a dozen NumPy calls and four gathers: a fountain's 250 newborns
         a step, 49 -> 30 us (about 20 of it the rows' cache misses, measured by calling
