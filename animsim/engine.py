@@ -282,12 +282,14 @@ def _run(
         last_good = state.copy() if replayable else None
         books = _snapshot(compiled, guard) if replayable else None
         passed_step = state.step  # the step of the last state that passed a check
-        # A run that cannot be replayed is checked after every step. A run with births is
-        # stepped one step at a time so that the watchdog books every newborn at its birth
-        # step (as a check at every step would); its full checks keep the stride, and the
-        # emitters' streams are restored with the state for a replay.
+        # A run that cannot be replayed is checked after every step. The watchdog books every
+        # newborn at its birth step (as a check at every step would): the stepper after each
+        # step when it can, else the loop, stepping the run one step at a time; the full
+        # checks keep the stride, and the emitters' streams are restored with the state for
+        # a replay.
         births = state.particle_alive is not None
-        one = 1 if (births or not replayable) else None
+        booked = births and stepper.books_inside(guard)
+        one = 1 if ((births and not booked) or not replayable) else None
         # A stepper may run the checks itself between record steps (the numba backend's
         # fused chunks on small scenes: one call per frame instead of one per stride); its
         # checks are these, at the same steps, deciding as guard.check does.
@@ -330,7 +332,7 @@ def _run(
                 else:
                     goal = min(goal, checked + stride)
                     k, failure, nonfinite = stepper.advance(state, k, goal, max_steps=one)
-                if births:
+                if births and not booked:
                     guard.book(state)
                 if failure is not None:  # the stepper itself gave up (adaptive: below dt_min)
                     status = STATUS_UNSTABLE
@@ -363,7 +365,7 @@ def _run(
                     failure = guard.check(state)
                     if failure is not None and last_good is not None and state.step - passed_step > 1:
                         failure = _first_failure(
-                            state, last_good, books, failure, stepper, guard, dyn, passed_step
+                            state, last_good, books, failure, stepper, guard, dyn, passed_step, booked
                         )
                     frames += _flush(pending, sinks, observers, failure)
                     checked = k
@@ -457,6 +459,7 @@ def _first_failure(
     guard: Guard,
     dyn: Any,
     passed_step: int,
+    booked: bool = False,
 ) -> Failure:
     """Replay from the last state kept for it (a state that passed a check), checking every
     step after ``passed_step`` (the last step whose check passed), so the report names the
@@ -465,6 +468,7 @@ def _first_failure(
     The replay is the same computation (the emitters' random streams are
     restored with the state, so the same births are drawn again), except that
     Verlet re-evaluates its first force. Its force evaluations are not counted.
+    ``booked``: the stepper books the newborns itself (``books_inside``).
     The steps up to ``passed_step`` are not checked again: a check at one of them
     that the run never made could stop a run whose energy swung and came back by
     the next check, which the run had passed.
@@ -479,7 +483,7 @@ def _first_failure(
     while state.step < failed_at:
         k, _, _ = stepper.advance(state, k, stepper.end, max_steps=1)
         if state.step <= passed_step:
-            if state.particle_alive is not None:
+            if state.particle_alive is not None and not booked:
                 guard.book(state)  # newborns booked at their birth step, as the run did
             continue
         found = guard.check(state)
