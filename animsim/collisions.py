@@ -864,6 +864,64 @@ def _stage_kernel(x_old, v_old, x, v, dt, inv_mass, fp, ip):
 PlaneColliders.numba_stage_source = staticmethod(_stage_kernel)
 
 
+def _newborn_kernel(x_old, v_old, x, v, rest, fp, ip):
+    """:meth:`PlaneColliders.collide_subset` compiled (the numba backend's birth step,
+    :mod:`animsim.backends.births`): the planes of ``fp`` on newborn rows (k, 3), all movable,
+    each row over its own rest ``rest[j]`` of its birth step, in place; True if any row hit.
+
+    The order of _planes_hit (every plane's hits, then every plane's settling with its
+    nudges), which for one plane gives _run_plane's numbers; only the step length is the
+    row's own. Every row is tested: a row neither on nor behind a plane is left as it is by
+    the rule itself (a newborn step's few hundred rows need no prefilter)."""
+    count = int(fp[0])
+    k = x.shape[0]
+    if count == 0 or k == 0:
+        return False
+    buf = np.empty((12, k))
+    for j in range(k):
+        for c in range(3):
+            buf[c, j] = x[j, c]
+            buf[3 + c, j] = v[j, c]
+            buf[6 + c, j] = x_old[j, c]
+            buf[9 + c, j] = v_old[j, c]
+    flags = np.zeros((2, k), dtype=np.bool_)
+    touched = flags[0]
+    nudge = flags[1]
+    hit = False
+    for p in range(count):
+        n0, n1, n2, off, e0, mu = (
+            fp[1 + 6 * p],
+            fp[2 + 6 * p],
+            fp[3 + 6 * p],
+            fp[4 + 6 * p],
+            fp[5 + 6 * p],
+            fp[6 + 6 * p],
+        )
+        friction = mu != 0.0
+        for j in range(k):
+            h, buf[0, j], buf[1, j], buf[2, j], buf[3, j], buf[4, j], buf[5, j] = _hit_row(
+                buf[0, j], buf[1, j], buf[2, j], buf[3, j], buf[4, j], buf[5, j],
+                buf[6, j], buf[7, j], buf[8, j], buf[9, j], buf[10, j], buf[11, j],
+                n0, n1, n2, off, e0, mu, rest[j], friction,
+            )  # fmt: skip
+            touched[j] |= h
+            hit |= h
+    if not hit:
+        return False
+    for p in range(count):
+        n0, n1, n2, off, mu = fp[1 + 6 * p], fp[2 + 6 * p], fp[3 + 6 * p], fp[4 + 6 * p], fp[6 + 6 * p]
+        if _run_projections(buf, k, n0, n1, n2, off, mu, touched, nudge, mu != 0.0):
+            _run_nudges(buf, k, n0, n1, n2, off, nudge)
+    for j in range(k):
+        for c in range(3):
+            x[j, c] = buf[c, j]
+            v[j, c] = buf[3 + c, j]
+    return True
+
+
+PlaneColliders.numba_newborn_source = staticmethod(_newborn_kernel)
+
+
 @register(m.Plane)
 def build(entries: list[tuple[int, m.Plane]], ctx: BuildContext) -> list[Any]:
     """Penalty planes become force elements; impulse planes one collision stage."""

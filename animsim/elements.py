@@ -165,6 +165,9 @@ class StepStage:
     random: bool = False
     #: newborn particles (emitters) are collided with this stage's ``collide_subset`` too
     collides_newborns: bool = False
+    #: ``collide_subset`` as a numba kernel (newborn_signature(), its parameters those of
+    #: ``numba_stage_params``), for the numba backend's compiled birth step; or None
+    numba_newborn_source: Callable[..., bool] | None = None
     #: its numba stage changes row i from row i of its arguments alone (and says whether it
     #: changed any), its parameters holding nothing per row: it may run on any block of rows
     pointwise: bool = False
@@ -187,6 +190,12 @@ class StepStage:
 
     def numba_stage_params(self) -> tuple[np.ndarray, np.ndarray]:
         return np.zeros(0), np.zeros(0, dtype=np.int64)
+
+    @property
+    def numba_newborn(self) -> Callable[..., bool] | None:
+        if self.numba_newborn_source is None:
+            return None
+        return jit_kernel(self.numba_newborn_source, newborn=True)
 
 
 Builder = Callable[[list[tuple[int, Any]], BuildContext], list[Any]]
@@ -271,6 +280,17 @@ def stage_signature() -> Any:
 
 
 @functools.cache
+def newborn_signature() -> Any:
+    """(x_old, v_old, x, v, rest f8[::1], fp, ip) -> bool: a stage's ``collide_subset`` as a
+    numba kernel, on newborn rows (k, 3) each moved over its own ``rest`` of its birth step."""
+    from numba import types
+
+    a2 = types.float64[:, ::1]
+    a1 = types.float64[::1]
+    return types.boolean(a2, a2, a2, a2, a1, a1, types.int64[::1])
+
+
+@functools.cache
 def energy_signature() -> Any:
     """(x f8[:,::1], x_ref f8[:,::1], u_ref f8[::1], mass f8[::1], fp f8[::1], ip i64[::1]) -> f8.
 
@@ -327,15 +347,21 @@ def _compile_helpers(namespace: dict[str, Any]) -> None:
             namespace[name] = numba.njit(cache=True, inline=inline)(obj)
 
 
-_JITTED: dict[tuple[Callable[..., Any], bool, bool, bool], Any] = {}
+_JITTED: dict[tuple[Callable[..., Any], bool, bool, bool, bool], Any] = {}
 
 
 def jit_kernel(
-    fn: Callable[..., Any], *, parallel: bool = False, stage: bool = False, energy: bool = False
+    fn: Callable[..., Any],
+    *,
+    parallel: bool = False,
+    stage: bool = False,
+    energy: bool = False,
+    newborn: bool = False,
 ) -> Any:
     """``fn`` compiled by numba with the uniform element signature (imported lazily, cached on
-    disk): a force kernel's, a stage's (``stage``) or an energy kernel's (``energy``)."""
-    key = (fn, parallel, stage, energy)
+    disk): a force kernel's, a stage's (``stage``), an energy kernel's (``energy``) or a
+    stage's newborn kernel's (``newborn``)."""
+    key = (fn, parallel, stage, energy, newborn)
     got = _JITTED.get(key)
     if got is None:
         import types as pytypes
@@ -347,7 +373,15 @@ def jit_kernel(
         # First-class function types are how the fused stepper calls any element;
         # numba still labels them experimental.
         warnings.filterwarnings("ignore", category=NumbaExperimentalFeatureWarning)
-        sig = energy_signature() if energy else stage_signature() if stage else kernel_signature()
+        sig = (
+            energy_signature()
+            if energy
+            else stage_signature()
+            if stage
+            else newborn_signature()
+            if newborn
+            else kernel_signature()
+        )
         _compile_helpers(fn.__globals__)
         target = fn
         if parallel:

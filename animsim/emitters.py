@@ -86,7 +86,11 @@ Bookkeeping on the numba backend
     it comes up); the free slots are kept as a sorted list (dead slots merged
     in, births taking its head) instead of being searched for. They choose
     the same slots as the NumPy scans, in the same order, so both backends
-    give the same particles bit for bit.
+    give the same particles bit for bit. When the newborns' forces read only
+    their own rows and every collider has a newborn kernel, the same call
+    also flies the newborns on, collides them and kills those already at
+    their age limit or outside the kill box (:func:`_pool_step`): a step of
+    an emitter is then one compiled call and a little bookkeeping in Python.
 
 Random streams
     Every emitter has its own streams, seeded by ``np.random.SeedSequence``
@@ -222,6 +226,7 @@ def _queue_compact(
     sizes[4] = n
 
 
+@numba_helper
 def _pool_births(
     t1: float,
     ev_time: np.ndarray,
@@ -335,6 +340,7 @@ def _pool_births(
     return nd, n
 
 
+@numba_helper
 def _outside_box(x: np.ndarray, alive: np.ndarray, lo: np.ndarray, hi: np.ndarray, out: np.ndarray) -> int:
     """The alive slots with a coordinate below lo or above hi (the kill box test), ascending,
     into ``out``; how many. One pass instead of NumPy's six over (capacity, 3) arrays."""
@@ -353,8 +359,94 @@ def _outside_box(x: np.ndarray, alive: np.ndarray, lo: np.ndarray, hi: np.ndarra
     return n
 
 
+def _pool_step(
+    xs, vs, mass_all, inv_mass_all, t1, t_mid, first,
+    ev_time, ev_life, ev_pos, ev_vel, mass, inv_mass, alive_count, born, capacity,
+    x, v, alive, m, inv_m, slot_birth, slot_death, slot_lifetime, slot_serial, slot_table,
+    free, sizes, q, qs, bounds, dying, scratch, keep, taken,
+    kernels, fps, ips, stage_fns, stage_fps, stage_ips,
+    has_box, box_lo, box_hi, gone, counts,
+):  # fmt: skip
+    """One pool's part of :meth:`Emitters.advance` in one call (the numba backend's birth
+    step, :meth:`Pool.step_numba`): its births and deaths by age (_pool_births), its
+    newborns flown on for the rest of their birth step and collided, then its newborns
+    already at their age limit and the rows outside its kill box killed.
+
+    ``xs``, ``vs``, ``mass_all``, ``inv_mass_all``: the whole system's rows (the pool's
+    slots are ``first`` onward; ``x``, ``v``, ``alive``, ``m``, ``inv_m`` are its slices).
+    The newborns' acceleration is the pointwise force kernels ``kernels`` (as the fused
+    stepper calls them) on their rows alone at ``t_mid``, summed in the kernels' order,
+    then times the inverse mass, as a full evaluation gives each row; they move by
+    x += r v0 + (r^2 / 2) a, v += r a over their rest r = t1 - birth time, and meet the
+    newborn kernels ``stage_fns`` (each stage's ``collide_subset``) in order. Every
+    number is the one the Python path of :meth:`Emitters.advance` computes.
+
+    ``counts`` receives (deaths by age among the alive, births kept, newborns dead at
+    once, deaths outside the box); ``gone`` the slots of the last two, in that order.
+    """
+    dead, n = _pool_births(
+        t1, ev_time, ev_life, ev_pos, ev_vel, mass, inv_mass, alive_count, born, capacity,
+        x, v, alive, m, inv_m, slot_birth, slot_death, slot_lifetime, slot_serial, slot_table,
+        free, sizes, q, qs, bounds, dying, scratch, keep, taken,
+    )  # fmt: skip
+    old = 0
+    if n:
+        rest = np.empty(n)
+        j = 0
+        for i in range(ev_time.shape[0]):
+            if keep[i]:
+                rest[j] = t1 - ev_time[i]
+                j += 1
+        x0 = np.empty((n, 3))
+        v0 = np.empty((n, 3))
+        a = np.zeros((n, 3))
+        x1 = np.empty((n, 3))
+        v1 = np.empty((n, 3))
+        mm = np.empty(n)
+        for j in range(n):
+            r = first + taken[j]
+            mm[j] = mass_all[r]
+            for c in range(3):
+                x0[j, c] = xs[r, c]
+                v0[j, c] = vs[r, c]
+        for k in range(len(kernels)):
+            kernels[k](x0, v0, t_mid, a, mm, fps[k], ips[k])
+        for j in range(n):
+            w = inv_mass_all[first + taken[j]]
+            r = rest[j]
+            h = 0.5 * r * r
+            for c in range(3):
+                a[j, c] *= w
+                x1[j, c] = x0[j, c] + r * v0[j, c] + h * a[j, c]
+                v1[j, c] = v0[j, c] + r * a[j, c]
+        for k in range(len(stage_fns)):
+            stage_fns[k](x0, v0, x1, v1, rest, stage_fps[k], stage_ips[k])
+        for j in range(n):
+            r = first + taken[j]
+            for c in range(3):
+                xs[r, c] = x1[j, c]
+                vs[r, c] = v1[j, c]
+        for j in range(n):  # ascending, as the slots were taken
+            if slot_death[taken[j]] <= t1:
+                gone[old] = taken[j]
+                old += 1
+        if old:
+            _pool_kill(gone[:old], alive, m, inv_m, v, slot_death, free, sizes, scratch)
+    out = 0
+    if has_box and alive_count - dead + n - old > 0:
+        out = _outside_box(x, alive, box_lo, box_hi, gone[old:])
+        if out:
+            _pool_kill(gone[old : old + out], alive, m, inv_m, v, slot_death, free, sizes, scratch)
+    counts[0] = dead
+    counts[1] = n
+    counts[2] = old
+    counts[3] = out
+
+
 #: the bookkeeping kernels compiled by numba (filled on first use of the numba backend)
 _NUMBA: dict[str, Any] = {}
+#: the kill box of a pool without one (the birth step's argument, never read)
+_NO_BOX = np.zeros(3)
 
 
 def _numba_kernels() -> dict[str, Any]:
@@ -363,8 +455,8 @@ def _numba_kernels() -> dict[str, Any]:
         import numba
 
         _compile_helpers(globals())
-        births = numba.njit(cache=True)(_pool_births)
-        kill = globals()["_pool_kill"]  # compiled above, as a helper of the births kernel
+        births = globals()["_pool_births"]  # compiled above, as helpers of the birth step
+        kill = globals()["_pool_kill"]
         # Compile (or load from the disk cache) now, before any run is timed: a call on a
         # one-slot pool with no events and no deaths, with the types a pool passes.
         f, i = np.zeros(1), np.zeros(1, dtype=np.int64)
@@ -376,9 +468,11 @@ def _numba_kernels() -> dict[str, Any]:
             f, f, f, f, f, i, i, i, sizes, q, qs, bounds, i, i, np.zeros(0, dtype=bool), i,
         )  # fmt: skip
         kill(np.zeros(0, dtype=np.int64), alive, f, f, xv, f, i, sizes, i)
-        outside = numba.njit(cache=True)(_outside_box)
+        outside = globals()["_outside_box"]
         outside(xv, alive, np.zeros(3), np.zeros(3), i)
         _NUMBA["births"], _NUMBA["kill"], _NUMBA["outside"] = births, kill, outside
+        # the birth step is compiled (or loaded) by its first call, with the scene's tables
+        _NUMBA["step"] = numba.njit(cache=True)(_pool_step)
     return _NUMBA
 
 
@@ -706,6 +800,8 @@ class Pool:
         self._dying = np.empty(cap, dtype=np.int64)
         self._scratch = np.empty(cap, dtype=np.int64)
         self._taken = np.empty(cap, dtype=np.int64)
+        self._gone = np.empty(cap, dtype=np.int64)  # slots the birth step killed (step_numba)
+        self._counts = np.zeros(4, dtype=np.int64)
         self._stale = True
 
     def _rebuild(self) -> None:
@@ -910,6 +1006,55 @@ class Pool:
         events = events.kept(keep, n)
         return self._booked(self._taken[:n].copy(), events)
 
+    def step_numba(
+        self, state: State, events: Births, t1: float, t_mid: float, call: Any, tables: Any
+    ) -> tuple[int, bool]:
+        """This pool's births, newborns and deaths of a step in one compiled call
+        (_pool_step through ``call``, with ``tables``: the newborns' forces and colliders);
+        the counters here, as :meth:`births` and :meth:`deaths` keep them. Returns
+        (births kept, whether a birth or death changed the state as :meth:`deaths` says)."""
+        k = len(events)
+        keep = np.empty(k, dtype=bool)
+        call(*self.step_args(state, events, t1, t_mid, tables, keep))
+        dead, n, old, out = self._counts.tolist()
+        if dead:  # as _births_numba
+            self.died_age += dead
+            self.alive_count -= dead
+            self._note(self._dying[:dead].copy(), born=False)
+        self.dropped += k - n
+        if n:
+            self._booked(self._taken[:n].copy(), events.kept(keep, n))
+        if old:  # as deaths: newborns at their age limit, then the kill box
+            self.died_age += old
+            self.alive_count -= old
+            self._note(self._gone[:old].copy(), born=False)
+        if out:
+            self.died_kill_box += out
+            self.alive_count -= out
+            self._note(self._gone[old : old + out].copy(), born=False)
+        self.peak_alive = max(self.peak_alive, self.alive_count)
+        return n, bool(n or old or out)
+
+    def step_args(
+        self, state: State, events: Births, t1: float, t_mid: float, tables: Any, keep: np.ndarray
+    ) -> tuple[Any, ...]:
+        """_pool_step's arguments for this pool's step to t1 with ``events`` (``keep``
+        receives their mask; ``tables``: the masses, then the newborns' kernels)."""
+        if self._stale:
+            self._rebuild()
+        box = self.kill_lo is not None
+        return (
+            state.particle_position, state.particle_velocity, *tables[0], t1, t_mid, self.first,
+            np.ascontiguousarray(events.time), np.ascontiguousarray(events.lifetime),
+            np.ascontiguousarray(events.position), np.ascontiguousarray(events.velocity),
+            self.mass, 1.0 / self.mass, self.alive_count, self.born, self.capacity,
+            self.x, self.v, self.alive, self.m, self.inv_m,
+            self.slot_birth, self.slot_death, self.slot_lifetime, self.slot_serial, self.slot_table,
+            self._free, self._sizes, self._q, self._qs, self._bounds, self._dying, self._scratch,
+            keep, self._taken, *tables[1], box, self.kill_lo if box else _NO_BOX,
+            self.kill_hi if box else _NO_BOX, self._gone, self._counts,
+        )  # fmt: skip
+
     def deaths(self, t1: float, newborn: np.ndarray) -> bool:
         """Newborns that already reached their age limit, and anything outside the kill box."""
         changed = False
@@ -986,6 +1131,9 @@ class Emitters(StepStage):
         self.names = [p.name for p in pools]
         self._accel: np.ndarray | None = None
         self._alive: np.ndarray | None = None  # the bound state's alive flags (take_changed)
+        # The numba backend's compiled birth step (use_numba): its call, the tables it flies
+        # and collides newborns with, and what counts its force evaluations; None: Python.
+        self._step: tuple[Any, Any, Any] | None = None
         self._next_table = first_index
         kill = [p.name for p in pools if p.kill_lo is not None]
         self.labels = [
@@ -1014,11 +1162,30 @@ class Emitters(StepStage):
         self._next_table = self.first_index
         self._alive = state.particle_alive
 
-    def use_numba(self) -> None:
-        """The pools' births and deaths by numba kernels (numba backend; the same slots)."""
+    def use_numba(self, state: State | None = None) -> None:
+        """The pools' births and deaths by numba kernels (numba backend; the same slots).
+
+        With ``state`` (the run's, its pools bound) and newborns whose forces and
+        colliders have kernels that run on their rows alone, a step's births, newborns and
+        deaths are one compiled call per pool (:func:`_pool_step`), compiled or loaded now,
+        before the run is timed."""
         for p in self.pools:
             if p._kernels is None:
                 p.use_numba()
+        self._step = None
+        forces = getattr(self.dynamics, "forces", None)
+        tables = None if (forces is None or state is None) else forces.newborn_tables(self.colliders)
+        if tables is None:
+            return
+        from animsim.backends.fused import _FastCall
+
+        both = (forces.masses(), tables)
+        # one call that changes nothing (no events, nothing due by -inf, no row outside a
+        # box: the pools are empty) compiles it, or loads it from the disk cache
+        args = self.pools[0].step_args(state, Births.empty(), -np.inf, 0.0, both, np.empty(0, dtype=bool))
+        call = _FastCall(_numba_kernels()["step"], args)
+        call(*args)
+        self._step = (call, both, forces)
 
     def take_changed(self, state: State) -> tuple[np.ndarray, np.ndarray] | None:
         """(rows born, sorted and unique; rows dead) since the last call, or None when not
@@ -1062,6 +1229,9 @@ class Emitters(StepStage):
 
     def advance(self, state: State, t0: float, t1: float) -> None:
         """Births in [t0, t1), moved on to t1; then deaths at t1."""
+        if self._step is not None:
+            self._advance_compiled(state, t0, t1)
+            return
         born: list[np.ndarray] = []
         times: list[np.ndarray] = []
         for p in self.pools:
@@ -1077,23 +1247,36 @@ class Emitters(StepStage):
         if changed:
             state.revision += 1  # integrators that cache a force must recompute it
 
+    def _advance_compiled(self, state: State, t0: float, t1: float) -> None:
+        """:meth:`advance` through the compiled birth step, a call per pool: the same numbers
+        (each pool's newborns alone, which the forces' pointwise rows allow), and one force
+        evaluation counted for a step's newborns, as the one evaluation of the Python path."""
+        call, tables, forces = self._step  # type: ignore[misc]
+        t_mid = 0.5 * (t0 + t1)
+        born = 0
+        changed = False
+        for p in self.pools:
+            n, c = p.step_numba(state, p.stream.take(t1), t1, t_mid, call, tables)
+            born += n
+            changed |= c
+        if born:
+            forces.dynamics.evaluations += 1
+        if changed:
+            state.revision += 1  # integrators that cache a force must recompute it
+
     def _move_newborns(self, state: State, idx: np.ndarray, rest: np.ndarray, t_mid: float) -> None:
         """x += r v0 + r^2/2 a0, v += r a0 for the rest r of the birth step; then planes."""
         x, v = state.particle_position, state.particle_velocity
         assert self._accel is not None
-        move = getattr(self.dynamics, "move_rows", None)
-        moved = None if move is None else move(x, v, t_mid, idx, rest)
-        if moved is not None:  # numba: one compiled call on the newborns' rows
-            x0, v0, x1, v1 = moved
-        else:
-            # One evaluation over every slot: the NumPy force terms hold per-particle arrays
-            # (mass) of the full system, so they cannot be evaluated on a subset, and on numba
-            # a force that reads other rows (or a driven row) needs them all too.
-            a = self.dynamics.acceleration(x, v, t_mid, self._accel)[idx]
-            x0, v0 = x[idx], v[idx]
-            r = rest[:, None]
-            x1 = x0 + r * v0 + (0.5 * r * r) * a
-            v1 = v0 + r * a
+        # One evaluation over every slot: the NumPy force terms hold per-particle arrays
+        # (mass) of the full system, so they cannot be evaluated on a subset, and on numba
+        # a force that reads other rows (or a driven row) needs them all too (the numba
+        # backend's compiled birth step serves the others, _advance_compiled).
+        a = self.dynamics.acceleration(x, v, t_mid, self._accel)[idx]
+        x0, v0 = x[idx], v[idx]
+        r = rest[:, None]
+        x1 = x0 + r * v0 + (0.5 * r * r) * a
+        v1 = v0 + r * a
         for stage in self.colliders:
             stage.collide_subset(x0, v0, x1, v1, rest)
         put_rows(x, idx, x1)

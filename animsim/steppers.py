@@ -257,7 +257,7 @@ def _compile_numba(stepper: Any, state: State, notice: Callable[[str], None] | N
     emitters = getattr(stepper.compiled, "emitters", None)
     if emitters is not None:  # newborns fly on with the same force sum (a full evaluation a step)
         emitters.dynamics = integ.dynamics
-        emitters.use_numba()  # births and deaths in compiled calls (the same slots)
+        emitters.use_numba(state)  # births and deaths in compiled calls (the same slots)
     if notice is not None and not _kernels_cached():
         notice("compiling numba kernels (first run only, cached afterwards)...")
     scratch = np.zeros_like(state.particle_position)
@@ -282,7 +282,7 @@ class _NumbaDynamics:
     def __init__(self, dynamics: Any, forces: Any):
         self._dynamics = dynamics
         self.acceleration = forces.acceleration
-        self.move_rows = forces.move_rows
+        self.forces = forces  # the kernels' tables (an emitter's compiled birth step)
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._dynamics, name)
@@ -357,7 +357,7 @@ class Fused(_Base):
             dyn = self.compiled.dynamics
             forces = NumbaForces(dyn)
             emitters.dynamics = _NumbaDynamics(dyn, forces)
-            emitters.use_numba()  # births and deaths in compiled calls (the same slots)
+            emitters.use_numba(state)  # births and deaths in compiled calls (the same slots)
             forces.acceleration(
                 state.particle_position,
                 state.particle_velocity,

@@ -72,6 +72,11 @@ def _no_stage(x_old, v_old, x, v, dt, inv_mass, fp, ip):
     return False
 
 
+def _no_newborn(x_old, v_old, x, v, rest, fp, ip):
+    """Stands in when newborns meet no collider (numba needs a non-empty tuple)."""
+    return False
+
+
 def _no_energy(x, x_ref, u_ref, mass, fp, ip):
     """Stands in when a scene has no elastic (or no releasing) element: adds 0.0, exactly."""
     return 0.0
@@ -868,10 +873,20 @@ class _Address(numba.types.WrapperAddressProtocol):
         return self._signature
 
 
-def _addresses(dispatchers: Any, stage: bool = False, energy: bool = False) -> tuple[Any, ...]:
-    from animsim.elements import energy_signature, kernel_signature, stage_signature
+def _addresses(
+    dispatchers: Any, stage: bool = False, energy: bool = False, newborn: bool = False
+) -> tuple[Any, ...]:
+    from animsim.elements import energy_signature, kernel_signature, newborn_signature, stage_signature
 
-    sig = energy_signature() if energy else stage_signature() if stage else kernel_signature()
+    sig = (
+        energy_signature()
+        if energy
+        else stage_signature()
+        if stage
+        else newborn_signature()
+        if newborn
+        else kernel_signature()
+    )
     return tuple(_Address(d, sig) for d in dispatchers)
 
 
@@ -978,68 +993,35 @@ class NumbaForces:
             out[self.pinned] = 0.0
         return out
 
-    def move_rows(
-        self, x: np.ndarray, v: np.ndarray, t: float, rows: np.ndarray, rest: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
-        """(x0, v0, x1, v1) for newborn ``rows``: their positions and velocities, and both
-        after the rest ``rest`` (k,) of their birth step at the acceleration of time ``t``
-        (_moved_rows), in one compiled call. None unless those rows can be evaluated alone:
-        every force pointwise (row i reads only row i), none left to NumPy, no row driven;
-        the caller then evaluates every row. The arrays are this object's buffers, valid
-        until the next call.
+    def newborn_tables(self, colliders: list[Any]) -> tuple[Any, ...] | None:
+        """What the compiled birth step (:func:`animsim.emitters._pool_step`) flies and
+        collides an emitter's newborns with: (the force kernels, their float and integer
+        parameters, the ``colliders``' newborn kernels, theirs). None unless the newborns'
+        rows can be evaluated alone (every force pointwise, none left to NumPy, no row
+        driven) and every collider has a newborn kernel; births then take the Python path,
+        which evaluates every row."""
+        from animsim.elements import jit_kernel
 
-        One call for about a dozen NumPy calls and four gathers: a fountain's 250 newborns
-        a step, 49 -> 30 us (about 20 of it the rows' cache misses, measured by calling
-        twice)."""
         d = self.dynamics
         if self.others or getattr(d, "drivers", ()) or not self._pointwise:
             return None
-        d.evaluations += 1
-        k = len(rows)
-        if self._rows_buf is None or self._rows_buf.shape[1] < k:
-            self._rows_buf = np.empty((5, max(k, 256), 3))
-            self._rows_mass = np.empty((2, max(k, 256)))
-        x0, v0, a, x1, v1 = (b[:k] for b in self._rows_buf)
-        m, im = self._rows_mass[0, :k], self._rows_mass[1, :k]
-        args = (
-            x, v, float(t), np.ascontiguousarray(rows, dtype=np.int64), np.ascontiguousarray(rest),
-            self.kernels, self.fps, self.ips, live_array(d.mass, self._copies),
-            live_array(d.inv_mass, self._copies), _NO_ROWS, x0, v0, a, m, im, x1, v1,
-        )  # fmt: skip
-        if self._move is None:
-            self._move = _FastCall(_moved_rows, args)
-        self._move(*args)
-        return x0, v0, x1, v1
+        if any(st.numba_newborn_source is None for st in colliders):
+            return None
+        kernels = [st.numba_newborn for st in colliders] or [jit_kernel(_no_newborn, newborn=True)]
+        params = [st.numba_stage_params() for st in colliders] or [(np.zeros(0), np.zeros(0, dtype=np.int64))]
+        return (
+            self.kernels,
+            self.fps,
+            self.ips,
+            _addresses(kernels, newborn=True),
+            _array_tuple([p[0] for p in params], np.float64),
+            _array_tuple([p[1] for p in params], np.int64),
+        )
 
-    _rows_buf: np.ndarray | None = None
-    _rows_mass: np.ndarray = np.empty((2, 0))
-    _move: Any = None
-
-
-#: no pinned rows (newborns are pool slots, never pinned)
-_NO_ROWS = np.zeros(0, dtype=np.int64)
-
-
-@njit(cache=True, _nrt=COUNTED)
-def _moved_rows(x, v, t, rows, rest, kernels, fps, ips, mass, inv_mass, pinned, x0, v0, a, m, im, x1, v1):
-    """Rows ``rows`` of x and v gathered (x0, v0), their acceleration at t on those rows
-    alone (a, as _acc gives it), and x1 = x0 + r v0 + (r^2/2) a, v1 = v0 + r a for each row's
-    rest r of its birth step: Emitters._move_newborns' NumPy operations, in their order."""
-    k = rows.shape[0]
-    for j in range(k):
-        i = rows[j]
-        m[j] = mass[i]
-        im[j] = inv_mass[i]
-        for c in range(3):
-            x0[j, c] = x[i, c]
-            v0[j, c] = v[i, c]
-    _acc(x0, v0, t, a, kernels, fps, ips, m, im, pinned)
-    for j in range(k):
-        r = rest[j]
-        h = 0.5 * r * r
-        for c in range(3):
-            x1[j, c] = x0[j, c] + r * v0[j, c] + h * a[j, c]
-            v1[j, c] = v0[j, c] + r * a[j, c]
+    def masses(self) -> tuple[np.ndarray, np.ndarray]:
+        """The live masses and inverse masses as the kernels take them."""
+        d = self.dynamics
+        return live_array(d.mass, self._copies), live_array(d.inv_mass, self._copies)
 
 
 #: calls timed on each blocked build before the faster one is kept
@@ -1233,12 +1215,15 @@ class FusedStepper:
 
     def advance(self, state: Any, times: np.ndarray, dts: np.ndarray) -> tuple[int, int, bool]:
         """len(dts) steps from times[0]; (steps taken, force evaluations, failed)."""
-        return self._advance(state, times, dts, self._threaded() and self.chooser.pick())
+        threaded = self._threaded()
+        return self._advance(state, times, dts, threaded and self.chooser.pick(), threaded)
 
     def _advance(
-        self, state: Any, times: np.ndarray, dts: np.ndarray, threaded: bool
+        self, state: Any, times: np.ndarray, dts: np.ndarray, threaded: bool, timed: bool | None = None
     ) -> tuple[int, int, bool]:
-        """advance, on numba's threads when ``threaded`` (blocked scenes only)."""
+        """advance, on numba's threads when ``threaded`` (blocked scenes only); ``timed``: the
+        chooser books the call (None: ask, as _threaded does; asking numba for its thread
+        count takes about 8 us after a large call, so advance asks once)."""
         common = self._common(state, times, dts, self.pinned)
         has_stage = self.stage_owner is not None
         if self.blocked:  # work: a0 and the rows saved at the call's start (x, v, a0)
@@ -1253,7 +1238,7 @@ class FusedStepper:
         t0 = time.perf_counter()
         result = call(*args)
         taken, evals, changed, self.a0_valid, failed = result
-        if self._threaded():
+        if self._threaded() if timed is None else timed:
             self.chooser.record(kernel is blocked_chunk_parallel, time.perf_counter() - t0, int(taken))
         self.changed_steps += int(changed)
         if changed:

@@ -320,30 +320,8 @@ def test_gravity_kernel_equals_accumulate_to_the_bit_signed_zeros_included(g):
     assert out.tobytes() == ref.tobytes()
 
 
-def test_newborns_move_in_one_compiled_call_with_the_numpy_numbers():
-    """move_rows (an emitter's newborns on numba) gives what Emitters._move_newborns' NumPy
-    expressions give from a full evaluation, bit for bit, on rows in any order."""
-    from animsim.backends.fused import NumbaForces
-
-    text = PARTICLES.replace("  - {id: d, position: [0, 1, 1], velocity: [0.5, 0, 0], pinned: true}\n", "")
-    compiled = compile_scene(load_scene_text(text).scene, "t")
-    dyn = compiled.dynamics
-    forces = NumbaForces(dyn)
-    rng = np.random.default_rng(11)
-    x = rng.normal(size=(3, 3))
-    v = rng.normal(size=(3, 3))
-    rows = np.array([2, 0, 1])
-    rest = np.array([0.003, 1e-4, 0.0017])
-    x0, v0, x1, v1 = (a.copy() for a in forces.move_rows(x, v, 0.25, rows, rest))
-    a = dyn.acceleration(x, v, 0.25, np.zeros_like(x))[rows]
-    r = rest[:, None]
-    assert x0.tobytes() == x[rows].tobytes() and v0.tobytes() == v[rows].tobytes()
-    assert x1.tobytes() == (x[rows] + r * v[rows] + (0.5 * r * r) * a).tobytes()
-    assert v1.tobytes() == (v[rows] + r * a).tobytes()
-
-
 #: a spring beside the emitter: a force that reads other rows, so the newborns take the
-#: full evaluation on numba (move_rows declines) instead of their own rows
+#: Python path's full evaluation on numba instead of the compiled birth step
 PENDULUM = """
 particles:
   - {id: a, pinned: true, position: [0, 1, 0]}
@@ -355,9 +333,9 @@ springs: [{between: [a, b], ks: 50, kd: 0.1}]
 @pytest.mark.parametrize("extra", ["", PENDULUM], ids=["own-rows", "full-evaluation"])
 def test_newborns_that_cross_the_plane_in_their_birth_step_match_numpy_to_the_bit(extra):
     """Born just above the ground and moving down: their birth step's rest moves them
-    (move_rows on numba, or the gathered full evaluation beside a spring) and the plane
-    meets them there; every frame equals the NumPy backend's, bit for bit, and none is
-    behind the plane."""
+    (the compiled birth step on numba, or the Python path's full evaluation beside a
+    spring) and the plane meets them there; every frame equals the NumPy backend's, bit
+    for bit, and none is behind the plane."""
     text = (
         extra
         + """
@@ -376,20 +354,13 @@ emitters:
     max_particles: 500
 """
     )
-    from animsim.backends.fused import NumbaForces
-
     runs = {}
     for backend in ("numpy", "numba"):
         compiled = compile_scene(load_scene_text(text).scene, "t", backend=backend)
         sink = MemorySink()
         assert run(compiled, [sink]).status == "ok"
         runs[backend] = sink.frames
-    state = compiled.fresh_state()
-    one = np.array([state.particle_position.shape[0] - 1])
-    declined = NumbaForces(compiled.dynamics).move_rows(
-        state.particle_position, state.particle_velocity, 0.0, one, np.array([0.001])
-    )
-    assert (declined is None) == bool(extra)  # which path the newborns took
+    assert (compiled.emitters._step is None) == bool(extra)  # which path the newborns took
     assert len(runs["numba"]) == len(runs["numpy"]) > 5
     for a, b in zip(runs["numba"], runs["numpy"], strict=True):
         assert a.position.tobytes() == b.position.tobytes()
