@@ -307,6 +307,18 @@ def energy_signature() -> Any:
     return types.float64(a2, a2, a1, a1, a1, types.int64[::1])
 
 
+def element_signature(*, stage: bool = False, energy: bool = False, newborn: bool = False) -> Any:
+    """The uniform signature of an element's kernel: a force's (the default), a stage's, an
+    energy sum's or a stage's newborn kernel's."""
+    if energy:
+        return energy_signature()
+    if stage:
+        return stage_signature()
+    if newborn:
+        return newborn_signature()
+    return kernel_signature()
+
+
 def numba_helper(fn: Callable[..., Any]) -> Callable[..., Any]:
     """Mark a module-level function a numba kernel calls; it is compiled with the kernel.
 
@@ -373,15 +385,7 @@ def jit_kernel(
         # First-class function types are how the fused stepper calls any element;
         # numba still labels them experimental.
         warnings.filterwarnings("ignore", category=NumbaExperimentalFeatureWarning)
-        sig = (
-            energy_signature()
-            if energy
-            else stage_signature()
-            if stage
-            else newborn_signature()
-            if newborn
-            else kernel_signature()
-        )
+        sig = element_signature(stage=stage, energy=energy, newborn=newborn)
         _compile_helpers(fn.__globals__)
         target = fn
         if parallel:

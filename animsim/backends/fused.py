@@ -876,17 +876,9 @@ class _Address(numba.types.WrapperAddressProtocol):
 def _addresses(
     dispatchers: Any, stage: bool = False, energy: bool = False, newborn: bool = False
 ) -> tuple[Any, ...]:
-    from animsim.elements import energy_signature, kernel_signature, newborn_signature, stage_signature
+    from animsim.elements import element_signature
 
-    sig = (
-        energy_signature()
-        if energy
-        else stage_signature()
-        if stage
-        else newborn_signature()
-        if newborn
-        else kernel_signature()
-    )
+    sig = element_signature(stage=stage, energy=energy, newborn=newborn)
     return tuple(_Address(d, sig) for d in dispatchers)
 
 
