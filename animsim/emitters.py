@@ -360,8 +360,8 @@ def _outside_box(x: np.ndarray, alive: np.ndarray, lo: np.ndarray, hi: np.ndarra
 
 
 def _pool_step(
-    xs, vs, mass_all, inv_mass_all, t1, t_mid, first,
-    ev_time, ev_life, ev_pos, ev_vel, mass, inv_mass, alive_count, born, capacity,
+    xs, vs, mass_all, inv_mass_all, t_mid, first,
+    t1, ev_time, ev_life, ev_pos, ev_vel, mass, inv_mass, alive_count, born, capacity,
     x, v, alive, m, inv_m, slot_birth, slot_death, slot_lifetime, slot_serial, slot_table,
     free, sizes, q, qs, bounds, dying, scratch, keep, taken,
     kernels, fps, ips, stage_fns, stage_fps, stage_ips,
@@ -374,6 +374,7 @@ def _pool_step(
 
     ``xs``, ``vs``, ``mass_all``, ``inv_mass_all``: the whole system's rows (the pool's
     slots are ``first`` onward; ``x``, ``v``, ``alive``, ``m``, ``inv_m`` are its slices).
+    ``t1`` to ``taken`` are _pool_births' arguments (:meth:`Pool.births_args`).
     The newborns' acceleration is the pointwise force kernels ``kernels`` (as the fused
     stepper calls them) on their rows alone at ``t_mid``, summed in the kernels' order,
     then times the inverse mass, as a full evaluation gives each row; they move by
@@ -885,9 +886,13 @@ class Pool:
         self._stale = True
         self._born_rows = None
 
-    def _kill(self, slots: np.ndarray) -> None:
+    def _dead_booked(self, slots: np.ndarray) -> None:
+        """The alive count and the energy books' rows after ``slots`` died."""
         self._note(slots, born=False)
         self.alive_count -= len(slots)
+
+    def _kill(self, slots: np.ndarray) -> None:
+        self._dead_booked(slots)
         if self._kernels is not None:
             self._kernels["kill"](
                 np.sort(slots), self.alive, self.m, self.inv_m, self.v, self.slot_death,
@@ -983,28 +988,37 @@ class Pool:
     def _births_numba(self, events: Births, t1: float) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`births` in one kernel call for the deaths by age, the room
         test and the slots' fields; the counters here, as the scans do them."""
+        keep = np.empty(len(events), dtype=bool)
+        dead, n = self._kernels["births"](*self.births_args(events, t1, keep))
+        return self._births_booked(events, keep, dead, n)
+
+    def births_args(self, events: Births, t1: float, keep: np.ndarray) -> tuple[Any, ...]:
+        """_pool_births' arguments for this pool's births to t1 (``keep`` receives the
+        events' mask), the free list and the death queue rebuilt first if stale."""
         if self._stale:
             self._rebuild()
-        k = len(events)
-        keep = np.empty(k, dtype=bool)
-        dead, n = self._kernels["births"](
+        return (
             t1, np.ascontiguousarray(events.time), np.ascontiguousarray(events.lifetime),
-            np.ascontiguousarray(events.position),
-            np.ascontiguousarray(events.velocity), self.mass, 1.0 / self.mass, self.alive_count,
-            self.born, self.capacity, self.x, self.v, self.alive, self.m, self.inv_m,
-            self.slot_birth, self.slot_death, self.slot_lifetime, self.slot_serial,
-            self.slot_table, self._free, self._sizes, self._q, self._qs, self._bounds,
-            self._dying, self._scratch, keep, self._taken,
+            np.ascontiguousarray(events.position), np.ascontiguousarray(events.velocity),
+            self.mass, 1.0 / self.mass, self.alive_count, self.born, self.capacity,
+            self.x, self.v, self.alive, self.m, self.inv_m,
+            self.slot_birth, self.slot_death, self.slot_lifetime, self.slot_serial, self.slot_table,
+            self._free, self._sizes, self._q, self._qs, self._bounds, self._dying, self._scratch,
+            keep, self._taken,
         )  # fmt: skip
+
+    def _births_booked(
+        self, events: Births, keep: np.ndarray, dead: int, n: int
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The counters after _pool_births: ``dead`` deaths by age (in _dying), ``n`` of
+        ``events`` kept (``keep``, into _taken); what :meth:`births` returns."""
         if dead:
             self.died_age += dead
-            self.alive_count -= dead
-            self._note(self._dying[:dead].copy(), born=False)
-        self.dropped += k - n
+            self._dead_booked(self._dying[:dead].copy())
+        self.dropped += len(events) - n
         if n == 0:
             return np.zeros(0, dtype=np.int64), np.zeros(0)
-        events = events.kept(keep, n)
-        return self._booked(self._taken[:n].copy(), events)
+        return self._booked(self._taken[:n].copy(), events.kept(keep, n))
 
     def step_numba(
         self, state: State, events: Births, t1: float, t_mid: float, call: Any, tables: Any
@@ -1013,25 +1027,16 @@ class Pool:
         (_pool_step through ``call``, with ``tables``: the newborns' forces and colliders);
         the counters here, as :meth:`births` and :meth:`deaths` keep them. Returns
         (births kept, whether a birth or death changed the state as :meth:`deaths` says)."""
-        k = len(events)
-        keep = np.empty(k, dtype=bool)
+        keep = np.empty(len(events), dtype=bool)
         call(*self.step_args(state, events, t1, t_mid, tables, keep))
         dead, n, old, out = self._counts.tolist()
-        if dead:  # as _births_numba
-            self.died_age += dead
-            self.alive_count -= dead
-            self._note(self._dying[:dead].copy(), born=False)
-        self.dropped += k - n
-        if n:
-            self._booked(self._taken[:n].copy(), events.kept(keep, n))
+        self._births_booked(events, keep, dead, n)
         if old:  # as deaths: newborns at their age limit, then the kill box
             self.died_age += old
-            self.alive_count -= old
-            self._note(self._gone[:old].copy(), born=False)
+            self._dead_booked(self._gone[:old].copy())
         if out:
             self.died_kill_box += out
-            self.alive_count -= out
-            self._note(self._gone[old : old + out].copy(), born=False)
+            self._dead_booked(self._gone[old : old + out].copy())
         self.peak_alive = max(self.peak_alive, self.alive_count)
         return n, bool(n or old or out)
 
@@ -1040,19 +1045,11 @@ class Pool:
     ) -> tuple[Any, ...]:
         """_pool_step's arguments for this pool's step to t1 with ``events`` (``keep``
         receives their mask; ``tables``: the masses, then the newborns' kernels)."""
-        if self._stale:
-            self._rebuild()
         box = self.kill_lo is not None
         return (
-            state.particle_position, state.particle_velocity, *tables[0], t1, t_mid, self.first,
-            np.ascontiguousarray(events.time), np.ascontiguousarray(events.lifetime),
-            np.ascontiguousarray(events.position), np.ascontiguousarray(events.velocity),
-            self.mass, 1.0 / self.mass, self.alive_count, self.born, self.capacity,
-            self.x, self.v, self.alive, self.m, self.inv_m,
-            self.slot_birth, self.slot_death, self.slot_lifetime, self.slot_serial, self.slot_table,
-            self._free, self._sizes, self._q, self._qs, self._bounds, self._dying, self._scratch,
-            keep, self._taken, *tables[1], box, self.kill_lo if box else _NO_BOX,
-            self.kill_hi if box else _NO_BOX, self._gone, self._counts,
+            state.particle_position, state.particle_velocity, *tables[0], t_mid, self.first,
+            *self.births_args(events, t1, keep), *tables[1], box,
+            self.kill_lo if box else _NO_BOX, self.kill_hi if box else _NO_BOX, self._gone, self._counts,
         )  # fmt: skip
 
     def deaths(self, t1: float, newborn: np.ndarray) -> bool:
