@@ -323,9 +323,10 @@ class Fused(_Base):
     """The numba backend's fused chunks (:class:`animsim.backends.fused.FusedStepper`).
 
     Stages without a numba kernel that may run between fused steps (births,
-    ``fused_between_steps``) run after every step, in Python: the chunks are then
-    one step long, still one numba call for the forces, the integrator and the
-    collisions."""
+    ``fused_between_steps``) are called from Python after every step: the chunks are
+    then one step long, still one numba call for the forces, the integrator and the
+    collisions (and an emitter's step is one more compiled call of its own where its
+    forces and colliders allow, :meth:`animsim.emitters.Emitters.use_numba`)."""
 
     def __init__(self, compiled: Any):
         super().__init__(compiled, numba=True)
@@ -445,7 +446,8 @@ class Fused(_Base):
         return k, None, failed
 
     def _advance_between(self, state: State, k: int, stop: int) -> tuple[int, Any, bool]:
-        """One fused step at a time, each followed by the stages that run in Python (as _one)."""
+        """One fused step at a time, each followed by the stages called from Python (as _one)
+        and, when the stepper books them (books_inside), the newborns' energy books."""
         failed = False
         while k < stop and not failed:
             t0 = state.time

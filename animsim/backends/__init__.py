@@ -5,7 +5,9 @@
 * ``numba``: every element's numba kernel (each element module holds both).
   A scene whose elements all have numba kernels and whose method has a fused
   kernel runs many steps per call (:mod:`animsim.backends.fused`), or one step
-  per call with births (emitters) in Python between calls; any other scene
+  per call with births (emitters) called from Python between calls (each
+  emitter's step a compiled call of its own where its forces and colliders allow);
+  any other scene
   (adaptive steps, implicit Euler, an element without a numba kernel) runs step
   by step through the same loop with the numba kernels of the elements that have
   one. Needs the ``fast`` extra.
@@ -94,7 +96,7 @@ def fused_unsupported(compiled: Any) -> list[str]:
         if term.numba_source is None:
             why.append(f"force {term.label!r}")
     for stage in compiled.post_step:
-        # births run in Python between one-step chunks (animsim.steppers.Fused)
+        # births are called from Python between one-step chunks (animsim.steppers.Fused)
         if stage.numba_stage_source is None and not getattr(stage, "fused_between_steps", False):
             why.append(stage.label.split(":")[0])
     return why

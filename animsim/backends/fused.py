@@ -1230,7 +1230,9 @@ class FusedStepper:
         t0 = time.perf_counter()
         result = call(*args)
         taken, evals, changed, self.a0_valid, failed = result
-        if self._threaded() if timed is None else timed:
+        if timed is None:
+            timed = self._threaded()
+        if timed:
             self.chooser.record(kernel is blocked_chunk_parallel, time.perf_counter() - t0, int(taken))
         self.changed_steps += int(changed)
         if changed:

@@ -197,7 +197,8 @@ def test_cli_run_and_explain_with_numba(tmp_path, cli):
 
 
 def test_an_emitter_scene_runs_fused_one_step_per_call_with_the_numpy_frames():
-    """Births run in Python between one-step fused calls; the frames are the NumPy backend's."""
+    """Births are called from Python between one-step fused calls (each step of the
+    emitter one compiled call); the frames are the NumPy backend's."""
     from animsim.backends import backend_line
     from animsim.steppers import Fused, make_stepper
 
@@ -226,6 +227,7 @@ emitters:
         result = run(compiled, [sink])
         assert result.status == "ok"
         frames[backend] = (sink.frames, result.meta["emitters"], result.force_evals)
+    assert fast.emitters._step is not None  # the emitter's step took the compiled call
     assert frames["numba"][1] == frames["numpy"][1]  # the same births, drops and deaths
     assert frames["numba"][2] == frames["numpy"][2]  # and the same force evaluations counted
     assert len(frames["numba"][0]) == len(frames["numpy"][0])
