@@ -85,6 +85,29 @@ def steps_per_second(
     return (warm_steps + steps - start) / (end - t0), result.meta["emitters"]
 
 
+def stepper_steps_per_second(steps: int, ground: bool, threads: int | None = None) -> float:
+    """Steady-state steps/s of the numba stepper alone on the fountain (wall clock): the
+    physics and the births of each step, with none of the run's watchdog around them (no
+    checks, no energy books, no copies kept for a replay, no recording or progress). Not a
+    way to run a scene: a ceiling on what any change outside the stepper could give a run."""
+    from animsim.backends import numba_threads
+    from animsim.steppers import start
+
+    warm_steps = round(WARMUP / DT)
+    loaded = load_scene_text(SCENE.replace("PLANES_HERE", GROUND if ground else ""))
+    scene = with_overrides(loaded.scene, duration=(warm_steps + steps) * DT)
+    compiled = compile_scene(scene, loaded.name, backend="numba", threads=threads)
+    with numba_threads(compiled):
+        state, stepper, _ = start(compiled, None)
+        k, failure, failed = stepper.advance(state, 0, warm_steps)
+        t0 = time.perf_counter()
+        end, failure, failed = stepper.advance(state, k, warm_steps + steps)
+        seconds = time.perf_counter() - t0
+    if failure is not None or failed or end != warm_steps + steps:
+        raise RuntimeError(f"the fountain's stepper stopped at step {end}: {failure}")
+    return steps / seconds
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=400, help="timed steps after the warm-up")
