@@ -449,9 +449,12 @@ class Fused(_Base):
         """One fused step at a time, each followed by the stages called from Python (as _one)
         and, when the stepper books them (books_inside), the newborns' energy books."""
         failed = False
+        threaded = self.fused.threaded()  # asked once for the stretch, not at every step
         while k < stop and not failed:
             t0 = state.time
-            taken, evals, failed = self.fused.advance(state, self.times[k : k + 1], self.dts[k : k + 1])
+            taken, evals, failed = self.fused.advance(
+                state, self.times[k : k + 1], self.dts[k : k + 1], threaded
+            )
             self.compiled.dynamics.evaluations += evals
             dt = self.dts[k]
             k += taken

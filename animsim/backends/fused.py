@@ -23,7 +23,6 @@ Imported only when numba is in use.
 
 from __future__ import annotations
 
-import statistics
 import time
 import types
 import warnings
@@ -1020,11 +1019,22 @@ class NumbaForces:
 TRIAL_CALLS = 3
 #: calls between two trials of the build not kept, so a change of the machine's load is followed
 RETRY_EVERY = 64
+#: and at least this much time (s) on the kept build between two trials: a trial of one
+#: thread where two are kept costs about a call more, so short calls would pay for it often
+#: (the 100,000-slot fountain, a step a call, spent 1.8 % of its run on them every 64 calls)
+RETRY_SECONDS = 0.25
 #: after the trials, the other build is kept only when it is this much faster (its median
 #: time per step over its last TRIAL_CALLS calls against the kept build's): on idle cores
 #: two threads run about 1.4-2x faster, on busy ones one thread 4-8x, while single calls
 #: of a run on a shared machine scatter by tens of percent
 SWITCH_MARGIN = 1.25
+
+
+def _median(values: list[float]) -> float:
+    """The median of a few floats, as statistics.median gives it."""
+    s = sorted(values)
+    h = len(s) // 2
+    return s[h] if len(s) % 2 else 0.5 * (s[h - 1] + s[h])
 
 
 class BuildChooser:
@@ -1037,9 +1047,10 @@ class BuildChooser:
     builds give the same bits, so the stepper times them (wall clock, what the user
     waits for): the first calls alternate until each build has TRIAL_CALLS timings, the
     build with the lower time per step (the median of its last TRIAL_CALLS calls) is
-    kept, and every RETRY_EVERY calls one call tries the other build again, which is then
-    kept only if that call was SWITCH_MARGIN times faster (a wrong switch on one lucky call
-    is undone once the new build's median over its next calls shows it).
+    kept, and once RETRY_EVERY calls and RETRY_SECONDS have passed on the kept build, one
+    call tries the other build again, which is then kept only if that call was
+    SWITCH_MARGIN times faster (a wrong switch on one lucky call is undone once the new
+    build's median over its next calls shows it).
     """
 
     def __init__(self) -> None:
@@ -1047,12 +1058,15 @@ class BuildChooser:
         self.calls = 0
         #: the build kept (True: numba's threads)
         self.parallel = True
+        #: calls and seconds on the kept build since the last trial of the other
+        self.kept_calls = 0
+        self.kept_seconds = 0.0
 
     def pick(self) -> bool:
         """True when the next call should run on numba's threads."""
         if self.calls < 2 * TRIAL_CALLS:  # the trials alternate, threads first
             return len(self.recent[True]) <= len(self.recent[False])
-        if self.calls % RETRY_EVERY == 0:
+        if self.kept_calls >= RETRY_EVERY and self.kept_seconds >= RETRY_SECONDS:
             return not self.parallel
         return self.parallel
 
@@ -1063,14 +1077,19 @@ class BuildChooser:
         self.calls += 1
         times = self.recent[parallel]
         trials = self.calls <= 2 * TRIAL_CALLS
+        if parallel == self.parallel:
+            self.kept_calls += 1
+            self.kept_seconds += seconds
+        else:
+            self.kept_calls, self.kept_seconds = 0, 0.0
         if not trials and parallel != self.parallel:
             times.clear()  # a retry of the other build: its old timings are of another load
         times.append(seconds / steps)
         del times[:-TRIAL_CALLS]
         if min(len(self.recent[True]), len(self.recent[False])) >= (TRIAL_CALLS if trials else 1):
-            # statistics, not NumPy: np.median on three floats took about 37 us, twice a call,
-            # which was a twelfth of a fountain step on two threads
-            on, off = statistics.median(self.recent[True]), statistics.median(self.recent[False])
+            # not NumPy: np.median on three floats took about 37 us, twice a call, which was a
+            # twelfth of a fountain step on two threads (statistics.median: about 1.5 us)
+            on, off = _median(self.recent[True]), _median(self.recent[False])
             if trials:  # the faster
                 self.parallel = on < off
             elif self.parallel:  # a change needs a clear margin (timings of calls scatter)
@@ -1205,10 +1224,20 @@ class FusedStepper:
             self.stage_ips,
         )
 
-    def advance(self, state: Any, times: np.ndarray, dts: np.ndarray) -> tuple[int, int, bool]:
-        """len(dts) steps from times[0]; (steps taken, force evaluations, failed)."""
-        threaded = self._threaded()
+    def advance(
+        self, state: Any, times: np.ndarray, dts: np.ndarray, threaded: bool | None = None
+    ) -> tuple[int, int, bool]:
+        """len(dts) steps from times[0]; (steps taken, force evaluations, failed).
+        ``threaded``: what :meth:`threaded` answers, when the caller asked it already (a
+        caller making many one-step calls asks once: each ask takes about 8 us right after
+        a large call)."""
+        if threaded is None:
+            threaded = self._threaded()
         return self._advance(state, times, dts, threaded and self.chooser.pick(), threaded)
+
+    def threaded(self) -> bool:
+        """Whether this stepper's calls may share their blocks among numba's threads now."""
+        return self._threaded()
 
     def _advance(
         self, state: Any, times: np.ndarray, dts: np.ndarray, threaded: bool, timed: bool | None = None

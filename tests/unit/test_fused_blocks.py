@@ -459,9 +459,11 @@ def test_explain_says_whether_the_blocks_share_the_cores(monkeypatch: pytest.Mon
     assert "shared among 1 thread)" in backend_line(compiled, "numba", "")
 
 
-def test_the_chooser_keeps_the_faster_build_and_follows_a_change_of_load():
+def test_the_chooser_keeps_the_faster_build_and_follows_a_change_of_load(monkeypatch):
     """Both builds are timed first; the one with the lower time per step is kept; every
-    RETRY_EVERY calls the other is tried again, and kept once it is faster."""
+    RETRY_EVERY calls (these calls are long enough for RETRY_SECONDS) the other is tried
+    again, and kept once it is faster."""
+    monkeypatch.setattr(fused_module, "RETRY_SECONDS", 0.0)
     chooser = fused_module.BuildChooser()
     trial = fused_module.TRIAL_CALLS
     picks = []
@@ -472,11 +474,11 @@ def test_the_chooser_keeps_the_faster_build_and_follows_a_change_of_load():
     assert picks == [True, False] * trial
     assert chooser.parallel is False
     tried = []
-    for _ in range(3 * fused_module.RETRY_EVERY):
+    for _ in range(3 * (fused_module.RETRY_EVERY + 1)):
         parallel = chooser.pick()
         tried.append(parallel)
         chooser.record(parallel, 8e-3 if parallel else 1e-3, 4)
-    # one call in RETRY_EVERY tries the threads again (and they stay slower)
+    # one call after every RETRY_EVERY tries the threads again (and they stay slower)
     assert sum(tried) == 3 and chooser.parallel is False
     booked = list(chooser.recent[True]), chooser.calls
     chooser.record(True, 0.0, 0)  # a call that took no step is not a timing
@@ -516,9 +518,10 @@ def test_both_builds_load_before_the_run_and_switching_keeps_the_bits(threads, m
     assert np.array_equal(state.particle_velocity.view(np.int64), ref_state.particle_velocity.view(np.int64))
 
 
-def test_the_chooser_switches_only_for_a_clear_margin():
+def test_the_chooser_switches_only_for_a_clear_margin(monkeypatch):
     """Timings of single calls scatter: after the trials a build close to the kept one's
     speed (within SWITCH_MARGIN) does not take over; a clearly faster one does."""
+    monkeypatch.setattr(fused_module, "RETRY_SECONDS", 0.0)
     chooser = fused_module.BuildChooser()
     for _ in range(2 * fused_module.TRIAL_CALLS):
         parallel = chooser.pick()
@@ -534,3 +537,34 @@ def test_the_chooser_switches_only_for_a_clear_margin():
         parallel = chooser.pick()
         chooser.record(parallel, clear if parallel else 1e-3, 1)
     assert chooser.parallel is True
+
+
+def test_the_chooser_tries_the_other_build_once_both_calls_and_time_have_passed():
+    """Short calls (a step of a fountain) would pay for a trial every RETRY_EVERY calls: a
+    trial also waits for RETRY_SECONDS on the kept build; long calls keep the call count."""
+    chooser = fused_module.BuildChooser()
+    for _ in range(2 * fused_module.TRIAL_CALLS):
+        parallel = chooser.pick()
+        chooser.record(parallel, 0.5e-3 if parallel else 1e-3, 1)
+    assert chooser.parallel is True
+    short = fused_module.RETRY_SECONDS / (4 * fused_module.RETRY_EVERY)  # 4 x RETRY_EVERY calls a trial
+    picks = []
+    for _ in range(13 * fused_module.RETRY_EVERY):
+        parallel = chooser.pick()
+        picks.append(parallel)
+        chooser.record(parallel, short if parallel else 2 * short, 1)
+    tried = [i for i, p in enumerate(picks) if not p]
+    assert len(tried) == 3
+    assert np.diff(tried).tolist() == [4 * fused_module.RETRY_EVERY + 1] * 2
+    long = 2 * fused_module.RETRY_SECONDS  # each call alone is long enough: RETRY_EVERY counts
+    chooser = fused_module.BuildChooser()
+    for _ in range(2 * fused_module.TRIAL_CALLS):
+        parallel = chooser.pick()
+        chooser.record(parallel, long if parallel else 2 * long, 1)
+    picks = []
+    for _ in range(4 * fused_module.RETRY_EVERY):
+        parallel = chooser.pick()
+        picks.append(parallel)
+        chooser.record(parallel, long if parallel else 2 * long, 1)
+    tried = [i for i, p in enumerate(picks) if not p]
+    assert tried == [fused_module.RETRY_EVERY + (fused_module.RETRY_EVERY + 1) * j for j in range(3)]
