@@ -272,8 +272,11 @@ def test_an_emitter_run_checked_every_stride_fails_where_one_checked_every_step_
     step. The first failing step, its particle, its numbers and the frames written are those
     of a run checked at every step. The lower floor fails after step 64, so its replay starts
     from a state kept some checks before the last passing one."""
+    import animsim.engine as engine
     import animsim.steppers as steppers
 
+    copy_every = 64  # a copy a few checks apart, so the lower floor's replay starts before one
+    monkeypatch.setattr(engine, "REPLAY_COPY_EVERY", copy_every)
     text = EMITTER.replace("record: {fps: 10}", "").replace("duration: 1.0", "duration: 3.0")
     text += STIFF_FLOOR.replace("-0.3", floor)
     strided_sink = MemorySink()
@@ -283,7 +286,7 @@ def test_an_emitter_run_checked_every_stride_fails_where_one_checked_every_step_
     every = run(compiled_from(text), [every_sink])
     assert strided.status == every.status == STATUS_UNSTABLE
     assert strided.failure.step % CHECK_STRIDE != 0  # found by the replay, inside a stride
-    assert (strided.failure.step > REPLAY_COPY_EVERY + CHECK_STRIDE) == (floor == "-5.0")
+    assert (strided.failure.step > copy_every + CHECK_STRIDE) == (floor == "-5.0")
     assert strided.failure == every.failure
     assert strided.meta["emitters"] == every.meta["emitters"]  # the pools' counts, restored too
     assert len(strided_sink.frames) == len(every_sink.frames) > 0
