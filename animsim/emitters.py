@@ -973,11 +973,12 @@ class Pool:
         self.slot_death[slots] = events.time + events.lifetime
         self.slot_serial[slots] = self.born + np.arange(n)
         self.slot_table[slots] = -1
-        return self._booked(slots, events)
+        self._booked(slots, events)
+        return self.first + slots, events.time
 
-    def _booked(self, slots: np.ndarray, events: Births) -> tuple[np.ndarray, np.ndarray]:
+    def _booked(self, slots: np.ndarray, events: Births) -> None:
         """The counters and the energy brought in by ``events``, born into ``slots`` (whose
-        fields are set); (global indices, birth times), what :meth:`births` returns."""
+        fields are set)."""
         n = len(slots)
         self._note(slots, born=True)
         self.born += n
@@ -985,14 +986,16 @@ class Pool:
         self.kinetic_energy_born += (
             0.5 * self.mass * float(np.einsum("ij,ij->", events.velocity, events.velocity))
         )
-        return self.first + slots, events.time
 
     def _births_numba(self, events: Births, t1: float) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`births` in one kernel call for the deaths by age, the room
         test and the slots' fields; the counters here, as the scans do them."""
         keep = np.empty(len(events), dtype=bool)
         dead, n = self._kernels["births"](*self.births_args(events, t1, keep))
-        return self._births_booked(events, keep, dead, n)
+        got = self._births_booked(events, keep, dead, n)
+        if got is None:
+            return np.zeros(0, dtype=np.int64), np.zeros(0)
+        return self.first + got[0], got[1].time
 
     def births_args(self, events: Births, t1: float, keep: np.ndarray) -> tuple[Any, ...]:
         """_pool_births' arguments for this pool's births to t1 (``keep`` receives the
@@ -1011,16 +1014,19 @@ class Pool:
 
     def _births_booked(
         self, events: Births, keep: np.ndarray, dead: int, n: int
-    ) -> tuple[np.ndarray, np.ndarray]:
+    ) -> tuple[np.ndarray, Births] | None:
         """The counters after _pool_births: ``dead`` deaths by age (in _dying), ``n`` of
-        ``events`` kept (``keep``, into _taken); what :meth:`births` returns."""
+        ``events`` kept (``keep``, into _taken); (the pool's slots born, their events), or
+        None when none was kept."""
         if dead:
             self.died_age += dead
             self._dead_booked(self._dying[:dead].copy())
         self.dropped += len(events) - n
         if n == 0:
-            return np.zeros(0, dtype=np.int64), np.zeros(0)
-        return self._booked(self._taken[:n].copy(), events.kept(keep, n))
+            return None
+        slots, kept = self._taken[:n].copy(), events.kept(keep, n)
+        self._booked(slots, kept)
+        return slots, kept
 
     def step_numba(
         self, state: State, events: Births, t1: float, t_mid: float, call: Any, tables: Any

@@ -115,6 +115,7 @@ class EnergyWatch:
         #: step's few hundred rows took about a dozen NumPy calls, 33 us a step of the
         #: 100,000-slot fountain
         self._book_rows: Any = None
+        self._book_buffers: tuple[np.ndarray, ...] | None = None
         if self._take_changed is not None and getattr(compiled, "backend", "numpy") == "numba":
             self._book_rows = _compiled_book_rows(system.particle_count)
         self._released = [f or t.released for f, t in zip(fast, self.releasing, strict=True)]
@@ -230,10 +231,15 @@ class EnergyWatch:
         """book_births' booking of ``rows`` (born, ascending) and ``dead`` through
         :func:`_newborn_rows`: the same numbers, its sums NumPy's on the gathered rows."""
         k = len(rows)
-        idx = np.empty(k, dtype=np.int64)
-        xb = np.empty((k, 3))
-        vb = np.empty((k, 3))
-        mb = np.empty(k)
+        if self._book_buffers is None or len(self._book_buffers[0]) < k:  # grown, then reused
+            room = max(k, 1024)
+            self._book_buffers = (
+                np.empty(room, dtype=np.int64),
+                np.empty((room, 3)),
+                np.empty((room, 3)),
+                np.empty(room),
+            )
+        idx, xb, vb, mb = self._book_buffers
         n = self._book_rows(
             state.particle_position, state.particle_velocity,
             np.ascontiguousarray(rows, dtype=np.int64), np.ascontiguousarray(dead, dtype=np.int64),
