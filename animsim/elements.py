@@ -99,6 +99,10 @@ class ForceElement:
     #: returns), for a RELEASING one the energy released since the watchdog opened its books
     #: (what ``released`` returns); None when it has none (the watchdog then checks in Python)
     numba_energy_source: Callable[..., float] | None = None
+    #: a RELEASING element whose released energy reads each particle's potential at its
+    #: reference position (``per_particle_potential``, which the watchdog books for every
+    #: newborn); False when it is measured from x - x_ref alone and that potential is zero
+    books_reference_potential: ClassVar[bool] = True
     #: which part of the energy plots its potential belongs to (gravitational, spring, other)
     energy_part: str = "other"
     #: stiffness (N/m) of a contact that may act on any particle (penalty planes), for the stability notes

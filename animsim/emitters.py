@@ -927,7 +927,9 @@ class Pool:
             b = born[0]
         else:
             b = np.unique(np.concatenate(born)) if born else np.zeros(0, dtype=np.int64)
-        d = np.concatenate(dead) if dead else np.zeros(0, dtype=np.int64)
+        d = (dead[0] if len(dead) == 1 else np.concatenate(dead)) if dead else np.zeros(0, dtype=np.int64)
+        if self.first == 0:  # a pool at the first row: its slots are the rows (no new arrays)
+            return b, d
         return self.first + b, self.first + d
 
     def _accepted(self, events: Births, dying: np.ndarray) -> np.ndarray:

@@ -164,6 +164,10 @@ class EnergyWatch:
         x = state.particle_position
         self.x_ref = x.copy()  # where each particle's released energy is measured from
         self.u_ref = [t.per_particle_potential(x) for t in self.releasing]
+        #: the reference potentials a newborn changes (gravity's stay zero: not booked)
+        self._u_booked = [
+            (t, u) for t, u in zip(self.releasing, self.u_ref, strict=True) if t.books_reference_potential
+        ]
         self.alive_prev = None if state.particle_alive is None else state.particle_alive.copy()
         self.born_energy = 0.0
         self._kept: list[np.ndarray] | None = None  # the last snapshot's arrays (snapshot)
@@ -224,7 +228,7 @@ class EnergyWatch:
             vb = take_rows(state.particle_velocity, idx)
             self.born_energy += float(0.5 * np.dot(self.mass[idx], np.einsum("ij,ij->i", vb, vb)))
             put_rows(self.x_ref, idx, xb)
-            for t, u in zip(self.releasing, self.u_ref, strict=True):
+            for t, u in self._u_booked:
                 u[idx] = t.per_particle_potential(xb, idx)
 
     def _book_compiled(self, state: Any, rows: np.ndarray, dead: np.ndarray) -> None:
@@ -248,7 +252,7 @@ class EnergyWatch:
         if n:
             vb = vb[:n]
             self.born_energy += float(0.5 * np.dot(mb[:n], np.einsum("ij,ij->i", vb, vb)))
-            for t, u in zip(self.releasing, self.u_ref, strict=True):
+            for t, u in self._u_booked:
                 u[idx[:n]] = t.per_particle_potential(xb[:n], idx[:n])
 
     def snapshot(self) -> tuple[Any, ...] | None:

@@ -57,6 +57,8 @@ class Gravity(ForceElement):
     constant_force = True
     watch_role = RELEASING
     energy_part = "gravitational"
+    #: released from x - x_ref directly: its per-particle reference potential stays zero
+    books_reference_potential = False
 
     def __init__(self, g: np.ndarray, particle_mass: np.ndarray):
         self.g = np.asarray(g, dtype=np.float64)

@@ -193,15 +193,24 @@ emitters:
 """
 
 
+ATTRACTED = KILLED.replace(
+    "  - {type: gravity, g: [0, -9.81, 0]}\n",
+    "  - {type: gravity, g: [0, -9.81, 0]}\n  - {type: attractor, position: [0, 3, 0], gm: 2.0, softening: 0.1}\n",
+)
+
+
 @pytest.mark.parametrize("backend", ["numpy", "numba"])
-def test_energy_books_of_births_match_a_full_comparison(backend: str) -> None:
+@pytest.mark.parametrize("text", [KILLED, ATTRACTED], ids=["gravity", "attractor"])
+def test_energy_books_of_births_match_a_full_comparison(backend: str, text: str) -> None:
     """Booking newborns from the rows the emitters name gives the books a comparison of every
-    slot gives: the same born energy, reference positions and flags at the end of a run."""
+    slot gives: the same born energy, reference positions, flags and reference potentials
+    (an attractor's, which newborns change; gravity's stay zero) at the end of a run."""
     from animsim.compile import compile_scene
     from animsim.engine import Guard, run
     from animsim.scene.loader import load_scene_text
 
-    loaded = load_scene_text(KILLED)
+    assert "attractor" in ATTRACTED
+    loaded = load_scene_text(text)
     books = []
     for told in (True, False):
         compiled = compile_scene(loaded.scene, loaded.name, backend=backend)
@@ -216,6 +225,8 @@ def test_energy_books_of_births_match_a_full_comparison(backend: str) -> None:
     assert np.array_equal(books[0][1], books[1][1])
     assert np.array_equal(books[0][2], books[1][2])
     assert all(np.array_equal(a, b) for a, b in zip(books[0][3], books[1][3], strict=True))
+    if text is ATTRACTED:  # the attractor's reference potentials were booked for newborns
+        assert np.count_nonzero(books[0][3][1]) > 0
 
 
 def test_kill_box_masks_match_the_plain_expression() -> None:
