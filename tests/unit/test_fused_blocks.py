@@ -568,3 +568,115 @@ def test_the_chooser_tries_the_other_build_once_both_calls_and_time_have_passed(
         chooser.record(parallel, long if parallel else 2 * long, 1)
     tried = [i for i, p in enumerate(picks) if not p]
     assert tried == [fused_module.RETRY_EVERY + (fused_module.RETRY_EVERY + 1) * j for j in range(3)]
+
+
+#: more particles than two pieces of the quick check, under gravity, an attractor (both
+#: releasing), drag, and a penalty floor (elastic): every watched element pointwise
+PIECES = """
+duration: 0.04
+dt: 0.002
+seed: 2
+forces:
+  - {type: gravity}
+  - {type: drag, k: 0.05}
+  - {type: attractor, position: [0, 2, 0], gm: 0.5, softening: 0.1}
+planes:
+  - {point: [0, -0.05, 0], normal: [0, 1, 0], response: penalty, stiffness: 3000, damping: 2}
+"""
+
+
+def _pieces_scene():
+    count = 2 * fused_module.CHECK_PIECE + 1234
+    text = PIECES + (
+        f"structures: [{{type: strand, id: s, start: [0, 0, 0], end: [1, 0, 0], count: {count}, mass: 0.5}}]\n"
+    )
+    compiled = _compiled(text)
+    rng = np.random.default_rng(8)
+    compiled.initial.particle_position[:] = rng.uniform([-1, -0.1, -1], [1, 0.3, 1], (count, 3))
+    compiled.initial.particle_velocity[:] = rng.uniform(-2, 2, (count, 3))
+    return compiled
+
+
+def test_the_quick_check_in_pieces_sums_and_decides_as_the_one_pass_check():
+    """The quick check shared among threads: each piece of rows summed alone, the pieces
+    added in order. Its sums equal NumPy's to rounding, it counts the movable rows, it finds
+    a number that is not finite at either end of any piece, and it passes and fails where
+    the one-thread check does."""
+    from animsim.analysis.watchdog import EnergyWatch
+
+    compiled = _pieces_scene()
+    state = compiled.fresh_state()
+    compiled.dynamics.bind(state)
+    watch = EnergyWatch(compiled, compiled.clock.dt)
+    watch.bind(state)
+    watch.reset(compiled.initial)
+    state.particle_position[:] += 0.01  # some energy released since the books opened
+    elastic, releasing = watch.elastic, watch.releasing
+    assert [type(t).__name__ for t in releasing] == ["Gravity", "Attractor"] and len(elastic) == 1
+    tables = (*fused_module._energy_table(elastic), *fused_module._energy_table(releasing))
+    u_refs = fused_module._array_tuple(list(watch.u_ref), np.float64)
+    n = len(state.particle_mass)
+    pieces = -(-n // fused_module.CHECK_PIECE)
+    assert pieces == 3
+    room = (np.ones(pieces, dtype=bool), np.zeros(pieces, dtype=np.int64), np.zeros((pieces, 4)))
+    x, v, m = state.particle_position, state.particle_velocity, state.particle_mass.copy()
+
+    def both(limit: float, x: np.ndarray, m: np.ndarray = m) -> tuple[bool, bool, float, float]:
+        books = np.array([1.0, 0.0, 0.0, 0.0, 0.0, limit])
+        one = fused_module._quick_check(x, v, 0.1, m, *tables, u_refs, watch.x_ref, np.zeros(0), books, True)
+        split = books.copy()
+        split[3] = 0.0
+        shared = fused_module._quick_check_pieces(
+            x, v, 0.1, m, *tables, u_refs, watch.x_ref, np.zeros(0), split, True, *room
+        )
+        return bool(one), bool(shared), books[3], split[3]
+
+    assert both(1e30, x) == (True, True, n, n)
+    sums = room[2].copy()
+    dead = m.copy()
+    dead[::5] = 0.0  # rows the count leaves out (a pool's dead slots)
+    assert both(1e30, x, dead)[2:] == (np.count_nonzero(dead),) * 2
+    kinetic = float(np.dot(m, np.einsum("ij,ij->i", v, v)))
+    np.testing.assert_allclose(sums[:, 0].sum(), kinetic, rtol=1e-12)
+    np.testing.assert_allclose(sums[:, 1].sum(), elastic[0].potential(x), rtol=1e-12)
+    for k, (t, u) in enumerate(zip(releasing, watch.u_ref, strict=True)):
+        np.testing.assert_allclose(sums[:, 2 + k].sum(), t.released(x, watch.x_ref, u), rtol=1e-10)
+    assert both(0.0, x)[:2] == (False, False)
+    # the pieces' sums combined: H / B as NumPy sums it, with books h0 = 1 and nothing else
+    h = 0.5 * kinetic + elastic[0].potential(x)
+    released = sum(t.released(x, watch.x_ref, u) for t, u in zip(releasing, watch.u_ref, strict=True))
+    ratio = h / (1.0 + max(released, 0.0))
+    assert both(ratio * (1 + 1e-9), x)[:2] == (True, True)
+    assert both(ratio * (1 - 1e-9), x)[:2] == (False, False)
+    piece = fused_module.CHECK_PIECE
+    for row in (0, piece - 1, piece, 2 * piece - 1, 2 * piece, n - 1):
+        bad = x.copy()
+        bad[row, row % 3] = np.inf if row % 2 else np.nan
+        assert both(1e30, bad)[:2] == (False, False), row
+
+
+@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="one thread")
+@pytest.mark.parametrize("threads", [2], indirect=True)
+def test_a_run_checked_in_pieces_on_two_threads_is_the_run_on_one(threads, monkeypatch):
+    """A run whose quick checks share their pieces among two threads: the same bits and
+    status as on one thread, where the one-pass check runs."""
+    used = []
+    pieces = fused_module._quick_check_pieces
+
+    def counted(*args):
+        used.append(True)
+        return pieces(*args)
+
+    results = []
+    for count in (2, 1):
+        numba.set_num_threads(count)
+        compiled = _pieces_scene()
+        with monkeypatch.context() as m:
+            m.setattr(fused_module, "_quick_check_pieces", counted)
+            results.append(run(compiled, []))
+        assert bool(used) == (count == 2)
+        used.clear()
+    two, one = results
+    assert two.status == one.status == "ok"
+    assert two.final_state.particle_position.tobytes() == one.final_state.particle_position.tobytes()
+    assert two.final_state.particle_velocity.tobytes() == one.final_state.particle_velocity.tobytes()
