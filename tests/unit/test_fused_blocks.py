@@ -542,32 +542,28 @@ def test_the_chooser_switches_only_for_a_clear_margin(monkeypatch):
 def test_the_chooser_tries_the_other_build_once_both_calls_and_time_have_passed():
     """Short calls (a step of a fountain) would pay for a trial every RETRY_EVERY calls: a
     trial also waits for RETRY_SECONDS on the kept build; long calls keep the call count."""
+
+    def one_thread_calls(chooser, calls: int, threaded: float) -> list[int]:
+        """The calls (of ``calls``) that ran on one thread, each taking twice ``threaded``."""
+        picks = []
+        for _ in range(calls):
+            parallel = chooser.pick()
+            picks.append(parallel)
+            chooser.record(parallel, threaded if parallel else 2 * threaded, 1)
+        return [i for i, p in enumerate(picks) if not p]
+
+    every = fused_module.RETRY_EVERY
+    short = fused_module.RETRY_SECONDS / (4 * every)  # 4 x RETRY_EVERY calls a trial
     chooser = fused_module.BuildChooser()
-    for _ in range(2 * fused_module.TRIAL_CALLS):
-        parallel = chooser.pick()
-        chooser.record(parallel, 0.5e-3 if parallel else 1e-3, 1)
+    one_thread_calls(chooser, 2 * fused_module.TRIAL_CALLS, short)
     assert chooser.parallel is True
-    short = fused_module.RETRY_SECONDS / (4 * fused_module.RETRY_EVERY)  # 4 x RETRY_EVERY calls a trial
-    picks = []
-    for _ in range(13 * fused_module.RETRY_EVERY):
-        parallel = chooser.pick()
-        picks.append(parallel)
-        chooser.record(parallel, short if parallel else 2 * short, 1)
-    tried = [i for i, p in enumerate(picks) if not p]
+    tried = one_thread_calls(chooser, 13 * every, short)
     assert len(tried) == 3
-    assert np.diff(tried).tolist() == [4 * fused_module.RETRY_EVERY + 1] * 2
+    assert np.diff(tried).tolist() == [4 * every + 1] * 2
     long = 2 * fused_module.RETRY_SECONDS  # each call alone is long enough: RETRY_EVERY counts
     chooser = fused_module.BuildChooser()
-    for _ in range(2 * fused_module.TRIAL_CALLS):
-        parallel = chooser.pick()
-        chooser.record(parallel, long if parallel else 2 * long, 1)
-    picks = []
-    for _ in range(4 * fused_module.RETRY_EVERY):
-        parallel = chooser.pick()
-        picks.append(parallel)
-        chooser.record(parallel, long if parallel else 2 * long, 1)
-    tried = [i for i, p in enumerate(picks) if not p]
-    assert tried == [fused_module.RETRY_EVERY + (fused_module.RETRY_EVERY + 1) * j for j in range(3)]
+    one_thread_calls(chooser, 2 * fused_module.TRIAL_CALLS, long)
+    assert one_thread_calls(chooser, 4 * every, long) == [every + (every + 1) * j for j in range(3)]
 
 
 #: more particles than two pieces of the quick check, under gravity, an attractor (both
