@@ -866,7 +866,7 @@ PlaneColliders.numba_stage_source = staticmethod(_stage_kernel)
 
 def _newborn_kernel(x_old, v_old, x, v, rest, fp, ip):
     """:meth:`PlaneColliders.collide_subset` compiled (the numba backend's birth step,
-    :mod:`animsim.backends.births`): the planes of ``fp`` on newborn rows (k, 3), all movable,
+    :func:`animsim.emitters._pool_step`): the planes of ``fp`` on newborn rows (k, 3), all movable,
     each row over its own rest ``rest[j]`` of its birth step, in place; True if any row hit.
 
     The order of _planes_hit (every plane's hits, then every plane's settling with its

@@ -225,11 +225,16 @@ class EnergyWatch:
             # rows gathered and put back whole (take_rows, put_rows: the same bytes as fancy
             # indexing, about three times faster on a step's few hundred newborns)
             xb = take_rows(state.particle_position, idx)
-            vb = take_rows(state.particle_velocity, idx)
-            self.born_energy += float(0.5 * np.dot(self.mass[idx], np.einsum("ij,ij->i", vb, vb)))
             put_rows(self.x_ref, idx, xb)
-            for t, u in self._u_booked:
-                u[idx] = t.per_particle_potential(xb, idx)
+            self._book_newborns(idx, xb, take_rows(state.particle_velocity, idx), self.mass[idx])
+
+    def _book_newborns(self, idx: np.ndarray, xb: np.ndarray, vb: np.ndarray, mb: np.ndarray) -> None:
+        """The newborns ``idx`` (ascending) at positions ``xb``, velocities ``vb``, masses
+        ``mb``: their kinetic energy into the budget, their reference potentials booked
+        (their reference positions are the caller's to write)."""
+        self.born_energy += float(0.5 * np.dot(mb, np.einsum("ij,ij->i", vb, vb)))
+        for t, u in self._u_booked:
+            u[idx] = t.per_particle_potential(xb, idx)
 
     def _book_compiled(self, state: Any, rows: np.ndarray, dead: np.ndarray) -> None:
         """book_births' booking of ``rows`` (born, ascending) and ``dead`` through
@@ -250,10 +255,7 @@ class EnergyWatch:
             state.particle_alive, self.alive_prev, self.mass, self.x_ref, idx, xb, vb, mb,
         )  # fmt: skip
         if n:
-            vb = vb[:n]
-            self.born_energy += float(0.5 * np.dot(mb[:n], np.einsum("ij,ij->i", vb, vb)))
-            for t, u in self._u_booked:
-                u[idx[:n]] = t.per_particle_potential(xb[:n], idx[:n])
+            self._book_newborns(idx[:n], xb[:n], vb[:n], mb[:n])
 
     def snapshot(self) -> tuple[Any, ...] | None:
         """The books a replay from a checked state restores (None: they never change)."""

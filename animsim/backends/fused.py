@@ -283,6 +283,14 @@ def _energy_passes(x, v, t, mass, elastic, efps, eips, releasing, rfps, rips, u_
     released = 0.0
     for k in range(len(releasing)):
         released += releasing[k](x, x_ref, u_refs[k], mass, rfps[k], rips[k])
+    return _within_budget(h, released, t, books)
+
+
+@njit(cache=True, error_model="numpy", _nrt=COUNTED)
+def _within_budget(h, released, t, books):
+    """H / B <= ``limit`` for the watched energy ``h`` and the energy ``released`` at time t,
+    B = h0 + max(released, 0) + wind power * movable * t + born + floor, in the order
+    EnergyWatch.budget adds them (``books``: see :func:`_energy_passes`)."""
     # max(released, 0.0) as Python's max decides it (NaN stays NaN)
     gained = 0.0 if released < 0.0 else released
     b = books[0] + gained + books[2] * books[3] * t + books[4] + books[1]
@@ -390,9 +398,7 @@ def _quick_check_pieces(
     for k in range(nr):
         for p in range(pieces):
             released += sums[p, 1 + ne + k]
-    gained = 0.0 if released < 0.0 else released
-    b = books[0] + gained + books[2] * books[3] * t + books[4] + books[1]
-    return h / b <= books[5]
+    return _within_budget(h, released, t, books)
 
 
 @njit(cache=True, _nrt=COUNTED)
@@ -1273,12 +1279,12 @@ class FusedStepper:
         t0 = time.perf_counter()
         no_steps = (state, np.array([state.time]), np.zeros(0))
         self._advance(*no_steps, False)
-        if self._threaded():  # both blocked builds: the run times them and may switch
+        if self.threaded():  # both blocked builds: the run times them and may switch
             self._advance(*no_steps, True)
         self.compile_seconds = time.perf_counter() - t0
         return self.compile_seconds
 
-    def _threaded(self) -> bool:
+    def threaded(self) -> bool:
         """Whether the blocked chunk may share its blocks among threads for this call."""
         # numba's thread count is asked only for scenes big enough to use it: asking
         # starts numba's thread pool, which a small scene's run should not wait for
@@ -1318,18 +1324,14 @@ class FusedStepper:
         caller making many one-step calls asks once: each ask takes about 8 us right after
         a large call)."""
         if threaded is None:
-            threaded = self._threaded()
+            threaded = self.threaded()
         return self._advance(state, times, dts, threaded and self.chooser.pick(), threaded)
-
-    def threaded(self) -> bool:
-        """Whether this stepper's calls may share their blocks among numba's threads now."""
-        return self._threaded()
 
     def _advance(
         self, state: Any, times: np.ndarray, dts: np.ndarray, threaded: bool, timed: bool | None = None
     ) -> tuple[int, int, bool]:
         """advance, on numba's threads when ``threaded`` (blocked scenes only); ``timed``: the
-        chooser books the call (None: ask, as _threaded does; asking numba for its thread
+        chooser books the call (None: ask, as :meth:`threaded` does; asking numba for its thread
         count takes about 8 us after a large call, so advance asks once)."""
         common = self._common(state, times, dts, self.pinned)
         has_stage = self.stage_owner is not None
@@ -1346,7 +1348,7 @@ class FusedStepper:
         result = call(*args)
         taken, evals, changed, self.a0_valid, failed = result
         if timed is None:
-            timed = self._threaded()
+            timed = self.threaded()
         if timed:
             self.chooser.record(kernel is blocked_chunk_parallel, time.perf_counter() - t0, int(taken))
         self.changed_steps += int(changed)
@@ -1424,11 +1426,11 @@ class FusedStepper:
         # among numba's threads, when the stepper's own calls do (its chooser keeps them)
         n = self.compiled.system.particle_count
         pieces = self.blocked and n >= 2 * CHECK_PIECE and all(t.pointwise for t in (*elastic, *releasing))
-        count = -(-n // CHECK_PIECE)
+        npieces = -(-n // CHECK_PIECE)
         room = (
-            np.ones(count, dtype=np.bool_),
-            np.zeros(count, dtype=np.int64),
-            np.zeros((count, 1 + len(elastic) + len(releasing))),
+            np.ones(npieces, dtype=np.bool_),
+            np.zeros(npieces, dtype=np.int64),
+            np.zeros((npieces, 1 + len(elastic) + len(releasing))),
         )
 
         def quick(state: Any) -> bool:
@@ -1448,7 +1450,7 @@ class FusedStepper:
                 births,
             )
             kernel = _quick_check
-            if pieces and self._threaded() and self.chooser.parallel:
+            if pieces and self.threaded() and self.chooser.parallel:
                 kernel = _quick_check_pieces
                 args = (*args, *room)
             fast = call.get(kernel)
