@@ -90,13 +90,9 @@ def with_overrides(
     """The scene with command-line overrides, checked by the same rules as the file."""
     update: dict[str, Any] = {}
     if integrator is not None:
-        if integrator not in m.INTEGRATOR_NAMES:
-            from animsim.scene.loader import did_you_mean
+        from animsim.scene.loader import method_from_option
 
-            hint = did_you_mean(integrator, m.INTEGRATOR_NAMES)
-            raise UsageError(
-                f"--integrator: unknown method {integrator!r}{hint} (valid: {', '.join(m.INTEGRATOR_NAMES)})"
-            )
+        method_from_option(integrator, "--integrator")
         adaptive = scene.adaptive
         update["integrator"] = (
             integrator if adaptive is None else m.IntegratorSpec(method=integrator, adaptive=adaptive)

@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from animsim import methods
 from animsim.errors import Diagnostic, SceneError, UsageError
 from animsim.scene.loader import (
     DEFAULT_MAX_DEPTH,
@@ -55,17 +56,8 @@ VECTOR_BYTES = 24
 # initial copy of both, the force accumulator, the collision snapshot of x and
 # v, and NumPy temporaries inside force terms and integrators (rounded up).
 BASE_VECTORS = 11
-# Work vectors each integrator preallocates (RK engine: 2 per stage + 2).
-INTEGRATOR_VECTORS = {
-    "euler": 4,
-    "symplectic_euler": 1,
-    "euler_average": 2,
-    "midpoint": 6,
-    "heun": 6,
-    "rk4": 10,
-    "verlet": 3,
-    "implicit_euler": 12,  # CG vectors and the linearised system's work arrays
-}
+# Work vectors each integrator preallocates: declared by its method (animsim.methods;
+# the tableau engine keeps 2 per stage and 2 more).
 # Mass, inverse mass, pinned and alive flags.
 PARTICLE_SCALAR_BYTES = 18
 # An id as a Python str in the id list plus its entry in compile's index dict.
@@ -245,7 +237,7 @@ def _emitter_memory(e: Any, births: int, frames: int, dt: float, per_particle: i
 
 def estimate(scene: Scene, steps: int, fmt: str = "csv") -> Estimate:
     """Count what the scene will hold and what that costs, without building it."""
-    vectors = BASE_VECTORS + INTEGRATOR_VECTORS.get(scene.integrator_name, max(INTEGRATOR_VECTORS.values()))
+    vectors = BASE_VECTORS + methods.get(scene.integrator_name).vectors
     per_particle = vectors * VECTOR_BYTES + PARTICLE_SCALAR_BYTES + ID_BYTES
     per_spring = SPRING_BYTES + (IMPLICIT_SPRING_BYTES if scene.integrator_name == "implicit_euler" else 0)
     parts: list[tuple[tuple[str | int, ...], int, str]] = []

@@ -26,10 +26,11 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from animsim.analysis.stability import METHOD_ORDER, largest_stable_dt  # noqa: E402
+from animsim.analysis.stability import largest_stable_dt  # noqa: E402
 from animsim.analysis.watchdog import BLOWUP_FACTOR  # noqa: E402
 from animsim.compile import compile_scene  # noqa: E402
 from animsim.engine import STATUS_OK, run  # noqa: E402
+from animsim.methods import names as method_names  # noqa: E402
 from animsim.scene.loader import load_scene_text  # noqa: E402
 
 HORIZONS = (100, 10_000)  # steps
@@ -89,7 +90,7 @@ NOTES = {
 
 def table() -> str:
     rows = []
-    for method in METHOD_ORDER:
+    for method in method_names():
         theory = float(largest_stable_dt(method, 1.0, 0.0)[0])
         measured = [measure(method, n) for n in HORIZONS]
         rows.append(

@@ -68,7 +68,7 @@ from animsim.analysis.references import (
 )
 from animsim.compile import Compiled
 from animsim.errors import UsageError
-from animsim.integrators import FIXED_STEP, REGISTRY, integrator_class
+from animsim.integrators import integrator_class, listed_methods
 from animsim.record import Clock, landing_steps, scene_record_steps
 from animsim.scene import models as m
 
@@ -239,19 +239,13 @@ class Comparison:
 def parse_integrators(text: str | None) -> list[str]:
     """Names from ``--integrators``; default every fixed-step method in this build."""
     if text is None:
-        return [name for name in FIXED_STEP if name in REGISTRY]
+        return list(listed_methods())
     names = [s.strip() for s in text.split(",") if s.strip()]
     if not names:
         raise UsageError("--integrators: give at least one name")
-    for name in names:
-        if name not in REGISTRY:
-            if name in m.INTEGRATOR_NAMES:
-                raise UsageError(f"--integrators: {name!r} is not available in this build")
-            from animsim.scene.loader import did_you_mean
+    from animsim.scene.loader import method_from_option
 
-            hint = did_you_mean(name, list(REGISTRY))
-            raise UsageError(f"--integrators: unknown method {name!r}{hint} (valid: {', '.join(REGISTRY)})")
-    return list(dict.fromkeys(names))
+    return list(dict.fromkeys(method_from_option(name, "--integrators") for name in names))
 
 
 def default_dts(dt: float, duration: float | None = None) -> list[float]:

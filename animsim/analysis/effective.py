@@ -12,15 +12,16 @@ from __future__ import annotations
 
 from typing import Any
 
-#: what implicit_euler computes when nothing is implicit
-FALLBACK = "symplectic_euler"
+from animsim import methods
 
 
 def effective_integrator(compiled: Any) -> str:
-    """The method the run's steps amount to on this scene (usually the one named)."""
+    """The method the run's steps amount to on this scene (usually the one named): an implicit
+    method with no implicit term computes its declared explicit fallback."""
     name = compiled.integrator_name
-    if name == "implicit_euler" and not getattr(compiled.integrator, "implicit_terms", True):
-        return FALLBACK
+    fallback = methods.get(name).explicit_fallback
+    if fallback is not None and not compiled.integrator.implicit_terms:
+        return fallback
     return name
 
 

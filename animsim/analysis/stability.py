@@ -41,22 +41,8 @@ from typing import Any
 
 import numpy as np
 
-from animsim.scene.models import INTEGRATOR_NAMES
+from animsim import methods
 
-#: explicit methods that amplify an undamped oscillation at every step size
-#: (|R(iy)| > 1 for every real y != 0; euler_average has det = 1 + (h omega)^2 / 2)
-WEAKLY_UNSTABLE = ("euler", "euler_average", "midpoint", "heun")
-#: methods without a step-size limit on linear damped springs
-UNCONDITIONAL = ("implicit_euler",)
-#: order in which the analysis lists methods
-METHOD_ORDER = INTEGRATOR_NAMES  # the order of the spec's table
-#: stability polynomials R(z) of the explicit Runge-Kutta methods (coefficients of z^0, z^1, ...)
-RK_POLYNOMIALS: dict[str, tuple[float, ...]] = {
-    "euler": (1.0, 1.0),
-    "midpoint": (1.0, 1.0, 0.5),
-    "heun": (1.0, 1.0, 0.5),
-    "rk4": (1.0, 1.0, 0.5, 1.0 / 6.0, 1.0 / 24.0),
-}
 #: the suggested dt is this fraction of the limit, then rounded down to two significant digits
 SAFETY_FACTOR = 0.9
 #: a one-step matrix counts as stable while its spectral radius is at most 1 + this
@@ -70,91 +56,48 @@ EXCURSION_NOTE = 2.0
 GROUPING_DIGITS = 12
 
 
-#: size of each method's one-step state: (x, v), and for Verlet (x, v, a) with a
-#: the acceleration it caches from the end of one step for the start of the next
-STATE_SIZE: dict[str, int] = {name: 2 for name in INTEGRATOR_NAMES} | {"verlet": 3}
-
-
 def one_step_matrix(method: str, h: np.ndarray, omega: np.ndarray, zeta: np.ndarray) -> np.ndarray:
     """The (..., d, d) matrix mapping one step's state to the next for
     x'' = -omega^2 x - 2 zeta omega x', exactly as the method in
-    :mod:`animsim.integrators` computes it (d = STATE_SIZE[method]).
+    :mod:`animsim.integrators` computes it (d = the method's ``state_size``).
 
-    The state is (x, v), except for Verlet: it reuses the acceleration taken
-    at the end of a step, with the *predicted* velocity v + h a0, as the next
-    step's first acceleration instead of recomputing it at the corrected
-    velocity. That cached a is part of what one step hands to the next, so
-    Verlet's state is (x, v, a); with damping its limit is well below the
-    textbook velocity Verlet's (the 2x2 matrix with a recomputed, Hairer, Lubich
-    and Wanner, "Geometric Numerical Integration", I.1.4).
+    Each method declares it (:mod:`animsim.methods`): an explicit Runge-Kutta method's
+    is R(hJ) with R the stability polynomial of its tableau; a splitting method's is
+    written from its step code, including what it carries from one step to the next
+    (Verlet's cached acceleration), and a test checks it against one step of the code.
     """
     h, omega, zeta = np.broadcast_arrays(
         np.asarray(h, float), np.asarray(omega, float), np.asarray(zeta, float)
     )
-    k = omega**2  # stiffness per unit mass
-    c = 2.0 * zeta * omega  # damping per unit mass
-    out = np.zeros((*h.shape, STATE_SIZE.get(method, 2), STATE_SIZE.get(method, 2)))
-    if method in RK_POLYNOMIALS:
-        # R(hA) for A = [[0, 1], [-k, -c]], by Horner's rule on 2x2 matrices
-        a = np.zeros((*h.shape, 2, 2))
-        a[..., 0, 1] = h
-        a[..., 1, 0] = -h * k
-        a[..., 1, 1] = -h * c
-        coeffs = RK_POLYNOMIALS[method]
-        out[...] = coeffs[-1] * np.eye(2)
-        for coef in reversed(coeffs[:-1]):
-            out = out @ a + coef * np.eye(2)
-        return out
-    if method == "symplectic_euler":
-        # v1 = v + h(-k x - c v); x1 = x + h v1
-        out[..., 1, 0] = -h * k
-        out[..., 1, 1] = 1.0 - h * c
-        out[..., 0, 0] = 1.0 + h * out[..., 1, 0]
-        out[..., 0, 1] = h * out[..., 1, 1]
-        return out
-    if method == "euler_average":
-        # a0 = -k x - c v; v1 = v + h a0; x1 = x + h (v + v1)/2 = x + h v + h^2/2 a0
-        out[..., 0, 0] = 1.0 - 0.5 * h * h * k
-        out[..., 0, 1] = h - 0.5 * h * h * c
-        out[..., 1, 0] = -h * k
-        out[..., 1, 1] = 1.0 - h * c
-        return out
-    if method == "verlet":
-        # State (x, v, a0), a0 the cached acceleration (symplectic.Verlet.step):
-        #   x1 = x + h v + h^2/2 a0,  vp = v + h a0,  a1 = -k x1 - c vp,
-        #   v1 = v + h/2 (a0 + a1),   next a0 = a1.
-        zero, one = np.zeros_like(h), np.ones_like(h)
-        x1 = np.stack([one, h, 0.5 * h * h], axis=-1)
-        vp = np.stack([zero, one, h], axis=-1)
-        a1 = -k[..., None] * x1 - c[..., None] * vp
-        out[..., 0, :] = x1
-        out[..., 1, :] = np.stack([zero, one, 0.5 * h], axis=-1) + 0.5 * h[..., None] * a1
-        out[..., 2, :] = a1
-        return out
-    if method == "implicit_euler":
-        # (I - hA) y1 = y0
-        a = np.zeros((*h.shape, 2, 2))
-        a[..., 0, 1] = h
-        a[..., 1, 0] = -h * k
-        a[..., 1, 1] = -h * c
-        return np.linalg.inv(np.eye(2) - a)
-    raise KeyError(method)
+    return methods.get(method).one_step_matrix(h, omega**2, 2.0 * zeta * omega)
 
 
 def initial_state_map(method: str, omega: np.ndarray, zeta: np.ndarray) -> np.ndarray:
     """(..., d, 2): the method's full state at the start of a run from (x, v).
 
-    Verlet computes its first acceleration, a = -omega^2 x - 2 zeta omega v;
-    every other method's state is (x, v) itself.
+    (x, v) itself unless the method declares more (Verlet computes its first acceleration).
     """
     omega, zeta = np.broadcast_arrays(np.asarray(omega, float), np.asarray(zeta, float))
-    d = STATE_SIZE.get(method, 2)
-    out = np.zeros((*omega.shape, d, 2))
+    declared = methods.get(method).initial_state
+    if declared is not None:
+        return declared(omega, zeta)
+    out = np.zeros((*omega.shape, 2, 2))
     out[..., 0, 0] = out[..., 1, 1] = 1.0
-    if d == 3:
-        out[..., 2, 0] = -(omega**2)
-        out[..., 2, 1] = -2.0 * zeta * omega
     return out
+
+
+#: omega*dt at which a method is tested for growth of an undamped oscillation: a method
+#: whose spectral radius exceeds 1 at all of them amplifies at every step size (|R(iy)| > 1
+#: near y = 0: explicit Euler, euler_average, midpoint, Heun), which the bisection could
+#: miss where the growth per step is below RADIUS_TOLERANCE
+WEAK_GROWTH_THETAS = (0.3, 0.1, 0.03)
+
+
+def weakly_unstable(method: str) -> bool:
+    """True when ``method`` amplifies an undamped oscillation at every step size."""
+    theta = np.array(WEAK_GROWTH_THETAS)
+    rho = spectral_radius(one_step_matrix(method, theta, np.ones_like(theta), np.zeros_like(theta)))
+    return bool(np.all(rho > 1.0 + RADIUS_TOLERANCE))
 
 
 def spectral_radius(m: np.ndarray) -> np.ndarray:
@@ -177,26 +120,20 @@ def largest_stable_dt(method: str, omega: np.ndarray, zeta: np.ndarray) -> np.nd
     zeta = np.broadcast_to(np.asarray(zeta, float), omega.shape)
     out = np.full(omega.shape, np.inf)
     stiff = omega > 0
-    if method in UNCONDITIONAL or not stiff.any():
+    if not stiff.any():
         return out
     w, z = omega[stiff], zeta[stiff]
-    if method == "symplectic_euler":
-        res = 2.0 * (np.sqrt(z * z + 1.0) - z) / w
-    elif method == "euler":
-        # complex pair: |1 + h lambda| <= 1  <=>  h <= 2 zeta / omega; overdamped: h |lambda_fast| <= 2
-        fast = w * (z + np.sqrt(np.maximum(z * z - 1.0, 0.0)))
-        with np.errstate(divide="ignore"):
-            res = np.where(z < 1.0, 2.0 * z / w, 2.0 / fast)
-    else:
-        res = _bisect_limit(method, w, z)
-    if method in WEAKLY_UNSTABLE:
+    closed_form = methods.get(method).closed_form_limit
+    res = closed_form(w, z) if closed_form is not None else _bisect_limit(method, w, z)
+    if weakly_unstable(method):
         res = np.where(z == 0.0, 0.0, res)
     out[stiff] = res
     return out
 
 
 def _bisect_limit(method: str, omega: np.ndarray, zeta: np.ndarray) -> np.ndarray:
-    """Largest h with spectral radius <= 1 on the first stable interval from 0."""
+    """Largest h with spectral radius <= 1 on the first stable interval from 0 (inf when no
+    omega*h of the scan is unstable: an A-stable method such as backward Euler)."""
     theta = SCAN_GRID[None, :]  # omega * h
     rho = spectral_radius(one_step_matrix(method, theta / omega[:, None], omega[:, None], zeta[:, None]))
     unstable = rho > 1.0 + RADIUS_TOLERANCE
@@ -210,7 +147,7 @@ def _bisect_limit(method: str, omega: np.ndarray, zeta: np.ndarray) -> np.ndarra
         bad = r > 1.0 + RADIUS_TOLERANCE
         hi = np.where(~done & bad, mid, hi)
         lo = np.where(~done & ~bad, mid, lo)
-    return lo / omega
+    return np.where(np.isfinite(hi), lo, np.inf) / omega
 
 
 #: steps over which the energy swing of a stable step is taken (the swing's period is a few
@@ -279,7 +216,7 @@ def scene_energy_excursion(method: str, omega: np.ndarray, zeta: np.ndarray, dt:
     """
     omega = np.atleast_1d(np.asarray(omega, float))
     zeta = np.broadcast_to(np.asarray(zeta, float), omega.shape)
-    if method in UNCONDITIONAL or omega.size == 0 or not (dt > 0 and math.isfinite(dt)):
+    if omega.size == 0 or not (dt > 0 and math.isfinite(dt)):
         return 1.0
     theta = omega * dt
     if np.any(dt > largest_stable_dt(method, omega, zeta)):
@@ -330,11 +267,12 @@ class StabilityReport:
 
     def stable_alternative(self) -> tuple[str, float]:
         """A method that is stable on this scene and a dt for it (symplectic Euler if it can)."""
-        for name in ("symplectic_euler", "verlet", "rk4"):
-            lim = self.limits.get(name, 0.0)
+        candidates = sorted((m for m in methods.all_methods() if m.suggest_rank is not None), key=_rank)
+        for method in candidates:
+            lim = self.limits.get(method.name, 0.0)
             if lim > 0:
-                return name, nice_dt(lim)
-        return "implicit_euler", self.dt
+                return method.name, nice_dt(lim)
+        return unconditional_method(), self.dt
 
     def suggestion(self, integrator: str | None = None) -> str:
         """What to do instead: a stable dt for this method, or a stable method and its dt."""
@@ -348,7 +286,7 @@ class StabilityReport:
         why = "the stiffest mode is undamped" if self.zeta == 0 else "the damping is too weak"
         return (
             f"{name} is unstable at every dt here ({why}); use {alt} with dt <= {alt_dt:.3g} s, "
-            f"or implicit_euler at any dt"
+            f"or {unconditional_method()} at any dt"
         )
 
     def lines(self) -> list[str]:
@@ -367,7 +305,7 @@ class StabilityReport:
             out.append(f"  penalty contact counted: stiffness {self.penalty_stiffness:.4g} N/m")
         out.extend(f"  {n}" for n in self.notes)
         out.append("  largest stable dt per integrator (omega_max*dt):")
-        for name in METHOD_ORDER:
+        for name in self.limits:
             lim = self.limits[name]
             if lim == 0:
                 text = "none: unstable at every dt"
@@ -485,12 +423,12 @@ def analyse(compiled: Any) -> StabilityReport:
         # Rows with the same (omega, zeta) give the same limit: a cloth has a handful.
         key = np.round(np.stack([omega_rows[stiff], zeta_rows[stiff]], axis=1), GROUPING_DIGITS)
         uniq = np.unique(key, axis=0)
-        for name in METHOD_ORDER:
+        for name in methods.names():
             limits[name] = float(largest_stable_dt(name, uniq[:, 0], uniq[:, 1]).min())
         largest_dt = max(scene.adaptive.dt_max, compiled.clock.dt) if adaptive else compiled.clock.dt
         excursion = scene_energy_excursion(compiled.integrator_name, uniq[:, 0], uniq[:, 1], largest_dt)
     else:
-        limits = {name: math.inf for name in METHOD_ORDER}
+        limits = {name: math.inf for name in methods.names()}
     if system.spring_count and np.any(system.spring_kd > 0):
         # Lander's damping term acts along the spring: swinging and bending across
         # springs keep only the drag's damping, and the weakly unstable methods
@@ -515,6 +453,18 @@ def analyse(compiled: Any) -> StabilityReport:
         notes=notes,
         excursion=excursion,
     )
+
+
+def _rank(method: methods.Method) -> int:
+    return method.suggest_rank if method.suggest_rank is not None else 0
+
+
+def unconditional_method() -> str:
+    """A method with no step-size limit on linear damped springs (backward Euler), for fixes."""
+    for method in methods.all_methods():
+        if method.one_step is not None and math.isinf(float(largest_stable_dt(method.name, 1.0, 0.0)[0])):
+            return method.name
+    raise LookupError("no registered method is unconditionally stable")
 
 
 def particle_name(compiled: Any, i: int) -> str:

@@ -159,20 +159,12 @@ def parse_set(text: str) -> Axis:
 
 def integrators_axis(text: str) -> Axis:
     """``--integrators euler,rk4`` as the ``integrator`` axis (names checked up front)."""
-    from animsim.scene.models import INTEGRATOR_NAMES
+    from animsim.scene.loader import method_from_option
 
     names = tuple(n.strip() for n in text.split(",") if n.strip())
     if not names:
         raise UsageError("--integrators: give at least one name")
-    for n in names:
-        if n not in INTEGRATOR_NAMES:
-            from animsim.scene.loader import did_you_mean
-
-            hint = did_you_mean(n, INTEGRATOR_NAMES)
-            raise UsageError(
-                f"--integrators: unknown method {n!r}{hint} (valid: {', '.join(INTEGRATOR_NAMES)})"
-            )
-    return Axis(INTEGRATOR_KEY, names)
+    return Axis(INTEGRATOR_KEY, tuple(method_from_option(n, "--integrators") for n in names))
 
 
 def check_axes(axes: Sequence[Axis]) -> None:

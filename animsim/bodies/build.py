@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from animsim import methods
 from animsim.bodies import quaternion as quat
 from animsim.bodies import shapes as sh
 from animsim.bodies.contacts import BodyContacts, PlaneTable
@@ -19,8 +20,10 @@ from animsim.bodies.springs import BodySprings
 from animsim.errors import UsageError
 from animsim.scene import models as m
 
-#: methods that integrate bodies (the implicit one is linearised for particles only)
-BODY_INTEGRATORS = ("euler", "symplectic_euler", "euler_average", "midpoint", "heun", "rk4", "verlet")
+
+def body_integrators() -> tuple[str, ...]:
+    """The methods that integrate bodies (each method declares it in animsim.methods)."""
+    return tuple(m.name for m in methods.all_methods() if m.integrates_bodies)
 
 
 def has_body_end(spring: m.Spring) -> bool:
@@ -88,10 +91,10 @@ def body_rows(scene: m.Scene) -> BodyRows:
 
 def check_integrator(scene: m.Scene) -> None:
     """implicit_euler is linearised over particle positions only: refuse bodies with it, clearly."""
-    if scene.bodies and scene.integrator_name not in BODY_INTEGRATORS:
+    if scene.bodies and not methods.get(scene.integrator_name).integrates_bodies:
         raise UsageError(
             f"integrator {scene.integrator_name!r} does not integrate rigid bodies (its linearisation "
-            f"covers particle positions only); use one of {', '.join(BODY_INTEGRATORS)}"
+            f"covers particle positions only); use one of {', '.join(body_integrators())}"
         )
 
 

@@ -56,7 +56,7 @@ def _work(integ: Any, stages: int) -> _Work:
 def step(integ: Any, state: Any, dt: float) -> None:
     """One step of ``integ`` (an animsim integrator) on a state with bodies."""
     name = integ.name
-    if hasattr(integ, "tableau"):
+    if integ.method.tableau is not None:
         _runge_kutta(integ, state, dt)
     elif name == "symplectic_euler":
         _symplectic_euler(integ, state, dt)

@@ -1,7 +1,11 @@
 """Integrators behind one contract (:mod:`animsim.integrators.base`).
 
-The name registry lives here, at the edge: the scene names a method once,
-the compiler turns it into a class, and the loop never sees a string.
+Which methods exist, and what each one is, is declared once in
+:mod:`animsim.methods`; this module turns a method's name into the class that
+steps it: the one tableau engine for an explicit Runge-Kutta method, or the
+method's own stepper class, imported when its name is first looked up (a run
+with another method never compiles implicit Euler's module, a few ms of every
+command's start).
 """
 
 from __future__ import annotations
@@ -9,52 +13,55 @@ from __future__ import annotations
 import importlib
 from collections.abc import Iterator, Mapping
 
+from animsim import methods
 from animsim.integrators.base import Integrator
-from animsim.integrators.runge_kutta import RK4, Euler, Heun, Midpoint
-from animsim.integrators.symplectic import EulerAverage, SymplecticEuler, Verlet
+from animsim.integrators.runge_kutta import runge_kutta_class
+
+
+def _stepper(method: methods.Method) -> type[Integrator]:
+    if method.tableau is not None:
+        return runge_kutta_class(method)
+    assert method.stepper is not None  # a Method without a tableau names its stepper
+    module, _, name = method.stepper.partition(":")
+    cls = getattr(importlib.import_module(module), name)
+    if not (isinstance(cls, type) and issubclass(cls, Integrator)) or cls.method != method:
+        raise TypeError(f"{method.stepper} does not step the method {method.name!r}")
+    return cls
 
 
 class _Methods(Mapping[str, type[Integrator]]):
-    """Method name -> class. A method in a module of its own (implicit Euler, whose module
-    is the largest) is imported when its name is first looked up: a run with another
-    method never compiles that module's source (a few ms of every command's start)."""
+    """Method name -> the class that steps it, for every method in :mod:`animsim.methods`."""
 
-    def __init__(self, classes: tuple[type[Integrator], ...], elsewhere: dict[str, str]):
-        self._classes = {cls.name: cls for cls in classes}
-        self._elsewhere = elsewhere
-
-    def add(self, cls: type[Integrator]) -> None:
-        self._classes[cls.name] = cls
+    def __init__(self) -> None:
+        self._classes: dict[methods.Method, type[Integrator]] = {}
 
     def __getitem__(self, name: str) -> type[Integrator]:
-        if name not in self._classes and name in self._elsewhere:
-            importlib.import_module(self._elsewhere[name])  # the module registers its class
-        return self._classes[name]
+        method = methods.get(name)
+        cls = self._classes.get(method)
+        if cls is None:
+            cls = self._classes[method] = _stepper(method)
+        return cls
 
     def __iter__(self) -> Iterator[str]:
-        yield from self._classes
-        yield from (name for name in self._elsewhere if name not in self._classes)
+        return iter(methods.names())
 
     def __len__(self) -> int:
-        return len(self._classes.keys() | self._elsewhere.keys())
+        return len(methods.names())
 
     def __contains__(self, name: object) -> bool:
-        return name in self._classes or name in self._elsewhere
+        return isinstance(name, str) and name in methods.names()
 
 
-REGISTRY = _Methods(
-    (Euler, SymplecticEuler, EulerAverage, Midpoint, Heun, RK4, Verlet),
-    {"implicit_euler": "animsim.integrators.implicit"},
-)
-
-#: the fixed-step methods, in the order the spec's table lists them
-FIXED_STEP = ("euler", "symplectic_euler", "euler_average", "midpoint", "heun", "rk4", "verlet")
+REGISTRY = _Methods()
 
 
-def register(cls: type[Integrator]) -> type[Integrator]:
-    """Add a method to the registry (used by methods that live in their own module)."""
-    REGISTRY.add(cls)
-    return cls
+def listed_methods() -> tuple[str, ...]:
+    """The methods ``compare`` and the parity tests run by default, in table order."""
+    return tuple(m.name for m in methods.all_methods() if m.listed)
+
+
+#: the listed methods as the package was imported (test tables parametrize over it)
+FIXED_STEP = listed_methods()
 
 
 def integrator_class(name: str) -> type[Integrator]:

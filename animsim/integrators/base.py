@@ -17,6 +17,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from typing import Any, ClassVar
 
+from animsim import methods
 from animsim.dynamics import Dynamics
 from animsim.system import State
 
@@ -28,12 +29,31 @@ FUSED_RUNGE_KUTTA = 3
 
 
 class Integrator(ABC):
+    #: the method's descriptor (animsim.methods): name, order, evaluations and stability are
+    #: declared there once; a stepper class names its method with ``method_name``
+    method: ClassVar[methods.Method]
+    method_name: ClassVar[str]
     name: ClassVar[str]
     #: global order of accuracy on smooth problems (course notes, Hairer et al.)
     order: ClassVar[int]
     #: force evaluations per step (Verlet: 1 once warmed up)
     evaluations_per_step: ClassVar[int]
-    description: ClassVar[str]
+    description: str
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        name = cls.__dict__.get("method_name")
+        if name is not None:
+            cls.bind_method(methods.get(name))
+
+    @classmethod
+    def bind_method(cls, method: methods.Method) -> None:
+        """Take the class's name, order, evaluations and description from ``method``."""
+        cls.method = method
+        cls.name = method.name
+        cls.order = method.order
+        cls.evaluations_per_step = method.evaluations_per_step
+        cls.description = method.description
 
     #: whether ``step(state, dt, stage)`` runs a post-step stage a block of rows at a time
     #: (its ``before(rows)`` and ``after(rows)`` around each block's update) when the

@@ -58,7 +58,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from animsim.dynamics import Dynamics
-from animsim.integrators import register
 from animsim.integrators.base import Integrator
 from animsim.system import State
 
@@ -98,11 +97,8 @@ SPARSE_CHOLESKY = True
 LU_MAX_DOF = 60_000
 
 
-@register
 class ImplicitEuler(Integrator):
-    name = "implicit_euler"
-    order = 1
-    evaluations_per_step = 1
+    method_name = "implicit_euler"
 
     def __init__(self, dynamics: Dynamics):
         super().__init__(dynamics)

@@ -9,36 +9,19 @@ y = (x, v), y' = (v, a). For a tableau (c, A, b) with s stages:
 (Hairer, Norsett and Wanner, "Solving Ordinary Differential Equations I",
 II.1.) With the one-stage tableau this is exactly the course notes' Euler
 method, x += dt v(t), v += dt a(t); the explicit midpoint tableau is the
-notes' "Midpoint method", derivative at t + dt/2.
+notes' "Midpoint method", derivative at t + dt/2. The tableaux themselves
+are data, one module each in :mod:`animsim.methods`.
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 
 from animsim.bodies.integrate import step as body_step
 from animsim.dynamics import Dynamics
 from animsim.integrators.base import FUSED_RUNGE_KUTTA, Integrator
+from animsim.methods import Method, Tableau
 from animsim.system import State
-
-
-@dataclass(frozen=True)
-class Tableau:
-    c: tuple[float, ...]
-    a: tuple[tuple[float, ...], ...]  # strictly lower triangular rows
-    b: tuple[float, ...]
-
-
-EULER = Tableau(c=(0.0,), a=((),), b=(1.0,))
-MIDPOINT = Tableau(c=(0.0, 0.5), a=((), (0.5,)), b=(0.0, 1.0))
-HEUN = Tableau(c=(0.0, 1.0), a=((), (1.0,)), b=(0.5, 0.5))
-RK4 = Tableau(
-    c=(0.0, 0.5, 0.5, 1.0),
-    a=((), (0.5,), (0.0, 0.5), (0.0, 0.0, 1.0)),
-    b=(1 / 6, 1 / 3, 1 / 3, 1 / 6),
-)
 
 
 class RungeKutta(Integrator):
@@ -135,33 +118,10 @@ class RungeKutta(Integrator):
             v += (dt * bi) * kvi
 
 
-class Euler(RungeKutta):
-    name = "euler"
-    order = 1
-    evaluations_per_step = 1
-    description = "explicit (forward) Euler: x += dt*v(t); v += dt*a(t)"
-    tableau = EULER
-
-
-class Midpoint(RungeKutta):
-    name = "midpoint"
-    order = 2
-    evaluations_per_step = 2
-    description = "explicit midpoint (RK2): derivative taken at t + dt/2"
-    tableau = MIDPOINT
-
-
-class Heun(RungeKutta):
-    name = "heun"
-    order = 2
-    evaluations_per_step = 2
-    description = "Heun's method (explicit trapezoid, RK2)"
-    tableau = HEUN
-
-
-class RK4(RungeKutta):
-    name = "rk4"
-    order = 4
-    evaluations_per_step = 4
-    description = "classical fourth-order Runge-Kutta"
-    tableau = RK4
+def runge_kutta_class(method: Method) -> type[RungeKutta]:
+    """The stepper of an explicit Runge-Kutta method: the one tableau engine with its tableau."""
+    if method.tableau is None:
+        raise ValueError(f"method {method.name!r} has no tableau")
+    cls = type(f"RungeKutta_{method.name}", (RungeKutta,), {"tableau": method.tableau})
+    cls.bind_method(method)
+    return cls

@@ -32,10 +32,7 @@ CACHE_TIME_RTOL = 1e-9
 
 
 class SymplecticEuler(Integrator):
-    name = "symplectic_euler"
-    order = 1
-    evaluations_per_step = 1
-    description = "semi-implicit Euler: v += dt*a(t); x += dt*v(t+dt)"
+    method_name = "symplectic_euler"
 
     def __init__(self, dynamics: Dynamics):
         super().__init__(dynamics)
@@ -98,10 +95,7 @@ class SymplecticEuler(Integrator):
 
 
 class EulerAverage(Integrator):
-    name = "euler_average"
-    order = 1
-    evaluations_per_step = 1
-    description = "Euler 2 of the notes: v1 = v + dt*a; x += dt*(v+v1)/2; v = v1"
+    method_name = "euler_average"
 
     def __init__(self, dynamics: Dynamics):
         super().__init__(dynamics)
@@ -125,10 +119,7 @@ class EulerAverage(Integrator):
 
 
 class Verlet(Integrator):
-    name = "verlet"
-    order = 2
-    evaluations_per_step = 1
-    description = "velocity Verlet; velocity-dependent forces at a predicted velocity"
+    method_name = "verlet"
 
     def __init__(self, dynamics: Dynamics):
         super().__init__(dynamics)

@@ -29,6 +29,7 @@ from pydantic import BaseModel, ValidationError
 from yaml.events import AliasEvent
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
+from animsim import methods
 from animsim.errors import Diagnostic, SceneError, UsageError
 from animsim.scene.models import HEX_COLOR_PATTERN, Scene
 
@@ -723,16 +724,6 @@ TYPE_ALIASES = {
     "damping": "drag",
     "air_resistance": "drag",
     "gravitation": "attractor",
-    "rk": "rk4",
-    "runge_kutta": "rk4",
-    "runge_kutta_4": "rk4",
-    "explicit_euler": "euler",
-    "forward_euler": "euler",
-    "semi_implicit_euler": "symplectic_euler",
-    "symplectic": "symplectic_euler",
-    "backward_euler": "implicit_euler",
-    "velocity_verlet": "verlet",
-    "leapfrog": "verlet",
 }
 
 
@@ -749,11 +740,20 @@ def did_you_mean(word: Any, choices: Sequence[str]) -> str:
     norm = _normal(word)
     if norm in by_case and by_case[norm] != word:
         return f"; did you mean '{by_case[norm]}'?"
-    alias = TYPE_ALIASES.get(norm)
+    alias = TYPE_ALIASES.get(norm) or methods.aliases().get(norm)
     if alias in choices:
         return f"; did you mean '{alias}'?"
     close = difflib.get_close_matches(norm, list(by_case), n=1, cutoff=0.6)
     return f"; did you mean '{by_case[close[0]]}'?" if close else ""
+
+
+def method_from_option(name: str, option: str) -> str:
+    """``name`` if it is a registered method, else a UsageError for ``option`` with a did-you-mean."""
+    known = methods.names()
+    if name in known:
+        return name
+    hint = did_you_mean(name, known)
+    raise UsageError(f"{option}: unknown method {name!r}{hint} (valid: {', '.join(known)})")
 
 
 _KIND = {

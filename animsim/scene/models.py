@@ -12,7 +12,7 @@ so that each error can name the exact key it is about.
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal, get_args
+from typing import Annotated, Any, Literal
 
 from pydantic import (
     AfterValidator,
@@ -26,21 +26,37 @@ from pydantic import (
     field_validator,
     model_validator,
 )
+from pydantic_core import PydanticCustomError, core_schema
 
-IntegratorName = Literal[
-    "euler",
-    "symplectic_euler",
-    "euler_average",
-    "midpoint",
-    "heun",
-    "rk4",
-    "verlet",
-    "implicit_euler",
-]
+from animsim import methods
+
+
+class _MethodName:
+    """A method name of :mod:`animsim.methods`, checked against the registry when a scene is
+    validated (a method registered at run time is accepted like a built-in one), with the
+    same ``literal_error`` a ``Literal`` gives, so diagnostics list the choices; the JSON
+    Schema's ``enum`` is read from the registry when the schema is made."""
+
+    @classmethod
+    def __get_pydantic_core_schema__(cls, source: Any, handler: Any) -> core_schema.CoreSchema:
+        return core_schema.no_info_plain_validator_function(_method_name)
+
+    @classmethod
+    def __get_pydantic_json_schema__(cls, schema: Any, handler: Any) -> dict[str, Any]:
+        return {"enum": list(methods.names()), "type": "string"}
+
+
+def _method_name(value: object) -> str:
+    names = methods.names()
+    if isinstance(value, str) and value in names:
+        return value
+    expected = ", ".join(repr(n) for n in names[:-1]) + f" or {names[-1]!r}"
+    raise PydanticCustomError("literal_error", "Input should be {expected}", {"expected": expected})
+
+
+IntegratorName = Annotated[str, _MethodName]
 #: the "file" of diagnostics about a scene built in Python (it has no lines)
 PYTHON_SOURCE = "<python>"
-#: the names, in the order of the integrator table
-INTEGRATOR_NAMES: tuple[str, ...] = get_args(IntegratorName)
 DEFAULT_INTEGRATOR = "symplectic_euler"
 DEFAULT_DT = 0.01
 # Bounds that keep a typo from asking for an absurd lattice; the memory

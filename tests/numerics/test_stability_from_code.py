@@ -15,8 +15,8 @@ import math
 import numpy as np
 import pytest
 
+from animsim import methods
 from animsim.analysis.stability import (
-    STATE_SIZE,
     analyse,
     initial_state_map,
     largest_stable_dt,
@@ -57,7 +57,7 @@ def measured_one_step_matrix(method: str, h: float, omega: float, zeta: float) -
     """One step of the integrator's own code applied to each basis state, column by column."""
     compiled = compiled_for(oscillators(method, h, [(omega, zeta)]))
     integ = compiled.integrator
-    d = STATE_SIZE[method]
+    d = methods.get(method).state_size
     out = np.zeros((d, d))
     for j in range(d):
         basis = np.eye(d)[j]

@@ -12,6 +12,7 @@ ORDERS = {
     "euler_average": 1,
     "midpoint": 2,
     "heun": 2,
+    "ralston3": 3,
     "rk4": 4,
     "verlet": 2,
     "implicit_euler": 1,
