@@ -319,7 +319,7 @@ def compare(
     comparison: bool = False,
     duration: float | None = None,
     budget: float | None = None,
-    backend: str = "numpy",
+    backend: str = "auto",
     name: str | None = None,
     jobs: int = 1,
     scheduler: Any = None,
@@ -543,9 +543,10 @@ def check(
     echo_err: Callable[[str], None] = print,
     limits: Any = None,
     drift_warn: float | None = None,
+    backend: str = "auto",
 ) -> bool:
-    """Validate, analyse and run each scene file, reporting through ``echo``/``echo_err``
-    as ``animsim check`` does; True only if every scene is valid and stable."""
+    """Validate, analyse and run each scene file on ``backend``, reporting through
+    ``echo``/``echo_err`` as ``animsim check`` does; True only if every scene is valid and stable."""
     from animsim.analysis.check import check_scenes
     from animsim.analysis.drift import check_threshold
 
@@ -556,6 +557,7 @@ def check(
         echo_err=echo_err,
         limits=limits,
         drift_warn=None if drift_warn is None else check_threshold(drift_warn),
+        backend=backend,
     )
 
 
@@ -579,8 +581,9 @@ def render(
     limits: Any = None,
     stop: Callable[[], bool] | None = None,
     progress: Callable[[int, int], None] | None = None,
+    backend: str = "auto",
 ) -> Any:
-    """Draw an animation (GIF and/or MP4): ``animsim render``.
+    """Draw an animation (GIF and/or MP4): ``animsim render``; a scene is simulated on ``backend``.
 
     ``source`` is a scene file or Scene (simulated, recording at ``fps``), a
     trajectory file (.csv, .npz; ``scene`` adds its springs and planes) or a
@@ -619,7 +622,9 @@ def render(
         names = _integrator_names(integrators)
         sc, name, _, _ = _prepared(source, limits, dt=dt, duration=duration)  # type: ignore[arg-type]
         sc = sc.model_copy(update={"record": m.Record(fps=fps)})
-        result = render_side_by_side(compile_each(sc, name, names), gif_path, mp4_path, opts, stop=stop)
+        result = render_side_by_side(
+            compile_each(sc, name, names, backend), gif_path, mp4_path, opts, stop=stop
+        )
         result.panels = list(names)
         return result
     if isinstance(source, Trajectory):
@@ -632,7 +637,8 @@ def render(
             sc = sc.model_copy(update={"record": m.Record(fps=fps)})  # exactly the frames shown
         from animsim.compile import compile_scene
 
-        compiled = compile_scene(sc, name)
+        # a trajectory's scene is only drawn (springs, planes), never stepped: NumPy compiles it
+        compiled = compile_scene(sc, name, backend="numpy" if from_file else backend)
     if from_file:
         return render_trajectory(read_trajectory(Path(source)), gif_path, mp4_path, opts, compiled=compiled)
     total = compiled.record_steps.size
@@ -660,8 +666,10 @@ def view(
     duration: float | None = None,
     limits: Any = None,
     stop: Callable[[], bool] | None = None,
+    backend: str = "auto",
 ) -> Any:
-    """Write one self-contained HTML page that plays the animation: ``animsim view``.
+    """Write one self-contained HTML page that plays the animation: ``animsim view``; a scene
+    is simulated on ``backend``.
     Returns :class:`animsim.export.viewer_command.ViewSummary` (the summary line and notes)."""
     import contextlib
 
@@ -688,6 +696,7 @@ def view(
         dt=dt,
         duration=duration,
         stop_context=lambda: contextlib.nullcontext(stop),
+        backend=backend,
     )
 
 
@@ -707,6 +716,7 @@ def plot(
     integrators: str | Sequence[str] | None = None,
     particles: str | Sequence[str] | None = None,
     limits: Any = None,
+    backend: str = "auto",
 ) -> Path:
     """Draw particle paths, the energy split into its parts, or phase portraits (PNG, SVG,
     PDF): ``animsim plot``. ``source`` is a scene (simulated first) or a trajectory file."""
@@ -738,6 +748,7 @@ def plot(
             integrator=integrator,
             dt=dt,
             duration=duration,
+            backend=backend,
         )
         return out
     scene_path = (None if scene is None else Path(scene)) if from_file else src
@@ -746,7 +757,8 @@ def plot(
         from animsim.compile import compile_scene
 
         loaded, sc, _ = prepare_path(scene_path, integrator=integrator, dt=dt, duration=duration)
-        compiled = compile_scene(sc, loaded.name)
+        # simulated for the energy of a scene; a trajectory's scene is only read
+        compiled = compile_scene(sc, loaded.name, backend="numpy" if from_file else backend)
     if kind == "energy":
         if compiled is None:
             raise UsageError("--kind energy needs the scene: give a scene, or --scene with the trajectory")
@@ -789,9 +801,10 @@ def sweep(
     scheduler: str | None = None,
     limits: Any = None,
     progress: Callable[[int, int], None] | None = None,
+    backend: str = "auto",
 ) -> Any:
     """Run a scene file for every combination of ``sets`` values (``"KEY=V1,V2,..."``) and
-    ``integrators``: ``animsim sweep``. Writes the table as CSV (``output``) and a plot
+    ``integrators`` on ``backend``: ``animsim sweep``. Writes the table as CSV (``output``) and a plot
     of ``y`` over ``x`` (``plot``) when asked. Returns
     :class:`animsim.analysis.sweep.SweepTable`; unstable and invalid cases are rows."""
     from animsim.analysis import sweep as sw
@@ -831,6 +844,7 @@ def sweep(
         jobs=jobs,
         scheduler=scheduler,
         progress=progress,
+        backend=backend,
     )
     if output is not None:
         sw.write_csv(table, Path(output))

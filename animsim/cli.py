@@ -128,8 +128,8 @@ BackendOpt = Annotated[
     str,
     typer.Option(
         "--backend",
-        help="auto (the default: numba when installed, else numpy), numpy, or numba (compiled; needs "
-        'pip install -e ".\\[fast]").',
+        help="auto (the default of every command: numba when installed, else numpy), numpy, or numba "
+        '(compiled; needs pip install -e ".\\[fast]").',
     ),
 ]
 
@@ -543,6 +543,7 @@ def check(
     scenes: Annotated[list[Path], typer.Argument(help="Scene files.", show_default=False)],
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Only problems.")] = False,
     drift_warn: DriftWarnOpt = 10.0,
+    backend: BackendOpt = "auto",
     *,
     limits: Any = None,
 ) -> None:
@@ -553,7 +554,15 @@ def check(
     """
     from animsim import api
 
-    ok = api.check(scenes, quiet=quiet, echo=typer.echo, echo_err=_err, limits=limits, drift_warn=drift_warn)
+    ok = api.check(
+        scenes,
+        quiet=quiet,
+        echo=typer.echo,
+        echo_err=_err,
+        limits=limits,
+        drift_warn=drift_warn,
+        backend=_backend(backend),
+    )
     if not ok:
         raise typer.Exit(EXIT_FAILED)
 
@@ -615,6 +624,7 @@ def render(
             "--integrators", help="Comma-separated methods: the scene once per method, panels side by side."
         ),
     ] = None,
+    backend: BackendOpt = "auto",
     *,
     limits: Any = None,
 ) -> None:
@@ -641,6 +651,7 @@ def render(
             limits=limits,
             stop=stop,
             progress=progress,
+            backend=_backend(backend),
         )
     outs = " and ".join(str(p) for p in result.outputs)
     if result.status == "interrupted":
@@ -695,6 +706,7 @@ def view(
     dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
     duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
+    backend: BackendOpt = "auto",
     *,
     limits: Any = None,
 ) -> None:
@@ -720,6 +732,7 @@ def view(
             duration=duration,
             limits=limits,
             stop=stop,
+            backend=_backend(backend),
         )
     if summary.interrupted:
         _err(f"{source}: interrupted; {output} was not written")
@@ -779,6 +792,7 @@ def sweep(
         ),
     ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No table, only the files.")] = False,
+    backend: BackendOpt = "auto",
     *,
     limits: Any = None,
 ) -> None:
@@ -808,6 +822,7 @@ def sweep(
             scheduler=scheduler,
             limits=limits,
             progress=progress,
+            backend=_backend(backend),
         )
     if not quiet:
         sw.print_table(table, _stdout_console())
@@ -1076,6 +1091,7 @@ def plot(
         str | None,
         typer.Option("--particles", help="--kind phase: comma-separated particle ids; default up to 3."),
     ] = None,
+    backend: BackendOpt = "auto",
     *,
     limits: Any = None,
 ) -> None:
@@ -1094,6 +1110,7 @@ def plot(
         integrators=integrators,
         particles=particles,
         limits=limits,
+        backend=_backend(backend),
     )
     typer.echo(f"wrote {output}")
 

@@ -61,6 +61,7 @@ def check_scenes(
     echo_err: Callable[[str], None] = print,
     limits: Any = None,
     drift_warn: float | None = None,
+    backend: str = "auto",
 ) -> bool:
     """``limits`` (a preflight.RunLimits) bounds every scene as ``animsim run`` would;
     ``drift_warn`` (percent) is the energy drift above which a conservative scene gets a warning."""
@@ -75,7 +76,7 @@ def check_scenes(
     for path in paths:
         try:
             loaded, scene, _ = prepare_scene(path, limits)
-            compiled = compile_scene(scene, loaded.name)
+            compiled = compile_scene(scene, loaded.name, backend=backend)
         except AnimsimError as exc:
             echo_err(str(exc))
             echo_err(f"{path}: INVALID")

@@ -76,6 +76,7 @@ import numpy as np
 from animsim.analysis.references import Trajectory, run_trajectory
 from animsim.errors import AnimsimError, UsageError
 from animsim.record import Clock, MemorySink, landing_steps
+from animsim.scene.models import DEFAULT_INTEGRATOR
 
 # --- names and constants -----------------------------------------------------------
 
@@ -292,10 +293,17 @@ class Case:
     overrides: tuple[tuple[str, Any], ...]
     seed: int
     reference: str | None = None
+    #: the backend the case runs on (its reference too); see animsim.backends
+    backend: str = "auto"
 
 
 def build_cases(
-    data: dict[str, Any], name: str, file: str, axes: Sequence[Axis], reference: str | None = None
+    data: dict[str, Any],
+    name: str,
+    file: str,
+    axes: Sequence[Axis],
+    reference: str | None = None,
+    backend: str = "auto",
 ) -> list[Case]:
     """The Cartesian product of ``axes`` (first outermost), each with its seed."""
     scene_seed = data.get(SEED_KEY, 0)
@@ -306,7 +314,7 @@ def build_cases(
         overrides = tuple(zip(keys, values, strict=True))
         swept_seed = dict(overrides).get(SEED_KEY)
         seed = swept_seed if swept_seed is not None else case_seed(scene_seed, index)
-        cases.append(Case(index, data, name, file, overrides, seed, reference))
+        cases.append(Case(index, data, name, file, overrides, seed, reference, backend))
     return cases
 
 
@@ -353,7 +361,9 @@ def fine_reference(compiled: Any, times: np.ndarray) -> Trajectory:
     if key in _FINE_CACHE:
         return _FINE_CACHE[key]
     # Record only the fine steps that land on the case's record times.
-    fine = compile_scene(scene, compiled.name, record_times=_landed(compiled, times, fine_dt))
+    fine = compile_scene(
+        scene, compiled.name, backend=compiled.backend, record_times=_landed(compiled, times, fine_dt)
+    )
     trajectory, status = run_trajectory(fine)
     if status != STATUS_OK:
         raise ReferenceFailed(f"the RK4 reference at dt = {fine_dt:.3g} s was {status}")
@@ -457,7 +467,7 @@ def _integrator_of(case: Case) -> str | None:
     if INTEGRATOR_KEY in over:
         v = over[INTEGRATOR_KEY]
         return v if isinstance(v, str) else None
-    v = case.data.get(INTEGRATOR_KEY, "symplectic_euler")
+    v = case.data.get(INTEGRATOR_KEY, DEFAULT_INTEGRATOR)
     return v.get("method") if isinstance(v, dict) else v
 
 
@@ -473,7 +483,7 @@ def run_case(case: Case) -> Row:
     row = Row(case.index, dict(case.overrides), _integrator_of(case), case.seed, STATUS_INVALID)
     try:
         scene = case_scene(case)
-        compiled = compile_scene(scene, case.name)
+        compiled = compile_scene(scene, case.name, backend=case.backend)
     except (CaseInvalid, AnimsimError) as exc:
         row.message = str(exc)
         return row
@@ -555,15 +565,16 @@ def sweep(
     jobs: int = 1,
     scheduler: Any = None,
     progress: Callable[[int, int], None] | None = None,
+    backend: str = "auto",
 ) -> SweepTable:
-    """Check the keys, build the cases and run them (serially, on processes or on Dask)."""
+    """Check the keys, build the cases and run them on ``backend`` (serially, on processes or on Dask)."""
     from animsim.parallel import map_cases
 
     check_axes(axes)
     check_keys_exist(data, axes, file)
     if reference is not None:
         reference_function(reference)  # an unknown or unavailable reference: exit 2 now
-    cases = build_cases(data, name, file, axes, reference)
+    cases = build_cases(data, name, file, axes, reference, backend)
     rows = map_cases(run_case, cases, jobs=jobs, scheduler=scheduler, on_error=error_row, progress=progress)
     return SweepTable(list(axes), rows, reference)
 

@@ -34,8 +34,9 @@ def phase_command(
     integrator: str | None,
     dt: float | None,
     duration: float | None,
+    backend: str = "auto",
 ) -> None:
-    """Simulate once per integrator (or read a trajectory) and draw the phase portraits."""
+    """Simulate once per integrator on ``backend`` (or read a trajectory) and draw the phase portraits."""
     from animsim.export.pictures import PhaseRun, phase_particles, plot_phase
     from animsim.export.viewer import dense_frames
 
@@ -74,7 +75,7 @@ def phase_command(
                 raise UsageError("give --integrator or --integrators, not both")
             names = parse_integrators(integrators)
         loaded, sc, _ = prepare(source, integrator=integrator, dt=dt, duration=duration)
-        compiled = compile_each(sc, loaded.name, names)
+        compiled = compile_each(sc, loaded.name, names, backend)
         for c in compiled:
             run = simulate_panel(c)
             dense = dense_frames(run.trajectory)

@@ -31,13 +31,15 @@ LABEL_SCALE = 1 / 20  # label height as a fraction of the panel's smaller side
 MIN_LABEL_PX = 13
 
 
-def compile_each(scene: Any, name: str, integrators: Sequence[str] | None) -> list[Any]:
-    """One compiled scene per integrator (or the scene as it is when there are none)."""
+def compile_each(
+    scene: Any, name: str, integrators: Sequence[str] | None, backend: str = "auto"
+) -> list[Any]:
+    """One compiled scene per integrator (or the scene as it is when there are none), for ``backend``."""
     from animsim.compile import compile_scene, with_overrides
 
     if not integrators:
-        return [compile_scene(scene, name)]
-    return [compile_scene(with_overrides(scene, integrator=i), name) for i in integrators]
+        return [compile_scene(scene, name, backend=backend)]
+    return [compile_scene(with_overrides(scene, integrator=i), name, backend=backend) for i in integrators]
 
 
 class LabelPainter:

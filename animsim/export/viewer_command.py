@@ -70,8 +70,10 @@ def write_view(
     dt: float | None,
     duration: float | None,
     stop_context: Callable[[], Any] = contextlib.nullcontext,
+    backend: str = "auto",
 ) -> ViewSummary:
-    """Build the panels and write ``output`` (atomically). ``prepare`` is the CLI's scene loader."""
+    """Build the panels and write ``output`` (atomically). ``prepare`` is the CLI's scene loader;
+    a scene is simulated on ``backend``."""
     from animsim.export.trajectory import is_trajectory, read_trajectory
     from animsim.export.viewer import panel_from_trajectory, panels_html
     from animsim.render import _up_axis
@@ -117,7 +119,7 @@ def write_view(
 
         loaded, sc, _ = prepare(source, integrator=integrator, dt=dt, duration=duration)
         sc = sc.model_copy(update={"record": m.Record(fps=fps)})
-        compiled_runs = compile_each(sc, loaded.name, names)
+        compiled_runs = compile_each(sc, loaded.name, names, backend)
         with stop_context() as stop:
             for c in compiled_runs:
                 run = simulate_panel(c, stop=stop)

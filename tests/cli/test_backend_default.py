@@ -55,3 +55,69 @@ def test_engine_hands_the_notice_to_a_first_numba_run(monkeypatch):
     assert result.status == "ok"
     assert heard and heard[0].startswith("compiling numba kernels (first run only")
     assert result.meta["compile_time"] > 0 and result.wall_time > 0
+
+
+#: a scene small and short enough that each command's run costs nothing but its compile
+TINY = """
+duration: 0.2
+dt: 0.01
+particles:
+  - {id: anchor, pinned: true, position: [0, 1, 0]}
+  - {id: bob, mass: 1.0, position: [0.3, 1, 0]}
+springs:
+  - {between: [anchor, bob], ks: 20.0}
+forces:
+  - {type: gravity}
+"""
+
+#: every command that simulates a scene, with the arguments that make it do so
+SIMULATING = {
+    "check": lambda scene, tmp: ["check", scene, "-q"],
+    "render": lambda scene, tmp: ["render", scene, "--gif", tmp / "a.gif", "-q"],
+    "view": lambda scene, tmp: ["view", scene, "-o", tmp / "a.html", "-q"],
+    "plot energy": lambda scene, tmp: ["plot", scene, "-o", tmp / "a.png", "--kind", "energy"],
+    "plot phase": lambda scene, tmp: ["plot", scene, "-o", tmp / "b.png", "--kind", "phase"],
+    "compare": lambda scene, tmp: ["compare", scene, "--integrators", "rk4", "--dt", "0.01"],
+    "sweep": lambda scene, tmp: ["sweep", scene, "--set", "dt=0.01", "-q"],
+}
+
+
+@pytest.mark.parametrize("command", list(SIMULATING))
+def test_every_simulating_command_takes_the_backend_run_takes(command, tmp_path, monkeypatch):
+    """Each command's compiled scenes are on the backend ``run`` would choose (auto: numba where
+    installed), and ``--backend numpy`` is honoured too."""
+    from typer.testing import CliRunner
+
+    import animsim.compile
+
+    scene = tmp_path / "tiny.yaml"
+    scene.write_text(TINY)
+    seen: list[str] = []
+    real = animsim.compile.compile_scene
+
+    def recording(*args, **kwargs):
+        compiled = real(*args, **kwargs)
+        if kwargs.get("record_times") is None:  # references of compare may differ by design
+            seen.append(compiled.backend)
+        return compiled
+
+    monkeypatch.setattr(animsim.compile, "compile_scene", recording)
+    runner = CliRunner()
+    for backend, expected in (("auto", "numba" if HAS_NUMBA else "numpy"), ("numpy", "numpy")):
+        seen.clear()
+        args = [str(a) for a in SIMULATING[command](scene, tmp_path / backend)]
+        (tmp_path / backend).mkdir()
+        if backend != "auto":
+            args += ["--backend", backend]
+        result = runner.invoke(cli.app, args)
+        assert result.exit_code == 0, result.output
+        assert seen and set(seen) == {expected}, (command, backend, seen)
+
+
+def test_every_simulating_command_defaults_to_auto():
+    for command in (cli.check, cli.render, cli.view, cli.plot, cli.compare, cli.sweep):
+        assert inspect.signature(command).parameters["backend"].default == "auto"
+    for function in (animsim.api.check, animsim.api.render, animsim.api.view, animsim.api.plot):
+        assert inspect.signature(function).parameters["backend"].default == "auto"
+    assert inspect.signature(animsim.api.compare).parameters["backend"].default == "auto"
+    assert inspect.signature(animsim.api.sweep).parameters["backend"].default == "auto"
