@@ -257,11 +257,11 @@ def make_limits(
     )
 
 
-class Format(StrEnum):
-    csv = "csv"
-    npz = "npz"
-    ply = "ply"  # a sequence of binary PLY files, one per recorded frame
-    usda = "usda"  # one USD ASCII file of animated points
+def _format_names(incomplete: str) -> list[str]:
+    """Shell completion of ``--format``: the registered trajectory formats."""
+    from animsim.export.sinks import formats
+
+    return [name for name in formats() if name.startswith(incomplete)]
 
 
 def _backend(name: str) -> str:
@@ -324,10 +324,12 @@ def run(
     duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
     seed: Annotated[int | None, typer.Option(help="Override the random seed.")] = None,
     format: Annotated[
-        Format | None,
+        str | None,
         typer.Option(
             "--format",
-            help="Trajectory format; default from the suffix (.npz, .ply, .usda; a folder means ply), else csv.",
+            help="Trajectory format (csv, npz, ply, usda, ...); default from the suffix (a folder means "
+            "ply), else csv.",
+            autocompletion=_format_names,
         ),
     ] = None,
     extra_columns: Annotated[
@@ -352,7 +354,7 @@ def run(
         outcome = api.run(
             scene,
             output,
-            fmt=None if format is None else format.value,
+            fmt=format,
             integrator=integrator,
             dt=dt,
             duration=duration,

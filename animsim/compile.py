@@ -293,7 +293,7 @@ def compile_scene(
     present = {f.type for f in scene.forces}
     if any(getattr(f, "turbulence", 0) > 0 for f in scene.forces):
         present.add("turbulence")
-    for kind in m.FORCE_TYPES:
+    for kind in m.force_types():
         if kind not in present:
             left_out.append(f"{kind}: not in the scene's forces")
     if "wind" in present and "turbulence" not in present:

@@ -216,6 +216,11 @@ def register(model: type) -> Callable[[Builder], Builder]:
     return wrap
 
 
+def unregister(model: type) -> None:
+    """Forget the builder of ``model`` (a test's throwaway element cleans up with this)."""
+    _BUILDERS.pop(model, None)
+
+
 #: packages whose every module may hold elements (found, not listed: a new force family
 #: is a new module in animsim/forces and nothing else here)
 ELEMENT_PACKAGES = ("animsim.forces",)

@@ -32,6 +32,7 @@ from typing import Any
 
 from animsim import methods
 from animsim.errors import Diagnostic, SceneError, UsageError
+from animsim.export.sinks import get_format
 from animsim.scene.loader import (
     DEFAULT_MAX_DEPTH,
     DEFAULT_MAX_FILE_BYTES,
@@ -65,8 +66,6 @@ ID_BYTES = 120
 # Index pair, rest length, ks, kd, scatter weights and the per-step (S, 3)
 # temporaries of the spring force (difference, direction, relative velocity).
 SPRING_BYTES = 256
-# The linearised implicit step adds a 3x3 block per spring in both directions.
-IMPLICIT_SPRING_BYTES = 2 * 9 * 8 * 2
 # An emitter pool slot: age, lifetime, size and RGBA over life, birth order.
 EMITTER_SLOT_BYTES = 96
 # A birth event drawn but not yet placed (time, position, velocity, lifetime, the thinning
@@ -74,19 +73,8 @@ EMITTER_SLOT_BYTES = 96
 BIRTH_EVENT_BYTES = 128
 # Births are drawn in chunks of about this many events (animsim.emitters.CHUNK_BIRTHS).
 BIRTH_CHUNK_EVENTS = 4096
-# Per recorded frame: the record-step index, and for NPZ the frame time and
-# row offset kept as Python objects until the file is assembled.
-FRAME_BYTES = {"csv": 8, "npz": 84}
-
 # --- output size model (bytes) -------------------------------------------------------
-# A float64 written with repr() is 17-20 characters for full precision.
-CSV_NUMBER_CHARS = 20
-CSV_NUMBERS_PER_ROW = 7  # t, x, y, z, vx, vy, vz
-CSV_SEPARATORS_PER_ROW = 8  # seven commas and a newline
-# NPZ: t, particle index, position and velocity, float64/int64; the rows are
-# written once to raw temporary files and once more into the zip.
-NPZ_ROW_BYTES = 8 + 8 + 24 + 24
-NPZ_COPIES = 2
+# Each format's own sizes per frame and per row live with it (animsim.export.sinks).
 # The .meta.json and the file system's own rounding.
 OUTPUT_SLACK_BYTES = 1 * MIB
 # Emitter populations: a rate or lifetime this many standard deviations above
@@ -172,10 +160,7 @@ class Estimate:
 
     def output_bytes(self, fmt: str, mean_id_chars: float) -> int:
         rows = self.frames * self.rows_per_frame
-        if fmt == "npz":
-            return rows * NPZ_ROW_BYTES * NPZ_COPIES + OUTPUT_SLACK_BYTES
-        row = CSV_NUMBERS_PER_ROW * CSV_NUMBER_CHARS + CSV_SEPARATORS_PER_ROW + mean_id_chars
-        return int(rows * row) + OUTPUT_SLACK_BYTES
+        return int(rows * get_format(fmt).disk_row_bytes(mean_id_chars)) + OUTPUT_SLACK_BYTES
 
 
 def step_count(duration: float, dt: float, max_steps: int) -> int | None:
@@ -237,9 +222,9 @@ def _emitter_memory(e: Any, births: int, frames: int, dt: float, per_particle: i
 
 def estimate(scene: Scene, steps: int, fmt: str = "csv") -> Estimate:
     """Count what the scene will hold and what that costs, without building it."""
-    vectors = BASE_VECTORS + methods.get(scene.integrator_name).vectors
-    per_particle = vectors * VECTOR_BYTES + PARTICLE_SCALAR_BYTES + ID_BYTES
-    per_spring = SPRING_BYTES + (IMPLICIT_SPRING_BYTES if scene.integrator_name == "implicit_euler" else 0)
+    method = methods.get(scene.integrator_name)
+    per_particle = (BASE_VECTORS + method.vectors) * VECTOR_BYTES + PARTICLE_SCALAR_BYTES + ID_BYTES
+    per_spring = SPRING_BYTES + method.spring_work_bytes
     parts: list[tuple[tuple[str | int, ...], int, str]] = []
 
     listed = len(scene.particles)
@@ -264,7 +249,8 @@ def estimate(scene: Scene, steps: int, fmt: str = "csv") -> Estimate:
         cost, recorded = _emitter_memory(e, b, frames, scene.dt, per_particle)
         what = f"emitter {e.name!r}: a pool of {e.max_particles} particles and up to {recorded} recorded ids"
         parts.append((("emitters", i, "max_particles"), cost, what))
-    parts.append((("record",), frames * FRAME_BYTES.get(fmt, 8), f"{frames} recorded frames"))
+    frame_bytes = get_format(fmt).frame_memory_bytes
+    parts.append((("record",), frames * frame_bytes, f"{frames} recorded frames"))
     parts.sort(key=lambda p: -p[1])
     return Estimate(
         steps=steps,

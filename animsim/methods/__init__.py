@@ -111,6 +111,8 @@ class Method:
     closed_form_limit: ClosedFormLimit | None = None
     #: (N, 3) work vectors its stepper preallocates (None: derived from the tableau)
     work_vectors: int | None = None
+    #: bytes its stepper holds per spring beyond the spring's own arrays (pre-flight)
+    spring_work_bytes: int = 0
     #: whether it advances rigid bodies' orientations and angular velocities
     integrates_bodies: bool = True
     #: in the set ``compare`` and the parity tests run by default

@@ -28,6 +28,8 @@ register(
         stepper="animsim.integrators.implicit:ImplicitEuler",
         # conjugate-gradient vectors and the linearised system's work arrays
         work_vectors=12,
+        # the linearised step adds a 3x3 block of float64 per spring, both directions, twice
+        spring_work_bytes=2 * 9 * 8 * 2,
         # linearised over particle positions only
         integrates_bodies=False,
         # runs on its own in compare and the parity tables: its cost is of another kind

@@ -12,7 +12,9 @@ so that each error can name the exact key it is about.
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal
+import functools
+import operator
+from typing import Annotated, Any, Literal, get_args
 
 from pydantic import (
     AfterValidator,
@@ -319,11 +321,45 @@ class Vortex(Model):
         return value
 
 
-Force = Annotated[
-    Gravity | Drag | QuadraticDrag | Wind | Attractor | Vortex,
-    Field(discriminator="type"),
-]
-FORCE_TYPES = ("gravity", "drag", "quadratic_drag", "wind", "attractor", "vortex")
+#: the force families of the language, in the order the guide lists them: each a model
+#: here and an element module in animsim/forces that registers its builder for it
+FORCE_MODELS: list[type[Model]] = [Gravity, Drag, QuadraticDrag, Wind, Attractor, Vortex]
+
+
+def _force_union() -> Any:
+    union = functools.reduce(operator.or_, FORCE_MODELS)  # Gravity | Drag | ...
+    return Annotated[union, Field(discriminator="type")]
+
+
+Force = _force_union()
+
+
+def force_types() -> tuple[str, ...]:
+    """The ``type`` names of the force families, read from their models."""
+    return tuple(get_args(cls.model_fields["type"].annotation)[0] for cls in FORCE_MODELS)
+
+
+def register_force(model: type[Model]) -> None:
+    """Add a force family's model to the language (a test's throwaway force uses this):
+    the scene model is rebuilt with the new union, so validation, the schema and every
+    consumer that reads the scene see it."""
+    if model not in FORCE_MODELS:
+        FORCE_MODELS.append(model)
+    _rebuild_forces()
+
+
+def unregister_force(model: type[Model]) -> None:
+    if model in FORCE_MODELS:
+        FORCE_MODELS.remove(model)
+    _rebuild_forces()
+
+
+def _rebuild_forces() -> None:
+    global Force
+    Force = _force_union()
+    # the field was resolved when Scene was made: give it the new union, then rebuild its schema
+    Scene.model_fields["forces"].annotation = list[Force]  # type: ignore[valid-type]
+    Scene.model_rebuild(force=True)
 
 
 # --- planes -----------------------------------------------------------------

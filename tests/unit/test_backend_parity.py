@@ -15,6 +15,7 @@ pinned and moving anchors, and every force family.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -22,9 +23,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from animsim import methods
 from animsim.compile import compile_scene
 from animsim.engine import run
 from animsim.record import MemorySink
+from animsim.scene import models as m
 from animsim.scene.loader import load_scene, load_scene_text
 from tests.conftest import ROOT
 
@@ -95,7 +98,21 @@ def test_resting_contact_agrees_and_rests():
 
 # --- generated scenes -------------------------------------------------------------
 
-FORCES = [
+
+def example_force(model: type) -> str:
+    """A force entry made from the examples its model documents (every key that has one)."""
+    keys = []
+    for key, field in model.model_fields.items():
+        if key == "type":
+            continue
+        if field.examples:
+            keys.append(f"{key}: {json.dumps(field.examples[0])}")
+    kind = model.model_fields["type"].annotation.__args__[0]
+    return "{" + ", ".join([f"type: {kind}", *keys]) + "}"
+
+
+#: every force family of the language, as documented, and a few variants of note
+FORCES = [example_force(model) for model in m.FORCE_MODELS] + [
     "{type: gravity}",
     "{type: gravity, g: [0.5, -9.81, 0.2]}",
     "{type: drag, k: 0.3}",
@@ -104,16 +121,13 @@ FORCES = [
     "{type: wind, velocity: [1, 0, 0], k: 0.1, turbulence: 0.5}",
     "{type: attractor, position: [0, 3, 0], gm: 2.0, softening: 0.1}",
 ]
-INTEGRATORS = [
-    "euler",
-    "symplectic_euler",
-    "euler_average",
-    "midpoint",
-    "heun",
-    "rk4",
-    "verlet",
-    "implicit_euler",
-]
+#: every method of the registry
+INTEGRATORS = list(methods.names())
+
+
+def test_the_generated_scenes_cover_every_force_family():
+    kinds = {load_scene_text(f"duration: 1\nforces: [{f}]\n").scene.forces[0].type for f in FORCES}
+    assert kinds == set(m.force_types())
 
 
 @st.composite
