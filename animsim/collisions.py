@@ -399,6 +399,9 @@ def _friction_rows(
 class PlaneColliders(StepStage):
     """All impulse planes of a scene, applied after each integrator step."""
 
+    #: particle contacts push out of these planes after their own pass
+    holds_planes = True
+
     def __init__(self, planes: list[ImpulsePlane], particle_inv_mass: np.ndarray, *, numba: bool = False):
         self.planes = planes
         self.inv_mass = particle_inv_mass  # rebound to the live state's by reset()

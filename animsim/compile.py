@@ -323,7 +323,7 @@ def compile_scene(
     solids = contact_stages.build(scene, system, chosen, springs_term, particle_position)
     post_step = [*solids.front, *post_step, *solids.back]
     if solids.contacts is not None:  # contacts push out of planes too, after the colliders
-        solids.contacts.planes = next((st for st in post_step if hasattr(st, "_project")), None)
+        solids.contacts.planes = next((st for st in post_step if st.holds_planes), None)
     left_out.extend(solids.left_out)
     dynamics = Dynamics(system, terms)
     dynamics.drivers = tuple(solids.drivers)
@@ -369,7 +369,7 @@ def compile_scene(
     stages[:0] = [t.label for t in terms]
     stages.append(f"integrator: {integrator.name} ({integrator.description})")
     for st in post_step:
-        stages.extend(getattr(st, "labels", None) or [st.label])
+        stages.extend(st.explain_lines())
     stages.append(
         f"record: {len(rec)} frames of {clock.steps} steps"
         + (f" (every {every})" if scene.record.every else "")

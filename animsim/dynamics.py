@@ -77,7 +77,7 @@ class Dynamics:
         if self._inv3 is None:
             return
         lead = 0
-        while lead < len(self.terms) and getattr(self.terms[lead], "constant_force", False):
+        while lead < len(self.terms) and self.terms[lead].constant_force:
             lead += 1
         if lead == 0:
             return

@@ -117,12 +117,37 @@ class ForceElement:
     #: row's index into its parameters): its kernels may run on any rows alone, so the numba
     #: backend evaluates newborns by themselves and steps whole scenes in cache-sized blocks
     pointwise: bool = False
+    #: its force depends on nothing that steps (gravity): the dynamics sums it once per
+    #: binding of the masses instead of at every evaluation
+    constant_force: ClassVar[bool] = False
+    #: what the stability analysis cannot count about it, said in ``check`` (None: nothing)
+    stability_caveat: ClassVar[str | None] = None
+    #: a RELEASING element's released energy as one compiled pass (see ``released``), used
+    #: by the watchdog on large numba runs; None: the NumPy sum serves
+    released_numba: Callable[[np.ndarray, np.ndarray, np.ndarray], float] | None = None
 
     def accumulate(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None:
         raise NotImplementedError  # pragma: no cover - every element defines its kernel
 
     def potential(self, x: np.ndarray) -> float | None:
         return None
+
+    def jacobians(self, x: np.ndarray, v: np.ndarray) -> tuple[Any, Any]:
+        """(dF/dx, dF/dv) as sparse (3N, 3N) matrices, None where it contributes nothing, for
+        implicit Euler; an element without them enters implicit Euler explicitly."""
+        raise NotImplementedError
+
+    @property
+    def offers_jacobians(self) -> bool:
+        return type(self).jacobians is not ForceElement.jacobians
+
+    def per_spring_energy(self, x: np.ndarray) -> np.ndarray:
+        """(S,) potential energy of each spring (J): the watchdog books what tearing releases."""
+        raise NotImplementedError
+
+    @property
+    def offers_per_spring_energy(self) -> bool:
+        return type(self).per_spring_energy is not ForceElement.per_spring_energy
 
     def stiffness_rows(self, inv_mass: np.ndarray, k_rows: np.ndarray, c_rows: np.ndarray) -> None:
         """Add this element's stiffness (N/m) and damping (N s/m), weighted by inverse mass, per row."""
@@ -175,9 +200,39 @@ class StepStage:
     #: its numba stage changes row i from row i of its arguments alone (and says whether it
     #: changed any), its parameters holding nothing per row: it may run on any block of rows
     pointwise: bool = False
+    #: a random stage that keeps what it draws in ``snapshot``/``restore``, so a run with it
+    #: can be replayed from a checked state (births)
+    replays: ClassVar[bool] = False
+    #: the numba backend calls it from Python between one-step compiled calls (births)
+    fused_between_steps: ClassVar[bool] = False
+    #: the impulse planes: particle contacts push out of them after their own pass
+    holds_planes: ClassVar[bool] = False
 
     def reset(self, state: Any) -> None:
         """Called at the start of every run (and replay) with the run's state."""
+
+    def explain_lines(self) -> list[str]:
+        """What ``explain`` lists for it (one line, its label, unless it has several parts)."""
+        return [self.label]
+
+    def meets_blocks(self) -> bool:
+        """Whether it can meet each block of rows inside the integrator's step (NumPy)."""
+        return False
+
+    def stability_note(self, dt: float) -> str | None:
+        """What limits its dt instead of a stiffness (``check`` prints it), or None."""
+        return None
+
+    def run_summary(self) -> dict[str, Any] | None:
+        """Numbers for the run's metadata (tearing: how many springs broke, and when)."""
+        return None
+
+    def snapshot(self) -> Any:
+        """What a replay restores besides the state (``replays`` stages)."""
+        return None
+
+    def restore(self, snap: Any) -> None:
+        """Put back what :meth:`snapshot` returned."""
 
     def apply(
         self, state: Any, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, dt: float

@@ -1127,6 +1127,8 @@ class Emitters(StepStage):
     random = True
     #: runs in Python after each step of the numba backend's fused kernel (no kernel of its own)
     fused_between_steps = True
+    #: snapshot/restore keep the pools and their random streams for a replay
+    replays = True
     no_closed_form = "it has emitters (particles are born and die at random)"
 
     def __init__(self, pools: list[Pool], first_index: int):
@@ -1208,6 +1210,9 @@ class Emitters(StepStage):
             return parts[0]
         # pools hold consecutive ranges in scene order: the born rows stay sorted when joined
         return np.concatenate([r[0] for r in parts]), np.concatenate([r[1] for r in parts])  # type: ignore[index]
+
+    def explain_lines(self) -> list[str]:
+        return self.labels
 
     def snapshot(self) -> list[tuple[Any, ...]]:
         """The pools' bookkeeping and random streams, for a replay from a checked state.

@@ -406,9 +406,9 @@ def _run(
         if compiled.emitters is not None:
             meta["emitters"] = compiled.emitters.summary()
         for stage in compiled.post_step:  # tearing: how many springs broke, and when first
-            report = getattr(stage, "run_summary", None)
+            report = stage.run_summary()
             if report is not None:
-                meta.update(report())
+                meta.update(report)
         return finish(sinks, state, dyn, status, wall, energy_start, energy_end, frames, failure, meta)
     except BaseException:
         for sink in sinks:
@@ -440,7 +440,7 @@ def _flush(
 def _snapshot(compiled: Compiled, guard: Guard) -> tuple[Any, list[tuple[Any, Any]]]:
     """What a replay restores besides the state: the watchdog's books and the stages' own
     bookkeeping (the emitters' random streams and pools)."""
-    stages = [(st, st.snapshot()) for st in compiled.post_step if hasattr(st, "snapshot")]
+    stages = [(st, st.snapshot()) for st in compiled.post_step if st.replays]
     return guard.snapshot(), stages
 
 

@@ -134,8 +134,7 @@ def block_stage(compiled: Any) -> Any:
     only = stages[0] if len(stages) == 1 else None
     if only is None or not only.pointwise or not compiled.integrator.block_stages:
         return None
-    meets = getattr(only, "meets_blocks", None)
-    return only if meets is not None and meets() else None
+    return only if only.meets_blocks() else None
 
 
 def start(compiled: Any, notice: Callable[[str], None] | None = None) -> tuple[State, Any, float]:
@@ -174,7 +173,7 @@ class _Base:
         # A stage that draws random numbers (births) can be replayed when it snapshots its
         # streams (``snapshot``/``restore``, restored with the state); else such runs are
         # checked at every step instead of replayed.
-        self.replayable = all(not st.random or hasattr(st, "snapshot") for st in compiled.post_step)
+        self.replayable = all(not st.random or st.replays for st in compiled.post_step)
         n = compiled.system.particle_count
         # Not sparser for small scenes: the watchdog judges energy at its checks, and a run
         # whose energy spikes between two far-apart checks and falls back would pass unseen.
@@ -254,7 +253,7 @@ def _compile_numba(stepper: Any, state: State, notice: Callable[[str], None] | N
         stepper.forces = NumbaForces(dyn)
     # Integrators evaluate forces only through dynamics.acceleration: point it at the kernels.
     integ.dynamics = _NumbaDynamics(dyn, stepper.forces)
-    emitters = getattr(stepper.compiled, "emitters", None)
+    emitters = stepper.compiled.emitters
     if emitters is not None:  # newborns fly on with the same force sum (a full evaluation a step)
         emitters.dynamics = integ.dynamics
         emitters.use_numba(state)  # births and deaths in compiled calls (the same slots)
@@ -351,7 +350,7 @@ class Fused(_Base):
         self.fused = FusedStepper(self.compiled)
         # the same watchdog rhythm as step by step, so both backends report the same failures
         self.check_stride = CHECK_STRIDE if self.replayable else 1
-        emitters = getattr(self.compiled, "emitters", None)
+        emitters = self.compiled.emitters
         if emitters is not None:  # newborns fly on with the numba force sum, as step by step
             from animsim.backends.fused import NumbaForces
 

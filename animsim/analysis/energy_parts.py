@@ -26,16 +26,14 @@ PARTS = ("kinetic", "rotational", "gravitational", "spring", "other")
 def term_part(term: Any) -> str:
     """Which part a force term's potential belongs to: the element says so itself
     (``energy_part``, see :mod:`animsim.elements`); "other" when it names none."""
-    declared = getattr(term, "energy_part", "other")
+    declared = term.energy_part
     return str(declared) if declared in PARTS else "other"
 
 
 def rotational_energy(system: Any, state: Any) -> float | None:
     """1/2 sum_b w_b . I_b w_b over rigid bodies, or None when there are none."""
-    q = getattr(state, "body_orientation", None)
-    w = getattr(state, "body_angular_velocity", None)
-    inertia = getattr(system, "body_inertia", None)
-    if q is None or w is None or inertia is None or len(q) == 0:
+    q, w, inertia = state.body_orientation, state.body_angular_velocity, system.body_inertia
+    if q is None or w is None or len(q) == 0:
         return None
     q = np.asarray(q, dtype=np.float64)
     w = np.asarray(w, dtype=np.float64)

@@ -348,7 +348,7 @@ def _row_bounds(compiled: Any) -> tuple[np.ndarray, np.ndarray, float, list[str]
     # Each element adds its own rows (animsim.elements: stiffness_rows).
     for term in compiled.dynamics.terms:
         term.stiffness_rows(inv, k_rows, c_rows)
-    if getattr(compiled.dynamics, "bodies", None) is not None:  # springs to points of bodies
+    if compiled.dynamics.bodies is not None:  # springs to points of bodies
         for term in compiled.dynamics.bodies.terms:
             term.stiffness_rows(inv, k_rows, c_rows)
     penalty_k = max((term.contact_stiffness for term in compiled.dynamics.terms), default=0.0)
@@ -357,9 +357,9 @@ def _row_bounds(compiled: Any) -> tuple[np.ndarray, np.ndarray, float, list[str]
     # Post-step stages resolved by impulses (colliders, contacts, keyframes, tearing) add no
     # stiffness; each says what limits it instead (animsim.contact_stages).
     for stage in compiled.post_step:
-        note = getattr(stage, "stability_note", None)
+        note = stage.stability_note(compiled.clock.dt)
         if note is not None:
-            notes.append(note(compiled.clock.dt))
+            notes.append(note)
     return k_rows, c_rows, penalty_k, notes
 
 
@@ -437,8 +437,8 @@ def analyse(compiled: Any) -> StabilityReport:
             "spring damping acts along springs only: euler, euler_average, midpoint and heun can "
             "still grow slowly on motion across them (swinging, bending) unless drag damps it"
         )
-    if any(getattr(t, "label", "").startswith("quadratic drag") for t in compiled.dynamics.terms):
-        notes.append("quadratic drag damps in proportion to speed and is not counted")
+    # what an element's stiffness rows cannot say (quadratic drag's speed-dependent damping)
+    notes.extend(dict.fromkeys(t.stability_caveat for t in compiled.dynamics.terms if t.stability_caveat))
     return StabilityReport(
         integrator=compiled.integrator_name,
         dt=compiled.clock.dt,

@@ -99,7 +99,7 @@ class EnergyWatch:
         self.dynamics = compiled.dynamics
         terms = self.dynamics.terms
         self.mass = system.particle_mass  # rebound to the run's live masses by bind()
-        emitters = getattr(compiled, "emitters", None)
+        emitters = compiled.emitters
         self._take_changed = None if emitters is None else emitters.take_changed
         self._movable = float(np.count_nonzero(self.mass))
         self.inv_mass = system.particle_inv_mass
@@ -107,19 +107,17 @@ class EnergyWatch:
         self.releasing = [t for t in terms if t.watch_role == RELEASING]
         # On the numba backend a releasing term may offer the same sum from compiled code,
         # worth its call where the NumPy passes over many particles cost more.
-        compiled_sums = (
-            getattr(compiled, "backend", "numpy") == "numba" and system.particle_count >= COMPILED_SUMS_FROM
-        )
-        fast = [getattr(t, "released_numba", None) if compiled_sums else None for t in self.releasing]
+        compiled_sums = compiled.backend == "numba" and system.particle_count >= COMPILED_SUMS_FROM
+        fast = [t.released_numba if compiled_sums else None for t in self.releasing]
         #: the newborns' books in one compiled call (numba backend, runs with births): a
         #: step's few hundred rows took about a dozen NumPy calls, 33 us a step of the
         #: 100,000-slot fountain
         self._book_rows: Any = None
         self._book_buffers: tuple[np.ndarray, ...] | None = None
-        if self._take_changed is not None and getattr(compiled, "backend", "numpy") == "numba":
+        if self._take_changed is not None and compiled.backend == "numba":
             self._book_rows = _compiled_book_rows(system.particle_count)
         self._released = [f or t.released for f, t in zip(fast, self.releasing, strict=True)]
-        self.springs = next((t for t in terms if hasattr(t, "per_spring_energy")), None)
+        self.springs = next((t for t in terms if t.offers_per_spring_energy), None)
         self.wind_power = sum(t.max_power_per_particle for t in terms if t.watch_role == INJECTING)
         known = (ELASTIC, RELEASING, DISSIPATIVE, INJECTING)
         unknown = [t.label for t in terms if t.watch_role not in known]

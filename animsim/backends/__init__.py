@@ -97,7 +97,7 @@ def fused_unsupported(compiled: Any) -> list[str]:
             why.append(f"force {term.label!r}")
     for stage in compiled.post_step:
         # births are called from Python between one-step chunks (animsim.steppers.Fused)
-        if stage.numba_stage_source is None and not getattr(stage, "fused_between_steps", False):
+        if stage.numba_stage_source is None and not stage.fused_between_steps:
             why.append(stage.label.split(":")[0])
     return why
 
@@ -110,7 +110,7 @@ def fused_in_blocks(compiled: Any) -> bool:
     the particles are then independent, and each block runs a call's steps in the cache.
     """
     d = compiled.dynamics
-    if getattr(d, "drivers", ()):
+    if d.drivers:
         return False
     if not all(t.pointwise for t in d.terms):
         return False
@@ -134,7 +134,7 @@ def backend_line(compiled: Any, chosen: str, note: str) -> str:
     """The ``backend:`` line ``explain`` shows."""
     if chosen == BACKEND_NUMBA:
         why = fused_unsupported(compiled)
-        between = any(getattr(st, "fused_between_steps", False) for st in compiled.post_step)
+        between = any(st.fused_between_steps for st in compiled.post_step)
         if why:
             how = f"element kernels step by step ({', '.join(why)} need the step-by-step loop)"
         else:

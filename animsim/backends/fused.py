@@ -1054,7 +1054,7 @@ class NumbaForces:
     def acceleration(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> np.ndarray:
         d = self.dynamics
         d.evaluations += 1
-        for drive in getattr(d, "drivers", ()):  # keyframed rows on their path (animsim.keyframes)
+        for drive in d.drivers:  # keyframed rows on their path (animsim.keyframes)
             drive.drive(t, x, v)
         mass = live_array(d.mass, self._copies)
         if not self.others:
@@ -1086,7 +1086,7 @@ class NumbaForces:
         from animsim.elements import jit_kernel
 
         d = self.dynamics
-        if self.others or getattr(d, "drivers", ()) or not self._pointwise:
+        if self.others or d.drivers or not self._pointwise:
             return None
         if any(st.numba_newborn_source is None for st in colliders):
             return None

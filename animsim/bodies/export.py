@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from animsim.bodies import quaternion as quat
+from animsim.bodies.springs import BodySprings
 
 if TYPE_CHECKING:  # the shapes' module loads when a shape is drawn: a writer only asks body_info
     from animsim.bodies.shapes import BodyShape
@@ -84,7 +85,7 @@ def world_outline_segments(shape: BodyShape, position: np.ndarray, q: np.ndarray
 
 def header_springs(body_dynamics: Any) -> dict[str, np.ndarray] | None:
     """The springs to bodies as plain arrays for drawing (row_a/b, body_a/b, at_a/b), or None."""
-    terms = [] if body_dynamics is None else [t for t in body_dynamics.terms if hasattr(t, "at_a")]
+    terms = [] if body_dynamics is None else [t for t in body_dynamics.terms if isinstance(t, BodySprings)]
     if not terms:
         return None
     return {

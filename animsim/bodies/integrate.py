@@ -54,23 +54,18 @@ def _work(integ: Any, stages: int) -> _Work:
 
 
 def step(integ: Any, state: Any, dt: float) -> None:
-    """One step of ``integ`` (an animsim integrator) on a state with bodies."""
-    name = integ.name
-    if integ.method.tableau is not None:
-        _runge_kutta(integ, state, dt)
-    elif name == "symplectic_euler":
-        _symplectic_euler(integ, state, dt)
-        return  # q normalised by advance_orientation
-    elif name == "euler_average":
-        _euler_average(integ, state, dt)
-    elif name == "verlet":
-        _verlet(integ, state, dt)
-    else:  # compile refuses the others for scenes with bodies
-        raise ValueError(f"integrator {name!r} does not integrate rigid bodies")
-    state.body_orientation[:] = quat.normalise(state.body_orientation)
+    """One step of ``integ`` (an animsim integrator) on a state with bodies: the rule its
+    class names (``body_rule``, one of the functions below; compile refuses bodies to a
+    method without one), then q back on the unit sphere."""
+    rule = integ.body_rule
+    if rule is None:  # compile refuses bodies to such a method; a bug if it gets here
+        raise ValueError(f"integrator {integ.name!r} does not integrate rigid bodies")
+    if rule(integ, state, dt):
+        state.body_orientation[:] = quat.normalise(state.body_orientation)
 
 
-def _runge_kutta(integ: Any, state: Any, dt: float) -> None:
+def runge_kutta(integ: Any, state: Any, dt: float) -> bool:
+    """Every explicit tableau: the same stages on the whole system (x, v, q, omega)."""
     tab = integ.tableau
     dyn = integ.dynamics
     bodies = dyn.bodies
@@ -103,9 +98,10 @@ def _runge_kutta(integ: Any, state: Any, dt: float) -> None:
             v += (dt * bi) * wk.kv[i]
             q += (dt * bi) * wk.kq[i]
             w += (dt * bi) * wk.kw[i]
+    return True
 
 
-def _symplectic_euler(integ: Any, state: Any, dt: float) -> None:
+def symplectic_euler(integ: Any, state: Any, dt: float) -> bool:
     dyn = integ.dynamics
     wk = _work(integ, 1)
     x, v = state.particle_position, state.particle_velocity
@@ -118,9 +114,10 @@ def _symplectic_euler(integ: Any, state: Any, dt: float) -> None:
         quat.numba_advance_orientation()(q, w, alpha, dt)
     else:
         quat.advance_orientation(q, w, alpha, dt)
+    return False  # advance_orientation normalises q itself
 
 
-def _euler_average(integ: Any, state: Any, dt: float) -> None:
+def euler_average(integ: Any, state: Any, dt: float) -> bool:
     dyn = integ.dynamics
     wk = _work(integ, 1)
     x, v = state.particle_position, state.particle_velocity
@@ -133,9 +130,10 @@ def _euler_average(integ: Any, state: Any, dt: float) -> None:
     q += dt * quat.derivative(q, 0.5 * (w + w1))
     np.copyto(v, v1)
     np.copyto(w, w1)
+    return True
 
 
-def _verlet(integ: Any, state: Any, dt: float) -> None:
+def verlet(integ: Any, state: Any, dt: float) -> bool:
     dyn = integ.dynamics
     wk = _work(integ, 2)
     x, v = state.particle_position, state.particle_velocity
@@ -153,3 +151,4 @@ def _verlet(integ: Any, state: Any, dt: float) -> None:
     v += (0.5 * dt) * (a0 + a1)
     w += (0.5 * dt) * (al0 + al1)
     integ.reset()  # the particle path's cached force is not this step's
+    return True

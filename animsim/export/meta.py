@@ -72,7 +72,7 @@ def run_facts(compiled: Any, state: Any) -> dict[str, Any]:
     gravity); ``fps``: recorded frames per second (the scene's ``record.fps``,
     else one frame every ``record.every`` steps of ``dt``).
     """
-    emitters = getattr(compiled, "emitters", None)
+    emitters = compiled.emitters
     pools = list(getattr(emitters, "pools", []) or [])
     pool_size = int(sum(p.capacity for p in pools))
     total = int(compiled.system.particle_count)

@@ -80,6 +80,7 @@ class QuadraticDrag(ForceElement):
     has_damping = True
 
     no_closed_form = "quadratic drag has no closed form in more than one dimension"
+    stability_caveat = "quadratic drag damps in proportion to speed and is not counted"
 
     def __init__(self, rho: float, cd: float, area: float):
         self.c = 0.5 * rho * cd * area

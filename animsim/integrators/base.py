@@ -15,6 +15,7 @@ change the state behind the integrator's back.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from typing import Any, ClassVar
 
 from animsim import methods
@@ -54,6 +55,11 @@ class Integrator(ABC):
         cls.order = method.order
         cls.evaluations_per_step = method.evaluations_per_step
         cls.description = method.description
+
+    #: how a step advances rigid bodies with the particles (animsim.bodies.integrate: a
+    #: function (integrator, state, dt) -> whether q still needs normalising), or None when
+    #: the method does not integrate bodies (its descriptor says so, and compile refuses them)
+    body_rule: ClassVar[Callable[[Any, State, float], bool] | None] = None
 
     #: whether ``step(state, dt, stage)`` runs a post-step stage a block of rows at a time
     #: (its ``before(rows)`` and ``after(rows)`` around each block's update) when the

@@ -111,7 +111,7 @@ class ImplicitEuler(Integrator):
         self._a = np.zeros((n, 3))
         self._f = np.zeros(3 * n)
         self._dv = np.zeros(3 * n)  # last step's solution, the next warm start
-        self.implicit_terms = [t for t in dynamics.terms if hasattr(t, "jacobians")]
+        self.implicit_terms = [t for t in dynamics.terms if t.offers_jacobians]
         #: conjugate-gradient iterations over the run, and solves that fell back to a direct solver
         self.cg_iterations = 0
         self.direct_solves = 0

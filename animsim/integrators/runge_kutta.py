@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from animsim.bodies import integrate as bodies
 from animsim.bodies.integrate import step as body_step
 from animsim.dynamics import Dynamics
 from animsim.integrators.base import FUSED_RUNGE_KUTTA, Integrator
@@ -26,6 +27,7 @@ from animsim.system import State
 
 class RungeKutta(Integrator):
     tableau: Tableau
+    body_rule = staticmethod(bodies.runge_kutta)
 
     def __init__(self, dynamics: Dynamics):
         super().__init__(dynamics)

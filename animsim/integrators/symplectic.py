@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from animsim.bodies import integrate as bodies
 from animsim.bodies.integrate import step as body_step
 from animsim.dynamics import Dynamics
 from animsim.integrators.base import (
@@ -33,6 +34,7 @@ CACHE_TIME_RTOL = 1e-9
 
 class SymplecticEuler(Integrator):
     method_name = "symplectic_euler"
+    body_rule = staticmethod(bodies.symplectic_euler)
 
     def __init__(self, dynamics: Dynamics):
         super().__init__(dynamics)
@@ -96,6 +98,7 @@ class SymplecticEuler(Integrator):
 
 class EulerAverage(Integrator):
     method_name = "euler_average"
+    body_rule = staticmethod(bodies.euler_average)
 
     def __init__(self, dynamics: Dynamics):
         super().__init__(dynamics)
@@ -120,6 +123,7 @@ class EulerAverage(Integrator):
 
 class Verlet(Integrator):
     method_name = "verlet"
+    body_rule = staticmethod(bodies.verlet)
 
     def __init__(self, dynamics: Dynamics):
         super().__init__(dynamics)

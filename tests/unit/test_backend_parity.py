@@ -126,7 +126,8 @@ INTEGRATORS = list(methods.names())
 
 
 def test_the_generated_scenes_cover_every_force_family():
-    kinds = {load_scene_text(f"duration: 1\nforces: [{f}]\n").scene.forces[0].type for f in FORCES}
+    one = "particles: [{id: a, mass: 1, position: [0, 1, 0]}]"
+    kinds = {load_scene_text(f"duration: 1\n{one}\nforces: [{f}]\n").scene.forces[0].type for f in FORCES}
     assert kinds == set(m.force_types())
 
 

@@ -257,3 +257,10 @@ def test_an_output_format_registered_at_test_time_reaches_every_consumer(throwaw
     assert est.output_bytes("test_jsonl", 1.0) - est.output_bytes("csv", 1.0) == pytest.approx(
         est.frames * est.rows_per_frame * (100.0 - sinks.get_format("csv").disk_row_bytes(1.0)), abs=1
     )
+
+
+def test_every_method_that_says_it_integrates_bodies_has_a_body_rule():
+    from animsim.integrators import REGISTRY
+
+    for name in methods.names():
+        assert methods.get(name).integrates_bodies == (REGISTRY[name].body_rule is not None), name
