@@ -28,8 +28,8 @@ for _var in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import typer  # noqa: E402
 
-from animsim import __version__  # noqa: E402
 from animsim.errors import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_USAGE, AnimsimError, UsageError  # noqa: E402
+from animsim.version import __version__  # noqa: E402
 
 
 class _App(typer.Typer):

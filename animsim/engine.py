@@ -18,11 +18,11 @@ from typing import Any
 
 import numpy as np
 
-from animsim import __version__
 from animsim.compile import Compiled
 from animsim.export.meta import run_facts
 from animsim.record import Frame, FrameSink
 from animsim.system import State
+from animsim.version import __version__
 
 STATUS_OK = "ok"
 STATUS_UNSTABLE = "unstable"

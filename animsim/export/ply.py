@@ -137,11 +137,11 @@ from typing import Any
 
 import numpy as np
 
-from animsim import __version__
 from animsim.atomic import AtomicFile
 from animsim.errors import SimulationError
 from animsim.export.meta import meta_file, meta_path
 from animsim.record import Connectivity, Frame, TrajectoryHeader
+from animsim.version import __version__
 
 PLY_SUFFIX = ".ply"
 DEFAULT_STEM = "frames"
