@@ -12,7 +12,7 @@ Reading
   order) is particle ``<id>[k]``.
 * PLY: the ``vertex`` (x, y, z) and ``face`` (``vertex_indices`` or
   ``vertex_index``) elements, ASCII or binary, read by animsim's own PLY
-  reader (:func:`animsim.export.ply.read_ply`); vertex order is file order.
+  reader (:func:`animsim.ply_reader.read_ply`); vertex order is file order.
 * STL: through trimesh (``pip install animsim[mesh]``), with identical
   corners merged, so ``k`` is trimesh's merged vertex order.
 
@@ -256,7 +256,8 @@ def _parse_obj(raw: bytes, name: str) -> tuple[np.ndarray, list[tuple[int, list[
 def _parse_ply(path: Path) -> tuple[np.ndarray, list[tuple[int, list[int]]]]:
     import numpy as np
 
-    from animsim.export.ply import PlyFormatError, read_ply
+    # lazy as numpy is here: loading a scene without a mesh does not pay for it
+    from animsim.ply_reader import PlyFormatError, read_ply
 
     try:
         v = read_ply(path, "vertex")
