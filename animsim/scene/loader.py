@@ -30,7 +30,9 @@ from yaml.events import AliasEvent
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
 from animsim.errors import Diagnostic, SceneError, UsageError
+from animsim.scene.meshes import check_meshes
 from animsim.scene.models import HEX_COLOR_PATTERN, Scene
+from animsim.scene.validate import check_scene, partial_scene
 
 Path_ = tuple[str | int, ...]
 
@@ -484,8 +486,6 @@ def load_scene_bytes(raw: bytes, file: str, limits: Limits = Limits()) -> Loaded
         )
     # Top-level keys starting with x- are free for anchors (as in Compose files).
     body = {k: v for k, v in data.items() if not (isinstance(k, str) and k.startswith("x-"))}
-    from animsim.scene.validate import check_scene, partial_scene  # late: validate imports structures
-
     try:
         scene = Scene.model_validate(body, context={"marks": True})
     except ValidationError as exc:
@@ -510,8 +510,6 @@ def mesh_problems(scene: Scene, file: str) -> list[tuple[Path_, str, bool]]:
     """Read the mesh files of ``type: mesh`` structures, relative to the scene's folder."""
     if not any(s.type == "mesh" for s in scene.structures):
         return []
-    from animsim.scene.meshes import check_meshes
-
     scene_dir = None if file.startswith("<") else Path(file).parent
     return check_meshes(scene, scene_dir)
 

@@ -12,6 +12,7 @@ so that each error can name the exact key it is about.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Annotated, Any, Literal, get_args
 
 from pydantic import (
@@ -26,6 +27,8 @@ from pydantic import (
     field_validator,
     model_validator,
 )
+
+from animsim.errors import Diagnostic, SceneError
 
 IntegratorName = Literal[
     "euler",
@@ -873,6 +876,13 @@ class Record(Model):
         return self
 
 
+#: The rules that span sections (:func:`animsim.scene.validate.check_scene`), each a
+#: function of the scene giving (path, message, at_key) problems. They read the models
+#: above, so this module cannot import them; the package ``animsim.scene`` hands them
+#: here when it is imported, which Python does before it imports this module.
+CROSS_CHECKS: list[Callable[[Scene], list[tuple[tuple[str | int, ...], str, bool]]]] = []
+
+
 class Scene(Model):
     """A whole scene file."""
 
@@ -965,10 +975,7 @@ class Scene(Model):
         Python. The loader runs them itself, with line marks (context ``{"marks": True}``)."""
         if info.context and info.context.get("marks"):
             return self
-        from animsim.errors import Diagnostic, SceneError
-        from animsim.scene.validate import check_scene
-
-        problems = check_scene(self)
+        problems = [problem for check in CROSS_CHECKS for problem in check(self)]
         if problems:
             raise SceneError(
                 [

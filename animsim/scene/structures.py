@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:  # numpy is imported where arrays are built, so validating a scene
     import numpy as np  # (and refusing a bad one) does not pay for importing it
 
+from animsim.scene.meshes import mesh_parts, mesh_spring_count
 from animsim.scene.models import Cloth, MeshStructure, SoftBox, SpringFamily, Strand, Structure
 
 _PLANE_AXES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}
@@ -82,8 +83,6 @@ def structure_spring_count(s: Structure) -> int:
     """Number of springs the structure generates, counted without generating them
     (the memory pre-flight calls this on lattices far too large to build)."""
     if isinstance(s, MeshStructure):
-        from animsim.scene.meshes import mesh_spring_count
-
         return mesh_spring_count(s)
     shape = grid_shape(s)
     total = 0
@@ -284,8 +283,6 @@ def _quads(sheet: np.ndarray) -> np.ndarray:
 def _expand_mesh(s: MeshStructure, scene_dir: Path | None) -> Expanded:
     import numpy as np
 
-    from animsim.scene.meshes import mesh_parts
-
     parts = mesh_parts(s, scene_dir)
     n = len(parts.position)
     groups = [
@@ -314,7 +311,7 @@ def connectivity(expanded: list[tuple[str, Expanded, int]]) -> tuple[Any, ...]:
     """:class:`animsim.record.Connectivity` of each expanded structure (id, expansion, first row)."""
     import numpy as np
 
-    from animsim.record import Connectivity
+    from animsim.record import Connectivity  # with numpy: validating a scene imports neither
 
     out = []
     for name, e, first in expanded:
