@@ -66,6 +66,7 @@ from typing import Any
 
 import numpy as np
 
+from animsim.backends import block_stage, fused_unsupported
 from animsim.system import State
 
 #: a doubled step has about DOUBLING_BASE^(p+1) times the local error of the two halves
@@ -125,19 +126,6 @@ def next_step(h: float, distance: float, dt_min: float, dt_max: float) -> tuple[
     return h, False
 
 
-def block_stage(compiled: Any) -> Any:
-    """The scene's one post-step stage when the NumPy step may run it a block of rows at a
-    time inside the integrator's step (a pointwise stage that offers it, ``meets_blocks``,
-    and an integrator that steps in blocks), else None. Whether a step then runs in blocks
-    is decided per step (:attr:`Dynamics.blocks`)."""
-    stages = compiled.post_step
-    only = stages[0] if len(stages) == 1 else None
-    if only is None or not only.pointwise or not compiled.integrator.block_stages:
-        return None
-    meets = getattr(only, "meets_blocks", None)
-    return only if meets is not None and meets() else None
-
-
 def start(compiled: Any, notice: Callable[[str], None] | None = None) -> tuple[State, Any, float]:
     """What a run starts from: a fresh state, the elements bound to it and the stages reset,
     and the stepper prepared (numba's kernels compiled or loaded): (state, stepper, seconds
@@ -155,11 +143,8 @@ def make_stepper(compiled: Any) -> Any:
     numba = compiled.backend == "numba"
     if compiled.adaptive is not None:
         return StepDoubling(compiled, numba=numba)
-    if numba:
-        from animsim.backends import fused_unsupported
-
-        if not fused_unsupported(compiled):
-            return Fused(compiled)
+    if numba and not fused_unsupported(compiled):
+        return Fused(compiled)
     return StepByStep(compiled, numba=numba)
 
 
