@@ -66,7 +66,9 @@ from typing import Any
 
 import numpy as np
 
+from animsim.analysis.stability import particle_name
 from animsim.backends import block_stage, fused_unsupported
+from animsim.guard import Failure, Guard
 from animsim.system import State
 
 #: a doubled step has about DOUBLING_BASE^(p+1) times the local error of the two halves
@@ -365,8 +367,6 @@ class Fused(_Base):
         decide as ``guard`` does: its own ``check`` (not a subclass's), no stage between the
         chunks, a replayable run, and a compiled energy sum for every element the watchdog sums
         (:meth:`animsim.backends.fused.FusedStepper.check_inside`)."""
-        from animsim.engine import Guard
-
         return (
             type(guard).check is Guard.check
             and not self.between
@@ -544,9 +544,6 @@ class StepDoubling(_Base):
             self._one(trial, h / halves, trial.time + h / halves)
 
     def advance(self, state: State, k: int, goal: int, max_steps: int | None = None) -> tuple[int, Any, bool]:
-        from animsim.analysis.stability import particle_name
-        from animsim.engine import Failure
-
         if self._big is None:
             self._big, self._small = state.copy(), state.copy()
         big, small = self._big, self._small
