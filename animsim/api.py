@@ -551,6 +551,7 @@ def check(
 
     return check_scenes(
         [Path(p) for p in paths],
+        prepare=prepare_file,
         quiet=quiet,
         echo=echo,
         echo_err=echo_err,

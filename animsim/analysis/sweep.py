@@ -73,6 +73,7 @@ from typing import Any
 
 import numpy as np
 
+from animsim.analysis.check import energy_drift
 from animsim.analysis.references import Trajectory, run_trajectory
 from animsim.errors import AnimsimError, UsageError
 from animsim.record import Clock, MemorySink, landing_steps
@@ -474,7 +475,6 @@ def run_case(case: Case) -> Row:
 
     Module level and fed plain data, so process pools and Dask can ship it.
     """
-    from animsim.analysis.check import energy_drift
     from animsim.compile import compile_scene
     from animsim.engine import STATUS_OK, STATUS_UNSTABLE, run
 
