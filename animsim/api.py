@@ -615,7 +615,8 @@ def render(
             )
         if integrator is not None:
             raise UsageError("give --integrator or --integrators, not both")
-        from animsim.export.side_by_side import compile_each, render_side_by_side
+        from animsim.export.side_by_side import render_side_by_side
+        from animsim.panel_runs import compile_each
 
         names = _integrator_names(integrators)
         sc, name, _, _ = _prepared(source, limits, dt=dt, duration=duration)  # type: ignore[arg-type]

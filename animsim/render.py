@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from animsim.errors import UsageError
+from animsim.export.raster import up_axis, view_up
 from animsim.record import Frame, TrajectoryHeader
 
 
@@ -138,22 +139,6 @@ def _bounds(lo: np.ndarray, hi: np.ndarray, planes: list[tuple[np.ndarray, np.nd
     return bounds_from_positions(np.stack(pts))
 
 
-def view_up(scene: Any) -> str | None:
-    """The axis a default view draws upward: y or z when the scene's gravity points down one
-    of them (its largest component), else None (no gravity: no up to keep)."""
-    for f in getattr(scene, "forces", ()):
-        if f.type == "gravity":
-            g = np.abs(np.asarray(f.g, dtype=np.float64))
-            k = int(np.argmax(g))
-            return "xyz"[k] if g[k] > 0 and k > 0 else None
-    return None
-
-
-def _up_axis(scene: Any) -> str:
-    """z-up when the scene's gravity points down z, else y-up (the language's default)."""
-    return view_up(scene) or "y"
-
-
 def validate(gif: Path | None, mp4: Path | None, opts: RenderOptions) -> tuple[int, int]:
     """Check every option before any work; UsageError (exit 2) when one is wrong."""
     from animsim.export.animation import _require_ffmpeg, check_fps
@@ -236,7 +221,7 @@ def render_scene(
         return RenderResult(frames=0, outputs=[], status="interrupted")
     bounds = _bounds(bounds_sink.lo, bounds_sink.hi, planes)
     opts = _with_view(opts, bounds_sink.lo, bounds_sink.hi, view_up(compiled.scene))
-    sinks = _sinks(gif, mp4, opts, bounds, planes, _up_axis(compiled.scene), progress)
+    sinks = _sinks(gif, mp4, opts, bounds, planes, up_axis(compiled.scene), progress)
     result = run(compiled, sinks, stop=stop)
     return RenderResult(
         frames=result.frames,
@@ -288,7 +273,7 @@ def render_trajectory(
     extra: dict[str, Any] = {}
     if compiled is not None:
         planes = compiled.header.extra.get("planes", [])
-        up = _up_axis(compiled.scene)
+        up = up_axis(compiled.scene)
         # Springs join scene indices; the trajectory numbers its ids itself.
         pos_of = {pid: k for k, pid in enumerate(traj.ids)}
         ids = compiled.system.ids

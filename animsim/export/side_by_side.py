@@ -21,6 +21,7 @@ import numpy as np
 
 from animsim.atomic import AtomicFile
 from animsim.errors import SimulationError
+from animsim.export.raster import up_axis, view_up
 
 LABEL_RGB = (0.92, 0.92, 0.92)
 MARK_RGB = (1.0, 0.2, 0.2)  # a pure palette red: the GIF palette has it exactly
@@ -29,15 +30,6 @@ DIVIDER_PX = 2  # even, so panels of an even width give an even MP4
 BORDER_PX = 3  # the red outline of a frozen (failed) panel
 LABEL_SCALE = 1 / 20  # label height as a fraction of the panel's smaller side
 MIN_LABEL_PX = 13
-
-
-def compile_each(scene: Any, name: str, integrators: Sequence[str] | None) -> list[Any]:
-    """One compiled scene per integrator (or the scene as it is when there are none)."""
-    from animsim.compile import compile_scene, with_overrides
-
-    if not integrators:
-        return [compile_scene(scene, name)]
-    return [compile_scene(with_overrides(scene, integrator=i), name) for i in integrators]
 
 
 class LabelPainter:
@@ -171,8 +163,8 @@ def render_side_by_side(
     """
     from animsim.export.animation import gif_delay_cs
     from animsim.export.raster import make_camera, parse_size
-    from animsim.export.viewer import simulate_panel
-    from animsim.render import RenderResult, _bounds, _up_axis, _with_view, view_up
+    from animsim.panel_runs import simulate_panel
+    from animsim.render import RenderResult, _bounds, _with_view
 
     runs = []
     for c in compiled:
@@ -189,7 +181,7 @@ def render_side_by_side(
     # no --view or --size: chosen from all runs' bounds, as a single render does
     opts = _with_view(opts, lo, hi, view_up(compiled[0].scene))
     size = parse_size(opts.size)
-    camera_opts: dict[str, Any] = {"up": _up_axis(compiled[0].scene), "distance": opts.distance}
+    camera_opts: dict[str, Any] = {"up": up_axis(compiled[0].scene), "distance": opts.distance}
     if opts.azimuth is not None:
         camera_opts["azimuth"] = opts.azimuth
     if opts.elevation is not None:
