@@ -353,7 +353,7 @@ def live_array(a: np.ndarray, cache: dict[int, np.ndarray]) -> np.ndarray:
     return got
 
 
-def _compile_helpers(namespace: dict[str, Any]) -> None:
+def compile_helpers(namespace: dict[str, Any]) -> None:
     import numba
 
     for name, obj in list(namespace.items()):
@@ -390,7 +390,7 @@ def jit_kernel(
         # numba still labels them experimental.
         warnings.filterwarnings("ignore", category=NumbaExperimentalFeatureWarning)
         sig = element_signature(stage=stage, energy=energy, newborn=newborn)
-        _compile_helpers(fn.__globals__)
+        compile_helpers(fn.__globals__)
         target = fn
         if parallel:
             # Kernels loop with a module-level ``prange`` that is plain ``range`` until

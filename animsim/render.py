@@ -51,7 +51,7 @@ DEFAULT_LONG_SIDE = 480
 MAX_ASPECT = 16 / 9
 
 
-def _with_view(opts: RenderOptions, lo: np.ndarray, hi: np.ndarray, up: str | None = None) -> RenderOptions:
+def with_view(opts: RenderOptions, lo: np.ndarray, hi: np.ndarray, up: str | None = None) -> RenderOptions:
     """``opts`` with a view and a size: as asked, else chosen from the motion's bounds.
 
     The view is chosen as ``animsim plot`` picks it (:func:`pick_view`: the side
@@ -128,7 +128,7 @@ class _BoundsSink:
         pass
 
 
-def _bounds(lo: np.ndarray, hi: np.ndarray, planes: list[tuple[np.ndarray, np.ndarray]]) -> Any:
+def picture_bounds(lo: np.ndarray, hi: np.ndarray, planes: list[tuple[np.ndarray, np.ndarray]]) -> Any:
     from animsim.export.raster import bounds_from_positions
 
     pts = [p for p in (lo, hi) if np.isfinite(p).all()]
@@ -141,7 +141,7 @@ def _bounds(lo: np.ndarray, hi: np.ndarray, planes: list[tuple[np.ndarray, np.nd
 
 def validate(gif: Path | None, mp4: Path | None, opts: RenderOptions) -> tuple[int, int]:
     """Check every option before any work; UsageError (exit 2) when one is wrong."""
-    from animsim.export.animation import _require_ffmpeg, check_fps
+    from animsim.export.animation import check_fps, require_ffmpeg
     from animsim.export.raster import VIEWS, parse_size
 
     if gif is None and mp4 is None:
@@ -164,7 +164,7 @@ def validate(gif: Path | None, mp4: Path | None, opts: RenderOptions) -> tuple[i
     if mp4 is not None:
         if mp4.suffix.lower() != ".mp4":
             raise UsageError(f"--mp4 {mp4}: the file name must end in .mp4")
-        _require_ffmpeg()
+        require_ffmpeg()
     return size
 
 
@@ -219,8 +219,8 @@ def render_scene(
     first = run(compiled, [bounds_sink], stop=stop)
     if first.status == "interrupted":
         return RenderResult(frames=0, outputs=[], status="interrupted")
-    bounds = _bounds(bounds_sink.lo, bounds_sink.hi, planes)
-    opts = _with_view(opts, bounds_sink.lo, bounds_sink.hi, view_up(compiled.scene))
+    bounds = picture_bounds(bounds_sink.lo, bounds_sink.hi, planes)
+    opts = with_view(opts, bounds_sink.lo, bounds_sink.hi, view_up(compiled.scene))
     sinks = _sinks(gif, mp4, opts, bounds, planes, up_axis(compiled.scene), progress)
     result = run(compiled, sinks, stop=stop)
     return RenderResult(
@@ -284,8 +284,8 @@ def render_trajectory(
         spring_index = np.array([p for p in keep if None not in p], dtype=np.int64).reshape(-1, 2)
         extra = _extras_for(compiled, traj.ids)
     lo, hi = traj.bounds()
-    bounds = _bounds(lo, hi, planes)
-    opts = _with_view(opts, lo, hi, None if compiled is None else view_up(compiled.scene))
+    bounds = picture_bounds(lo, hi, planes)
+    opts = with_view(opts, lo, hi, None if compiled is None else view_up(compiled.scene))
     sinks = _sinks(gif, mp4, opts, bounds, planes, up, progress)
     header = TrajectoryHeader(
         scene_name="trajectory", ids=[], spring_index=spring_index, has_emitters=False, extra=extra

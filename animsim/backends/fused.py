@@ -953,7 +953,7 @@ def _addresses(
     return tuple(_Address(d, sig) for d in dispatchers)
 
 
-class _FastCall:
+class FastCall:
     """Call a numba function's compiled overload directly, skipping the dispatcher's typing
     of every argument on every call (the fused chunk takes 26; with first-class function
     tuples that cost about 150 us a call, measured). Used only for argument types already
@@ -1039,7 +1039,7 @@ class NumbaForces:
             inv_mass = live_array(d.inv_mass, self._copies)
             args = (x, v, float(t), out, self.kernels, self.fps, self.ips, mass, inv_mass, self.pinned)
             if self._acc is None:  # loads (or compiles) the kernel; then calls its overload directly
-                self._acc = _FastCall(_acc, args)
+                self._acc = FastCall(_acc, args)
             self._acc(*args)
             return out
         # Mixed: sum every force first (numba kernels, then NumPy ones), then divide.
@@ -1237,7 +1237,7 @@ class FusedStepper:
         self.compile_seconds = 0.0
         self._copies: dict[int, np.ndarray] = {}
         #: the chunk kernels this stepper has called, each called directly from then on
-        self._chunks: dict[Any, _FastCall] = {}
+        self._chunks: dict[Any, FastCall] = {}
         #: steps a collision changed, over every call so far
         self.changed_steps = 0
 
@@ -1313,7 +1313,7 @@ class FusedStepper:
             args = (*common, self.kx, self.kv, *self.work, self.a0_valid, has_stage)
         call = self._chunks.get(kernel)
         if call is None:  # loads (or compiles) the chunk; then calls its overload directly
-            call = self._chunks[kernel] = _FastCall(kernel, args)
+            call = self._chunks[kernel] = FastCall(kernel, args)
         t0 = time.perf_counter()
         result = call(*args)
         taken, evals, changed, self.a0_valid, failed = result
@@ -1390,7 +1390,7 @@ class FusedStepper:
         no_u = np.zeros(0)
         births = watch.alive_prev is not None
         books = np.zeros(6)
-        call: dict[Any, _FastCall] = {}
+        call: dict[Any, FastCall] = {}
         copies: dict[int, np.ndarray] = {}
         # several pieces of rows, every watched element pointwise: the check may share them
         # among numba's threads, when the stepper's own calls do (its chooser keeps them)
@@ -1425,7 +1425,7 @@ class FusedStepper:
                 args = (*args, *room)
             fast = call.get(kernel)
             if fast is None:  # loads (or compiles) the check; then calls its overload directly
-                fast = call[kernel] = _FastCall(kernel, args)
+                fast = call[kernel] = FastCall(kernel, args)
             return bool(fast(*args))
 
         return quick
@@ -1462,7 +1462,7 @@ class FusedStepper:
             *shots,
         )
         if self._checked_call is None:  # loads (or compiles) the chunk; then calls its overload
-            self._checked_call = _FastCall(checked_chunk, args)
+            self._checked_call = FastCall(checked_chunk, args)
         result = self._checked_call(*args)
         taken, evals, changed, self.a0_valid, passed, stopped, copied = result
         self.changed_steps += int(changed)

@@ -57,10 +57,10 @@ def phase_command(
         pinned = np.zeros(len(traj.ids), dtype=bool)
         if scene is not None:
             from animsim.compile import compile_scene
-            from animsim.export.viewer import _pinned_for
+            from animsim.export.viewer import pinned_for
 
             loaded, sc, _ = prepare(scene)
-            pinned = _pinned_for(compile_scene(sc, loaded.name), traj.ids)
+            pinned = pinned_for(compile_scene(sc, loaded.name), traj.ids)
         title = f"{source.name}: phase portrait"
     else:
         from animsim.export.viewer import panel_label

@@ -528,7 +528,7 @@ def _springs_over_time(compiled: Any, traj: Any) -> tuple[np.ndarray, np.ndarray
     return springs[order], drawn
 
 
-def _pinned_for(compiled: Any, ids: Sequence[str]) -> np.ndarray:
+def pinned_for(compiled: Any, ids: Sequence[str]) -> np.ndarray:
     names = compiled.system.ids
     pinned = {names[i] for i in np.flatnonzero(compiled.system.particle_pinned)}
     return np.array([pid in pinned for pid in ids], dtype=bool)
@@ -564,7 +564,7 @@ def panel_from_trajectory(
     drawn = None
     if compiled is not None:
         springs, drawn = _springs_over_time(compiled, traj)
-        pinned = _pinned_for(compiled, traj.ids)
+        pinned = pinned_for(compiled, traj.ids)
         shapes = scene_shapes(compiled)
     return ViewerPanel(
         times=traj.times,
@@ -613,7 +613,7 @@ def trajectory_html(traj: Any, *, shapes: Sequence[Shape] = (), height: int = 76
             times=traj.times,
             positions=traj.positions,
             springs=_springs_for(compiled, traj.ids) if compiled is not None else None,
-            pinned=_pinned_for(compiled, traj.ids) if compiled is not None else None,
+            pinned=pinned_for(compiled, traj.ids) if compiled is not None else None,
             shapes=scene_shapes(compiled) if compiled is not None else (),
             status=status,
             failure_time=failure_time,

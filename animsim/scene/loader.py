@@ -491,7 +491,7 @@ def load_scene_bytes(raw: bytes, file: str, limits: Limits = Limits()) -> Loaded
     except ValidationError as exc:
         # Report the cross-field problems of the parts that did validate too,
         # so one round of fixes is enough (never twice for one key).
-        found = _diagnostics(exc, body, marks, file)
+        found = diagnostics(exc, body, marks, file)
         partial, ids_complete = partial_scene(body)
         seen = {d.path for d in found}
         for p, msg, key in check_scene(partial, ids_complete=ids_complete, partial=True):
@@ -796,7 +796,7 @@ def _short(value: Any) -> str:
     return r if len(r) <= 40 else r[:37] + "..."
 
 
-def _diagnostics(exc: ValidationError, data: dict[str, Any], marks: Marks, file: str) -> list[Diagnostic]:
+def diagnostics(exc: ValidationError, data: dict[str, Any], marks: Marks, file: str) -> list[Diagnostic]:
     groups: dict[Path_, list[dict[str, Any]]] = {}
     for err in exc.errors(include_url=False):
         loc = err["loc"]

@@ -86,7 +86,7 @@ def structure_spring_count(s: Structure) -> int:
         return mesh_spring_count(s)
     shape = grid_shape(s)
     total = 0
-    for _name, _fam, offsets in _family_offsets(s):
+    for _name, _fam, offsets in family_offsets(s):
         for offset in offsets:
             if all(abs(o) < n for n, o in zip(shape, offset, strict=True)):
                 total += math.prod(n - abs(o) for n, o in zip(shape, offset, strict=True))
@@ -164,7 +164,7 @@ def _offset_pairs(shape: tuple[int, ...], offset: tuple[int, ...]) -> np.ndarray
     return _pairs(shape, tuple(a), tuple(b))
 
 
-def _family_offsets(s: Structure) -> list[tuple[str, SpringFamily, list[tuple[int, ...]]]]:
+def family_offsets(s: Structure) -> list[tuple[str, SpringFamily, list[tuple[int, ...]]]]:
     """The spring families a structure asks for, each with its grid offsets."""
     if isinstance(s, Cloth):
         spec = [
@@ -192,7 +192,7 @@ def _families(s: Structure, shape: tuple[int, ...]) -> list[tuple[str, np.ndarra
 
     return [
         (name, np.concatenate([_offset_pairs(shape, o) for o in offsets]), fam)
-        for name, fam, offsets in _family_offsets(s)
+        for name, fam, offsets in family_offsets(s)
     ]
 
 
