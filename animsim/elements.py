@@ -403,7 +403,7 @@ def jit_kernel(
         got = numba.njit(cache=True, parallel=parallel)(target)
         # numba.njit(sig) would compile (or load) at once, through numba's full start-up
         # of its compiler even for a disk-cache hit: load_cached skips that on a hit
-        from animsim.backends.numba_cache import load_cached
+        from animsim.numba_cache import load_cached
 
         if not load_cached(got, sig):
             got.compile(sig)

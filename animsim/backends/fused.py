@@ -35,7 +35,6 @@ from numba import njit, prange
 from numba.core.errors import NumbaExperimentalFeatureWarning
 
 from animsim import backends
-from animsim.backends.numba_cache import load_cached
 from animsim.elements import element_signature, jit_kernel, live_array
 from animsim.integrators.base import (
     FUSED_EULER_AVERAGE as EULER_AVERAGE,
@@ -49,6 +48,7 @@ from animsim.integrators.base import (
 from animsim.integrators.base import (
     FUSED_VERLET as VERLET,
 )
+from animsim.numba_cache import load_cached
 
 warnings.filterwarnings("ignore", category=NumbaExperimentalFeatureWarning)
 
