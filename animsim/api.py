@@ -615,7 +615,7 @@ def render(
             )
         if integrator is not None:
             raise UsageError("give --integrator or --integrators, not both")
-        from animsim.export.side_by_side import render_side_by_side
+        from animsim.commands.side_by_side import render_side_by_side
         from animsim.panel_runs import compile_each
 
         names = _integrator_names(integrators)
@@ -664,11 +664,11 @@ def view(
     stop: Callable[[], bool] | None = None,
 ) -> Any:
     """Write one self-contained HTML page that plays the animation: ``animsim view``.
-    Returns :class:`animsim.export.viewer_command.ViewSummary` (the summary line and notes)."""
+    Returns :class:`animsim.commands.viewer_command.ViewSummary` (the summary line and notes)."""
     import contextlib
 
+    from animsim.commands.viewer_command import write_view
     from animsim.export.viewer import VIEWS
-    from animsim.export.viewer_command import write_view
 
     if view not in VIEWS:
         raise UsageError(f"--view {view!r}: choose one of {', '.join(VIEWS)}")
@@ -727,7 +727,7 @@ def plot(
         raise UsageError("--integrators and --particles go with --kind phase")
     prepare_path = lambda path, **kw: prepare_file(path, limits, **kw)  # noqa: E731
     if kind == "phase":
-        from animsim.export.phase import phase_command
+        from animsim.commands.phase import phase_command
 
         phase_command(
             src,
@@ -752,7 +752,7 @@ def plot(
     if kind == "energy":
         if compiled is None:
             raise UsageError("--kind energy needs the scene: give a scene, or --scene with the trajectory")
-        from animsim.export.phase import energy_parts_of
+        from animsim.commands.phase import energy_parts_of
         from animsim.export.pictures import plot_energy_parts
 
         times, parts = energy_parts_of(compiled, read_trajectory(src) if from_file else None)
@@ -837,7 +837,7 @@ def sweep(
     if output is not None:
         sw.write_csv(table, Path(output))
     if plot is not None:
-        from animsim.export import sweep_plot
+        from animsim.commands import sweep_plot
 
         sweep_plot.plot_table(table, Path(plot), x_key, y_col)
     return table

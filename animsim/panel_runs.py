@@ -3,8 +3,8 @@ its energy parts kept (the viewer's panels, side-by-side pictures, phase plots),
 integrator when several are compared.
 
 It stands above the loop and below the commands that show the runs
-(:mod:`animsim.export.viewer_command`, :mod:`animsim.export.side_by_side`,
-:mod:`animsim.export.phase`), so the page and picture makers in :mod:`animsim.export`
+(:mod:`animsim.commands.viewer_command`, :mod:`animsim.commands.side_by_side`,
+:mod:`animsim.commands.phase`), so the page and picture makers in :mod:`animsim.export`
 never import the engine.
 """
 
