@@ -454,9 +454,9 @@ def run(
     memory limits) is refused before the first step. ``warn`` receives the
     stability warning of a step beyond its limit, before the run.
     """
-    from animsim.analysis import stability
-    from animsim.analysis.drift import DEFAULT_DRIFT_WARN_PERCENT, META_THRESHOLD_KEY, check_threshold
     from animsim.export.sinks import format_for, open_sink
+    from animsim.measures import stability
+    from animsim.measures.drift import DEFAULT_DRIFT_WARN_PERCENT, META_THRESHOLD_KEY, check_threshold
     from animsim.preflight import RunLimits, check_disk, check_ply_output
     from animsim.record import recording_rule
 
@@ -512,7 +512,7 @@ def explain(
 ) -> list[str]:
     """What a scene compiles to, as the lines ``animsim explain`` prints: counts, the
     stages each step runs, and what was left out because the scene does not need it."""
-    from animsim.analysis.effective import fallback_note
+    from animsim.measures.effective import fallback_note
 
     sc, name, _, _ = _prepared(source, limits, integrator=integrator)
     c = compile(sc, backend, name=name)
@@ -547,7 +547,7 @@ def check(
     """Validate, analyse and run each scene file, reporting through ``echo``/``echo_err``
     as ``animsim check`` does; True only if every scene is valid and stable."""
     from animsim.analysis.check import check_scenes
-    from animsim.analysis.drift import check_threshold
+    from animsim.measures.drift import check_threshold
 
     return check_scenes(
         [Path(p) for p in paths],

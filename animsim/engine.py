@@ -17,11 +17,11 @@ from typing import Any
 
 import numpy as np
 
-from animsim.analysis.drift import annotate
 from animsim.backends import numba_threads
 from animsim.compile import Compiled
 from animsim.export.meta import run_facts
 from animsim.guard import Failure, Guard
+from animsim.measures.drift import annotate
 from animsim.record import Frame, FrameSink
 from animsim.startup import resume_collector
 from animsim.steppers import start

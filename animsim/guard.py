@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from animsim.analysis import stability
-from animsim.analysis.watchdog import EnergyWatch
 from animsim.compile import Compiled
+from animsim.measures import stability
+from animsim.measures.watchdog import EnergyWatch
 from animsim.system import State
 
 
@@ -49,10 +49,10 @@ class Failure:
 class Guard:
     """The watchdog: stops a run at the first step whose state is not finite or
     whose mechanical energy has grown far beyond what the forces put in
-    (:mod:`animsim.analysis.watchdog`).
+    (:mod:`animsim.measures.watchdog`).
 
     ``check`` returns a Failure (with the particle and spring most to blame and
-    a fix from :mod:`animsim.analysis.stability`) or None. How often it runs
+    a fix from :mod:`animsim.measures.stability`) or None. How often it runs
     is the stepper's ``check_stride`` (:mod:`animsim.steppers`).
     """
 

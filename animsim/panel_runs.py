@@ -16,11 +16,11 @@ from typing import Any
 
 import numpy as np
 
-from animsim.analysis.energy_parts import EnergyRecorder
 from animsim.compile import compile_scene, with_overrides
 from animsim.engine import run
 from animsim.export.trajectory import TrajectoryCollector
 from animsim.export.viewer import ViewerPanel, panel_from_trajectory, panel_label
+from animsim.measures.energy_parts import EnergyRecorder
 
 
 def compile_each(scene: Any, name: str, integrators: Sequence[str] | None) -> list[Any]:

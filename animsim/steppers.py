@@ -66,9 +66,9 @@ from typing import Any
 
 import numpy as np
 
-from animsim.analysis.stability import particle_name
 from animsim.backends import block_stage, fused_unsupported
 from animsim.guard import Failure, Guard
+from animsim.measures.stability import particle_name
 from animsim.system import State
 
 #: a doubled step has about DOUBLING_BASE^(p+1) times the local error of the two halves

@@ -14,13 +14,13 @@ from typing import Any
 
 import numpy as np
 
-from animsim.analysis import stability
-from animsim.analysis.drift import DEFAULT_DRIFT_WARN_PERCENT, drift
-from animsim.analysis.effective import fallback_note
 from animsim.compile import compile_scene
 from animsim.console import table_width
 from animsim.engine import STATUS_OK, run
 from animsim.errors import AnimsimError
+from animsim.measures import stability
+from animsim.measures.drift import DEFAULT_DRIFT_WARN_PERCENT, drift
+from animsim.measures.effective import fallback_note
 
 # Below this energy scale (J) a relative drift means nothing; report absolute.
 ENERGY_FLOOR = 1e-12
@@ -32,7 +32,7 @@ def energy_drift(e0: float, e1: float) -> float:
 
 
 def _energy_report(compiled: Any, result: Any, drift_warn: float) -> str:
-    """Energy at start and end, and the drift verdict (animsim.analysis.drift)."""
+    """Energy at start and end, and the drift verdict (animsim.measures.drift)."""
     text = f"energy {result.energy_start:.4g} -> {result.energy_end:.4g} J"
     verdict = drift(compiled, result.energy_start, result.energy_end, drift_warn)
     if verdict.relative is None:

@@ -1328,7 +1328,7 @@ class FusedStepper:
 
     def check_inside(self, watch: Any) -> bool:
         """Take the watchdog's checks into the chunks (:meth:`advance_checked`) for the books of
-        ``watch`` (an opened :class:`animsim.analysis.watchdog.EnergyWatch`), when every
+        ``watch`` (an opened :class:`animsim.measures.watchdog.EnergyWatch`), when every
         element its energy test sums has a compiled energy kernel; False leaves them to Python.
 
         Only for a run without births (the books never change after they opened) and

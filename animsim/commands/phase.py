@@ -13,7 +13,7 @@ from animsim.errors import UsageError
 
 def energy_parts_of(compiled: Any, traj: Any = None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """(times, parts) of a run of ``compiled`` (simulated), or of a trajectory of its scene."""
-    from animsim.analysis.energy_parts import energies_from_trajectory
+    from animsim.measures.energy_parts import energies_from_trajectory
     from animsim.panel_runs import simulate_panel
 
     if traj is not None:

@@ -8,10 +8,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from animsim.analysis.energy_parts import energies_from_trajectory
 from animsim.atomic import AtomicFile
 from animsim.errors import UsageError
 from animsim.export.raster import up_axis
+from animsim.measures.energy_parts import energies_from_trajectory
 
 #: pages above this size get a note on stderr (they still work; they open slowly)
 LARGE_PAGE_BYTES = 50_000_000

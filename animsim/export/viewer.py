@@ -37,8 +37,8 @@ from typing import Any
 
 import numpy as np
 
-from animsim.analysis.energy_parts import energies_from_trajectory
 from animsim.export.raster import ORTHO_VIEWS, up_axis
+from animsim.measures.energy_parts import energies_from_trajectory
 
 SHAPE_KINDS = ("plane", "sphere", "box", "capsule")
 QUANT_MAX = 65534  # positions are quantised to 0..QUANT_MAX

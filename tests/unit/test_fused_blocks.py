@@ -598,7 +598,7 @@ def test_the_quick_check_in_pieces_sums_and_decides_as_the_one_pass_check():
     added in order. Its sums equal NumPy's to rounding, it counts the movable rows, it finds
     a number that is not finite at either end of any piece, and it passes and fails where
     the one-thread check does."""
-    from animsim.analysis.watchdog import EnergyWatch
+    from animsim.measures.watchdog import EnergyWatch
 
     compiled = _pieces_scene()
     state = compiled.fresh_state()
