@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-__version__ = "0.2.0"
+from animsim.version import __version__ as __version__
 
 __all__ = ["Scene", "SceneError", "Trajectory", "compare", "load", "loads", "simulate"]
 

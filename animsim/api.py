@@ -454,9 +454,9 @@ def run(
     memory limits) is refused before the first step. ``warn`` receives the
     stability warning of a step beyond its limit, before the run.
     """
-    from animsim.analysis import stability
-    from animsim.analysis.drift import DEFAULT_DRIFT_WARN_PERCENT, META_THRESHOLD_KEY, check_threshold
     from animsim.export.sinks import format_for, open_sink
+    from animsim.measures import stability
+    from animsim.measures.drift import DEFAULT_DRIFT_WARN_PERCENT, META_THRESHOLD_KEY, check_threshold
     from animsim.preflight import RunLimits, check_disk, check_ply_output
     from animsim.record import recording_rule
 
@@ -512,7 +512,7 @@ def explain(
 ) -> list[str]:
     """What a scene compiles to, as the lines ``animsim explain`` prints: counts, the
     stages each step runs, and what was left out because the scene does not need it."""
-    from animsim.analysis.effective import fallback_note
+    from animsim.measures.effective import fallback_note
 
     sc, name, _, _ = _prepared(source, limits, integrator=integrator)
     c = compile(sc, backend, name=name)
@@ -548,10 +548,11 @@ def check(
     """Validate, analyse and run each scene file on ``backend``, reporting through
     ``echo``/``echo_err`` as ``animsim check`` does; True only if every scene is valid and stable."""
     from animsim.analysis.check import check_scenes
-    from animsim.analysis.drift import check_threshold
+    from animsim.measures.drift import check_threshold
 
     return check_scenes(
         [Path(p) for p in paths],
+        prepare=prepare_file,
         quiet=quiet,
         echo=echo,
         echo_err=echo_err,
@@ -617,7 +618,8 @@ def render(
             )
         if integrator is not None:
             raise UsageError("give --integrator or --integrators, not both")
-        from animsim.export.side_by_side import compile_each, render_side_by_side
+        from animsim.commands.side_by_side import render_side_by_side
+        from animsim.panel_runs import compile_each
 
         names = _integrator_names(integrators)
         sc, name, _, _ = _prepared(source, limits, dt=dt, duration=duration)  # type: ignore[arg-type]
@@ -670,11 +672,11 @@ def view(
 ) -> Any:
     """Write one self-contained HTML page that plays the animation: ``animsim view``; a scene
     is simulated on ``backend``.
-    Returns :class:`animsim.export.viewer_command.ViewSummary` (the summary line and notes)."""
+    Returns :class:`animsim.commands.viewer_command.ViewSummary` (the summary line and notes)."""
     import contextlib
 
+    from animsim.commands.viewer_command import write_view
     from animsim.export.viewer import VIEWS
-    from animsim.export.viewer_command import write_view
 
     if view not in VIEWS:
         raise UsageError(f"--view {view!r}: choose one of {', '.join(VIEWS)}")
@@ -735,7 +737,7 @@ def plot(
         raise UsageError("--integrators and --particles go with --kind phase")
     prepare_path = lambda path, **kw: prepare_file(path, limits, **kw)  # noqa: E731
     if kind == "phase":
-        from animsim.export.phase import phase_command
+        from animsim.commands.phase import phase_command
 
         phase_command(
             src,
@@ -762,7 +764,7 @@ def plot(
     if kind == "energy":
         if compiled is None:
             raise UsageError("--kind energy needs the scene: give a scene, or --scene with the trajectory")
-        from animsim.export.phase import energy_parts_of
+        from animsim.commands.phase import energy_parts_of
         from animsim.export.pictures import plot_energy_parts
 
         times, parts = energy_parts_of(compiled, read_trajectory(src) if from_file else None)
@@ -849,7 +851,7 @@ def sweep(
     if output is not None:
         sw.write_csv(table, Path(output))
     if plot is not None:
-        from animsim.export import sweep_plot
+        from animsim.commands import sweep_plot
 
         sweep_plot.plot_table(table, Path(plot), x_key, y_col)
     return table

@@ -28,8 +28,8 @@ for _var in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import typer  # noqa: E402
 
-from animsim import __version__  # noqa: E402
 from animsim.errors import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_USAGE, AnimsimError, UsageError  # noqa: E402
+from animsim.version import __version__  # noqa: E402
 
 
 class _App(typer.Typer):
@@ -455,8 +455,8 @@ def _summary(compiled: Any, result: Any, wrote: str | None) -> None:
 
 
 def _drift_of(compiled: Any, result: Any) -> Any:
-    """The run's energy-drift verdict (animsim.analysis.drift), with the run's own threshold."""
-    from animsim.analysis.drift import DEFAULT_DRIFT_WARN_PERCENT, META_THRESHOLD_KEY, drift
+    """The run's energy-drift verdict (animsim.measures.drift), with the run's own threshold."""
+    from animsim.measures.drift import DEFAULT_DRIFT_WARN_PERCENT, META_THRESHOLD_KEY, drift
 
     threshold = result.meta.get(META_THRESHOLD_KEY, DEFAULT_DRIFT_WARN_PERCENT)
     return drift(compiled, result.energy_start, result.energy_end, threshold)
@@ -471,7 +471,7 @@ def _drift_warning(scene: Path, compiled: Any, result: Any) -> None:
 
 def _summary_notes(compiled: Any, result: Any) -> list[str]:
     """Summary lines about what the numbers mean: the method really run."""
-    from animsim.analysis.effective import fallback_note
+    from animsim.measures.effective import fallback_note
 
     note = fallback_note(compiled)
     return [] if note is None else [f"  note: {note}"]

@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from animsim.collisions import RESTING_STEPS, _apply_friction
+from animsim.collisions import RESTING_STEPS, apply_friction
 from animsim.elements import StepStage, numba_helper
 from animsim.vec import dot3
 
@@ -516,7 +516,7 @@ def resolve_numpy(
             e = np.where(resting, 0.0, shape.restitution)
             vn_new = np.where(approaching, -e * vn, vn)
             vt = vc - vn[:, None] * n
-            vt = _apply_friction(vt, np.abs(vn_new - vn), shape.friction)
+            vt = apply_friction(vt, np.abs(vn_new - vn), shape.friction)
             vr = vt + vn_new[:, None] * n
             rest = (1.0 - sh) * dt
             x[rows_hit] = xc + rest * vr + 0.5 * rest * rest * mean_acc
@@ -560,7 +560,7 @@ def _project(
     vn = dot3(vr, n)
     inward = np.minimum(vn, 0.0)
     vt = vr - vn[:, None] * n
-    vt = _apply_friction(vt, -inward, shape.friction)
+    vt = apply_friction(vt, -inward, shape.friction)
     v[rows] = vt + (vn - inward)[:, None] * n + u
     return True
 

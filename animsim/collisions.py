@@ -56,7 +56,7 @@ class ImpulsePlane:
         return _axis(self.normal)
 
 
-def _apply_friction(vt: np.ndarray, dvn: np.ndarray, mu: float) -> np.ndarray:
+def apply_friction(vt: np.ndarray, dvn: np.ndarray, mu: float) -> np.ndarray:
     """Reduce tangential velocities (k, 3) by at most mu * dvn (k,), never reversing them."""
     if mu == 0.0:
         return vt

@@ -8,13 +8,13 @@ capabilities, which the rest of animsim reads instead of asking "what type is
 this?":
 
 * energy: ``potential(x)`` (None when not conservative) and ``watch_role``,
-  how the watchdog books it (:mod:`animsim.analysis.watchdog`);
+  how the watchdog books it (:mod:`animsim.measures.watchdog`);
 * compiled energy (numba backend): ``numba_energy_source``, the element's share of the
   watchdog's sums as a kernel of :func:`energy_signature` (an elastic element's potential,
   a releasing one's released energy), so the fused stepper can check inside its chunks;
 * stability: ``stiffness_rows(inv_mass, k_rows, c_rows)`` adds the element's
   stiffness (N/m) and damping (N s/m) per particle row
-  (:mod:`animsim.analysis.stability`);
+  (:mod:`animsim.measures.stability`);
 * implicit Euler: ``jacobians(x, v)``;
 * references: ``closed_form`` is an allow-list entry; ``None`` means "no
   analytic reference may include this element" (:mod:`animsim.analysis.references`).
@@ -359,7 +359,7 @@ def energy_signature() -> Any:
     """(x f8[:,::1], x_ref f8[:,::1], u_ref f8[::1], mass f8[::1], fp f8[::1], ip i64[::1]) -> f8.
 
     An element's share of the watchdog's energy sums at positions ``x``
-    (:mod:`animsim.analysis.watchdog`): an elastic element's potential energy (J), which
+    (:mod:`animsim.measures.watchdog`): an elastic element's potential energy (J), which
     ignores ``x_ref`` and ``u_ref``; a releasing element's energy released since the books
     opened, U(x_ref) - U(x) (J), with ``x_ref`` the positions the books were opened at and
     ``u_ref`` its per-particle potential there (as ``released`` takes them).
@@ -413,7 +413,7 @@ def live_array(a: np.ndarray, cache: dict[int, np.ndarray]) -> np.ndarray:
     return got
 
 
-def _compile_helpers(namespace: dict[str, Any]) -> None:
+def compile_helpers(namespace: dict[str, Any]) -> None:
     import numba
 
     for name, obj in list(namespace.items()):
@@ -450,7 +450,7 @@ def jit_kernel(
         # numba still labels them experimental.
         warnings.filterwarnings("ignore", category=NumbaExperimentalFeatureWarning)
         sig = element_signature(stage=stage, energy=energy, newborn=newborn)
-        _compile_helpers(fn.__globals__)
+        compile_helpers(fn.__globals__)
         target = fn
         if parallel:
             # Kernels loop with a module-level ``prange`` that is plain ``range`` until
@@ -463,7 +463,7 @@ def jit_kernel(
         got = numba.njit(cache=True, parallel=parallel)(target)
         # numba.njit(sig) would compile (or load) at once, through numba's full start-up
         # of its compiler even for a disk-cache hit: load_cached skips that on a hit
-        from animsim.backends.numba_cache import load_cached
+        from animsim.numba_cache import load_cached
 
         if not load_cached(got, sig):
             got.compile(sig)

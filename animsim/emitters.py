@@ -109,7 +109,7 @@ from typing import Any
 
 import numpy as np
 
-from animsim.elements import StepStage, _compile_helpers, numba_helper
+from animsim.elements import StepStage, compile_helpers, numba_helper
 from animsim.record import Frame
 from animsim.scene import models as m
 from animsim.system import State, kept_copies
@@ -457,7 +457,7 @@ def _numba_kernels() -> dict[str, Any]:
     if not _NUMBA:
         import numba
 
-        _compile_helpers(globals())
+        compile_helpers(globals())
         births = globals()["_pool_births"]  # compiled above, as helpers of the birth step
         kill = globals()["_pool_kill"]
         # Compile (or load from the disk cache) now, before any run is timed: a call on a
@@ -1186,13 +1186,13 @@ class Emitters(StepStage):
         tables = None if (forces is None or state is None) else forces.newborn_tables(self.colliders)
         if tables is None:
             return
-        from animsim.backends.fused import _FastCall
+        from animsim.backends.fused import FastCall
 
         both = (forces.masses(), tables)
         # one call that changes nothing (no events, nothing due by -inf, no row outside a
         # box: the pools are empty) compiles it, or loads it from the disk cache
         args = self.pools[0].step_args(state, Births.empty(), -np.inf, 0.0, both, np.empty(0, dtype=bool))
-        call = _FastCall(_numba_kernels()["step"], args)
+        call = FastCall(_numba_kernels()["step"], args)
         call(*args)
         self._step = (call, both, forces)
 

@@ -10,7 +10,6 @@ they are made.
 
 from __future__ import annotations
 
-import math
 import time as _time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -18,42 +17,20 @@ from typing import Any
 
 import numpy as np
 
-from animsim import __version__
+from animsim.backends import numba_threads
 from animsim.compile import Compiled
 from animsim.export.meta import run_facts
+from animsim.guard import Failure, Guard
+from animsim.measures.drift import annotate
 from animsim.record import Frame, FrameSink
+from animsim.startup import resume_collector
+from animsim.steppers import start
 from animsim.system import State
+from animsim.version import __version__
 
 STATUS_OK = "ok"
 STATUS_UNSTABLE = "unstable"
 STATUS_INTERRUPTED = "interrupted"
-
-
-@dataclass
-class Failure:
-    """Where and why a run became unstable."""
-
-    step: int
-    time: float
-    particle: str | None
-    reason: str
-    spring: str | None = None
-    growth: float | None = None
-    suggestion: str | None = None
-
-    def as_dict(self) -> dict[str, Any]:
-        return {k: v for k, v in self.__dict__.items() if v is not None}
-
-    def describe(self) -> str:
-        parts = [f"unstable at step {self.step} (t = {self.time:.6g} s): {self.reason}"]
-        if self.particle is not None:
-            parts.append(f"particle {self.particle!r}")
-        if self.spring is not None:
-            parts.append(f"spring {self.spring}")
-        text = "; ".join(parts)
-        if self.suggestion:
-            text += f"\n  fix: {self.suggestion}"
-        return text
 
 
 @dataclass
@@ -68,109 +45,6 @@ class RunResult:
     final_state: State
     failure: Failure | None = None
     meta: dict[str, Any] = field(default_factory=dict)
-
-
-class Guard:
-    """The watchdog: stops a run at the first step whose state is not finite or
-    whose mechanical energy has grown far beyond what the forces put in
-    (:mod:`animsim.analysis.watchdog`).
-
-    ``check`` returns a Failure (with the particle and spring most to blame and
-    a fix from :mod:`animsim.analysis.stability`) or None. How often it runs
-    is the stepper's ``check_stride`` (:mod:`animsim.steppers`).
-    """
-
-    def __init__(self, compiled: Compiled, dt: float | None = None):
-        from animsim.analysis.watchdog import EnergyWatch
-
-        self.compiled = compiled
-        self.watch = EnergyWatch(compiled, dt if dt is not None else compiled.clock.dt)
-        #: a compiled test that is True only where check passes (the stepper's quick_check)
-        self.quick: Callable[[State], bool] | None = None
-
-    def start(self, state: State) -> None:
-        """Open the energy books at the run's initial state."""
-        self.watch.bind(state)
-        self.watch.reset(state)
-
-    def book(self, state: State) -> None:
-        """After a step of a run with births: book the newborns as a check would (cheap)."""
-        self.watch.book_births(state)
-
-    def snapshot(self) -> Any:
-        """The watchdog's books at a checked state, for a replay from it."""
-        return self.watch.snapshot()
-
-    def restore(self, snap: Any) -> None:
-        self.watch.restore(snap)
-
-    def check(self, state: State) -> Failure | None:
-        if self.quick is not None and self.quick(state):
-            return None  # passes: finite, and the energy test below its margin
-        x, v = state.particle_position, state.particle_velocity
-        # One reduction each instead of an (N, 3) boolean array: a NaN or inf
-        # anywhere makes the sum non-finite.
-        if not (math.isfinite(x.sum()) and math.isfinite(v.sum())):
-            bad = ~(np.isfinite(x).all(axis=1) & np.isfinite(v).all(axis=1))
-            if bad.any():  # else the sum overflowed on huge but finite values
-                i = int(np.flatnonzero(bad)[0])
-                return self._failure(
-                    state, i, self._stiffest_spring_at(i), None, "a position or velocity is not finite"
-                )
-        if state.body_orientation is not None:
-            found = self._body_not_finite(state)
-            if found is not None:
-                return found
-        if self.watch.disabled is not None:
-            return None
-        with np.errstate(over="ignore", invalid="ignore"):
-            h, b, growth = self.watch.growth(state)
-        if growth <= self.watch.allowance:  # False for NaN too: an overflowed energy is a blow-up
-            return None
-        particle, spring = self.watch.blame(state)
-        reason = f"the mechanical energy {h:.3g} J is {growth:.3g} times what the forces put in ({b:.3g} J)"
-        return self._failure(state, particle, spring, growth, reason)
-
-    def _body_not_finite(self, state: State) -> Failure | None:
-        """A rigid body whose orientation or angular velocity is not finite, named by its id."""
-        q, w = state.body_orientation, state.body_angular_velocity
-        if np.isfinite(q.sum()) and np.isfinite(w.sum()):
-            return None
-        bad = ~(np.isfinite(q).all(axis=1) & np.isfinite(w).all(axis=1))
-        if not bad.any():
-            return None
-        i = self.compiled.system.body_first + int(np.flatnonzero(bad)[0])
-        return self._failure(
-            state, i, None, None, "a rigid body's orientation or angular velocity is not finite"
-        )
-
-    def _stiffest_spring_at(self, i: int) -> int | None:
-        sysm = self.compiled.system
-        if not sysm.spring_count:
-            return None
-        idx = sysm.spring_index
-        touching = np.flatnonzero((idx[:, 0] == i) | (idx[:, 1] == i))
-        if touching.size == 0:
-            return None
-        inv = sysm.particle_inv_mass
-        w2 = sysm.spring_ks[touching] * (inv[idx[touching, 0]] + inv[idx[touching, 1]])
-        return int(touching[np.argmax(w2)])
-
-    def _failure(
-        self, state: State, i: int, spring: int | None, growth: float | None, reason: str
-    ) -> Failure:
-        from animsim.analysis import stability
-
-        report = stability.analyse(self.compiled)
-        return Failure(
-            step=state.step,
-            time=state.time,
-            particle=stability.particle_name(self.compiled, i),
-            reason=reason,
-            spring=None if spring is None else stability.spring_label(self.compiled.system, spring),
-            growth=None if growth is None else float(growth),
-            suggestion=report.suggestion(),
-        )
 
 
 #: frames held (copied) at most while waiting for a watchdog check; more forces a check
@@ -211,8 +85,6 @@ def run(
     On the numba backend, ``compiled.threads`` (when set) is numba's thread count for
     the run, and numba's own count is put back after it.
     """
-    from animsim.backends import numba_threads
-
     with numba_threads(compiled):
         return _run(
             compiled,
@@ -238,15 +110,11 @@ def _run(
     notice: Callable[[str], None] | None,
 ) -> RunResult:
     """run's loop (see run)."""
-    from animsim.steppers import start
-
     # Compiling numba kernels (first run on a machine) is not run time.
     state, stepper, compile_seconds = start(compiled, notice)
     dyn = compiled.dynamics
     clock = compiled.clock
     guard = guard or Guard(compiled, dt=stepper.largest_dt)
-    from animsim.startup import resume_collector
-
     resume_collector()  # start-up is over (animsim.startup): collect as usual from here
     record = compiled.record_steps
     next_rec = 0
@@ -400,8 +268,6 @@ def _run(
             meta["compile_time"] = compile_seconds
         meta.update(stepper.summary())
         meta.update(meta_extra or {})
-        from animsim.analysis.drift import annotate
-
         annotate(meta, compiled)  # energy drift as a verdict of its own, in the metadata
         if compiled.emitters is not None:
             meta["emitters"] = compiled.emitters.summary()

@@ -62,7 +62,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from animsim.elements import StepStage, _compile_helpers, numba_helper
+from animsim.elements import StepStage, compile_helpers, numba_helper
 from animsim.vec import dot3
 
 #: velocity and position passes per step
@@ -710,7 +710,7 @@ def numba_kernels() -> NumbaKernels:
         return _KERNELS
     import numba
 
-    _compile_helpers(globals())
+    compile_helpers(globals())
 
     @numba.njit(cache=True)
     def find_pairs(x, radius, active, exclude, cell):  # pragma: no cover - compiled

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from animsim.errors import UsageError
+from animsim.export.raster import up_axis, view_up
 from animsim.record import Frame, TrajectoryHeader
 
 
@@ -50,7 +51,7 @@ DEFAULT_LONG_SIDE = 480
 MAX_ASPECT = 16 / 9
 
 
-def _with_view(opts: RenderOptions, lo: np.ndarray, hi: np.ndarray, up: str | None = None) -> RenderOptions:
+def with_view(opts: RenderOptions, lo: np.ndarray, hi: np.ndarray, up: str | None = None) -> RenderOptions:
     """``opts`` with a view and a size: as asked, else chosen from the motion's bounds.
 
     The view is chosen as ``animsim plot`` picks it (:func:`pick_view`: the side
@@ -127,7 +128,7 @@ class _BoundsSink:
         pass
 
 
-def _bounds(lo: np.ndarray, hi: np.ndarray, planes: list[tuple[np.ndarray, np.ndarray]]) -> Any:
+def picture_bounds(lo: np.ndarray, hi: np.ndarray, planes: list[tuple[np.ndarray, np.ndarray]]) -> Any:
     from animsim.export.raster import bounds_from_positions
 
     pts = [p for p in (lo, hi) if np.isfinite(p).all()]
@@ -138,25 +139,9 @@ def _bounds(lo: np.ndarray, hi: np.ndarray, planes: list[tuple[np.ndarray, np.nd
     return bounds_from_positions(np.stack(pts))
 
 
-def view_up(scene: Any) -> str | None:
-    """The axis a default view draws upward: y or z when the scene's gravity points down one
-    of them (its largest component), else None (no gravity: no up to keep)."""
-    for f in getattr(scene, "forces", ()):
-        if f.type == "gravity":
-            g = np.abs(np.asarray(f.g, dtype=np.float64))
-            k = int(np.argmax(g))
-            return "xyz"[k] if g[k] > 0 and k > 0 else None
-    return None
-
-
-def _up_axis(scene: Any) -> str:
-    """z-up when the scene's gravity points down z, else y-up (the language's default)."""
-    return view_up(scene) or "y"
-
-
 def validate(gif: Path | None, mp4: Path | None, opts: RenderOptions) -> tuple[int, int]:
     """Check every option before any work; UsageError (exit 2) when one is wrong."""
-    from animsim.export.animation import _require_ffmpeg, check_fps
+    from animsim.export.animation import check_fps, require_ffmpeg
     from animsim.export.raster import VIEWS, parse_size
 
     if gif is None and mp4 is None:
@@ -179,7 +164,7 @@ def validate(gif: Path | None, mp4: Path | None, opts: RenderOptions) -> tuple[i
     if mp4 is not None:
         if mp4.suffix.lower() != ".mp4":
             raise UsageError(f"--mp4 {mp4}: the file name must end in .mp4")
-        _require_ffmpeg()
+        require_ffmpeg()
     return size
 
 
@@ -234,9 +219,9 @@ def render_scene(
     first = run(compiled, [bounds_sink], stop=stop)
     if first.status == "interrupted":
         return RenderResult(frames=0, outputs=[], status="interrupted")
-    bounds = _bounds(bounds_sink.lo, bounds_sink.hi, planes)
-    opts = _with_view(opts, bounds_sink.lo, bounds_sink.hi, view_up(compiled.scene))
-    sinks = _sinks(gif, mp4, opts, bounds, planes, _up_axis(compiled.scene), progress)
+    bounds = picture_bounds(bounds_sink.lo, bounds_sink.hi, planes)
+    opts = with_view(opts, bounds_sink.lo, bounds_sink.hi, view_up(compiled.scene))
+    sinks = _sinks(gif, mp4, opts, bounds, planes, up_axis(compiled.scene), progress)
     result = run(compiled, sinks, stop=stop)
     return RenderResult(
         frames=result.frames,
@@ -288,7 +273,7 @@ def render_trajectory(
     extra: dict[str, Any] = {}
     if compiled is not None:
         planes = compiled.header.extra.get("planes", [])
-        up = _up_axis(compiled.scene)
+        up = up_axis(compiled.scene)
         # Springs join scene indices; the trajectory numbers its ids itself.
         pos_of = {pid: k for k, pid in enumerate(traj.ids)}
         ids = compiled.system.ids
@@ -299,8 +284,8 @@ def render_trajectory(
         spring_index = np.array([p for p in keep if None not in p], dtype=np.int64).reshape(-1, 2)
         extra = _extras_for(compiled, traj.ids)
     lo, hi = traj.bounds()
-    bounds = _bounds(lo, hi, planes)
-    opts = _with_view(opts, lo, hi, None if compiled is None else view_up(compiled.scene))
+    bounds = picture_bounds(lo, hi, planes)
+    opts = with_view(opts, lo, hi, None if compiled is None else view_up(compiled.scene))
     sinks = _sinks(gif, mp4, opts, bounds, planes, up, progress)
     header = TrajectoryHeader(
         scene_name="trajectory", ids=[], spring_index=spring_index, has_emitters=False, extra=extra

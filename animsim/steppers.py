@@ -66,6 +66,9 @@ from typing import Any
 
 import numpy as np
 
+from animsim.backends import block_stage, fused_unsupported
+from animsim.guard import Failure, Guard
+from animsim.measures.stability import particle_name
 from animsim.system import State
 
 #: a doubled step has about DOUBLING_BASE^(p+1) times the local error of the two halves
@@ -125,18 +128,6 @@ def next_step(h: float, distance: float, dt_min: float, dt_max: float) -> tuple[
     return h, False
 
 
-def block_stage(compiled: Any) -> Any:
-    """The scene's one post-step stage when the NumPy step may run it a block of rows at a
-    time inside the integrator's step (a pointwise stage that offers it, ``meets_blocks``,
-    and an integrator that steps in blocks), else None. Whether a step then runs in blocks
-    is decided per step (:attr:`Dynamics.blocks`)."""
-    stages = compiled.post_step
-    only = stages[0] if len(stages) == 1 else None
-    if only is None or not only.pointwise or not compiled.integrator.block_stages:
-        return None
-    return only if only.meets_blocks() else None
-
-
 def start(compiled: Any, notice: Callable[[str], None] | None = None) -> tuple[State, Any, float]:
     """What a run starts from: a fresh state, the elements bound to it and the stages reset,
     and the stepper prepared (numba's kernels compiled or loaded): (state, stepper, seconds
@@ -154,11 +145,8 @@ def make_stepper(compiled: Any) -> Any:
     numba = compiled.backend == "numba"
     if compiled.adaptive is not None:
         return StepDoubling(compiled, numba=numba)
-    if numba:
-        from animsim.backends import fused_unsupported
-
-        if not fused_unsupported(compiled):
-            return Fused(compiled)
+    if numba and not fused_unsupported(compiled):
+        return Fused(compiled)
     return StepByStep(compiled, numba=numba)
 
 
@@ -379,8 +367,6 @@ class Fused(_Base):
         decide as ``guard`` does: its own ``check`` (not a subclass's), no stage between the
         chunks, a replayable run, and a compiled energy sum for every element the watchdog sums
         (:meth:`animsim.backends.fused.FusedStepper.check_inside`)."""
-        from animsim.engine import Guard
-
         return (
             type(guard).check is Guard.check
             and not self.between
@@ -558,9 +544,6 @@ class StepDoubling(_Base):
             self._one(trial, h / halves, trial.time + h / halves)
 
     def advance(self, state: State, k: int, goal: int, max_steps: int | None = None) -> tuple[int, Any, bool]:
-        from animsim.analysis.stability import particle_name
-        from animsim.engine import Failure
-
         if self._big is None:
             self._big, self._small = state.copy(), state.copy()
         big, small = self._big, self._small

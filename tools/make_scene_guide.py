@@ -251,10 +251,10 @@ def _expand(entry: dict[str, Any]) -> Any:
 
 def _offsets_text(spec: Any) -> list[str]:
     """One row per spring family: the index pairs it joins, from the generator's offsets."""
-    from animsim.scene.structures import _family_offsets
+    from animsim.scene.structures import family_offsets
 
     rows = []
-    for name, _fam, offsets in _family_offsets(spec):
+    for name, _fam, offsets in family_offsets(spec):
         letters = "ijk"[: len(offsets[0])]
         here = "[" + ",".join(letters) + "]"
         pairs = []

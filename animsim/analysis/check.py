@@ -6,11 +6,21 @@ ran stable.
 
 from __future__ import annotations
 
+import shutil
+import textwrap
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from animsim.compile import compile_scene
+from animsim.console import table_width
+from animsim.engine import STATUS_OK, run
 from animsim.errors import AnimsimError
+from animsim.measures import stability
+from animsim.measures.drift import DEFAULT_DRIFT_WARN_PERCENT, drift
+from animsim.measures.effective import fallback_note
 
 # Below this energy scale (J) a relative drift means nothing; report absolute.
 ENERGY_FLOOR = 1e-12
@@ -22,9 +32,7 @@ def energy_drift(e0: float, e1: float) -> float:
 
 
 def _energy_report(compiled: Any, result: Any, drift_warn: float) -> str:
-    """Energy at start and end, and the drift verdict (animsim.analysis.drift)."""
-    from animsim.analysis.drift import drift
-
+    """Energy at start and end, and the drift verdict (animsim.measures.drift)."""
     text = f"energy {result.energy_start:.4g} -> {result.energy_end:.4g} J"
     verdict = drift(compiled, result.energy_start, result.energy_end, drift_warn)
     if verdict.relative is None:
@@ -34,8 +42,6 @@ def _energy_report(compiled: Any, result: Any, drift_warn: float) -> str:
 
 def _momentum_report(compiled: Any, result: Any) -> str:
     """Angular momentum about the origin at the start and the end (scenes with rigid bodies)."""
-    import numpy as np
-
     dyn = compiled.dynamics
     ends = []
     for state in (compiled.initial, result.final_state):
@@ -56,6 +62,7 @@ def _momentum_report(compiled: Any, result: Any) -> str:
 def check_scenes(
     paths: Sequence[Path],
     *,
+    prepare: Callable[[Path, Any], tuple[Any, Any, Any]],
     quiet: bool = False,
     echo: Callable[[str], None] = print,
     echo_err: Callable[[str], None] = print,
@@ -63,19 +70,16 @@ def check_scenes(
     drift_warn: float | None = None,
     backend: str = "auto",
 ) -> bool:
-    """``limits`` (a preflight.RunLimits) bounds every scene as ``animsim run`` would;
+    """``prepare(path, limits)`` loads a scene file as every command does (the API's
+    ``prepare_file``: the load, the overrides and the pre-flight, giving (LoadedScene, Scene,
+    Estimate)); ``limits`` (a preflight.RunLimits) bounds every scene as ``animsim run`` would;
     ``drift_warn`` (percent) is the energy drift above which a conservative scene gets a warning."""
-    from animsim.analysis.drift import DEFAULT_DRIFT_WARN_PERCENT, drift
-    from animsim.api import prepare_file as prepare_scene
-    from animsim.compile import compile_scene
-    from animsim.engine import STATUS_OK, run
-
     warn = DEFAULT_DRIFT_WARN_PERCENT if drift_warn is None else drift_warn
     all_ok = True
     tally: dict[str, int] = {}
     for path in paths:
         try:
-            loaded, scene, _ = prepare_scene(path, limits)
+            loaded, scene, _ = prepare(path, limits)
             compiled = compile_scene(scene, loaded.name, backend=backend)
         except AnimsimError as exc:
             echo_err(str(exc))
@@ -84,11 +88,7 @@ def check_scenes(
             tally["invalid"] = tally.get("invalid", 0) + 1
             continue
         notes = []
-        from animsim.analysis import stability
-
         report = stability.analyse(compiled)
-        from animsim.analysis.effective import fallback_note
-
         fallback = fallback_note(compiled)
         if fallback is not None:
             notes.append(f"note: {fallback}")
@@ -130,11 +130,6 @@ def wrap(line: str, width: int | None = None) -> str:
 
     Numbers never break (no word is split), so a narrow terminal shows them whole.
     """
-    import shutil
-    import textwrap
-
-    from animsim.console import table_width
-
     width = width or table_width() or shutil.get_terminal_size().columns
     if len(line) <= width:
         return line

@@ -73,6 +73,7 @@ from typing import Any
 
 import numpy as np
 
+from animsim.analysis.check import energy_drift
 from animsim.analysis.references import Trajectory, run_trajectory
 from animsim.errors import AnimsimError, UsageError
 from animsim.record import Clock, MemorySink, landing_steps
@@ -226,7 +227,7 @@ def validate_case_data(data: dict[str, Any], file: str) -> Any:
     """The Scene for ``data`` by the file's rules; raises :class:`CaseInvalid`."""
     from pydantic import ValidationError
 
-    from animsim.scene.loader import Marks, _diagnostics, mesh_problems
+    from animsim.scene.loader import Marks, diagnostics, mesh_problems
     from animsim.scene.models import Scene
     from animsim.scene.validate import check_scene
 
@@ -235,7 +236,7 @@ def validate_case_data(data: dict[str, Any], file: str) -> Any:
     except ValidationError as exc:
         # The loader's own wording (did-you-mean and all); marks are irrelevant
         # here since the values came from the command line.
-        diags = _diagnostics(exc, data, Marks(), file)
+        diags = diagnostics(exc, data, Marks(), file)
         raise CaseInvalid([(d.path, d.message) for d in diags]) from None
     problems = mesh_problems(scene, file) + check_scene(scene)  # mesh files read like the loader's
     if problems:
@@ -476,7 +477,6 @@ def run_case(case: Case) -> Row:
 
     Module level and fed plain data, so process pools and Dask can ship it.
     """
-    from animsim.analysis.check import energy_drift
     from animsim.compile import compile_scene
     from animsim.engine import STATUS_OK, STATUS_UNSTABLE, run
 

@@ -39,6 +39,25 @@ ALL_BACKENDS = (*BACKENDS, BACKEND_REFERENCE)
 
 INSTALL_HINT = 'pip install -e ".[fast]"'
 
+#: rows per block of the numba backend's blocked chunk (animsim.backends.fused), here so
+#: that ``explain`` can tell without importing numba: a block's position, velocity, acceleration and
+#: step-start copies (5 x 512 x 24 bytes, 60 KB) stay in the near caches over all of a
+#: call's steps; measured on 1e6 particles with a plane, 1 thread: 128 rows 43 M
+#: particle-steps/s, 256 47, 512 49, 1,024 50, 2,048 46, 4,096 42 (smaller blocks pay
+#: the calls into the element kernels more often, larger ones leave the cache)
+BLOCK = 512
+
+#: blocks from which a call runs them on several threads (when numba has more than one).
+#: Measured on a quiet 2-core machine, particles with a plane, 16 steps a call (the
+#: watchdog's stride), M particle-steps/s wall, 1 thread / 2: one block 35.7 / 35.4 (and
+#: twice the CPU time: the idle thread waits), two 39.6 / 72.4, three 39.3 / 56.8, four
+#: 38.9 / 72.7, sixteen 39.3 / 76.9. On cores busy with other work a parallel call waits
+#: for the slowest thread, which costs more at any size (compile_scene's ``threads``),
+#: and the most where a call's work is short: a 1,024-particle scene at load 2-5 went
+#: 21.8 -> 5.6. So threads start at eight blocks (4,096 particles), where the watchdog's
+#: checks leave the compiled steps too (smaller scenes keep them inside, on one thread).
+PARALLEL_MIN_BLOCKS = 8
+
 
 def numba_available() -> bool:
     """True when numba can be imported (without importing it)."""
@@ -119,8 +138,6 @@ def fused_in_blocks(compiled: Any) -> bool:
 
 def _block_cores(compiled: Any) -> str:
     """How many of numba's threads share the blocks (animsim.backends.fused.FusedStepper)."""
-    from animsim.backends.fused import BLOCK, PARALLEL_MIN_BLOCKS
-
     n = compiled.system.particle_count
     if -(-n // BLOCK) < PARALLEL_MIN_BLOCKS:
         return f" on one thread (below {PARALLEL_MIN_BLOCKS * BLOCK:,} particles)"
@@ -128,6 +145,18 @@ def _block_cores(compiled: Any) -> str:
 
     threads = compiled.threads if compiled.threads is not None else numba.get_num_threads()
     return f" shared among {threads} thread{'s' if threads != 1 else ''}"
+
+
+def block_stage(compiled: Any) -> Any:
+    """The scene's one post-step stage when the NumPy step may run it a block of rows at a
+    time inside the integrator's step (a pointwise stage that offers it, ``meets_blocks``,
+    and an integrator that steps in blocks), else None. Whether a step then runs in blocks
+    is decided per step (:attr:`Dynamics.blocks`)."""
+    stages = compiled.post_step
+    only = stages[0] if len(stages) == 1 else None
+    if only is None or not only.pointwise or not compiled.integrator.block_stages:
+        return None
+    return only if only.meets_blocks() else None
 
 
 def backend_line(compiled: Any, chosen: str, note: str) -> str:
@@ -149,8 +178,6 @@ def backend_line(compiled: Any, chosen: str, note: str) -> str:
     else:
         line = "backend: numpy"
         if compiled.integrator.block_stages and compiled.dynamics.blocks:
-            from animsim.steppers import block_stage
-
             stage = block_stage(compiled)
             line += " (a block of particles at a time while it is in cache: no particle acts on another" + (
                 f"; the {stage.block_name} meets each block inside the step)" if stage is not None else ")"

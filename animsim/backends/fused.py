@@ -34,8 +34,8 @@ import numpy as np
 from numba import njit, prange
 from numba.core.errors import NumbaExperimentalFeatureWarning
 
-from animsim.backends.numba_cache import load_cached
-from animsim.elements import live_array
+from animsim import backends
+from animsim.elements import element_signature, jit_kernel, live_array
 from animsim.integrators.base import (
     FUSED_EULER_AVERAGE as EULER_AVERAGE,
 )
@@ -48,6 +48,7 @@ from animsim.integrators.base import (
 from animsim.integrators.base import (
     FUSED_VERLET as VERLET,
 )
+from animsim.numba_cache import load_cached
 
 warnings.filterwarnings("ignore", category=NumbaExperimentalFeatureWarning)
 
@@ -527,25 +528,6 @@ def checked_chunk(
     return steps, evals, changed, a0_valid, checked, False, r
 
 
-#: rows per block of the blocked chunk: a block's position, velocity, acceleration and
-#: step-start copies (5 x 512 x 24 bytes, 60 KB) stay in the near caches over all of a
-#: call's steps; measured on 1e6 particles with a plane, 1 thread: 128 rows 43 M
-#: particle-steps/s, 256 47, 512 49, 1,024 50, 2,048 46, 4,096 42 (smaller blocks pay
-#: the calls into the element kernels more often, larger ones leave the cache)
-BLOCK = 512
-
-#: blocks from which a call runs them on several threads (when numba has more than one).
-#: Measured on a quiet 2-core machine, particles with a plane, 16 steps a call (the
-#: watchdog's stride), M particle-steps/s wall, 1 thread / 2: one block 35.7 / 35.4 (and
-#: twice the CPU time: the idle thread waits), two 39.6 / 72.4, three 39.3 / 56.8, four
-#: 38.9 / 72.7, sixteen 39.3 / 76.9. On cores busy with other work a parallel call waits
-#: for the slowest thread, which costs more at any size (compile_scene's ``threads``),
-#: and the most where a call's work is short: a 1,024-particle scene at load 2-5 went
-#: 21.8 -> 5.6. So threads start at eight blocks (4,096 particles), where the watchdog's
-#: checks leave the compiled steps too (smaller scenes keep them inside, on one thread).
-PARALLEL_MIN_BLOCKS = 8
-
-
 @njit(cache=True, _nrt=COUNTED)
 def _acc_block(x, v, t, out, kernels, fps, ips, mass, inv_mass, pinned):
     """out = F(x, v, t) / m on rows of pointwise forces (``pinned``: those rows' flags), as _acc."""
@@ -967,13 +949,11 @@ class _Address(numba.types.WrapperAddressProtocol):
 def _addresses(
     dispatchers: Any, stage: bool = False, energy: bool = False, newborn: bool = False
 ) -> tuple[Any, ...]:
-    from animsim.elements import element_signature
-
     sig = element_signature(stage=stage, energy=energy, newborn=newborn)
     return tuple(_Address(d, sig) for d in dispatchers)
 
 
-class _FastCall:
+class FastCall:
     """Call a numba function's compiled overload directly, skipping the dispatcher's typing
     of every argument on every call (the fused chunk takes 26; with first-class function
     tuples that cost about 150 us a call, measured). Used only for argument types already
@@ -1027,8 +1007,6 @@ def _element_tables(terms: Any) -> tuple[tuple[Any, ...], Any, Any]:
     kernels = [t.numba_kernel for t in terms if t.numba_source is not None]
     params = [t.numba_params() for t in terms if t.numba_source is not None]
     if not kernels:
-        from animsim.elements import jit_kernel
-
         kernels = [jit_kernel(_no_force)]
         params = [(np.zeros(0), np.zeros(0, dtype=np.int64))]
     fps = _array_tuple([p[0] for p in params], np.float64)
@@ -1061,7 +1039,7 @@ class NumbaForces:
             inv_mass = live_array(d.inv_mass, self._copies)
             args = (x, v, float(t), out, self.kernels, self.fps, self.ips, mass, inv_mass, self.pinned)
             if self._acc is None:  # loads (or compiles) the kernel; then calls its overload directly
-                self._acc = _FastCall(_acc, args)
+                self._acc = FastCall(_acc, args)
             self._acc(*args)
             return out
         # Mixed: sum every force first (numba kernels, then NumPy ones), then divide.
@@ -1083,8 +1061,6 @@ class NumbaForces:
         rows can be evaluated alone (every force pointwise, none left to NumPy, no row
         driven) and every collider has a newborn kernel; births then take the Python path,
         which evaluates every row."""
-        from animsim.elements import jit_kernel
-
         d = self.dynamics
         if self.others or d.drivers or not self._pointwise:
             return None
@@ -1193,8 +1169,6 @@ class BuildChooser:
 def _energy_table(terms: list[Any]) -> tuple[Any, ...]:
     """(kernels, float parameters, integer parameters) of the elements' compiled energy sums,
     as the compiled checks take them (a kernel that adds nothing when there is none)."""
-    from animsim.elements import jit_kernel
-
     kernels = [t.numba_energy_kernel for t in terms] or [jit_kernel(_no_energy, energy=True)]
     params = [t.numba_energy_params() for t in terms] or [(np.zeros(0), np.zeros(0, dtype=np.int64))]
     return (
@@ -1230,17 +1204,13 @@ class FusedStepper:
             self.stage_owner = fusable[0]
             params = [st.numba_stage_params() for st in fusable]
         else:
-            from animsim.elements import jit_kernel
-
             self.stages = _addresses([jit_kernel(_no_stage, stage=True)], stage=True)
             self.stage_owner = None
             params = [(np.zeros(0), np.zeros(0, dtype=np.int64))]
         self.stage_fps = _array_tuple([p[0] for p in params], np.float64)
         self.stage_ips = _array_tuple([p[1] for p in params], np.int64)
-        from animsim.backends import fused_in_blocks
-
         #: rows are independent (animsim.backends.fused_in_blocks): blocked_chunk steps them
-        self.blocked = fused_in_blocks(compiled)
+        self.blocked = backends.fused_in_blocks(compiled)
         pinned = compiled.system.particle_pinned
         #: the pinned rows' indices, as the plain chunk (and the checked one) takes them
         self.plain_pinned = np.ascontiguousarray(np.flatnonzero(pinned), dtype=np.int64)
@@ -1258,7 +1228,7 @@ class FusedStepper:
             self.work = tuple(np.zeros((n, 3)) for _ in range(6))  # xs, vs, a0, a1, xo, vo
         #: enough blocks to share among numba's threads (when it has several): the blocked
         #: chunk's calls then run them in parallel (blocked_chunk_parallel)
-        self.parallel_blocks = self.blocked and -(-n // BLOCK) >= PARALLEL_MIN_BLOCKS
+        self.parallel_blocks = self.blocked and -(-n // backends.BLOCK) >= backends.PARALLEL_MIN_BLOCKS
         #: which of the two builds runs a call, by timing them (BuildChooser)
         self.chooser = BuildChooser()
         self.a0_valid = False
@@ -1267,7 +1237,7 @@ class FusedStepper:
         self.compile_seconds = 0.0
         self._copies: dict[int, np.ndarray] = {}
         #: the chunk kernels this stepper has called, each called directly from then on
-        self._chunks: dict[Any, _FastCall] = {}
+        self._chunks: dict[Any, FastCall] = {}
         #: steps a collision changed, over every call so far
         self.changed_steps = 0
 
@@ -1337,13 +1307,13 @@ class FusedStepper:
         has_stage = self.stage_owner is not None
         if self.blocked:  # work: a0 and the rows saved at the call's start (x, v, a0)
             kernel = blocked_chunk_parallel if threaded else blocked_chunk
-            args = (*common, *self.work, self.a0_valid, has_stage, BLOCK)
+            args = (*common, *self.work, self.a0_valid, has_stage, backends.BLOCK)
         else:  # work: xs, vs, a0, a1, xo, vo
             kernel = fused_chunk
             args = (*common, self.kx, self.kv, *self.work, self.a0_valid, has_stage)
         call = self._chunks.get(kernel)
         if call is None:  # loads (or compiles) the chunk; then calls its overload directly
-            call = self._chunks[kernel] = _FastCall(kernel, args)
+            call = self._chunks[kernel] = FastCall(kernel, args)
         t0 = time.perf_counter()
         result = call(*args)
         taken, evals, changed, self.a0_valid, failed = result
@@ -1358,7 +1328,7 @@ class FusedStepper:
 
     def check_inside(self, watch: Any) -> bool:
         """Take the watchdog's checks into the chunks (:meth:`advance_checked`) for the books of
-        ``watch`` (an opened :class:`animsim.analysis.watchdog.EnergyWatch`), when every
+        ``watch`` (an opened :class:`animsim.measures.watchdog.EnergyWatch`), when every
         element its energy test sums has a compiled energy kernel; False leaves them to Python.
 
         Only for a run without births (the books never change after they opened) and
@@ -1420,7 +1390,7 @@ class FusedStepper:
         no_u = np.zeros(0)
         births = watch.alive_prev is not None
         books = np.zeros(6)
-        call: dict[Any, _FastCall] = {}
+        call: dict[Any, FastCall] = {}
         copies: dict[int, np.ndarray] = {}
         # several pieces of rows, every watched element pointwise: the check may share them
         # among numba's threads, when the stepper's own calls do (its chooser keeps them)
@@ -1455,7 +1425,7 @@ class FusedStepper:
                 args = (*args, *room)
             fast = call.get(kernel)
             if fast is None:  # loads (or compiles) the check; then calls its overload directly
-                fast = call[kernel] = _FastCall(kernel, args)
+                fast = call[kernel] = FastCall(kernel, args)
             return bool(fast(*args))
 
         return quick
@@ -1492,7 +1462,7 @@ class FusedStepper:
             *shots,
         )
         if self._checked_call is None:  # loads (or compiles) the chunk; then calls its overload
-            self._checked_call = _FastCall(checked_chunk, args)
+            self._checked_call = FastCall(checked_chunk, args)
         result = self._checked_call(*args)
         taken, evals, changed, self.a0_valid, passed, stopped, copied = result
         self.changed_steps += int(changed)

@@ -46,7 +46,7 @@ import numpy as np
 from animsim.bodies import quaternion as quat
 from animsim.bodies.quaternion import rotate_scalar
 from animsim.bodies.shapes import BodyShape, Box, Capsule, Sphere, contact_table
-from animsim.elements import StepStage, _compile_helpers
+from animsim.elements import StepStage, compile_helpers
 
 #: sequential-impulse sweeps over the contacts per step
 ITERATIONS = 10
@@ -514,7 +514,7 @@ def numba_pair_contacts() -> Any:
     """:func:`_pair_contacts_loop` compiled by numba."""
     from numba import njit
 
-    _compile_helpers(globals())
+    compile_helpers(globals())
     return njit(cache=True)(_pair_contacts_loop)
 
 
@@ -856,7 +856,7 @@ def numba_kernels() -> tuple[Any, Any]:
     """(plane detection, list solver) compiled by numba."""
     from numba import njit
 
-    _compile_helpers(globals())
+    compile_helpers(globals())
     detect = njit(cache=True)(_detect_planes_loop)
     solver = njit(cache=True)(_solve_list_loop)
     return detect, solver

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from animsim.elements import _compile_helpers, numba_helper
+from animsim.elements import compile_helpers, numba_helper
 
 IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
 
@@ -232,5 +232,5 @@ def numba_angular_acceleration() -> Any:
     """
     from numba import njit
 
-    _compile_helpers(globals())
+    compile_helpers(globals())
     return njit(cache=True)(_angular_acceleration_loop)

@@ -132,7 +132,7 @@ def _format_of(path: Path, fmt: str | None) -> str:
     return fmt
 
 
-def _require_ffmpeg() -> Any:
+def require_ffmpeg() -> Any:
     """The imageio_ffmpeg module with a usable ffmpeg, or RenderUnavailable."""
     try:
         import imageio_ffmpeg  # optional extra; imported only when MP4 is asked for
@@ -495,7 +495,7 @@ class AnimationSink:
             camera, planes, time_stamp=time_stamp, time_decimals=decimals, dot_radius=dot_radius
         )
         self.progress = progress
-        self._ffmpeg = _require_ffmpeg() if self.format == "mp4" else None
+        self._ffmpeg = require_ffmpeg() if self.format == "mp4" else None
         self.frames_written = 0
         self._file: AtomicFile | None = None
         self._gif: GifStream | None = None

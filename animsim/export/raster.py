@@ -31,7 +31,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cache
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -919,3 +919,19 @@ def paint_planes(canvas: Canvas, camera: Camera, planes: Sequence[Plane]) -> Non
         canvas.rgb[checker] = np.asarray(GROUND_ALT_RGB, dtype=np.float32)
         return
     raise TypeError(f"cannot draw planes for camera {type(camera).__name__}")
+
+
+def view_up(scene: Any) -> str | None:
+    """The axis a default view draws upward: y or z when the scene's gravity points down one
+    of them (its largest component), else None (no gravity: no up to keep)."""
+    for f in getattr(scene, "forces", ()):
+        if f.type == "gravity":
+            g = np.abs(np.asarray(f.g, dtype=np.float64))
+            k = int(np.argmax(g))
+            return "xyz"[k] if g[k] > 0 and k > 0 else None
+    return None
+
+
+def up_axis(scene: Any) -> str:
+    """z-up when the scene's gravity points down z, else y-up (the language's default)."""
+    return view_up(scene) or "y"

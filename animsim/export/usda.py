@@ -113,12 +113,12 @@ from typing import IO, Any
 
 import numpy as np
 
-from animsim import __version__
 from animsim.atomic import AtomicFile
 from animsim.errors import SimulationError
 from animsim.export.meta import meta_file
 from animsim.export.ply import DEFAULT_RGBA, DEFAULT_SIZE, validate_frame
 from animsim.record import Connectivity, Frame, TrajectoryHeader
+from animsim.version import __version__
 
 USDA_MAGIC = "#usda 1.0"
 UP_AXIS = "Y"

@@ -19,8 +19,8 @@ A 32 x 32 cloth over 2 s at 25 fps is about 0.3 MB.
 The public entry points are :func:`viewer_html` (arrays in, page out),
 :func:`panels_html` (several runs side by side, played in step) and
 :func:`iframe_html` (a page wrapped for a notebook cell: what
-``Trajectory._repr_html_`` returns). :func:`simulate_panel` is the one place here that
-runs a simulation.
+``Trajectory._repr_html_`` returns). It runs no simulation: the runs its panels show
+come from :mod:`animsim.panel_runs`.
 """
 
 from __future__ import annotations
@@ -37,7 +37,8 @@ from typing import Any
 
 import numpy as np
 
-from animsim.export.raster import ORTHO_VIEWS
+from animsim.export.raster import ORTHO_VIEWS, up_axis
+from animsim.measures.energy_parts import energies_from_trajectory
 
 SHAPE_KINDS = ("plane", "sphere", "box", "capsule")
 QUANT_MAX = 65534  # positions are quantised to 0..QUANT_MAX
@@ -527,7 +528,7 @@ def _springs_over_time(compiled: Any, traj: Any) -> tuple[np.ndarray, np.ndarray
     return springs[order], drawn
 
 
-def _pinned_for(compiled: Any, ids: Sequence[str]) -> np.ndarray:
+def pinned_for(compiled: Any, ids: Sequence[str]) -> np.ndarray:
     names = compiled.system.ids
     pinned = {names[i] for i in np.flatnonzero(compiled.system.particle_pinned)}
     return np.array([pid in pinned for pid in ids], dtype=bool)
@@ -563,7 +564,7 @@ def panel_from_trajectory(
     drawn = None
     if compiled is not None:
         springs, drawn = _springs_over_time(compiled, traj)
-        pinned = _pinned_for(compiled, traj.ids)
+        pinned = pinned_for(compiled, traj.ids)
         shapes = scene_shapes(compiled)
     return ViewerPanel(
         times=traj.times,
@@ -598,8 +599,6 @@ def trajectory_html(traj: Any, *, shapes: Sequence[Shape] = (), height: int = 76
     if long is not None:
         energies = None
         if compiled is not None and compiled.emitters is None:
-            from animsim.export.viewer_command import energies_from_trajectory
-
             energies = energies_from_trajectory(compiled, long)
         panel = panel_from_trajectory(
             long,
@@ -614,7 +613,7 @@ def trajectory_html(traj: Any, *, shapes: Sequence[Shape] = (), height: int = 76
             times=traj.times,
             positions=traj.positions,
             springs=_springs_for(compiled, traj.ids) if compiled is not None else None,
-            pinned=_pinned_for(compiled, traj.ids) if compiled is not None else None,
+            pinned=pinned_for(compiled, traj.ids) if compiled is not None else None,
             shapes=scene_shapes(compiled) if compiled is not None else (),
             status=status,
             failure_time=failure_time,
@@ -624,55 +623,12 @@ def trajectory_html(traj: Any, *, shapes: Sequence[Shape] = (), height: int = 76
     title = compiled.name if compiled is not None else ""
     up = "y"
     if compiled is not None:
-        from animsim.render import _up_axis
-
-        up = _up_axis(compiled.scene)
+        up = up_axis(compiled.scene)
     return iframe_html(panels_html([panel], title=title, up=up), height=height)
-
-
-@dataclass
-class PanelRun:
-    """What :func:`simulate_panel` returns: the panel and the run's outcome."""
-
-    panel: ViewerPanel
-    trajectory: Any
-    energies: dict[str, np.ndarray]
-    result: Any
-
-
-def simulate_panel(compiled: Any, label: str | None = None, stop: Any = None) -> PanelRun:
-    """Simulate ``compiled`` once, keeping every recorded frame and its energy parts.
-
-    The only place in this module that runs the simulator (so a switch to
-    the public Python API is one edit here).
-    """
-    from animsim.analysis.energy_parts import EnergyRecorder
-    from animsim.engine import run
-    from animsim.export.trajectory import TrajectoryCollector
-
-    collector = TrajectoryCollector()
-    energy = EnergyRecorder(compiled.dynamics)
-    result = run(compiled, [collector], observers=[energy], stop=stop)
-    traj = collector.trajectory()
-    series = energy.series()
-    series.pop("time")
-    if len(next(iter(series.values()), ())) != traj.frame_count:
-        series = {}  # a backend that does not call observers: no energy rather than a wrong one
-    failure_time = result.failure.time if result.failure is not None else None
-    panel = panel_from_trajectory(
-        traj,
-        compiled,
-        energies=series or None,
-        label=panel_label(compiled) if label is None else label,
-        status=result.status,
-        failure_time=failure_time,
-    )
-    return PanelRun(panel=panel, trajectory=traj, energies=series, result=result)
 
 
 __all__ = [
     "SHAPE_KINDS",
-    "PanelRun",
     "Shape",
     "ViewerPanel",
     "dense_frames",
@@ -682,7 +638,6 @@ __all__ = [
     "planes_as_shapes",
     "quantise_positions",
     "scene_shapes",
-    "simulate_panel",
     "trajectory_html",
     "viewer_html",
 ]

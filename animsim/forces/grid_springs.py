@@ -30,15 +30,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from animsim.elements import numba_helper
-from animsim.forces.springs import Springs
-from animsim.forces.springs import _kernel as _springs_kernel
+from animsim.forces.springs import Springs, spring_kernel
 from animsim.system import System
 from animsim.vec import dot3
 
 #: the bincount-order kernel of the springs outside the blocks, compiled with the grid kernel
-#: (a twin of springs._kernel, so marking it leaves that module's kernel alone)
+#: (a twin of springs.spring_kernel, so marking it leaves that module's kernel alone)
 springs_kernel = numba_helper(
-    types.FunctionType(_springs_kernel.__code__, _springs_kernel.__globals__, "springs_kernel")
+    types.FunctionType(spring_kernel.__code__, spring_kernel.__globals__, "springs_kernel")
 )
 #: einsum spec of a row-wise dot product over the last (xyz) axis
 _DOT = "...k,...k->..."

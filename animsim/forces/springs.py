@@ -27,7 +27,7 @@ if TYPE_CHECKING:  # SciPy loads only when implicit Euler asks for a Jacobian
 prange = range  # numba's prange once the kernel is compiled (see animsim.elements.jit_kernel)
 
 
-def _kernel(x, v, t, out, mass, fp, ip):
+def spring_kernel(x, v, t, out, mass, fp, ip):
     """Lander Eq. 2 per spring (in parallel), then each particle gathers its springs (CSR).
 
     fp = [rest (S), ks (S), kd (S), damped]; ip = [S, N, a (S), b (S), ptr (N+1), inc (2S)],
@@ -162,7 +162,7 @@ class Springs(ForceElement):
             rows += np.bincount(a, weights=coef * (ia + cross), minlength=n)
             rows += np.bincount(b, weights=coef * (ib + cross), minlength=n)
 
-    numba_source = staticmethod(_kernel)
+    numba_source = staticmethod(spring_kernel)
     numba_energy_source = staticmethod(_energy)
 
     def numba_energy_params(self) -> tuple[np.ndarray, np.ndarray]:

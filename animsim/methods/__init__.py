@@ -11,7 +11,7 @@ it integrates rigid bodies, and the numba backend's fused step.
   from (c, A, b) (SciPy's ``integrate/_ivp/rk.py`` keeps methods the same way).
 * A splitting method (symplectic Euler, velocity Verlet, implicit Euler) declares
   its one-step matrix on the damped test oscillator; its stability limit is
-  computed from that matrix (:mod:`animsim.analysis.stability`), and a test
+  computed from that matrix (:mod:`animsim.measures.stability`), and a test
   checks the matrix against one step of the method's code.
 
 This package imports nothing but NumPy, so the scene models may read it.

@@ -31,7 +31,9 @@ from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
 from animsim import methods
 from animsim.errors import Diagnostic, SceneError, UsageError
+from animsim.scene.meshes import check_meshes
 from animsim.scene.models import HEX_COLOR_PATTERN, Scene
+from animsim.scene.validate import check_scene, partial_scene
 
 Path_ = tuple[str | int, ...]
 
@@ -485,14 +487,12 @@ def load_scene_bytes(raw: bytes, file: str, limits: Limits = Limits()) -> Loaded
         )
     # Top-level keys starting with x- are free for anchors (as in Compose files).
     body = {k: v for k, v in data.items() if not (isinstance(k, str) and k.startswith("x-"))}
-    from animsim.scene.validate import check_scene, partial_scene  # late: validate imports structures
-
     try:
         scene = Scene.model_validate(body, context={"marks": True})
     except ValidationError as exc:
         # Report the cross-field problems of the parts that did validate too,
         # so one round of fixes is enough (never twice for one key).
-        found = _diagnostics(exc, body, marks, file)
+        found = diagnostics(exc, body, marks, file)
         partial, ids_complete = partial_scene(body)
         seen = {d.path for d in found}
         for p, msg, key in check_scene(partial, ids_complete=ids_complete, partial=True):
@@ -511,8 +511,6 @@ def mesh_problems(scene: Scene, file: str) -> list[tuple[Path_, str, bool]]:
     """Read the mesh files of ``type: mesh`` structures, relative to the scene's folder."""
     if not any(s.type == "mesh" for s in scene.structures):
         return []
-    from animsim.scene.meshes import check_meshes
-
     scene_dir = None if file.startswith("<") else Path(file).parent
     return check_meshes(scene, scene_dir)
 
@@ -798,7 +796,7 @@ def _short(value: Any) -> str:
     return r if len(r) <= 40 else r[:37] + "..."
 
 
-def _diagnostics(exc: ValidationError, data: dict[str, Any], marks: Marks, file: str) -> list[Diagnostic]:
+def diagnostics(exc: ValidationError, data: dict[str, Any], marks: Marks, file: str) -> list[Diagnostic]:
     groups: dict[Path_, list[dict[str, Any]]] = {}
     for err in exc.errors(include_url=False):
         loc = err["loc"]

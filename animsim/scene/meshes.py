@@ -12,7 +12,7 @@ Reading
   order) is particle ``<id>[k]``.
 * PLY: the ``vertex`` (x, y, z) and ``face`` (``vertex_indices`` or
   ``vertex_index``) elements, ASCII or binary, read by animsim's own PLY
-  reader (:func:`animsim.export.ply.read_ply`); vertex order is file order.
+  reader (:func:`animsim.ply_reader.read_ply`); vertex order is file order.
 * STL: through trimesh (``pip install animsim[mesh]``), with identical
   corners merged, so ``k`` is trimesh's merged vertex order.
 
@@ -72,10 +72,10 @@ from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from animsim.scene.models import MeshStructure, PinInside, Scene
+
 if TYPE_CHECKING:
     import numpy as np
-
-    from animsim.scene.models import MeshStructure, Scene
 
 MAX_MESH_VERTICES = 200_000
 MAX_MESH_FACES = 1_000_000
@@ -256,7 +256,8 @@ def _parse_obj(raw: bytes, name: str) -> tuple[np.ndarray, list[tuple[int, list[
 def _parse_ply(path: Path) -> tuple[np.ndarray, list[tuple[int, list[int]]]]:
     import numpy as np
 
-    from animsim.export.ply import PlyFormatError, read_ply
+    # lazy as numpy is here: loading a scene without a mesh does not pay for it
+    from animsim.ply_reader import PlyFormatError, read_ply
 
     try:
         v = read_ply(path, "vertex")
@@ -366,8 +367,6 @@ def check_meshes(scene: Scene, scene_dir: Path | None) -> list[Problem]:
     ``scene_dir``: the folder relative paths start from (the scene file's);
     None means the current directory.
     """
-    from animsim.scene.models import MeshStructure
-
     out: list[Problem] = []
     for i, s in enumerate(scene.structures):
         if not isinstance(s, MeshStructure):
@@ -422,8 +421,6 @@ def _check_mode(s: MeshStructure, geom: MeshGeometry) -> None:
 
 def _check_pins(s: MeshStructure, geom: MeshGeometry) -> list[Problem]:
     import numpy as np
-
-    from animsim.scene.models import PinInside
 
     n = geom.vertex_count
     if isinstance(s.pin, PinInside):
@@ -551,8 +548,6 @@ class MeshParts:
 
 def mesh_parts(s: MeshStructure, scene_dir: Path | None = None) -> MeshParts:
     import numpy as np
-
-    from animsim.scene.models import PinInside
 
     geom = geometry_of(s, scene_dir)
     x = place(s, geom.vertices)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import functools
 import operator
+from collections.abc import Callable
 from typing import Annotated, Any, Literal, get_args
 
 from pydantic import (
@@ -31,6 +32,7 @@ from pydantic import (
 from pydantic_core import PydanticCustomError, core_schema
 
 from animsim import methods
+from animsim.errors import Diagnostic, SceneError
 
 
 class _MethodName:
@@ -925,6 +927,13 @@ class Record(Model):
         return self
 
 
+#: The rules that span sections (:func:`animsim.scene.validate.check_scene`), each a
+#: function of the scene giving (path, message, at_key) problems. They read the models
+#: above, so this module cannot import them; the package ``animsim.scene`` hands them
+#: here when it is imported, which Python does before it imports this module.
+CROSS_CHECKS: list[Callable[[Scene], list[tuple[tuple[str | int, ...], str, bool]]]] = []
+
+
 class Scene(Model):
     """A whole scene file."""
 
@@ -1017,10 +1026,7 @@ class Scene(Model):
         Python. The loader runs them itself, with line marks (context ``{"marks": True}``)."""
         if info.context and info.context.get("marks"):
             return self
-        from animsim.errors import Diagnostic, SceneError
-        from animsim.scene.validate import check_scene
-
-        problems = check_scene(self)
+        problems = [problem for check in CROSS_CHECKS for problem in check(self)]
         if problems:
             raise SceneError(
                 [

@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:  # numpy is imported where arrays are built, so validating a scene
     import numpy as np  # (and refusing a bad one) does not pay for importing it
 
+from animsim.scene.meshes import mesh_parts, mesh_spring_count
 from animsim.scene.models import Cloth, MeshStructure, SoftBox, SpringFamily, Strand, Structure
 
 _PLANE_AXES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}
@@ -82,12 +83,10 @@ def structure_spring_count(s: Structure) -> int:
     """Number of springs the structure generates, counted without generating them
     (the memory pre-flight calls this on lattices far too large to build)."""
     if isinstance(s, MeshStructure):
-        from animsim.scene.meshes import mesh_spring_count
-
         return mesh_spring_count(s)
     shape = grid_shape(s)
     total = 0
-    for _name, _fam, offsets in _family_offsets(s):
+    for _name, _fam, offsets in family_offsets(s):
         for offset in offsets:
             if all(abs(o) < n for n, o in zip(shape, offset, strict=True)):
                 total += math.prod(n - abs(o) for n, o in zip(shape, offset, strict=True))
@@ -165,7 +164,7 @@ def _offset_pairs(shape: tuple[int, ...], offset: tuple[int, ...]) -> np.ndarray
     return _pairs(shape, tuple(a), tuple(b))
 
 
-def _family_offsets(s: Structure) -> list[tuple[str, SpringFamily, list[tuple[int, ...]]]]:
+def family_offsets(s: Structure) -> list[tuple[str, SpringFamily, list[tuple[int, ...]]]]:
     """The spring families a structure asks for, each with its grid offsets."""
     if isinstance(s, Cloth):
         spec = [
@@ -193,7 +192,7 @@ def _families(s: Structure, shape: tuple[int, ...]) -> list[tuple[str, np.ndarra
 
     return [
         (name, np.concatenate([_offset_pairs(shape, o) for o in offsets]), fam)
-        for name, fam, offsets in _family_offsets(s)
+        for name, fam, offsets in family_offsets(s)
     ]
 
 
@@ -284,8 +283,6 @@ def _quads(sheet: np.ndarray) -> np.ndarray:
 def _expand_mesh(s: MeshStructure, scene_dir: Path | None) -> Expanded:
     import numpy as np
 
-    from animsim.scene.meshes import mesh_parts
-
     parts = mesh_parts(s, scene_dir)
     n = len(parts.position)
     groups = [
@@ -314,7 +311,7 @@ def connectivity(expanded: list[tuple[str, Expanded, int]]) -> tuple[Any, ...]:
     """:class:`animsim.record.Connectivity` of each expanded structure (id, expansion, first row)."""
     import numpy as np
 
-    from animsim.record import Connectivity
+    from animsim.record import Connectivity  # with numpy: validating a scene imports neither
 
     out = []
     for name, e, first in expanded:

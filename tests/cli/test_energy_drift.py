@@ -13,7 +13,7 @@ import math
 
 import pytest
 
-from animsim.analysis.drift import DEFAULT_DRIFT_WARN_PERCENT, drift
+from animsim.measures.drift import DEFAULT_DRIFT_WARN_PERCENT, drift
 from tests.conftest import SCENES, run_cli, simulate_text
 
 PERIOD = 2 * math.pi  # scenes/orbit.yaml: gm = 1, radius 1, speed 1

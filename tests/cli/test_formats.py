@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from animsim.export.csv import read_csv
-from animsim.export.ply import read_ids, read_ply
+from animsim.export.ply import read_ids
+from animsim.ply_reader import read_ply
 from tests.conftest import SCENES
 
 SCENE = SCENES / "spring_pendulum.yaml"  # two particles, 251 frames at 50 fps

@@ -36,8 +36,8 @@ def test_energy_plot_other_formats_deterministic(tmp_path, suffix):
 def test_energy_from_trajectory_matches_energy_from_scene(tmp_path):
     traj = tmp_path / "t.csv"
     assert run_cli("run", SCENES / "orbit.yaml", "-o", traj, "-q").returncode == 0
+    from animsim.commands.phase import energy_parts_of
     from animsim.compile import compile_scene
-    from animsim.export.phase import energy_parts_of
     from animsim.export.trajectory import read_trajectory
     from animsim.scene.loader import load_scene
 

@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 
 from animsim import methods
-from animsim.analysis.stability import analyse, largest_stable_dt
 from animsim.compile import compile_scene
 from animsim.engine import run
+from animsim.measures.stability import analyse, largest_stable_dt
 from animsim.record import MemorySink
 from animsim.scene.loader import load_scene_text
 

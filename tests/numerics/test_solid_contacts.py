@@ -261,7 +261,7 @@ def test_contacts_in_a_run_conserve_momentum(backend: str) -> None:
 
 
 def test_the_watchdog_and_explain_account_for_the_stages() -> None:
-    from animsim.analysis.watchdog import EnergyWatch
+    from animsim.measures.watchdog import EnergyWatch
 
     compiled, result, _ = _run(_rain(10), "numpy")
     watch = EnergyWatch(compiled, compiled.clock.dt)

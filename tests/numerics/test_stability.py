@@ -14,8 +14,8 @@ import math
 import numpy as np
 import pytest
 
-from animsim.analysis.stability import analyse, largest_stable_dt, one_step_matrix, spectral_radius
 from animsim.compile import compile_scene
+from animsim.measures.stability import analyse, largest_stable_dt, one_step_matrix, spectral_radius
 from animsim.scene.loader import load_scene_text
 
 

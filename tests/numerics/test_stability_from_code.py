@@ -16,14 +16,14 @@ import numpy as np
 import pytest
 
 from animsim import methods
-from animsim.analysis.stability import (
+from animsim.compile import compile_scene
+from animsim.integrators import FIXED_STEP
+from animsim.measures.stability import (
     analyse,
     initial_state_map,
     largest_stable_dt,
     one_step_matrix,
 )
-from animsim.compile import compile_scene
-from animsim.integrators import FIXED_STEP
 from animsim.scene.loader import load_scene_text
 
 #: rest length of the test springs: the motion is 1-D along x, where the spring force is

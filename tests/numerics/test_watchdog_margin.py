@@ -12,9 +12,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from animsim.analysis.stability import analyse, energy_excursion, one_step_matrix
-from animsim.analysis.watchdog import BLOWUP_FACTOR, ENERGY_FLOOR_J
 from animsim.engine import STATUS_OK, STATUS_UNSTABLE
+from animsim.measures.stability import analyse, energy_excursion, one_step_matrix
+from animsim.measures.watchdog import BLOWUP_FACTOR, ENERGY_FLOOR_J
 from tests.conftest import simulate_text
 
 # A long rest length keeps the 1-D spring linear over the near-limit swing (amplitude up to 2 m).

@@ -329,7 +329,7 @@ planes:
 
 @pytest.mark.parametrize("grid", [True, False], ids=["grid-springs", "listed-springs"])
 def test_compiled_energies_equal_the_watchdogs_numpy_sums(grid):
-    from animsim.analysis.watchdog import EnergyWatch
+    from animsim.measures.watchdog import EnergyWatch
 
     compiled = _compiled(ENERGY_SCENE, "numba" if grid else "reference")
     watch = EnergyWatch(compiled, compiled.clock.dt)

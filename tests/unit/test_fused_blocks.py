@@ -169,7 +169,7 @@ def _advance_all(compiled, monkeypatch, chunk: int) -> tuple[list[tuple], object
 @pytest.mark.parametrize("threads", THREADS, indirect=True)
 @pytest.mark.parametrize("integrator", FIXED_STEP)
 def test_blocks_give_the_bits_counts_and_changed_steps_of_one_pass_per_step(integrator, threads, monkeypatch):
-    monkeypatch.setattr(fused_module, "BLOCK", SMALL_BLOCK)
+    monkeypatch.setattr(animsim.backends, "BLOCK", SMALL_BLOCK)
     compiled = _compiled(SCENE, integrator)
     calls, blocked, _ = _advance_all(compiled, monkeypatch, chunk=40)
     assert sum(c[0] for c in calls) == compiled.clock.steps
@@ -182,7 +182,7 @@ def test_a_block_longer_than_the_scene_and_the_default_block(threads, monkeypatc
     """The default block (one short block) and a block of exactly the scene's rows."""
     compiled = _compiled(SCENE)
     _advance_all(compiled, monkeypatch, chunk=150)
-    monkeypatch.setattr(fused_module, "BLOCK", 43)
+    monkeypatch.setattr(animsim.backends, "BLOCK", 43)
     _advance_all(compiled, monkeypatch, chunk=150)
 
 
@@ -225,7 +225,7 @@ def test_steps_a_collision_changed_are_counted_over_every_block(integrator, thre
     """Only two blocks meet a plane, at steps that differ and steps they share: a step
     counts once when either block's particle was changed (the union over the blocks, not
     their sum nor one block's count), and Verlet's next force is evaluated again."""
-    monkeypatch.setattr(fused_module, "BLOCK", SMALL_BLOCK)
+    monkeypatch.setattr(animsim.backends, "BLOCK", SMALL_BLOCK)
     compiled = _compiled(_some_blocks(), integrator)
     calls, blocked, state = _advance_all(compiled, monkeypatch, chunk=40)
     assert sum(c[0] for c in calls) == compiled.clock.steps
@@ -239,7 +239,7 @@ def test_the_two_blocks_collide_apart(monkeypatch):
     """What the test above relies on: each of the two particles alone (the other in the
     air) makes fewer steps changed than both, and together fewer than the sum (they
     share steps)."""
-    monkeypatch.setattr(fused_module, "BLOCK", SMALL_BLOCK)
+    monkeypatch.setattr(animsim.backends, "BLOCK", SMALL_BLOCK)
     counts = {}
     for which, text in (
         ("both", _some_blocks()),
@@ -274,7 +274,7 @@ def test_many_blocks_on_two_threads_at_once(threads, monkeypatch):
     """Blocks long enough (64 rows, 40 steps a call) that both threads step one at the same
     time: work arrays shared between blocks would give other bits here (a race, so not
     every time; it did on each of a few tries)."""
-    monkeypatch.setattr(fused_module, "BLOCK", 64)
+    monkeypatch.setattr(animsim.backends, "BLOCK", 64)
     compiled = _crowd(64 * 40, 3)
     calls, blocked, _ = _advance_all(compiled, monkeypatch, chunk=40)
     assert sum(c[0] for c in calls) == compiled.clock.steps and blocked.changed_steps > 0
@@ -309,7 +309,7 @@ def test_the_first_step_not_finite_is_the_same_wherever_it_falls(integrator, fir
     on several threads; on one, those before it) are put back and run again up to it, the
     other failing block too, and the chunk stops at the earlier of the two failures
     whichever block is first."""
-    monkeypatch.setattr(fused_module, "BLOCK", SMALL_BLOCK)
+    monkeypatch.setattr(animsim.backends, "BLOCK", SMALL_BLOCK)
     compiled, other = _two_unstable(first, integrator)
     calls, _, state = _advance_all(compiled, monkeypatch, chunk=40)
     assert calls[-1][2]  # it blew up, at the same step on all three
@@ -333,8 +333,8 @@ def test_the_first_step_not_finite_is_the_same_wherever_it_falls(integrator, fir
 @pytest.mark.parametrize("integrator", FIXED_STEP)
 def test_blocked_runs_equal_numpy_frames(integrator, threads, monkeypatch):
     """Whole runs: the stepper picks the parallel build itself when numba has two threads."""
-    monkeypatch.setattr(fused_module, "BLOCK", SMALL_BLOCK)
-    monkeypatch.setattr(fused_module, "PARALLEL_MIN_BLOCKS", 2)
+    monkeypatch.setattr(animsim.backends, "BLOCK", SMALL_BLOCK)
+    monkeypatch.setattr(animsim.backends, "PARALLEL_MIN_BLOCKS", 2)
     frames = {}
     for backend in ("numba", "numpy"):
         scene = load_scene_text(SCENE).scene.model_copy(update={"integrator": integrator})
@@ -374,13 +374,13 @@ def test_blocks_are_chosen_for_pointwise_scenes_only():
 @pytest.mark.parametrize("threads", [2], indirect=True)
 def test_the_parallel_build_runs_for_enough_blocks_and_threads(threads, monkeypatch):
     """From PARALLEL_MIN_BLOCKS blocks on, and only while numba has several threads."""
-    monkeypatch.setattr(fused_module, "BLOCK", SMALL_BLOCK)
+    monkeypatch.setattr(animsim.backends, "BLOCK", SMALL_BLOCK)
     clock_times = np.array([0.0, 0.002, 0.004])
     dts = np.full(2, 0.002)
     for blocks, count, wanted in (
-        (fused_module.PARALLEL_MIN_BLOCKS, 2, fused_module.blocked_chunk_parallel),
-        (fused_module.PARALLEL_MIN_BLOCKS, 1, fused_module.blocked_chunk),
-        (fused_module.PARALLEL_MIN_BLOCKS - 1, 2, fused_module.blocked_chunk),
+        (animsim.backends.PARALLEL_MIN_BLOCKS, 2, fused_module.blocked_chunk_parallel),
+        (animsim.backends.PARALLEL_MIN_BLOCKS, 1, fused_module.blocked_chunk),
+        (animsim.backends.PARALLEL_MIN_BLOCKS - 1, 2, fused_module.blocked_chunk),
     ):
         compiled = _crowd(SMALL_BLOCK * blocks, 1)
         compiled.dynamics.bind(compiled.fresh_state())
@@ -448,11 +448,11 @@ def test_explain_says_whether_the_blocks_share_the_cores(monkeypatch: pytest.Mon
 
     compiled = _compiled(SCENE)
     n = compiled.system.particle_count
-    monkeypatch.setattr(fused_module, "PARALLEL_MIN_BLOCKS", -(-n // fused_module.BLOCK) + 1)
+    monkeypatch.setattr(animsim.backends, "PARALLEL_MIN_BLOCKS", -(-n // animsim.backends.BLOCK) + 1)
     assert "in blocks of particles (no particle acts on another) on one thread" in backend_line(
         compiled, "numba", ""
     )
-    monkeypatch.setattr(fused_module, "PARALLEL_MIN_BLOCKS", 1)
+    monkeypatch.setattr(animsim.backends, "PARALLEL_MIN_BLOCKS", 1)
     compiled.threads = 2
     assert "shared among 2 threads" in backend_line(compiled, "numba", "")
     compiled.threads = 1
@@ -495,8 +495,8 @@ def test_the_chooser_keeps_the_faster_build_and_follows_a_change_of_load(monkeyp
 def test_both_builds_load_before_the_run_and_switching_keeps_the_bits(threads, monkeypatch):
     """warm_up loads both builds (none compiles inside the timed run), and a run whose calls
     switch between them steps the same bits as one that never shares the blocks."""
-    monkeypatch.setattr(fused_module, "BLOCK", SMALL_BLOCK)
-    compiled = _crowd(SMALL_BLOCK * fused_module.PARALLEL_MIN_BLOCKS, 5)
+    monkeypatch.setattr(animsim.backends, "BLOCK", SMALL_BLOCK)
+    compiled = _crowd(SMALL_BLOCK * animsim.backends.PARALLEL_MIN_BLOCKS, 5)
     ref_state = compiled.fresh_state()
     compiled.dynamics.bind(ref_state)
     times = np.arange(41) * 0.002
@@ -598,7 +598,7 @@ def test_the_quick_check_in_pieces_sums_and_decides_as_the_one_pass_check():
     added in order. Its sums equal NumPy's to rounding, it counts the movable rows, it finds
     a number that is not finite at either end of any piece, and it passes and fails where
     the one-thread check does."""
-    from animsim.analysis.watchdog import EnergyWatch
+    from animsim.measures.watchdog import EnergyWatch
 
     compiled = _pieces_scene()
     state = compiled.fresh_state()

@@ -1,6 +1,6 @@
 """The disk-cache loader that skips numba's compiler set-up falls back to numba's own path.
 
-``animsim.backends.numba_cache.load_cached`` reaches into numba's private
+``animsim.numba_cache.load_cached`` reaches into numba's private
 cache machinery; on a numba whose internals differ it must say "not loaded"
 (so the caller compiles or loads through the dispatcher), never break a run.
 """
@@ -12,7 +12,7 @@ import pytest
 
 numba = pytest.importorskip("numba")
 
-from animsim.backends import numba_cache  # noqa: E402
+from animsim import numba_cache  # noqa: E402
 
 
 def _fresh_kernel():

@@ -10,12 +10,8 @@ import pytest
 
 from animsim.errors import SimulationError
 from animsim.export import ply
-from animsim.export.ply import (
-    PlyFormatError,
-    PlySequenceSink,
-    read_ids,
-    read_ply,
-)
+from animsim.export.ply import PlySequenceSink, read_ids
+from animsim.ply_reader import PlyFormatError, read_ply
 from animsim.record import Frame, TrajectoryHeader
 
 EXPECTED_PROPERTIES = [

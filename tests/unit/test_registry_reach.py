@@ -20,10 +20,10 @@ import numpy as np
 import pytest
 
 from animsim import elements, methods
-from animsim.analysis.stability import analyse
 from animsim.compile import compile_scene
 from animsim.engine import run
 from animsim.export import sinks
+from animsim.measures.stability import analyse
 from animsim.preflight import estimate
 from animsim.record import MemorySink
 from animsim.scene import models as m
@@ -113,7 +113,7 @@ def test_an_unregistered_method_is_refused_with_its_line_again(throwaway_method)
     methods.unregister(throwaway_method.name)
     from animsim.errors import SceneError
 
-    with pytest.raises(SceneError, match="x.yaml:4:13: integrator: .test_ssprk3. is not one of"):
+    with pytest.raises(SceneError, match=r"x\.yaml:4:13: integrator: 'test_ssprk3' is not one of"):
         load_scene_text(OSCILLATOR.format(dt=0.01, method=throwaway_method.name), "x.yaml")
     methods.register(throwaway_method)
 

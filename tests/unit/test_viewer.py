@@ -11,7 +11,6 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from animsim.analysis.energy_parts import energy_parts, rotational_energy
 from animsim.export.viewer import (
     QUANT_DEAD,
     QUANT_MAX,
@@ -23,6 +22,7 @@ from animsim.export.viewer import (
     quantise_positions,
     viewer_html,
 )
+from animsim.measures.energy_parts import energy_parts, rotational_energy
 from tests.conftest import simulate_text
 
 

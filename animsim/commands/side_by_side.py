@@ -21,6 +21,7 @@ import numpy as np
 
 from animsim.atomic import AtomicFile
 from animsim.errors import SimulationError
+from animsim.export.raster import up_axis, view_up
 
 LABEL_RGB = (0.92, 0.92, 0.92)
 MARK_RGB = (1.0, 0.2, 0.2)  # a pure palette red: the GIF palette has it exactly
@@ -29,17 +30,6 @@ DIVIDER_PX = 2  # even, so panels of an even width give an even MP4
 BORDER_PX = 3  # the red outline of a frozen (failed) panel
 LABEL_SCALE = 1 / 20  # label height as a fraction of the panel's smaller side
 MIN_LABEL_PX = 13
-
-
-def compile_each(
-    scene: Any, name: str, integrators: Sequence[str] | None, backend: str = "auto"
-) -> list[Any]:
-    """One compiled scene per integrator (or the scene as it is when there are none), for ``backend``."""
-    from animsim.compile import compile_scene, with_overrides
-
-    if not integrators:
-        return [compile_scene(scene, name, backend=backend)]
-    return [compile_scene(with_overrides(scene, integrator=i), name, backend=backend) for i in integrators]
 
 
 class LabelPainter:
@@ -173,8 +163,8 @@ def render_side_by_side(
     """
     from animsim.export.animation import gif_delay_cs
     from animsim.export.raster import make_camera, parse_size
-    from animsim.export.viewer import simulate_panel
-    from animsim.render import RenderResult, _bounds, _up_axis, _with_view, view_up
+    from animsim.panel_runs import simulate_panel
+    from animsim.render import RenderResult, picture_bounds, with_view
 
     runs = []
     for c in compiled:
@@ -189,14 +179,14 @@ def render_side_by_side(
         if len(finite):
             lo, hi = np.minimum(lo, finite.min(axis=0)), np.maximum(hi, finite.max(axis=0))
     # no --view or --size: chosen from all runs' bounds, as a single render does
-    opts = _with_view(opts, lo, hi, view_up(compiled[0].scene))
+    opts = with_view(opts, lo, hi, view_up(compiled[0].scene))
     size = parse_size(opts.size)
-    camera_opts: dict[str, Any] = {"up": _up_axis(compiled[0].scene), "distance": opts.distance}
+    camera_opts: dict[str, Any] = {"up": up_axis(compiled[0].scene), "distance": opts.distance}
     if opts.azimuth is not None:
         camera_opts["azimuth"] = opts.azimuth
     if opts.elevation is not None:
         camera_opts["elevation"] = opts.elevation
-    camera = make_camera(opts.view, _bounds(lo, hi, planes), size, **camera_opts)
+    camera = make_camera(opts.view, picture_bounds(lo, hi, planes), size, **camera_opts)
     sbs = SideBySide(runs, compiled, size, camera, planes, opts.dot_radius)
     writers = [
         w
@@ -248,9 +238,9 @@ class _GifWriter:
 
 class _Mp4Writer:
     def __init__(self, path: Path, size: tuple[int, int], fps: float):
-        from animsim.export.animation import MP4_QUALITY, _require_ffmpeg
+        from animsim.export.animation import MP4_QUALITY, require_ffmpeg
 
-        ffmpeg = _require_ffmpeg()
+        ffmpeg = require_ffmpeg()
         self.path = path
         # H.264 in yuv420p needs even sides: render.validate insists on an even panel, and
         # k panels with k - 1 dividers of DIVIDER_PX (even) stay even.

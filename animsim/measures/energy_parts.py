@@ -19,6 +19,8 @@ from typing import Any
 
 import numpy as np
 
+from animsim.errors import UsageError
+
 #: the parts, in the order plots stack and list them
 PARTS = ("kinetic", "rotational", "gravitational", "spring", "other")
 
@@ -84,3 +86,28 @@ class EnergyRecorder:
         out = {k: np.array([r.get(k, 0.0) for r in self.rows], dtype=np.float64) for k in keys}
         out["time"] = np.array(self.times, dtype=np.float64)
         return out
+
+
+def energies_from_trajectory(compiled: Any, traj: Any) -> dict[str, np.ndarray]:
+    """Energy parts of every frame of a trajectory of ``compiled``'s scene.
+
+    Particles missing from a frame keep their initial state; a scene with
+    emitters cannot be rebuilt from a trajectory, so it is refused.
+    """
+    if compiled.emitters is not None:
+        raise UsageError("energy from a trajectory needs a scene without emitters; give the scene itself")
+    index_of = {pid: i for i, pid in enumerate(compiled.system.ids)}
+    try:
+        rows = np.array([index_of[pid] for pid in traj.ids], dtype=np.int64)
+    except KeyError as exc:
+        raise UsageError(f"the trajectory has particle {exc.args[0]!r}, which the scene does not") from None
+    state = compiled.fresh_state()
+    recorder = EnergyRecorder(compiled.dynamics)
+    for frame in traj.frames():
+        state.particle_position[rows[frame.index]] = frame.position
+        state.particle_velocity[rows[frame.index]] = frame.velocity
+        state.time = frame.time
+        recorder(state)
+    series = recorder.series()
+    series.pop("time")
+    return series

@@ -8,10 +8,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from animsim.atomic import AtomicFile
 from animsim.errors import UsageError
+from animsim.export.raster import up_axis
+from animsim.measures.energy_parts import energies_from_trajectory
 
 #: pages above this size get a note on stderr (they still work; they open slowly)
 LARGE_PAGE_BYTES = 50_000_000
@@ -24,33 +24,6 @@ class ViewSummary:
     interrupted: bool = False
     panels: int = 0
     bytes: int = 0
-
-
-def energies_from_trajectory(compiled: Any, traj: Any) -> dict[str, np.ndarray]:
-    """Energy parts of every frame of a trajectory of ``compiled``'s scene.
-
-    Particles missing from a frame keep their initial state; a scene with
-    emitters cannot be rebuilt from a trajectory, so it is refused.
-    """
-    from animsim.analysis.energy_parts import EnergyRecorder
-
-    if compiled.emitters is not None:
-        raise UsageError("energy from a trajectory needs a scene without emitters; give the scene itself")
-    index_of = {pid: i for i, pid in enumerate(compiled.system.ids)}
-    try:
-        rows = np.array([index_of[pid] for pid in traj.ids], dtype=np.int64)
-    except KeyError as exc:
-        raise UsageError(f"the trajectory has particle {exc.args[0]!r}, which the scene does not") from None
-    state = compiled.fresh_state()
-    recorder = EnergyRecorder(compiled.dynamics)
-    for frame in traj.frames():
-        state.particle_position[rows[frame.index]] = frame.position
-        state.particle_velocity[rows[frame.index]] = frame.velocity
-        state.time = frame.time
-        recorder(state)
-    series = recorder.series()
-    series.pop("time")
-    return series
 
 
 def _megabytes(n: int) -> str:
@@ -76,7 +49,6 @@ def write_view(
     a scene is simulated on ``backend``."""
     from animsim.export.trajectory import is_trajectory, read_trajectory
     from animsim.export.viewer import panel_from_trajectory, panels_html
-    from animsim.render import _up_axis
     from animsim.scene import models as m
 
     summary = ViewSummary()
@@ -111,11 +83,10 @@ def write_view(
             energies = energies_from_trajectory(compiled, traj)
         panels.append(panel_from_trajectory(traj, compiled, energies=energies, label=source.name))
         title = source.name if compiled is None else f"{compiled.name} ({source.name})"
-        up = "y" if compiled is None else _up_axis(compiled.scene)
+        up = "y" if compiled is None else up_axis(compiled.scene)
         total = None
     else:
-        from animsim.export.side_by_side import compile_each
-        from animsim.export.viewer import simulate_panel
+        from animsim.panel_runs import compile_each, simulate_panel
 
         loaded, sc, _ = prepare(source, integrator=integrator, dt=dt, duration=duration)
         sc = sc.model_copy(update={"record": m.Record(fps=fps)})
@@ -130,7 +101,7 @@ def write_view(
                     summary.notes.append(f"{c.integrator_name}: {run.result.failure.describe()}")
                 panels.append(run.panel)
         title = compiled_runs[0].name
-        up = _up_axis(compiled_runs[0].scene)
+        up = up_axis(compiled_runs[0].scene)
         total = compiled_runs[0].clock.duration
     page = panels_html(panels, title=title, up=up, view=view, duration=total)
     out = AtomicFile(output, "w", newline="\n")

@@ -28,7 +28,7 @@ m g^2 dt^2 / 2 of kinetic energy before any position has moved).
 A run is unstable when H > BLOWUP_FACTOR * S * B: at least 99 % of the energy
 was made by the integrator. S is the energy swing the method shows on the
 scene's stiffest modes at this dt when it is stable
-(:func:`animsim.analysis.stability.energy_excursion`, 1 when the dt is beyond
+(:func:`animsim.measures.stability.energy_excursion`, 1 when the dt is beyond
 the limit): near its limit a stable method's energy oscillates far above its
 start (symplectic Euler by about 400x at omega dt = 1.99) and comes back, so a
 fixed factor would call bounded runs unstable that ``check`` calls stable. Terms whose energy input is unknown (turbulence, moving
@@ -129,7 +129,7 @@ class EnergyWatch:
         #: why the energy test is off, or None when it is on
         self.disabled = ", ".join(unknown) if unknown else None
         self.dt = dt
-        from animsim.analysis.stability import run_energy_excursion
+        from animsim.measures.stability import run_energy_excursion
 
         #: the energy swing a stable run may show at this dt, and the growth H/B that stops a run
         self.excursion = run_energy_excursion(compiled, dt)
@@ -325,7 +325,7 @@ def _compiled_book_rows(n: int) -> Any:
     with the types a run passes (``n`` slots), and called without the dispatcher's typing."""
     import numba
 
-    from animsim.backends.fused import _FastCall
+    from animsim.backends.fused import FastCall
 
     kernel = numba.njit(cache=True)(_newborn_rows)
     i, f = np.zeros(0, dtype=np.int64), np.zeros((0, 3))
@@ -345,4 +345,4 @@ def _compiled_book_rows(n: int) -> Any:
         np.zeros(0),
     )
     kernel(*args)
-    return _FastCall(kernel, args)
+    return FastCall(kernel, args)

@@ -13,8 +13,8 @@ from animsim.errors import UsageError
 
 def energy_parts_of(compiled: Any, traj: Any = None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """(times, parts) of a run of ``compiled`` (simulated), or of a trajectory of its scene."""
-    from animsim.export.viewer import simulate_panel
-    from animsim.export.viewer_command import energies_from_trajectory
+    from animsim.measures.energy_parts import energies_from_trajectory
+    from animsim.panel_runs import simulate_panel
 
     if traj is not None:
         return np.asarray(traj.times, dtype=np.float64), energies_from_trajectory(compiled, traj)
@@ -58,14 +58,14 @@ def phase_command(
         pinned = np.zeros(len(traj.ids), dtype=bool)
         if scene is not None:
             from animsim.compile import compile_scene
-            from animsim.export.viewer import _pinned_for
+            from animsim.export.viewer import pinned_for
 
             loaded, sc, _ = prepare(scene)
-            pinned = _pinned_for(compile_scene(sc, loaded.name), traj.ids)
+            pinned = pinned_for(compile_scene(sc, loaded.name), traj.ids)
         title = f"{source.name}: phase portrait"
     else:
-        from animsim.export.side_by_side import compile_each
-        from animsim.export.viewer import panel_label, simulate_panel
+        from animsim.export.viewer import panel_label
+        from animsim.panel_runs import compile_each, simulate_panel
 
         names = None
         if integrators is not None:
