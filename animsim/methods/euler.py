@@ -10,7 +10,7 @@ def closed_form_limit(omega: np.ndarray, zeta: np.ndarray) -> np.ndarray:
     fast real root sets it: h |lambda_fast| <= 2."""
     fast = omega * (zeta + np.sqrt(np.maximum(zeta * zeta - 1.0, 0.0)))
     with np.errstate(divide="ignore"):
-        return np.where(zeta < 1.0, 2.0 * zeta / omega, 2.0 / fast)
+        return np.asarray(np.where(zeta < 1.0, 2.0 * zeta / omega, 2.0 / fast))
 
 
 register(
