@@ -130,6 +130,7 @@ class Dynamics:
         BLOCK_ROWS."""
         self.evaluations += 1
         f0, inv3, n = self._f0, self._inv3, len(x)
+        assert inv3 is not None  # blocks: a fixed population (see the property)
         if not self._uniform_known:  # once per run (_constants forgets it)
             self._uniform = _uniform_rows(f0, inv3)
             self._uniform_known = True

@@ -43,7 +43,7 @@ import functools
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Literal, cast
 
 import numpy as np
 
@@ -157,7 +157,7 @@ class ForceElement:
         """The compiled numba kernel (compiles, or loads from the disk cache, on first use)."""
         if self.numba_source is None:
             return None
-        return jit_kernel(self.numba_source, parallel=self.numba_parallel)
+        return cast(Callable[..., None], jit_kernel(self.numba_source, parallel=self.numba_parallel))
 
     def numba_params(self) -> tuple[np.ndarray, np.ndarray]:
         """(float parameters, integer parameters) for ``numba_kernel``."""
@@ -168,7 +168,7 @@ class ForceElement:
         """The compiled energy kernel (compiles, or loads from the disk cache, on first use)."""
         if self.numba_energy_source is None:
             return None
-        return jit_kernel(self.numba_energy_source, energy=True)
+        return cast(Callable[..., float], jit_kernel(self.numba_energy_source, energy=True))
 
     def numba_energy_params(self) -> tuple[np.ndarray, np.ndarray]:
         """(float parameters, integer parameters) for ``numba_energy_kernel`` (the force's own)."""
@@ -245,7 +245,7 @@ class StepStage:
     def numba_stage(self) -> Callable[..., bool] | None:
         if self.numba_stage_source is None:
             return None
-        return jit_kernel(self.numba_stage_source, stage=True)
+        return cast(Callable[..., bool], jit_kernel(self.numba_stage_source, stage=True))
 
     def numba_stage_params(self) -> tuple[np.ndarray, np.ndarray]:
         return np.zeros(0), np.zeros(0, dtype=np.int64)
@@ -254,7 +254,7 @@ class StepStage:
     def numba_newborn(self) -> Callable[..., bool] | None:
         if self.numba_newborn_source is None:
             return None
-        return jit_kernel(self.numba_newborn_source, newborn=True)
+        return cast(Callable[..., bool], jit_kernel(self.numba_newborn_source, newborn=True))
 
 
 Builder = Callable[[list[tuple[int, Any]], BuildContext], list[Any]]
@@ -419,7 +419,7 @@ def compile_helpers(namespace: dict[str, Any]) -> None:
     for name, obj in list(namespace.items()):
         # a dispatcher from an earlier call answers for its function's attributes too
         if getattr(obj, "_numba_helper", False) and not isinstance(obj, numba.core.dispatcher.Dispatcher):
-            inline = "always" if getattr(obj, "_numba_inline", False) else "never"
+            inline: Literal["always", "never"] = "always" if getattr(obj, "_numba_inline", False) else "never"
             namespace[name] = numba.njit(cache=True, inline=inline)(obj)
 
 

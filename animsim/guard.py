@@ -108,6 +108,7 @@ class Guard:
     def _body_not_finite(self, state: State) -> Failure | None:
         """A rigid body whose orientation or angular velocity is not finite, named by its id."""
         q, w = state.body_orientation, state.body_angular_velocity
+        assert q is not None and w is not None  # called for states with bodies only
         if np.isfinite(q.sum()) and np.isfinite(w.sum()):
             return None
         bad = ~(np.isfinite(q).all(axis=1) & np.isfinite(w).all(axis=1))

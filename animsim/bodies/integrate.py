@@ -55,12 +55,9 @@ def _work(integ: Any, stages: int) -> _Work:
 
 def step(integ: Any, state: Any, dt: float) -> None:
     """One step of ``integ`` (an animsim integrator) on a state with bodies: the rule its
-    class names (``body_rule``, one of the functions below; compile refuses bodies to a
-    method without one), then q back on the unit sphere."""
-    rule = integ.body_rule
-    if rule is None:  # compile refuses bodies to such a method; a bug if it gets here
-        raise ValueError(f"integrator {integ.name!r} does not integrate rigid bodies")
-    if rule(integ, state, dt):
+    class names (``body_rule``, calling one of the functions below; compile refuses bodies
+    to a method without one), then q back on the unit sphere."""
+    if integ.body_rule(state, dt):
         state.body_orientation[:] = quat.normalise(state.body_orientation)
 
 

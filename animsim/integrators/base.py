@@ -15,7 +15,6 @@ change the state behind the integrator's back.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Callable
 from typing import Any, ClassVar
 
 from animsim import methods
@@ -56,10 +55,16 @@ class Integrator(ABC):
         cls.evaluations_per_step = method.evaluations_per_step
         cls.description = method.description
 
-    #: how a step advances rigid bodies with the particles (animsim.bodies.integrate: a
-    #: function (integrator, state, dt) -> whether q still needs normalising), or None when
-    #: the method does not integrate bodies (its descriptor says so, and compile refuses them)
-    body_rule: ClassVar[Callable[[Any, State, float], bool] | None] = None
+    def body_rule(self, state: State, dt: float) -> bool:
+        """How a step advances rigid bodies with the particles: a rule of
+        animsim.bodies.integrate; True when q still needs normalising after it. A method
+        that does not integrate bodies keeps this one (its descriptor says so, and compile
+        refuses bodies to it)."""
+        raise NotImplementedError(f"integrator {self.name!r} does not integrate rigid bodies")
+
+    @classmethod
+    def integrates_bodies(cls) -> bool:
+        return cls.body_rule is not Integrator.body_rule
 
     #: whether ``step(state, dt, stage)`` runs a post-step stage a block of rows at a time
     #: (its ``before(rows)`` and ``after(rows)`` around each block's update) when the

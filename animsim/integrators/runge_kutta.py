@@ -15,6 +15,8 @@ are data, one module each in :mod:`animsim.methods`.
 
 from __future__ import annotations
 
+from typing import cast
+
 import numpy as np
 
 from animsim.bodies import integrate as bodies
@@ -27,7 +29,9 @@ from animsim.system import State
 
 class RungeKutta(Integrator):
     tableau: Tableau
-    body_rule = staticmethod(bodies.runge_kutta)
+
+    def body_rule(self, state: State, dt: float) -> bool:
+        return bodies.runge_kutta(self, state, dt)
 
     def __init__(self, dynamics: Dynamics):
         super().__init__(dynamics)
@@ -124,6 +128,8 @@ def runge_kutta_class(method: Method) -> type[RungeKutta]:
     """The stepper of an explicit Runge-Kutta method: the one tableau engine with its tableau."""
     if method.tableau is None:
         raise ValueError(f"method {method.name!r} has no tableau")
-    cls = type(f"RungeKutta_{method.name}", (RungeKutta,), {"tableau": method.tableau})
+    cls = cast(
+        type[RungeKutta], type(f"RungeKutta_{method.name}", (RungeKutta,), {"tableau": method.tableau})
+    )
     cls.bind_method(method)
     return cls

@@ -34,7 +34,9 @@ CACHE_TIME_RTOL = 1e-9
 
 class SymplecticEuler(Integrator):
     method_name = "symplectic_euler"
-    body_rule = staticmethod(bodies.symplectic_euler)
+
+    def body_rule(self, state: State, dt: float) -> bool:
+        return bodies.symplectic_euler(self, state, dt)
 
     def __init__(self, dynamics: Dynamics):
         super().__init__(dynamics)
@@ -98,7 +100,9 @@ class SymplecticEuler(Integrator):
 
 class EulerAverage(Integrator):
     method_name = "euler_average"
-    body_rule = staticmethod(bodies.euler_average)
+
+    def body_rule(self, state: State, dt: float) -> bool:
+        return bodies.euler_average(self, state, dt)
 
     def __init__(self, dynamics: Dynamics):
         super().__init__(dynamics)
@@ -123,7 +127,9 @@ class EulerAverage(Integrator):
 
 class Verlet(Integrator):
     method_name = "verlet"
-    body_rule = staticmethod(bodies.verlet)
+
+    def body_rule(self, state: State, dt: float) -> bool:
+        return bodies.verlet(self, state, dt)
 
     def __init__(self, dynamics: Dynamics):
         super().__init__(dynamics)

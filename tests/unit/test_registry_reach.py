@@ -263,4 +263,4 @@ def test_every_method_that_says_it_integrates_bodies_has_a_body_rule():
     from animsim.integrators import REGISTRY
 
     for name in methods.names():
-        assert methods.get(name).integrates_bodies == (REGISTRY[name].body_rule is not None), name
+        assert methods.get(name).integrates_bodies == REGISTRY[name].integrates_bodies(), name
