@@ -14,6 +14,11 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from animsim.export.csv import CsvSink
+from animsim.export.npz import NpzSink
+from animsim.export.ply import PlySequenceSink
+from animsim.export.usda import USD_DEFAULT_TIME_CODES_PER_SECOND, UsdaSink
+
 #: format names, in the order ``--format`` lists them
 FORMATS = ("csv", "npz", "ply", "usda")
 #: output suffix -> format (an existing folder means ply; anything else csv)
@@ -47,19 +52,11 @@ def open_sink(
     """
     fmt = format_for(path, fmt)
     if fmt == "npz":
-        from animsim.export.npz import NpzSink
-
         return NpzSink(path)
     if fmt == "ply":
-        from animsim.export.ply import PlySequenceSink
-
         return PlySequenceSink(path, expected_frames=expected_frames)
     if fmt == "usda":
-        from animsim.export.usda import USD_DEFAULT_TIME_CODES_PER_SECOND, UsdaSink
-
         return UsdaSink(
             path, uneven_rate=meta_rate if meta_rate is not None else USD_DEFAULT_TIME_CODES_PER_SECOND
         )
-    from animsim.export.csv import CsvSink
-
     return CsvSink("-" if str(path) == "-" else path, extra_columns=extra_columns)
