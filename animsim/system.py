@@ -12,6 +12,7 @@ masses of emitter pool slots, which births and deaths switch on and off.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -50,7 +51,7 @@ class System:
     body_inertia: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     body_inv_inertia: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     #: one plain frozen shape per body (animsim.bodies.shapes)
-    body_shape: tuple = ()
+    body_shape: tuple[Any, ...] = ()
 
     @property
     def body_rows(self) -> slice:
@@ -137,6 +138,7 @@ class State:
             np.copyto(self.spring_intact, src.spring_intact)
         if self.body_orientation is not None and src.body_orientation is not None:
             np.copyto(self.body_orientation, src.body_orientation)
+        if self.body_angular_velocity is not None and src.body_angular_velocity is not None:
             np.copyto(self.body_angular_velocity, src.body_angular_velocity)
         self.time, self.step, self.revision = src.time, src.step, src.revision
 
