@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from animsim.collisions import RESTING_STEPS, apply_friction
-from animsim.elements import StepStage, numba_helper
+from animsim.elements import StepStage, jit_kernel, numba_helper
 from animsim.vec import dot3
 
 SPHERE, BOX, CAPSULE = 0, 1, 2
@@ -844,7 +844,5 @@ def _stage_kernel(x_old, v_old, x, v, dt, inv_mass, fp, ip):  # pragma: no cover
 
 def numba_kernel():
     """The step-by-step numba kernel (:func:`_collide`), compiled or loaded on first use."""
-    from animsim.elements import jit_kernel
-
     jit_kernel(_stage_kernel, stage=True)  # compiles this module's helpers (_collide among them)
     return globals()["_collide"]

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from animsim.elements import BuildContext, StepStage, numba_helper, numba_inline_helper, register
+from animsim.forces.penalty import PenaltyPlane
 from animsim.scene import models as m
 from animsim.vec import add_scaled, dot3, put_rows, sub_scaled, take_rows
 
@@ -928,8 +929,6 @@ PlaneColliders.numba_newborn_source = staticmethod(_newborn_kernel)
 @register(m.Plane)
 def build(entries: list[tuple[int, m.Plane]], ctx: BuildContext) -> list[Any]:
     """Penalty planes become force elements; impulse planes one collision stage."""
-    from animsim.forces.penalty import PenaltyPlane
-
     out: list[Any] = []
     impulse: list[ImpulsePlane] = []
     for _, p in entries:

@@ -13,9 +13,13 @@ from typing import Any
 
 import numpy as np
 
+from animsim import contact_stages
 from animsim.backends import BACKEND_REFERENCE, backend_line, choose_backend
+from animsim.bodies.build import body_rows, build_body_elements, check_integrator, particle_springs
+from animsim.bodies.export import header_springs
 from animsim.dynamics import Dynamics
 from animsim.elements import BuildContext, ForceElement, StepStage, build_elements
+from animsim.emitters import build_emitters
 from animsim.errors import UsageError
 from animsim.forces.grid_springs import build_spring_term
 from animsim.forces.penalty import PenaltyPlane
@@ -23,6 +27,7 @@ from animsim.integrators import integrator_class
 from animsim.integrators.base import Integrator
 from animsim.record import Clock, TrajectoryHeader, landing_steps, recording_rule, scene_record_steps
 from animsim.scene import models as m
+from animsim.scene.loader import method_from_option
 from animsim.scene.structures import connectivity, expand
 from animsim.system import State, System
 
@@ -90,8 +95,6 @@ def with_overrides(
     """The scene with command-line overrides, checked by the same rules as the file."""
     update: dict[str, Any] = {}
     if integrator is not None:
-        from animsim.scene.loader import method_from_option
-
         method_from_option(integrator, "--integrator")
         adaptive = scene.adaptive
         update["integrator"] = (
@@ -116,8 +119,6 @@ def with_overrides(
 
 def _body_header(system: System, dynamics: Dynamics) -> dict[str, Any]:
     """What sinks and renderers learn about bodies: rows, ids, shapes, springs to bodies."""
-    from animsim.bodies.export import header_springs
-
     return {
         "first": system.body_first,
         "ids": system.body_ids,
@@ -130,8 +131,6 @@ def _particle_springs(scene: m.Scene) -> list[Any]:
     """Springs between two particles (springs to points of bodies are the bodies' element)."""
     if not scene.bodies:
         return list(scene.springs)
-    from animsim.bodies.build import particle_springs
-
     return particle_springs(scene)
 
 
@@ -188,8 +187,6 @@ def compile_scene(
     # --- rigid bodies: each centre of mass is a particle row, after the structures ------
     bodies = None
     if scene.bodies:
-        from animsim.bodies.build import body_rows, check_integrator
-
         check_integrator(scene)
         bodies = body_rows(scene)
         body_first = len(ids)
@@ -232,8 +229,6 @@ def compile_scene(
     particle_pinned = np.concatenate(pinned)
     particle_alive = None
     if scene.emitters:
-        from animsim.emitters import build_emitters
-
         emitters = build_emitters(scene, first_index=fixed_count)
         extra = emitters.capacity
         particle_position = np.concatenate([particle_position, np.zeros((extra, 3))])
@@ -300,8 +295,6 @@ def compile_scene(
         left_out.append("turbulence: the wind has none")
 
     # keyframes, solid colliders, particle contacts, tearing (animsim.contact_stages)
-    from animsim import contact_stages
-
     tearing_limits = contact_stages.spring_max_strain(scene)
     can_tear = bool(system.spring_count and np.isfinite(tearing_limits).any())
     springs_term = None
@@ -328,8 +321,6 @@ def compile_scene(
     dynamics = Dynamics(system, terms)
     dynamics.drivers = tuple(solids.drivers)
     if bodies is not None:
-        from animsim.bodies.build import build_body_elements
-
         dynamics.bodies, body_stages, body_labels, body_left_out = build_body_elements(
             scene, system, index_of, particle_position, bodies.orientation, chosen
         )

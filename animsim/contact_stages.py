@@ -29,7 +29,12 @@ from typing import Any
 
 import numpy as np
 
+from animsim.colliders import BOX, CAPSULE, SPHERE, Colliders, Shape, axis_angle_quaternion, quaternion_matrix
+from animsim.keyframes import KeyframeDrive, PathEvaluator, make_paths
+from animsim.particle_contacts import ParticleContacts, spring_exclusions
 from animsim.scene import models as m
+from animsim.scene.structures import expand, local_index, structure_spring_count
+from animsim.tearing import Tearing
 
 
 @dataclass
@@ -48,8 +53,6 @@ class Built:
 def spring_max_strain(scene: m.Scene) -> np.ndarray:
     """Per spring, in the compiler's order (listed springs, then each structure's families),
     the tearing limit; +inf where the spring cannot tear."""
-    from animsim.scene.structures import expand, structure_spring_count
-
     parts = [np.array([np.inf if sp.max_strain is None else sp.max_strain for sp in scene.springs])]
     for s in scene.structures:
         families = [getattr(s, name, None) for name in type(s).model_fields]
@@ -106,8 +109,6 @@ def build(scene: m.Scene, system: Any, backend: str, springs: Any | None, positi
             rows.append(i)
             base.append(np.zeros(3))
     if scene.structures:
-        from animsim.scene.structures import local_index
-
         for s, (first, _shape, _f0, _f1) in zip(scene.structures, system.structure_grids, strict=True):
             if getattr(s, "pin_motion", None) is None:
                 continue
@@ -122,8 +123,6 @@ def build(scene: m.Scene, system: Any, backend: str, springs: Any | None, positi
                 rows.append(first + li)
                 base.append(positions[first + li])
     if rows:  # the keyframes module loads only for a scene that has some
-        from animsim.keyframes import KeyframeDrive, make_paths
-
         drive = KeyframeDrive(
             np.array(rows), np.array(which), np.array(base), make_paths(keys, smooth), numba
         )
@@ -135,16 +134,6 @@ def build(scene: m.Scene, system: Any, backend: str, springs: Any | None, positi
     # --- solid colliders ------------------------------------------------------------------
     colliders = None
     if scene.colliders:
-        from animsim.colliders import (
-            BOX,
-            CAPSULE,
-            SPHERE,
-            Colliders,
-            Shape,
-            axis_angle_quaternion,
-            quaternion_matrix,
-        )
-
         shapes: list[Shape] = []
         motion_keys: list[list[Any]] = []
         motion_smooth: list[bool] = []
@@ -186,8 +175,6 @@ def build(scene: m.Scene, system: Any, backend: str, springs: Any | None, positi
                 moving.append(-1)
         evaluator = None
         if motion_keys:
-            from animsim.keyframes import PathEvaluator, make_paths
-
             evaluator = PathEvaluator(make_paths(motion_keys, motion_smooth), numba)
         colliders = Colliders(
             shapes,
@@ -205,8 +192,6 @@ def build(scene: m.Scene, system: Any, backend: str, springs: Any | None, positi
 
     # --- particle contacts ------------------------------------------------------------------
     if scene.particle_collisions is not None:
-        from animsim.particle_contacts import ParticleContacts, spring_exclusions
-
         pc = scene.particle_collisions
         active = _point_rows(system) & (radius > 0)
         exclude = spring_exclusions(
@@ -224,8 +209,6 @@ def build(scene: m.Scene, system: Any, backend: str, springs: Any | None, positi
     # --- tearing ----------------------------------------------------------------------------------
     limits = spring_max_strain(scene)
     if system.spring_count and np.isfinite(limits).any():
-        from animsim.tearing import Tearing
-
         tear = Tearing(system.spring_index, system.spring_rest_length, limits, numba)
         tear.springs = springs
         out.back.append(tear)

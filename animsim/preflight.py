@@ -32,7 +32,10 @@ from typing import Any
 
 from animsim import methods
 from animsim.errors import Diagnostic, SceneError, UsageError
+from animsim.export.meta import meta_path
+from animsim.export.ply import PLY_SUFFIX
 from animsim.export.sinks import get_format
+from animsim.record import Clock, recording_rule
 from animsim.scene.loader import (
     DEFAULT_MAX_DEPTH,
     DEFAULT_MAX_FILE_BYTES,
@@ -172,15 +175,11 @@ def step_count(duration: float, dt: float, max_steps: int) -> int | None:
     q = duration / dt
     if not math.isfinite(q) or q > max_steps + 1:
         return None
-    from animsim.record import Clock
-
     steps = Clock.make(duration, dt).steps
     return steps if steps <= max_steps else None
 
 
 def _frame_count(scene: Scene, steps: int) -> int:
-    from animsim.record import recording_rule
-
     every, fps = recording_rule(scene.record.every, scene.record.fps, scene.duration / max(steps, 1))
     if fps is not None:
         span = min(scene.duration * fps, float(steps))
@@ -330,8 +329,6 @@ def _same_file(a: Path, b: Path) -> bool:
 
 def check_output_path(output: Path, scene_path: Path) -> None:
     """Refuse, before any step, an output that cannot be written or must not be."""
-    from animsim.export.meta import meta_path
-
     parent = output.parent if str(output.parent) else Path(".")
     if not parent.exists():
         raise UsageError(f"{output}: the folder {parent} does not exist")
@@ -370,8 +367,6 @@ def check_ply_output(output: Path, scene_path: Path) -> None:
     it, but a typo in a folder name would then silently scatter frames
     somewhere new.
     """
-    from animsim.export.ply import PLY_SUFFIX
-
     if output.is_dir():
         if not os.access(output, os.W_OK):
             raise UsageError(f"{output}: the folder is not writable")

@@ -18,8 +18,11 @@ from typing import Any
 
 import numpy as np
 
+from animsim.engine import run
 from animsim.errors import UsageError
-from animsim.export.raster import up_axis, view_up
+from animsim.export.animation import AnimationSink, check_fps, require_ffmpeg
+from animsim.export.pictures import AXES, pick_view
+from animsim.export.raster import VIEWS, bounds_from_positions, parse_size, up_axis, view_up
 from animsim.record import Frame, TrajectoryHeader
 
 
@@ -61,8 +64,6 @@ def with_view(opts: RenderOptions, lo: np.ndarray, hi: np.ndarray, up: str | Non
     of empty ground.
     """
     from dataclasses import replace
-
-    from animsim.export.pictures import AXES, pick_view
 
     finite = bool(np.isfinite(lo).all() and np.isfinite(hi).all())
     view = opts.view or (pick_view(lo, hi, up) if finite else "xy")
@@ -129,8 +130,6 @@ class _BoundsSink:
 
 
 def picture_bounds(lo: np.ndarray, hi: np.ndarray, planes: list[tuple[np.ndarray, np.ndarray]]) -> Any:
-    from animsim.export.raster import bounds_from_positions
-
     pts = [p for p in (lo, hi) if np.isfinite(p).all()]
     # Keep the ground in view: the point where each plane is anchored.
     pts.extend(np.asarray(point, dtype=np.float64) for point, _ in planes)
@@ -141,9 +140,6 @@ def picture_bounds(lo: np.ndarray, hi: np.ndarray, planes: list[tuple[np.ndarray
 
 def validate(gif: Path | None, mp4: Path | None, opts: RenderOptions) -> tuple[int, int]:
     """Check every option before any work; UsageError (exit 2) when one is wrong."""
-    from animsim.export.animation import check_fps, require_ffmpeg
-    from animsim.export.raster import VIEWS, parse_size
-
     if gif is None and mp4 is None:
         raise UsageError("give --gif PATH and/or --mp4 PATH")
     try:
@@ -177,8 +173,6 @@ def _sinks(
     up: str,
     progress: Callable[[int], object] | None,
 ) -> list[Any]:
-    from animsim.export.animation import AnimationSink
-
     camera: dict[str, Any] = {"up": up, "distance": opts.distance, "dot_radius": opts.dot_radius}
     if opts.azimuth is not None:
         camera["azimuth"] = opts.azimuth
@@ -211,8 +205,6 @@ def render_scene(
     stop: Callable[[], bool] | None = None,
 ) -> RenderResult:
     """Simulate (recording at the frame rate) and draw. ``compiled`` must record at opts.fps."""
-    from animsim.engine import run
-
     planes = compiled.header.extra.get("planes", [])
     bounds_sink = _BoundsSink()
     # The first pass (finding the bounds) obeys Ctrl-C too; stopped there, nothing is drawn.

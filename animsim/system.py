@@ -12,6 +12,7 @@ masses of emitter pool slots, which births and deaths switch on and off.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -50,7 +51,7 @@ class System:
     body_inertia: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     body_inv_inertia: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     #: one plain frozen shape per body (animsim.bodies.shapes)
-    body_shape: tuple[object, ...] = ()
+    body_shape: tuple[Any, ...] = ()
 
     @property
     def body_rows(self) -> slice:

@@ -24,7 +24,9 @@ import difflib
 from dataclasses import dataclass
 from pathlib import Path
 
+from animsim.atomic import write_text_atomic
 from animsim.errors import UsageError
+from animsim.scene.schema import schema_text
 
 SCHEMA_NAME = "scene.schema.json"
 MODELINE = f"# yaml-language-server: $schema={SCHEMA_NAME}"
@@ -163,9 +165,6 @@ def write_starter(path: Path, name: str, force: bool = False) -> list[str]:
     Refuses (UsageError, nothing written) an unknown template, a missing folder,
     or an existing ``path`` unless ``force``. Returns what was done, one line each.
     """
-    from animsim.atomic import write_text_atomic
-    from animsim.scene.schema import schema_text
-
     text = scene_text(name)
     folder = path.parent
     if not folder.is_dir():

@@ -55,22 +55,31 @@ import numpy as np
 
 from animsim.analysis.references import (
     FINE_MAX_FACTOR,
+    FINE_MAX_STEPS,
+    FINE_MIN_STEPS,
+    FINE_START_DIVISOR,
     NoClosedForm,
     Reference,
     ReferenceFailed,
     Trajectory,
     analytic_reference,
     body_point_distances,
+    dop853_rate,
     dop853_reference,
     record_at,
     rk4_reference,
     smooth,
 )
-from animsim.compile import Compiled
+from animsim.atomic import write_text_atomic
+from animsim.compile import Compiled, compile_scene, with_overrides
+from animsim.console import sig
+from animsim.engine import run
 from animsim.errors import UsageError
 from animsim.integrators import integrator_class, listed_methods
-from animsim.record import Clock, landing_steps, scene_record_steps
+from animsim.parallel import map_cases
+from animsim.record import Clock, MemorySink, landing_steps, scene_record_steps
 from animsim.scene import models as m
+from animsim.scene.loader import method_from_option
 
 COLUMNS = (
     "integrator",
@@ -243,8 +252,6 @@ def parse_integrators(text: str | None) -> list[str]:
     names = [s.strip() for s in text.split(",") if s.strip()]
     if not names:
         raise UsageError("--integrators: give at least one name")
-    from animsim.scene.loader import method_from_option
-
     return list(dict.fromkeys(method_from_option(name, "--integrators") for name in names))
 
 
@@ -475,8 +482,6 @@ def compare(
     else:
         # Rows in parallel (local processes or Dask): the same rows, noisier
         # seconds, since the runs share the cores they are timed on.
-        from animsim.parallel import map_cases
-
         def tick(done: int, total: int) -> None:
             if progress is not None:
                 progress(f"{done}/{total} runs")
@@ -549,9 +554,6 @@ def _measure(
     With ``repeat`` = 0 the accuracy run's own wall time is the row's seconds.
     """
     import dataclasses
-
-    from animsim.engine import run
-    from animsim.record import MemorySink
 
     compiled = record_at(scene, name, integ, dt, times, backend)
     sink = MemorySink()
@@ -652,13 +654,6 @@ class Probe:
 def rk4_reference_dts(finest_dt: float, duration: float, min_steps: int | None = None) -> list[float]:
     """The step sizes :func:`animsim.analysis.references.rk4_reference` runs when it does
     not converge early (the most it may cost)."""
-    from animsim.analysis.references import (
-        FINE_MAX_FACTOR,
-        FINE_MAX_STEPS,
-        FINE_MIN_STEPS,
-        FINE_START_DIVISOR,
-    )
-
     dt = finest_dt / FINE_START_DIVISOR
     steps = Clock.make(duration, dt).steps
     finest_steps = max(1, steps // FINE_START_DIVISOR)
@@ -765,10 +760,6 @@ def probe(
     ``compile_seconds``, never estimated) and NumPy's warm-up are not counted.
     """
 
-    from animsim.compile import compile_scene, with_overrides
-    from animsim.engine import run
-    from animsim.record import MemorySink
-
     budget = PROBE_SECONDS if seconds is None else seconds
     began = time.perf_counter()
     scene = scene.model_copy(update={"integrator": scene.integrator_name})
@@ -834,8 +825,6 @@ def probe(
 
     dop = None
     if kind == "DOP853":
-        from animsim.analysis.references import dop853_rate
-
         dop = dop853_rate(base, PROBE_REFERENCE_SECONDS)
     return Probe(
         backend=chosen,
@@ -1127,8 +1116,6 @@ def window_scene(scene: m.Scene, duration: float) -> m.Scene:
     """The scene cut to its first ``duration`` seconds (itself when that is all of it)."""
     if duration >= scene.duration:
         return scene
-    from animsim.compile import with_overrides
-
     return with_overrides(scene, duration=duration)
 
 
@@ -1199,8 +1186,6 @@ def _fit_orders(
 
 def write_csv(comparison: Comparison, path: str | Path) -> None:
     """The table as CSV with exactly ``COLUMNS``, written atomically."""
-    from animsim.atomic import write_text_atomic
-
     lines = [",".join(COLUMNS)] + [",".join(r.csv_fields()) for r in comparison.rows]
     write_text_atomic(path, "\n".join(lines) + "\n")
 
@@ -1222,8 +1207,6 @@ _PRIORITY = (
 
 
 def _cells(comparison: Comparison, r: Row, shown_name: bool) -> dict[str, str]:
-    from animsim.console import sig
-
     return {
         "integrator": r.integrator if shown_name else "",
         "dt": sig(r.dt, 4),

@@ -48,7 +48,9 @@ from typing import Any
 
 import numpy as np
 
+from animsim.bodies import quaternion as quat
 from animsim.compile import Compiled, compile_scene, with_overrides
+from animsim.engine import run
 from animsim.errors import SimulationError
 from animsim.record import MemorySink
 from animsim.scene import models as m
@@ -150,8 +152,6 @@ def body_point_distances(run: Trajectory, ref: Trajectory) -> list[np.ndarray] |
     None when either trajectory has no orientations."""
     if run.orientation is None or ref.orientation is None or ref.body_rows is None:
         return None
-    from animsim.bodies import quaternion as quat
-
     rows, radius = ref.body_rows, ref.body_radius
     out = []
     for xr, qr, xf, qf in zip(run.position, run.orientation, ref.position, ref.orientation, strict=True):
@@ -357,8 +357,6 @@ AXISYMMETRIC_RTOL = 1e-9
 
 def _body_rotations(compiled: Compiled) -> list[tuple[str, Fill]]:
     """The torque-free rotation of every body (see the module docstring), or NoClosedForm."""
-    from animsim.bodies import quaternion as quat
-
     system = compiled.system
     q0_all = compiled.initial.body_orientation
     w0_all = compiled.initial.body_angular_velocity
@@ -398,8 +396,6 @@ def _spin_piece(
 ) -> Fill:
     """q(t) = Rot(turn, |turn| t) q0 Rot(sym, -omega_p t) and omega(t) = turn - omega_p R(t) sym
     (``turn`` = L / I1 in the world; ``sym`` the symmetry axis in the body frame)."""
-    from animsim.bodies import quaternion as quat
-
     rate = float(np.linalg.norm(turn))
     axis = turn / rate if rate > 0 else np.array([1.0, 0.0, 0.0])
 
@@ -818,8 +814,6 @@ def record_at(
 
 def run_trajectory(compiled: Compiled) -> tuple[Trajectory, str]:
     """Run ``compiled`` into memory; returns the trajectory and the run's status."""
-    from animsim.engine import run
-
     sink = MemorySink()
     with np.errstate(all="ignore"):
         result = run(compiled, [sink])

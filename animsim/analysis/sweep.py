@@ -74,10 +74,16 @@ from typing import Any
 import numpy as np
 
 from animsim.analysis.check import energy_drift
-from animsim.analysis.references import Trajectory, run_trajectory
+from animsim.analysis.references import NoClosedForm, Trajectory, analytic_reference, run_trajectory
+from animsim.atomic import AtomicFile
+from animsim.compile import compile_scene
+from animsim.engine import STATUS_OK, STATUS_UNSTABLE, run
 from animsim.errors import AnimsimError, UsageError
+from animsim.parallel import map_cases
 from animsim.record import Clock, MemorySink, landing_steps
-from animsim.scene.models import DEFAULT_INTEGRATOR
+from animsim.scene.loader import Marks, diagnostics, mesh_problems, method_from_option, parse_yaml
+from animsim.scene.models import DEFAULT_INTEGRATOR, Scene
+from animsim.scene.validate import check_scene
 
 # --- names and constants -----------------------------------------------------------
 
@@ -138,8 +144,6 @@ def split_values(text: str) -> list[str]:
 
 def parse_value(text: str, where: str) -> Any:
     """One value as the scene file would read it (YAML 1.2, same loader)."""
-    from animsim.scene.loader import parse_yaml
-
     if text == "":
         raise UsageError(f"{where}: an empty value")
     value, _ = parse_yaml(text, where)
@@ -161,8 +165,6 @@ def parse_set(text: str) -> Axis:
 
 def integrators_axis(text: str) -> Axis:
     """``--integrators euler,rk4`` as the ``integrator`` axis (names checked up front)."""
-    from animsim.scene.loader import method_from_option
-
     names = tuple(n.strip() for n in text.split(",") if n.strip())
     if not names:
         raise UsageError("--integrators: give at least one name")
@@ -226,10 +228,6 @@ def set_path(data: dict[str, Any], key: str, value: Any) -> None:
 def validate_case_data(data: dict[str, Any], file: str) -> Any:
     """The Scene for ``data`` by the file's rules; raises :class:`CaseInvalid`."""
     from pydantic import ValidationError
-
-    from animsim.scene.loader import Marks, diagnostics, mesh_problems
-    from animsim.scene.models import Scene
-    from animsim.scene.validate import check_scene
 
     try:
         scene = Scene.model_validate(data, context={"marks": True})
@@ -352,9 +350,6 @@ def _landed(compiled: Any, times: np.ndarray, fine_dt: float) -> np.ndarray:
 
 def fine_reference(compiled: Any, times: np.ndarray) -> Trajectory:
     """RK4 at the case's dt / :data:`FINE_DT_DIVISOR` on the case's own scene, at ``times``."""
-    from animsim.compile import compile_scene
-    from animsim.engine import STATUS_OK
-
     fine_dt = compiled.clock.dt / FINE_DT_DIVISOR
     scene = compiled.scene.model_copy(update={"integrator": FINE_INTEGRATOR, "dt": fine_dt})
     # repr of a frozen pydantic model names every field: equal reprs, equal scenes.
@@ -380,7 +375,6 @@ def _closed_form(kind: str) -> Callable[[Any, np.ndarray], Trajectory]:
     ``auto`` falls back to the fine RK4 reference when the scene has none;
     ``analytic`` makes that case's row say why.
     """
-    from animsim.analysis.references import NoClosedForm, analytic_reference
 
     def reference(compiled: Any, times: np.ndarray) -> Trajectory:
         try:
@@ -477,9 +471,6 @@ def run_case(case: Case) -> Row:
 
     Module level and fed plain data, so process pools and Dask can ship it.
     """
-    from animsim.compile import compile_scene
-    from animsim.engine import STATUS_OK, STATUS_UNSTABLE, run
-
     row = Row(case.index, dict(case.overrides), _integrator_of(case), case.seed, STATUS_INVALID)
     try:
         scene = case_scene(case)
@@ -568,8 +559,6 @@ def sweep(
     backend: str = "auto",
 ) -> SweepTable:
     """Check the keys, build the cases and run them on ``backend`` (serially, on processes or on Dask)."""
-    from animsim.parallel import map_cases
-
     check_axes(axes)
     check_keys_exist(data, axes, file)
     if reference is not None:
@@ -604,8 +593,6 @@ def to_csv(table: SweepTable) -> str:
 
 
 def write_csv(table: SweepTable, path: Path) -> None:
-    from animsim.atomic import AtomicFile
-
     f = AtomicFile(path, "w", newline="")
     try:
         f.handle.write(to_csv(table))

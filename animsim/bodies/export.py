@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from animsim.bodies import quaternion as quat
+from animsim.bodies.shapes import mesh, outline
 from animsim.bodies.springs import BodySprings
 
 if TYPE_CHECKING:  # the shapes' module loads when a shape is drawn: a writer only asks body_info
@@ -66,16 +67,12 @@ def world_mesh(
     shape: BodyShape, position: np.ndarray, q: np.ndarray, detail: int = 12
 ) -> tuple[np.ndarray, np.ndarray]:
     """The shape's closed triangle mesh placed at ``position`` with orientation ``q``."""
-    from animsim.bodies.shapes import mesh
-
     v, f = mesh(shape, detail)
     return position + quat.rotate(np.broadcast_to(q, (len(v), 4)), v), f
 
 
 def world_outline_segments(shape: BodyShape, position: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Line segments (M, 2, 3) that show the body's shape and orientation (box edges, circles)."""
-    from animsim.bodies.shapes import outline
-
     segs = []
     for line in outline(shape):
         pts = position + quat.rotate(np.broadcast_to(q, (len(line), 4)), line)
@@ -120,8 +117,6 @@ def body_mesh_rows(
     rows = np.flatnonzero((idx >= first) & (idx < first + len(info["ids"])))
     v_com = np.asarray(frame.velocity)[rows]
     omega = frame.angular_velocity[body]
-    from animsim.bodies.shapes import mesh
-
     pos, vel, ids, tris = [], [], [], []
     base = n
     for k, b in enumerate(body.tolist()):

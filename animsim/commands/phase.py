@@ -8,14 +8,18 @@ from typing import Any
 
 import numpy as np
 
+from animsim.analysis.compare import parse_integrators
+from animsim.compile import compile_scene
 from animsim.errors import UsageError
+from animsim.export.pictures import PhaseRun, phase_particles, plot_phase
+from animsim.export.trajectory import read_trajectory
+from animsim.export.viewer import dense_frames, panel_label, pinned_for
+from animsim.measures.energy_parts import energies_from_trajectory
+from animsim.panel_runs import compile_each, simulate_panel
 
 
 def energy_parts_of(compiled: Any, traj: Any = None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """(times, parts) of a run of ``compiled`` (simulated), or of a trajectory of its scene."""
-    from animsim.measures.energy_parts import energies_from_trajectory
-    from animsim.panel_runs import simulate_panel
-
     if traj is not None:
         return np.asarray(traj.times, dtype=np.float64), energies_from_trajectory(compiled, traj)
     run = simulate_panel(compiled)
@@ -37,17 +41,12 @@ def phase_command(
     backend: str = "auto",
 ) -> None:
     """Simulate once per integrator on ``backend`` (or read a trajectory) and draw the phase portraits."""
-    from animsim.export.pictures import PhaseRun, phase_particles, plot_phase
-    from animsim.export.viewer import dense_frames
-
     requested = [p.strip() for p in particles.split(",") if p.strip()] if particles is not None else None
     if particles is not None and not requested:
         raise UsageError("--particles: give at least one particle id")
     runs: list[PhaseRun] = []
     pinned: np.ndarray
     if from_file:
-        from animsim.export.trajectory import read_trajectory
-
         if integrators is not None:
             raise UsageError(
                 "--integrators simulates the scene once per method: give the scene, not a trajectory"
@@ -57,20 +56,12 @@ def phase_command(
         runs.append(PhaseRun(source.name, list(traj.ids), dense["position"], dense["velocity"]))
         pinned = np.zeros(len(traj.ids), dtype=bool)
         if scene is not None:
-            from animsim.compile import compile_scene
-            from animsim.export.viewer import pinned_for
-
             loaded, sc, _ = prepare(scene)
             pinned = pinned_for(compile_scene(sc, loaded.name), traj.ids)
         title = f"{source.name}: phase portrait"
     else:
-        from animsim.export.viewer import panel_label
-        from animsim.panel_runs import compile_each, simulate_panel
-
         names = None
         if integrators is not None:
-            from animsim.analysis.compare import parse_integrators
-
             if integrator is not None:
                 raise UsageError("give --integrator or --integrators, not both")
             names = parse_integrators(integrators)

@@ -21,7 +21,10 @@ import numpy as np
 
 from animsim.atomic import AtomicFile
 from animsim.errors import SimulationError
-from animsim.export.raster import up_axis, view_up
+from animsim.export.animation import MP4_QUALITY, FrameRenderer, GifStream, gif_delay_cs, require_ffmpeg
+from animsim.export.raster import make_camera, parse_size, quantise, to_rgb8, up_axis, view_up
+from animsim.panel_runs import simulate_panel
+from animsim.render import RenderResult, picture_bounds, with_view
 
 LABEL_RGB = (0.92, 0.92, 0.92)
 MARK_RGB = (1.0, 0.2, 0.2)  # a pure palette red: the GIF palette has it exactly
@@ -91,8 +94,6 @@ class SideBySide:
         planes: Sequence[Any],
         dot_radius: float,
     ):
-        from animsim.export.animation import FrameRenderer
-
         self.runs = list(runs)
         self.width, self.height = size
         self.renderers = []
@@ -161,11 +162,6 @@ def render_side_by_side(
     Returns a :class:`animsim.render.RenderResult` whose status is ``unstable``
     when any run was stopped by the watchdog (its failure is the first such).
     """
-    from animsim.export.animation import gif_delay_cs
-    from animsim.export.raster import make_camera, parse_size
-    from animsim.panel_runs import simulate_panel
-    from animsim.render import RenderResult, picture_bounds, with_view
-
     runs = []
     for c in compiled:
         runs.append(simulate_panel(c, stop=stop))
@@ -217,15 +213,11 @@ def render_side_by_side(
 
 class _GifWriter:
     def __init__(self, path: Path, size: tuple[int, int]):
-        from animsim.export.animation import GifStream
-
         self.path = path
         self.file = AtomicFile(path, "wb")
         self.stream = GifStream(self.file.handle, *size)
 
     def add(self, image: np.ndarray, delay_cs: int) -> None:
-        from animsim.export.raster import quantise
-
         self.stream.add(quantise(image), delay_cs)
 
     def commit(self) -> None:
@@ -238,8 +230,6 @@ class _GifWriter:
 
 class _Mp4Writer:
     def __init__(self, path: Path, size: tuple[int, int], fps: float):
-        from animsim.export.animation import MP4_QUALITY, require_ffmpeg
-
         ffmpeg = require_ffmpeg()
         self.path = path
         # H.264 in yuv420p needs even sides: render.validate insists on an even panel, and
@@ -258,8 +248,6 @@ class _Mp4Writer:
         self.video.send(None)
 
     def add(self, image: np.ndarray, delay_cs: int) -> None:
-        from animsim.export.raster import to_rgb8
-
         self.video.send(np.ascontiguousarray(to_rgb8(image)))
 
     def commit(self) -> None:

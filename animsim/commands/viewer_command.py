@@ -8,10 +8,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from animsim.analysis.compare import parse_integrators
 from animsim.atomic import AtomicFile
+from animsim.compile import compile_scene
 from animsim.errors import UsageError
 from animsim.export.raster import up_axis
+from animsim.export.trajectory import is_trajectory, read_trajectory
+from animsim.export.viewer import panel_from_trajectory, panels_html
 from animsim.measures.energy_parts import energies_from_trajectory
+from animsim.panel_runs import compile_each, simulate_panel
+from animsim.scene import models as m
 
 #: pages above this size get a note on stderr (they still work; they open slowly)
 LARGE_PAGE_BYTES = 50_000_000
@@ -47,17 +53,11 @@ def write_view(
 ) -> ViewSummary:
     """Build the panels and write ``output`` (atomically). ``prepare`` is the CLI's scene loader;
     a scene is simulated on ``backend``."""
-    from animsim.export.trajectory import is_trajectory, read_trajectory
-    from animsim.export.viewer import panel_from_trajectory, panels_html
-    from animsim.scene import models as m
-
     summary = ViewSummary()
     from_file = is_trajectory(source)
     panels = []
     names: Sequence[str] | None = None
     if integrators is not None:
-        from animsim.analysis.compare import parse_integrators
-
         if from_file:
             raise UsageError(
                 "--integrators simulates the scene once per method: give the scene, not a trajectory"
@@ -68,8 +68,6 @@ def write_view(
     if from_file:
         compiled = None
         if scene is not None:
-            from animsim.compile import compile_scene
-
             loaded, sc, _ = prepare(scene, integrator=integrator, dt=dt, duration=duration)
             compiled = compile_scene(sc, loaded.name)
         traj = read_trajectory(source)
@@ -86,8 +84,6 @@ def write_view(
         up = "y" if compiled is None else up_axis(compiled.scene)
         total = None
     else:
-        from animsim.panel_runs import compile_each, simulate_panel
-
         loaded, sc, _ = prepare(source, integrator=integrator, dt=dt, duration=duration)
         sc = sc.model_copy(update={"record": m.Record(fps=fps)})
         compiled_runs = compile_each(sc, loaded.name, names, backend)

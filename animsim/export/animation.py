@@ -33,6 +33,9 @@ from typing import IO, Any
 import numpy as np
 
 from animsim.atomic import AtomicFile
+from animsim.bodies.draw import draw_bodies, draw_body_springs
+from animsim.bodies.export import body_info
+from animsim.emitters import parse_color
 from animsim.errors import EXIT_USAGE, AnimsimError, SimulationError
 from animsim.export.raster import (
     BACKGROUND_RGB,
@@ -198,8 +201,6 @@ class FrameRenderer:
 
     def set_particles(self, extra: dict[str, Any]) -> None:
         """Per-particle radius, colour and pins, and the colliders, from a trajectory header's extras."""
-        from animsim.emitters import parse_color
-
         radius = extra.get("particle_radius")
         if radius is not None:
             self.row_radius = np.asarray(radius, dtype=np.float64)
@@ -303,8 +304,6 @@ class FrameRenderer:
     ) -> Any:
         """Draw the bodies as shapes; returns the projection with their centre rows hidden."""
         from dataclasses import replace
-
-        from animsim.bodies.draw import draw_bodies, draw_body_springs
 
         info = self.bodies
         assert info is not None
@@ -509,8 +508,6 @@ class AnimationSink:
             raise RuntimeError(f"begin() called on a sink that is {self._state}")
         self.renderer.set_springs(header.spring_index)
         self.renderer.set_particles(header.extra)
-        from animsim.bodies.export import body_info
-
         self.renderer.set_bodies(body_info(header))
         try:
             self._file = AtomicFile(self.path, "wb")

@@ -21,7 +21,9 @@ from typing import IO, Any
 import numpy as np
 
 from animsim.atomic import AtomicFile, writing
+from animsim.bodies.export import CSV_COLUMNS, body_info, row_columns
 from animsim.export.meta import commit_with_meta
+from animsim.export.trajectory import TornSprings
 from animsim.record import Frame, TrajectoryHeader
 
 HEADER = ("t", "id", "x", "y", "z", "vx", "vy", "vz")
@@ -59,12 +61,8 @@ class CsvSink:
             self._file = AtomicFile(self.path, "w", newline="")
             self._out = self._file.handle
         self._ids = [quote_id(i) for i in header.ids]
-        from animsim.bodies.export import CSV_COLUMNS, body_info
-
         self._bodies = body_info(header)
         cols = HEADER + (EXTRA_HEADER if self.extra else ()) + (CSV_COLUMNS if self._bodies else ())
-        from animsim.export.trajectory import TornSprings
-
         self._torn = TornSprings() if header.extra.get("springs_can_tear") else None
         if self._torn is not None:
             cols = (*cols, TORN_COLUMN)
@@ -105,8 +103,6 @@ class CsvSink:
         self, frame: Frame, t: str, ids: list[str], rows: list[Any], index: list[int]
     ) -> list[str]:
         """Rows of a scene with bodies: q and omega for body rows, seven empty cells for particles."""
-        from animsim.bodies.export import row_columns
-
         assert self._bodies is not None
         q, w = row_columns(frame, int(self._bodies["first"]))
         tail = [

@@ -34,7 +34,9 @@ from typing import IO, Any
 import numpy as np
 
 from animsim.atomic import AtomicFile, writing
+from animsim.bodies.export import body_info, row_columns
 from animsim.export.meta import commit_with_meta
+from animsim.export.trajectory import TornSprings
 from animsim.record import Frame, TrajectoryHeader
 
 _COLUMNS = {
@@ -64,8 +66,6 @@ class NpzSink:
     def begin(self, header: TrajectoryHeader) -> None:
         if header.has_emitters:
             self._columns.update(_EXTRA)
-        from animsim.bodies.export import body_info
-
         self._bodies = body_info(header)
         if self._bodies is not None:
             self._columns.update(_BODY)
@@ -74,8 +74,6 @@ class NpzSink:
             for name in self._columns:
                 self._raw[name] = open(Path(self._tmpdir.name) / name, "wb")  # noqa: SIM115
         self._ids = list(header.ids)
-        from animsim.export.trajectory import TornSprings
-
         self._torn = TornSprings() if header.extra.get("springs_can_tear") else None
 
     def write(self, frame: Frame) -> None:
@@ -101,8 +99,6 @@ class NpzSink:
         self._frame_start.append(self._rows)
 
     def _write_bodies(self, frame: Frame) -> None:
-        from animsim.bodies.export import row_columns
-
         assert self._bodies is not None
         q, w = row_columns(frame, int(self._bodies["first"]))
         self._raw["orientation"].write(np.ascontiguousarray(q).tobytes())

@@ -20,6 +20,7 @@ import io
 from pathlib import Path
 from typing import Any
 
+from animsim.atomic import write_bytes_atomic
 from animsim.errors import UsageError
 
 #: suffix -> (matplotlib format, metadata that removes dates and versions)
@@ -208,8 +209,6 @@ def _guides(ax: Any, series: list[tuple[str, list[Any], Any]], dt_lo: float, dt_
 def write_compare_plot(comparison: Any, path: str | Path) -> None:
     """Draw the figure and write it atomically; the type follows the suffix."""
     import matplotlib
-
-    from animsim.atomic import write_bytes_atomic
 
     fmt = plot_format(path)
     metadata = FORMATS[Path(path).suffix.lower()][1]

@@ -137,6 +137,7 @@ from typing import Any
 import numpy as np
 
 from animsim.atomic import AtomicFile
+from animsim.bodies.export import body_mesh_rows
 from animsim.errors import SimulationError
 from animsim.export.meta import meta_file, meta_path
 
@@ -544,8 +545,6 @@ def _with_body_meshes(
     """The frame with each rigid body's shape appended: its mesh vertices (id = the body's row,
     velocity = v + omega x r of that point) and triangles (wound counter-clockwise seen from
     outside) after the frame's own rows and faces."""
-    from animsim.bodies.export import body_mesh_rows
-
     pos, vel, idx, tris = body_mesh_rows(frame, info, n)
     if not len(idx):
         return frame, n, faces, face_count

@@ -17,6 +17,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from animsim.export.csv import CsvSink
+from animsim.export.npz import NpzSink
+from animsim.export.ply import PlySequenceSink
+from animsim.export.usda import USD_DEFAULT_TIME_CODES_PER_SECOND, UsdaSink
+
 
 @dataclass(frozen=True)
 class SinkOptions:
@@ -38,7 +43,7 @@ class OutputFormat:
     suffixes: tuple[str, ...]
     #: one line for ``--format``'s help
     summary: str
-    #: (path, options) -> a frame sink (see animsim.record.FrameSink); imports its module lazily
+    #: (path, options) -> a frame sink (see animsim.record.FrameSink)
     open: Callable[[Path, SinkOptions], Any]
     #: bytes the sink holds in memory per recorded frame until it closes (pre-flight)
     frame_memory_bytes: int
@@ -126,26 +131,18 @@ def _csv_row_bytes(mean_id_chars: float) -> float:
 
 
 def _open_csv(path: Path, options: SinkOptions) -> Any:
-    from animsim.export.csv import CsvSink
-
     return CsvSink("-" if str(path) == "-" else path, extra_columns=options.extra_columns)
 
 
 def _open_npz(path: Path, options: SinkOptions) -> Any:
-    from animsim.export.npz import NpzSink
-
     return NpzSink(path)
 
 
 def _open_ply(path: Path, options: SinkOptions) -> Any:
-    from animsim.export.ply import PlySequenceSink
-
     return PlySequenceSink(path, expected_frames=options.expected_frames)
 
 
 def _open_usda(path: Path, options: SinkOptions) -> Any:
-    from animsim.export.usda import USD_DEFAULT_TIME_CODES_PER_SECOND, UsdaSink
-
     rate = options.meta_rate if options.meta_rate is not None else USD_DEFAULT_TIME_CODES_PER_SECOND
     return UsdaSink(path, uneven_rate=rate)
 

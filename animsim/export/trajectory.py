@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from animsim.bodies.export import CSV_COLUMNS, bodies_from_rows, body_info, row_columns
 from animsim.errors import UsageError
 from animsim.record import Frame
 
@@ -91,8 +92,6 @@ class Trajectory:
     def _body_fields(self, a: int, b: int) -> dict[str, Any]:
         if self.orientation is None:
             return {}
-        from animsim.bodies.export import bodies_from_rows
-
         q, w = bodies_from_rows(self.orientation[a:b], self.angular_velocity[a:b])
         return {"orientation": q, "angular_velocity": w}
 
@@ -163,8 +162,6 @@ def _read_csv(p: Path) -> Trajectory:
     traj = Trajectory(ids, t, particle, num[:, 1:4], num[:, 4:7], frame_start)
     names = header[8:]
     if {"qw", "wz"} <= set(names):
-        from animsim.bodies.export import CSV_COLUMNS
-
         at = [header.index(c) for c in CSV_COLUMNS]
         body = np.array(
             [[float(row[j]) if row[j] != "" else np.nan for j in at] for row in rows], dtype=np.float64
@@ -244,8 +241,6 @@ class TrajectoryCollector:
         self._torn: TornSprings | None = None
 
     def begin(self, header: Any) -> None:
-        from animsim.bodies.export import body_info
-
         self.ids = list(header.ids)
         self._bodies = body_info(header)
         self._torn = TornSprings() if header.extra.get("springs_can_tear") else None
@@ -266,8 +261,6 @@ class TrajectoryCollector:
             p["size"].append(np.array(frame.size))
             p["color"].append(np.array(frame.color))
         if self._bodies is not None:
-            from animsim.bodies.export import row_columns
-
             self._body_parts.append(row_columns(frame, int(self._bodies["first"])))
         self._starts.append(self._starts[-1] + n)
 

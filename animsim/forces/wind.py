@@ -14,6 +14,7 @@ import numpy as np
 
 from animsim.elements import INJECTING, BuildContext, ForceElement, register
 from animsim.forces.jacobian import scaled_identity
+from animsim.forces.turbulence import Turbulence
 from animsim.scene import models as m
 
 if TYPE_CHECKING:  # SciPy loads only when implicit Euler asks for a Jacobian
@@ -82,8 +83,6 @@ class Wind(ForceElement):
 
 @register(m.Wind)
 def build(entries: list[tuple[int, m.Wind]], ctx: BuildContext) -> list[ForceElement]:
-    from animsim.forces.turbulence import Turbulence
-
     out: list[ForceElement] = []
     for index, f in entries:
         out.append(Wind(np.array(f.velocity), f.k))

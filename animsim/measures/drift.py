@@ -24,6 +24,8 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from animsim.errors import UsageError
+
 #: the default threshold (percent of |E_start|) above which a drift is a warning
 DEFAULT_DRIFT_WARN_PERCENT = 10.0
 #: below this starting energy (J) a relative drift means nothing
@@ -78,8 +80,6 @@ class Drift:
 
 def check_threshold(percent: float) -> float:
     """The --drift-warn value, refused unless a finite percentage >= 0."""
-    from animsim.errors import UsageError
-
     if not (math.isfinite(percent) and percent >= 0):
         raise UsageError(f"--drift-warn: {percent!r} must be a percentage >= 0 (for example 10)")
     return float(percent)

@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 
 from animsim.elements import DISSIPATIVE, ELASTIC, INJECTING, RELEASING
+from animsim.measures.stability import run_energy_excursion
 from animsim.system import kept_copies
 from animsim.vec import put_rows, take_rows
 
@@ -129,8 +130,6 @@ class EnergyWatch:
         #: why the energy test is off, or None when it is on
         self.disabled = ", ".join(unknown) if unknown else None
         self.dt = dt
-        from animsim.measures.stability import run_energy_excursion
-
         #: the energy swing a stable run may show at this dt, and the growth H/B that stops a run
         self.excursion = run_energy_excursion(compiled, dt)
         self.allowance = BLOWUP_FACTOR * self.excursion

@@ -2,6 +2,8 @@
 
 * no import cycle among animsim's modules, counting the imports written inside functions
   (a lazy import may save start-up time, never hide a cycle);
+* an import of an animsim module inside a function loads a heavy package (numba), keeps the
+  command line's start light (the API and the package face), or says on its line why;
 * no private name (``_x``) is imported from another module: a name two modules share is public;
 * the import-linter contracts of pyproject.toml (the layer table, the forbidden imports) are kept.
 """
@@ -156,6 +158,66 @@ def test_no_import_cycle_even_through_imports_inside_functions() -> None:
         for c in _cycles(graph)
     ]
     assert described == []
+
+
+#: modules whose import loads numba: imported inside the functions that need them
+HEAVY = {"animsim.backends.fused", "animsim.numba_cache"}
+#: the package face, the API and the command line import the rest of animsim inside their
+#: functions, so that ``animsim --help``, ``import animsim`` and a command load only what
+#: they use (test_the_command_line_starts_without_numpy_or_pydantic)
+START_UP = {"animsim", "animsim.api", "animsim.cli", "animsim.__main__"}
+
+
+def _lazy_imports() -> list[tuple[str, int, str, str]]:
+    """(module, line, imported module, the line's text) for each import of animsim inside a function."""
+    found = []
+    for module, path in MODULES.items():
+        text = path.read_text(encoding="utf-8")
+        lines = text.splitlines()
+        tree = ast.parse(text, filename=str(path))
+        inside: set[int] = set()
+        for func in ast.walk(tree):
+            if isinstance(func, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                inside.update(id(n) for n in _import_nodes(func))
+        for node in _import_nodes(tree):
+            if id(node) in inside:
+                for target, _ in _targets(module, node):
+                    above = lines[node.lineno - 2].strip()  # a comment line just above counts too
+                    said = lines[node.lineno - 1] + (above if above.startswith("#") else "")
+                    found.append((module, node.lineno, target, said))
+    return found
+
+
+def test_imports_inside_functions_load_numba_or_keep_the_start_light_or_say_why() -> None:
+    unexplained = [
+        f"{module}:{line}: {target}"
+        for module, line, target, text in _lazy_imports()
+        if module not in START_UP and target not in HEAVY and "#" not in text
+    ]
+    assert unexplained == []
+
+
+def test_the_heavy_modules_are_heavy() -> None:
+    """The modules HEAVY names really load numba (else their lazy imports would be for nothing)."""
+    pytest.importorskip("numba")
+    code = "import sys, {m}; print('numba' in sys.modules)"
+    for module in sorted(HEAVY):
+        out = subprocess.run(
+            [sys.executable, "-c", code.format(m=module)],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        assert out.stdout.strip() == "True", module
+
+
+def test_the_command_line_starts_without_numpy_or_pydantic() -> None:
+    """``animsim --help`` and ``import animsim`` load neither NumPy nor pydantic: the reason
+    the package face, the API and the command line import the rest inside their functions."""
+    code = "import sys, animsim, animsim.cli; print(sorted(m for m in ('numpy', 'pydantic', 'scipy') if m in sys.modules))"
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
 
 
 def _private_imports(root: Path, package_modules: dict[str, Path]) -> list[str]:
