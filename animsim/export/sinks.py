@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from animsim.errors import UsageError
 from animsim.export.csv import CsvSink
 from animsim.export.npz import NpzSink
 from animsim.export.ply import PlySequenceSink
@@ -83,8 +84,6 @@ def format_for(path: Path | None, requested: str | None = None) -> str:
     """The format: as asked, else from the suffix, else PLY for an existing folder, else CSV."""
     if requested is not None:
         if requested not in _FORMATS:
-            from animsim.errors import UsageError
-
             raise UsageError(f"--format: unknown format {requested!r} (valid: {', '.join(_FORMATS)})")
         return requested
     if path is None or str(path) == "-":
