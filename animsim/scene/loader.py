@@ -503,6 +503,7 @@ def load_scene_bytes(raw: bytes, file: str, limits: Limits = Limits()) -> Loaded
         raise SceneError(
             [Diagnostic(file, *marks.at(p, prefer_key=key), _dotted(p), msg) for p, msg, key in problems]
         )
+    scene._located = (file, marks)
     return LoadedScene(scene=scene, file=file, sha256=sha, marks=marks, data=body, source=text)
 
 

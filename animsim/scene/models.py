@@ -887,6 +887,8 @@ class Scene(Model):
 
     #: where a loaded scene came from ({"file", "sha256"}), for the metadata; not part of the scene
     _source: dict[str, str] | None = PrivateAttr(default=None)
+    #: (file, marks) of a scene read from YAML, so that checks made after compiling can name a line
+    _located: tuple[str, Any] | None = PrivateAttr(default=None)
 
     name: StrictStr | None = Doc(None, "the scene's name; defaults to the file stem", example="projectile")
     duration: Positive = Doc(description="simulated time", unit="s", example=2.0)
