@@ -203,6 +203,17 @@ _LIMIT_PARAMS: dict[str, tuple[Any, Any]] = {
         ],
         True,
     ),
+    "mesh_dir": (
+        Annotated[
+            list[str] | None,
+            typer.Option(
+                "--mesh-dir",
+                help="Also read mesh files under this folder (repeatable); by default only the scene's own.",
+                rich_help_panel=_LIMITS_PANEL,
+            ),
+        ],
+        None,
+    ),
 }
 
 
@@ -243,6 +254,7 @@ def make_limits(
     max_steps: str | int = "100000000",
     max_memory: str | int = "4GiB",
     disk_check: bool = True,
+    mesh_dir: list[str] | None = None,
 ):
     """RunLimits from the options' values (sizes and counts parsed here, once)."""
     from animsim.preflight import RunLimits, parse_count, parse_size
@@ -254,6 +266,7 @@ def make_limits(
         max_steps=parse_count(str(max_steps), "--max-steps"),
         max_memory=parse_size(str(max_memory), "--max-memory"),
         disk_check=disk_check,
+        mesh_dirs=tuple(mesh_dir or ()),
     )
 
 

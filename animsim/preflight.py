@@ -148,6 +148,7 @@ class RunLimits:
     max_steps: int = DEFAULT_MAX_STEPS
     max_memory: int = DEFAULT_MAX_MEMORY
     disk_check: bool = True
+    mesh_dirs: tuple[str, ...] = ()
 
     @property
     def loader(self) -> Limits:
@@ -156,6 +157,7 @@ class RunLimits:
             max_depth=self.max_depth,
             max_nodes=self.max_nodes,
             max_memory=self.max_memory,
+            mesh_dirs=self.mesh_dirs,
         )
 
 
