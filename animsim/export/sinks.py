@@ -23,6 +23,10 @@ SUFFIXES = {".csv": "csv", ".npz": "npz", ".ply": "ply", ".usda": "usda"}
 def format_for(path: Path | None, requested: str | None = None) -> str:
     """The format: as asked, else from the suffix, else PLY for an existing folder, else CSV."""
     if requested is not None:
+        if requested not in FORMATS:  # never write CSV under another format's name
+            from animsim.errors import UsageError
+
+            raise UsageError(f"unknown trajectory format {requested!r} (valid: {', '.join(FORMATS)})")
         return requested
     if path is None or str(path) == "-":
         return "csv"
