@@ -291,12 +291,19 @@ def _err(text: str) -> None:
 
 
 class _StopFlag:
-    """Set by SIGINT/SIGTERM; the loop polls it at each step boundary."""
+    """Set by SIGINT/SIGTERM; the loop polls it at each step boundary.
+
+    The loop's first poll marks it as stepping. Before that (loading,
+    compiling, which can take a minute with numba) nothing would read the
+    flag, so a signal then stops at once instead (see _graceful_stop).
+    """
 
     def __init__(self) -> None:
         self.signal: int | None = None
+        self.stepping = False
 
     def __call__(self) -> bool:
+        self.stepping = True
         return self.signal is not None
 
 
@@ -305,7 +312,9 @@ def _graceful_stop():
     flag = _StopFlag()
 
     def handler(signum: int, frame: Any) -> None:
-        if flag.signal is not None:  # a second Ctrl-C: stop now
+        # Before the step loop, or a second Ctrl-C: unwind now (temporary files are removed,
+        # nothing is written, exit 130). In the loop: finish the step and write the frames so far.
+        if flag.signal is not None or not flag.stepping:
             raise KeyboardInterrupt
         flag.signal = signum
 
