@@ -20,12 +20,14 @@ CAP_BYTES = 1536 * 1024 * 1024
 resource = pytest.importorskip("resource")
 
 
-def run_capped(*args: str, cwd=None, timeout: float = 120) -> subprocess.CompletedProcess[str]:
-    """``python -m animsim ARGS`` with its address space capped at CAP_BYTES."""
+def run_capped(
+    *args: str, cwd=None, timeout: float = 120, cap: int = CAP_BYTES
+) -> subprocess.CompletedProcess[str]:
+    """``python -m animsim ARGS`` with its address space capped at ``cap`` bytes."""
     prog = textwrap.dedent(
         f"""
         import resource, runpy, sys
-        resource.setrlimit(resource.RLIMIT_AS, ({CAP_BYTES}, {CAP_BYTES}))
+        resource.setrlimit(resource.RLIMIT_AS, ({cap}, {cap}))
         sys.argv = ["animsim", *{list(map(str, args))!r}]
         runpy.run_module("animsim", run_name="__main__")
         """
@@ -131,3 +133,22 @@ def test_a_huge_rate_is_refused_for_its_births_per_step(tmp_path):
     assert r.returncode == 2, r.stderr
     assert f"{scene}:5:5: emitters.0.rate:" in r.stderr
     assert "emitter 'spray': 1e+10 births drawn per step (rate x dt 0.01 s)" in r.stderr
+
+
+#: a smaller cap for the mesh reader: what it holds must not grow with the file
+MESH_CAP_BYTES = 1024 * 1024 * 1024
+
+
+def test_a_huge_obj_is_refused_without_reading_it_whole(tmp_path):
+    mesh = tmp_path / "big.obj"
+    with open(mesh, "w") as fh:
+        for _ in range(50):
+            fh.write("v 0 0 0\n" * 100_000)  # 5 million vertices, 40 MB
+    scene = tmp_path / "s.yaml"
+    scene.write_text(
+        "duration: 0.01\ndt: 0.001\nstructures:\n"
+        "  - {type: mesh, id: m, file: big.obj, mode: cloth, mass: 1.0, stretch: {ks: 10}}\n"
+    )
+    r = run_capped("check", scene, cap=MESH_CAP_BYTES)
+    assert "stopped reading at line 200001" in r.stderr, r.stderr
+    assert "MemoryError" not in r.stderr and "internal error" not in r.stderr
