@@ -78,8 +78,8 @@ def test_an_uneven_body_gets_the_struts_of_the_rule(seed):
 def test_a_body_at_the_vertex_limit_is_braced_in_seconds():
     x, tri = uv_sphere(100, 202)  # 99 rings of 202 vertices and two poles
     assert MAX_SOFT_BODY_VERTICES - 100 <= len(x) <= MAX_SOFT_BODY_VERTICES
-    start = time.perf_counter()
+    start = time.process_time()  # CPU time: the machine running the tests may be shared
     pairs = struts(x, tri)
-    elapsed = time.perf_counter() - start
-    assert elapsed < 60, f"{elapsed:.1f} s"  # the search over all pairs took minutes; seconds alone here
+    elapsed = time.process_time() - start
+    assert elapsed < 30, f"{elapsed:.1f} s"  # the search over all pairs took minutes; about 3 s here
     assert np.all(np.isin(np.arange(len(x)), pairs))  # every vertex is braced
