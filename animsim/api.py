@@ -11,6 +11,7 @@ Bad scenes raise :class:`animsim.SceneError`, whose ``diagnostics`` are the
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,9 +23,16 @@ from animsim.errors import SceneError, UsageError
 from animsim.scene.models import Scene
 
 
+def _type_name(value: Any) -> str:
+    return "None" if value is None else type(value).__name__
+
+
 def load(path: str | Path, *, limits: Any = None) -> Scene:
     """Read, parse and validate a scene file (every problem as a SceneError)."""
     from animsim.scene.loader import Limits, load_scene
+
+    if not isinstance(path, str | os.PathLike):
+        raise TypeError(f"load() takes the path of a scene file (str or Path), not {_type_name(path)}")
 
     loaded = load_scene(path, limits or Limits())
     return _named(loaded)
@@ -33,6 +41,10 @@ def load(path: str | Path, *, limits: Any = None) -> Scene:
 def loads(text: str, name: str = "scene", *, limits: Any = None) -> Scene:
     """The same from YAML text; diagnostics name the file ``<name>``."""
     from animsim.scene.loader import Limits, load_scene_text
+
+    if not isinstance(text, str):
+        hint = "; for a file use load(path)" if isinstance(text, os.PathLike) else ""
+        raise TypeError(f"loads() takes the scene's YAML text as a str, not {_type_name(text)}{hint}")
 
     loaded = load_scene_text(text, f"<{name}>", limits or Limits())
     scene = _named(loaded)
@@ -63,6 +75,7 @@ def prepare(
     """
     from animsim.preflight import RunLimits, check_limits
 
+    _check_overrides(dt=dt, duration=duration, seed=seed)
     limits = limits or RunLimits()
     sc = scene
     if any(v is not None for v in (integrator, dt, duration, seed)):
@@ -244,9 +257,15 @@ def simulate(
     holds the metadata only. ``sinks``: more frame sinks to feed; ``keep=False``
     keeps no frames in memory (the sinks have them).
     """
+    from animsim.compile import Compiled
     from animsim.engine import run
     from animsim.export.trajectory import TrajectoryCollector
 
+    if not isinstance(scene, Scene | Compiled | dict):  # a dict is read as a scene (SceneError if wrong)
+        hint = "; for a scene file use simulate(load(path))" if isinstance(scene, str | os.PathLike) else ""
+        raise TypeError(
+            f"simulate() takes a Scene (from load or loads) or a compiled scene, not {_type_name(scene)}{hint}"
+        )
     if isinstance(scene, Scene):
         sc, _ = prepare(scene, integrator=integrator, dt=dt, duration=duration, seed=seed, limits=limits)
         compiled = compile(sc, backend)
@@ -285,6 +304,22 @@ def simulate(
     traj.result = result
     traj.compiled = compiled
     return traj
+
+
+#: the largest seed: seeds are stored and hashed as signed 64-bit integers (the scene key's bound)
+MAX_SEED = 2**63 - 1
+
+
+def _check_overrides(*, dt: Any = None, duration: Any = None, seed: Any = None) -> None:
+    """TypeError for overrides of the wrong type (a str dt, a float seed); the values' ranges are
+    checked with the file's rules when they are applied."""
+    import numbers
+
+    for key, value in (("dt", dt), ("duration", duration)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, numbers.Real)):
+            raise TypeError(f"{key} must be a number of seconds, not {_type_name(value)} {value!r}")
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, numbers.Integral)):
+        raise TypeError(f"seed must be a whole number from 0 to {MAX_SEED}, not {_type_name(seed)} {seed!r}")
 
 
 def _fill_bodies(traj: Trajectory, compiled: Any) -> None:

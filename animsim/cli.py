@@ -203,6 +203,17 @@ _LIMIT_PARAMS: dict[str, tuple[Any, Any]] = {
         ],
         True,
     ),
+    "mesh_dir": (
+        Annotated[
+            list[str] | None,
+            typer.Option(
+                "--mesh-dir",
+                help="Also read mesh files under this folder (repeatable); by default only the scene's own.",
+                rich_help_panel=_LIMITS_PANEL,
+            ),
+        ],
+        None,
+    ),
 }
 
 
@@ -243,6 +254,7 @@ def make_limits(
     max_steps: str | int = "100000000",
     max_memory: str | int = "4GiB",
     disk_check: bool = True,
+    mesh_dir: list[str] | None = None,
 ):
     """RunLimits from the options' values (sizes and counts parsed here, once)."""
     from animsim.preflight import RunLimits, parse_count, parse_size
@@ -254,6 +266,7 @@ def make_limits(
         max_steps=parse_count(str(max_steps), "--max-steps"),
         max_memory=parse_size(str(max_memory), "--max-memory"),
         disk_check=disk_check,
+        mesh_dirs=tuple(mesh_dir or ()),
     )
 
 
@@ -278,12 +291,19 @@ def _err(text: str) -> None:
 
 
 class _StopFlag:
-    """Set by SIGINT/SIGTERM; the loop polls it at each step boundary."""
+    """Set by SIGINT/SIGTERM; the loop polls it at each step boundary.
+
+    The loop's first poll marks it as stepping. Before that (loading,
+    compiling, which can take a minute with numba) nothing would read the
+    flag, so a signal then stops at once instead (see _graceful_stop).
+    """
 
     def __init__(self) -> None:
         self.signal: int | None = None
+        self.stepping = False
 
     def __call__(self) -> bool:
+        self.stepping = True
         return self.signal is not None
 
 
@@ -292,7 +312,9 @@ def _graceful_stop():
     flag = _StopFlag()
 
     def handler(signum: int, frame: Any) -> None:
-        if flag.signal is not None:  # a second Ctrl-C: stop now
+        # Before the step loop, or a second Ctrl-C: unwind now (temporary files are removed,
+        # nothing is written, exit 130). In the loop: finish the step and write the frames so far.
+        if flag.signal is not None or not flag.stepping:
             raise KeyboardInterrupt
         flag.signal = signum
 

@@ -106,9 +106,9 @@ def with_overrides(
                 raise UsageError(f"--{key}: must be a finite number > 0, not {value!r}")
             update[key] = float(value)
     if seed is not None:
-        if seed < 0:
-            raise UsageError(f"--seed: must be >= 0, not {seed}")
-        update["seed"] = seed
+        if not 0 <= seed <= 2**63 - 1:  # the scene key's range: seeds are signed 64-bit integers
+            raise UsageError(f"--seed: must be a whole number from 0 to 2^63 - 1 = {2**63 - 1}, not {seed}")
+        update["seed"] = int(seed)
     if not update:
         return scene
     new = scene.model_copy(update=update)

@@ -121,6 +121,11 @@ def _run(
     dyn.evaluations = 0
     steps = clock.steps
 
+    # The first poll says the loop has begun: a stop asked for before it (loading, compiling the
+    # scene or its numba kernels) unwinds at once and writes nothing; from here on it finishes
+    # the step and keeps the frames (the CLI's handler tells the two apart by this poll).
+    if stop is not None:
+        stop()
     for sink in sinks:
         sink.begin(compiled.header)
     try:

@@ -130,9 +130,10 @@ def _map_processes(
     # numba steps large particle systems on every core it may use; several workers each
     # using every core would wait on each other's threads, so each gets its share
     share = str(max(1, (os.cpu_count() or 1) // workers))
-    with ProcessPoolExecutor(
-        max_workers=workers, mp_context=context, initializer=_numba_threads, initargs=(share,)
-    ) as pool:
+    pool = ProcessPoolExecutor(
+        max_workers=workers, mp_context=context, initializer=_init_worker, initargs=(share,)
+    )
+    try:
         futures = [pool.submit(fn, c) for c in cases]
         for _ in as_completed(futures):
             tick()
@@ -142,12 +143,57 @@ def _map_processes(
                 outcomes.append((True, f.result()))
             except Exception as exc:  # the case raised, or its worker died
                 outcomes.append((False, exc))
+    except BaseException:
+        # Ctrl-C (or SIGTERM, raised as KeyboardInterrupt by the CLI): the executor's own exit
+        # would wait for every running case to finish. Stop the workers instead.
+        _stop_workers(pool)
+        raise
+    pool.shutdown(wait=True)
     return _collect(cases, outcomes, on_error)
 
 
-def _numba_threads(share: str) -> None:
-    """In a worker, before numba loads: its thread count, unless NUMBA_NUM_THREADS says one."""
+#: how long stopped workers get to remove their temporary files before they are killed (s)
+WORKER_STOP_SECONDS = 0.5
+
+
+def _stop_workers(pool: ProcessPoolExecutor) -> None:
+    """Cancel the cases not started and end the running ones within a second.
+
+    Each worker turns SIGTERM into KeyboardInterrupt (:func:`_init_worker`), so
+    a case that is writing removes its temporary file as on Ctrl-C; a worker
+    still alive after WORKER_STOP_SECONDS is killed.
+    """
+    import time
+
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for p in processes:
+        if p.is_alive():
+            p.terminate()
+    deadline = time.monotonic() + WORKER_STOP_SECONDS
+    for p in processes:
+        p.join(max(0.0, deadline - time.monotonic()))
+        if p.is_alive():
+            p.kill()
+            p.join(1.0)
+
+
+def _init_worker(share: str) -> None:
+    """In a worker, before numba loads: its thread count, unless NUMBA_NUM_THREADS says one.
+
+    Ctrl-C at a terminal reaches every process of the group; the main process
+    decides (it stops the workers), so a worker ignores SIGINT and takes
+    SIGTERM as the interrupt that unwinds its case.
+    """
+    import signal
+
     os.environ.setdefault("NUMBA_NUM_THREADS", share)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _interrupt)
+
+
+def _interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt
 
 
 def _import_distributed() -> Any:

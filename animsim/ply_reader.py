@@ -133,7 +133,8 @@ def _parse_header(fh: Any) -> tuple[str, list[str], list[str], list[PlyElement]]
             if not elements:
                 raise PlyFormatError(f"property before any element: {line!r}")
             if len(words) == 5 and words[1] == "list":
-                _scalar_code(words[2])
+                if _scalar_code(words[2]).startswith("f"):
+                    raise PlyFormatError(f"the count of a list must have an integer type: {line!r}")
                 _scalar_code(words[3])
                 prop = PlyProperty(words[4], words[3], words[2])
             elif len(words) == 3:
@@ -191,6 +192,8 @@ def _read_binary_rows(
                 cols[p.name].append(take(_scalar_code(p.type), 1)[0])
             else:
                 length = int(take(_scalar_code(p.list_count_type), 1)[0])
+                if length < 0:
+                    raise PlyFormatError(f"element {el.name!r}: a list count of {length} (negative)")
                 cols[p.name].append(take(_scalar_code(p.type), length))
     return {p.name: _column(cols[p.name], p) for p in el.properties}, offset
 
@@ -226,6 +229,11 @@ def _read_ascii(data: bytes, elements: list[PlyElement], wanted: str) -> tuple[d
                         acc[p.name].append(_parse_tokens(np.array(tokens[pos : pos + 1]), p.type)[0])
                         pos += 1
                     else:
+                        if not tokens[pos].isdigit():  # "abc", "3.0", "nan", "-1": not a count
+                            shown = tokens[pos][:20].decode("ascii", "replace")
+                            raise PlyFormatError(
+                                f"element {el.name!r}: list count {shown!r} is not a whole number >= 0"
+                            )
                         length = int(tokens[pos])
                         chunk = np.array(tokens[pos + 1 : pos + 1 + length], dtype=bytes)
                         if len(chunk) != length:
@@ -246,6 +254,12 @@ def _parse_tokens(tokens: np.ndarray, type_name: str) -> np.ndarray:
         return tokens.astype(np.int64).astype(code)
     except ValueError as exc:
         raise PlyFormatError(f"bad {type_name} value: {exc}") from None
+
+
+def read_ply_header(path: str | os.PathLike[str]) -> list[PlyElement]:
+    """The elements a PLY file's header declares, without reading any row."""
+    with open(path, "rb") as fh:
+        return _parse_header(fh)[3]
 
 
 def read_ply(path: str | os.PathLike[str], element: str = VERTEX_ELEMENT) -> PlyData:

@@ -131,6 +131,7 @@ class RunLimits:
     max_steps: int = DEFAULT_MAX_STEPS
     max_memory: int = DEFAULT_MAX_MEMORY
     disk_check: bool = True
+    mesh_dirs: tuple[str, ...] = ()
 
     @property
     def loader(self) -> Limits:
@@ -139,6 +140,7 @@ class RunLimits:
             max_depth=self.max_depth,
             max_nodes=self.max_nodes,
             max_memory=self.max_memory,
+            mesh_dirs=self.mesh_dirs,
         )
 
 
@@ -198,6 +200,13 @@ def _emitter_numbers(e: Any, duration: float) -> tuple[int, int]:
     return math.ceil(alive), math.ceil(births)
 
 
+def _birth_events(e: Any, dt: float) -> int:
+    """Birth events drawn in one step (rate x dt of them, before a full pool drops them)."""
+    peak = max(kf[1] for kf in e.rate) if isinstance(e.rate, list) else e.rate
+    peak += SPREAD_SIGMAS * e.rate_spread
+    return math.ceil(min(peak * dt, 1e18))
+
+
 def _emitter_memory(e: Any, births: int, frames: int, dt: float, per_particle: int) -> tuple[int, int]:
     """(bytes, ids kept) of one emitter: what can be alive, what is recorded, one step's draws.
 
@@ -246,8 +255,14 @@ def estimate(scene: Scene, steps: int, fmt: str = "csv") -> Estimate:
         alive += a
         births += b
         cost, recorded = _emitter_memory(e, b, frames, scene.dt, per_particle)
+        # The births drawn in one step are blamed on the rate, the rest on the pool: a rate of
+        # 1e12/s is refused for its 1e10 births a step, not for a pool of 1000.
+        events = _birth_events(e, scene.dt)
+        drawn = events * BIRTH_EVENT_BYTES
         what = f"emitter {e.name!r}: a pool of {e.max_particles} particles and up to {recorded} recorded ids"
-        parts.append((("emitters", i, "max_particles"), cost, what))
+        parts.append((("emitters", i, "max_particles"), cost - drawn, what))
+        what = f"emitter {e.name!r}: {events:.3g} births drawn per step (rate x dt {scene.dt:g} s)"
+        parts.append((("emitters", i, "rate"), drawn, what))
     frame_bytes = get_format(fmt).frame_memory_bytes
     parts.append((("record",), frames * frame_bytes, f"{frames} recorded frames"))
     parts.sort(key=lambda p: -p[1])
@@ -309,7 +324,93 @@ def check_limits(
         )
         dotted = ".".join(str(p) for p in path)
         raise SceneError([Diagnostic(loaded.file, *_where(loaded, path), dotted, msg)])
+    _contact_radius_problem(loaded, scene)
+    # Contacts are counted once the rest is known to fit: counting them places the
+    # structures' particles, which the estimate above has just bounded.
+    pairs = contact_pairs(scene)
+    if pairs:
+        cost = pairs * CONTACT_PAIR_BYTES
+        est.parts.append((("particle_collisions", "radius"), cost, f"{pairs} candidate contact pairs"))
+        est.parts.sort(key=lambda p: -p[1])
+        est.memory += cost
+        if est.memory > limits.max_memory:
+            path = ("particle_collisions", "radius")
+            msg = (
+                f"the run needs about {format_bytes(est.memory)} for its live state, of which "
+                f"{format_bytes(cost)} for particle contacts: {pairs} pairs of particles start within "
+                f"2 x radius + skin of each other; more than the budget of {format_bytes(limits.max_memory)} "
+                "(lower the radius, or raise the budget with --max-memory)"
+            )
+            raise SceneError(
+                [Diagnostic(loaded.file, *_where(loaded, path), "particle_collisions.radius", msg)]
+            )
     return est
+
+
+# --- particle contacts ------------------------------------------------------------------
+
+# One candidate pair of the contact list: its (i, j) index pair as built (16), the k-d
+# tree's or the grid's output before sorting (16), and the per-step arrays of a pair that
+# overlaps (gathered differences and normals, distances, normal speeds, impulses and the
+# Jacobi work arrays: about 20 float64), so a list where everything touches costs this much.
+CONTACT_PAIR_BYTES = 16 + 16 + 20 * 8
+# Contact distances beyond this cannot be squared in float64 (the neighbour search squares
+# them); no scene needs particles of 1e150 m.
+MAX_CONTACT_RADIUS = 1e150
+
+
+def _contact_radius_problem(loaded: LoadedScene, scene: Scene) -> None:
+    """Refuse, at its key, a contact radius the neighbour search cannot square."""
+    from animsim.scene.models import Particle
+
+    keys: list[tuple[tuple[str | int, ...], float | None]] = []
+    if scene.particle_collisions is not None:
+        keys.append((("particle_collisions", "radius"), scene.particle_collisions.radius))
+    keys += [
+        (("particles", i, "radius"), p.radius)
+        for i, p in enumerate(scene.particles)
+        if isinstance(p, Particle)
+    ]
+    keys += [
+        (("structures", i, "radius"), getattr(st, "radius", None)) for i, st in enumerate(scene.structures)
+    ]
+    for path, radius in keys:
+        if radius is not None and radius > MAX_CONTACT_RADIUS:
+            msg = (
+                f"a radius of {radius:g} m is beyond what contact distances can be computed with "
+                f"(at most {MAX_CONTACT_RADIUS:g} m)"
+            )
+            raise SceneError([Diagnostic(loaded.file, *_where(loaded, path), ".".join(map(str, path)), msg)])
+
+
+def contact_pairs(scene: Scene) -> int:
+    """Candidate contact pairs at the start: particles within 2 r + skin of each other.
+
+    Counted with a k-d tree's pair count (no pair is stored), over the listed
+    particles and the structures' particles at their initial positions, with
+    the largest radius in the scene as the neighbour search does. Particles
+    emitted later are not counted. Zero when particles do not collide.
+    """
+    import numpy as np
+    from scipy.spatial import cKDTree
+
+    from animsim.particle_contacts import SKIN
+    from animsim.scene.structures import initial_positions
+
+    if scene.particle_collisions is None:
+        return 0
+    radii = [scene.particle_collisions.radius]
+    radii += [p.radius for p in scene.particles if getattr(p, "radius", None) is not None]
+    radii += [st.radius for st in scene.structures if getattr(st, "radius", None) is not None]
+    reach = 2.0 * max(radii) * (1.0 + SKIN)
+    points = [np.asarray([p.position for p in scene.particles], dtype=np.float64).reshape(-1, 3)]
+    points += [initial_positions(st) for st in scene.structures]
+    x = np.concatenate(points)
+    if len(x) < 2 or reach <= 0:
+        return 0
+    tree = cKDTree(x)
+    # count_neighbors counts ordered pairs including each point with itself
+    return int((tree.count_neighbors(tree, reach) - len(x)) // 2)
 
 
 # --- output --------------------------------------------------------------------------

@@ -140,6 +140,11 @@ def record_steps(clock: Clock, every: int | None = None, fps: float | None = Non
     period = 1.0 / fps
     if not math.isfinite(period):  # a rate so low (5e-324 fps) that one frame never ends
         return np.array([0], dtype=np.int64)
+    if clock.duration * fps > n + 1:
+        # Frames closer together than steps: every step is the nearest to some frame time
+        # (each step's half-open interval of width dt holds a target), so every step is
+        # recorded, without building 1e8 (or 1e300) targets to find that out.
+        return np.arange(n + 1, dtype=np.int64)
     count = math.floor(clock.duration / period * (1 + STEP_COUNT_RTOL)) + 1
     targets = np.arange(count, dtype=np.float64) * period
     if clock.divides:

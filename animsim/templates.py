@@ -176,6 +176,17 @@ def write_starter(path: Path, name: str, force: bool = False) -> list[str]:
     schema_path = folder / SCHEMA_NAME
     if path.resolve() == schema_path.resolve():
         raise UsageError(f"{path}: that name is kept for the schema; choose another")
+    # The honest test of "can I write there" (os.access says yes to root on a read-only
+    # mount): create and remove a file before writing either, so a refusal writes nothing.
+    import os
+    import tempfile
+
+    try:
+        fd, probe = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".probe", dir=folder)
+    except OSError as exc:
+        raise UsageError(f"{path}: cannot create files in {folder}: {exc.strerror}") from None
+    os.close(fd)
+    os.unlink(probe)
     done = []
     schema = schema_text()
     if not schema_path.exists():

@@ -83,8 +83,8 @@ def get_format(name: str) -> OutputFormat:
 def format_for(path: Path | None, requested: str | None = None) -> str:
     """The format: as asked, else from the suffix, else PLY for an existing folder, else CSV."""
     if requested is not None:
-        if requested not in _FORMATS:
-            raise UsageError(f"--format: unknown format {requested!r} (valid: {', '.join(_FORMATS)})")
+        if requested not in _FORMATS:  # never write CSV under another format's name
+            raise UsageError(f"unknown trajectory format {requested!r} (valid: {', '.join(_FORMATS)})")
         return requested
     if path is None or str(path) == "-":
         return DEFAULT_FORMAT

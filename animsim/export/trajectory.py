@@ -105,16 +105,71 @@ def is_trajectory(path: Path) -> bool:
     return path.suffix.lower() in TRAJECTORY_SUFFIXES
 
 
+#: largest coordinate (m) a trajectory may hold to be drawn: its square, and the span of the
+#: scene squared, must stay finite in the camera and axis arithmetic
+MAX_COORDINATE = 1e150
+
+
 def read_trajectory(path: str | Path) -> Trajectory:
+    """Read and check a trajectory file (exit 2 with the reason when it is not one animsim can draw)."""
+    import zipfile
+
     p = Path(path)
     if not p.is_file():
         raise UsageError(f"{p}: no such file")
     try:
-        if p.suffix.lower() == ".npz":
-            return _read_npz(p)
-        return _read_csv(p)
-    except (ValueError, KeyError, IndexError, OSError) as exc:
+        traj = _read_npz(p) if p.suffix.lower() == ".npz" else _read_csv(p)
+    except zipfile.BadZipFile:
+        raise UsageError(f"{p}: not an animsim trajectory (not an NPZ archive)") from None
+    except (ValueError, KeyError, IndexError, OSError, EOFError, csv.Error) as exc:
+        if "pickled" in str(exc):  # NumPy's advice to unpickle a stranger's file is not ours to give
+            raise UsageError(f"{p}: not an animsim trajectory (not an NPZ archive)") from None
         raise UsageError(f"{p}: not an animsim trajectory ({exc})") from None
+    problem = _check(traj)
+    if problem:
+        raise UsageError(f"{p}: {problem}")
+    return traj
+
+
+def _check(traj: Trajectory) -> str | None:
+    """What makes a parsed trajectory unusable (None when it is fine)."""
+    rows = len(traj.t)
+    if traj.frame_count < 1:
+        return "the trajectory holds no frames (a header and no rows)"
+    shapes = (traj.particle.shape, traj.position.shape, traj.velocity.shape)
+    if shapes != ((rows,), (rows, 3), (rows, 3)) or traj.t.ndim != 1:
+        return "not an animsim trajectory (its arrays do not have matching lengths)"
+    fs = traj.frame_start
+    if fs.ndim != 1 or fs[0] != 0 or fs[-1] != rows or np.any(np.diff(fs) < 0):
+        return "not an animsim trajectory (its frame offsets do not cover its rows in order)"
+    if rows and (traj.particle.min() < 0 or traj.particle.max() >= len(traj.ids)):
+        return "not an animsim trajectory (a row names a particle outside its id table)"
+    times = traj.times
+    if len(times) != traj.frame_count:
+        return "not an animsim trajectory (its frame times do not match its frames)"
+    for name, values in (
+        ("t", times),
+        ("t", traj.t),
+        ("position", traj.position),
+        ("velocity", traj.velocity),
+    ):
+        bad = np.flatnonzero(
+            ~np.isfinite(np.asarray(values, dtype=np.float64)).reshape(len(values), -1).all(axis=1)
+        )
+        if bad.size:
+            return f"row {int(bad[0]) + 1}: {name} is not a finite number"
+    back = np.flatnonzero(np.diff(times) < 0)
+    if back.size:
+        k = int(back[0])
+        return f"time goes backwards from frame {k + 1} to frame {k + 2} ({times[k]:g} s, then {times[k + 1]:g} s)"
+    if rows:
+        big = np.flatnonzero(np.abs(traj.position).max(axis=1) > MAX_COORDINATE)
+        if big.size:
+            return (
+                f"row {int(big[0]) + 1}: a coordinate of {np.abs(traj.position[big[0]]).max():.3g} m, beyond "
+                f"the {MAX_COORDINATE:g} m that can be drawn (did the run blow up?)"
+            )
+    return None
 
 
 def _read_npz(p: Path) -> Trajectory:
@@ -141,7 +196,9 @@ def _read_npz(p: Path) -> Trajectory:
 def _read_csv(p: Path) -> Trajectory:
     with p.open(newline="", encoding="utf-8") as fh:
         reader = csv.reader(fh)
-        header = next(reader)
+        header = next(reader, None)
+        if header is None:
+            raise ValueError("the file is empty")
         if header[:8] != ["t", "id", "x", "y", "z", "vx", "vy", "vz"]:
             raise ValueError(f"unexpected header {header[:8]}")
         rows = list(reader)

@@ -102,12 +102,18 @@ def weakly_unstable(method: str) -> bool:
 
 def spectral_radius(m: np.ndarray) -> np.ndarray:
     """Largest |eigenvalue| of each square matrix in (..., d, d) (2x2: from trace and determinant)."""
+    # A matrix whose entries overflowed (h c of 1e80 raised to rk4's fourth power) has an
+    # eigenvalue of that size: unstable, which is what inf says (eigvals refuses inf and NaN).
+    finite = np.isfinite(m).all(axis=(-2, -1))
+    m = np.where(finite[..., None, None], m, 0.0)
     if m.shape[-1] != 2:
-        return np.abs(np.linalg.eigvals(m)).max(axis=-1)
-    tr = m[..., 0, 0] + m[..., 1, 1]
-    det = m[..., 0, 0] * m[..., 1, 1] - m[..., 0, 1] * m[..., 1, 0]
-    disc = np.sqrt((0.25 * tr * tr - det).astype(complex))
-    return np.maximum(np.abs(0.5 * tr + disc), np.abs(0.5 * tr - disc))
+        return np.where(finite, np.abs(np.linalg.eigvals(m)).max(axis=-1), np.inf)
+    with np.errstate(over="ignore", invalid="ignore"):
+        tr = m[..., 0, 0] + m[..., 1, 1]
+        det = m[..., 0, 0] * m[..., 1, 1] - m[..., 0, 1] * m[..., 1, 0]
+        disc = np.sqrt((0.25 * tr * tr - det).astype(complex))
+        rho = np.maximum(np.abs(0.5 * tr + disc), np.abs(0.5 * tr - disc))
+    return np.where(finite & ~np.isnan(rho), rho, np.inf)
 
 
 def largest_stable_dt(method: str, omega: np.ndarray, zeta: np.ndarray) -> np.ndarray:
@@ -135,7 +141,9 @@ def _bisect_limit(method: str, omega: np.ndarray, zeta: np.ndarray) -> np.ndarra
     """Largest h with spectral radius <= 1 on the first stable interval from 0 (inf when no
     omega*h of the scan is unstable: an A-stable method such as backward Euler)."""
     theta = SCAN_GRID[None, :]  # omega * h
-    rho = spectral_radius(one_step_matrix(method, theta / omega[:, None], omega[:, None], zeta[:, None]))
+    # a heavily damped mode overflows the matrices at large h: spectral_radius calls that unstable
+    with np.errstate(over="ignore", invalid="ignore"):
+        rho = spectral_radius(one_step_matrix(method, theta / omega[:, None], omega[:, None], zeta[:, None]))
     unstable = rho > 1.0 + RADIUS_TOLERANCE
     first_bad = np.where(unstable.any(axis=1), unstable.argmax(axis=1), len(SCAN_GRID))
     lo = np.where(first_bad > 0, SCAN_GRID[np.maximum(first_bad - 1, 0)], 0.0)
@@ -143,7 +151,8 @@ def _bisect_limit(method: str, omega: np.ndarray, zeta: np.ndarray) -> np.ndarra
     done = ~np.isfinite(hi) | (lo == 0.0)
     for _ in range(BISECTION_STEPS):
         mid = np.where(done, lo, 0.5 * (lo + np.where(np.isfinite(hi), hi, lo)))
-        r = spectral_radius(one_step_matrix(method, mid / omega, omega, zeta))
+        with np.errstate(over="ignore", invalid="ignore"):
+            r = spectral_radius(one_step_matrix(method, mid / omega, omega, zeta))
         bad = r > 1.0 + RADIUS_TOLERANCE
         hi = np.where(~done & bad, mid, hi)
         lo = np.where(~done & ~bad, mid, lo)
@@ -346,11 +355,12 @@ def _row_bounds(compiled: Any) -> tuple[np.ndarray, np.ndarray, float, list[str]
     c_rows = np.zeros(n)
     notes: list[str] = []
     # Each element adds its own rows (animsim.elements: stiffness_rows).
-    for term in compiled.dynamics.terms:
-        term.stiffness_rows(inv, k_rows, c_rows)
-    if compiled.dynamics.bodies is not None:  # springs to points of bodies
-        for term in compiled.dynamics.bodies.terms:
+    with np.errstate(over="ignore", invalid="ignore"):  # overflow is refused below, with its place
+        for term in compiled.dynamics.terms:
             term.stiffness_rows(inv, k_rows, c_rows)
+        if compiled.dynamics.bodies is not None:  # springs to points of bodies
+            for term in compiled.dynamics.bodies.terms:
+                term.stiffness_rows(inv, k_rows, c_rows)
     penalty_k = max((term.contact_stiffness for term in compiled.dynamics.terms), default=0.0)
     if compiled.emitters is not None and penalty_k > 0:
         notes.append("emitted particles touching penalty planes are not counted")
@@ -360,7 +370,67 @@ def _row_bounds(compiled: Any) -> tuple[np.ndarray, np.ndarray, float, list[str]
         note = stage.stability_note(compiled.clock.dt)
         if note is not None:
             notes.append(note)
+    _refuse_overflow(compiled, k_rows, c_rows)
     return k_rows, c_rows, penalty_k, notes
+
+
+#: largest stiffness or damping per unit mass (1/s^2 and 1/s) whose square still fits a float64:
+#: beyond it omega^2, zeta^2 and the one-step matrices overflow, and no step size is representable
+ROW_BOUND_LIMIT = 1e150
+
+
+def _refuse_overflow(compiled: Any, k_rows: np.ndarray, c_rows: np.ndarray) -> None:
+    """Refuse (exit 2, at the particle's place in the scene) rows that float64 cannot hold.
+
+    A strand of total mass 5e-324 has particles whose inverse mass is inf; a
+    damping of 1e300 on 0.01 kg is 1e302 per second, whose square overflows.
+    Such a particle needs a step below 1e-150 s to be stable: no run can take
+    it, and the analysis would compute inf - inf. Everything below the bound
+    gets its finite answer.
+    """
+    inv = compiled.system.particle_inv_mass
+    with np.errstate(over="ignore", invalid="ignore"):
+        bad = ~(np.isfinite(k_rows) & np.isfinite(c_rows) & np.isfinite(inv))
+        bad |= (np.abs(k_rows) > ROW_BOUND_LIMIT**2) | (np.abs(c_rows) > ROW_BOUND_LIMIT)
+    rows = np.flatnonzero(bad)
+    if not rows.size:
+        return
+    from animsim.errors import Diagnostic, SceneError
+
+    i = int(rows[0])
+    name = particle_name(compiled, i)
+    mass = float(compiled.system.particle_mass[i])
+    message = (
+        f"particle {name!r} (mass {mass:.3g} kg) has a stiffness per unit mass of {k_rows[i]:.3g} 1/s^2 "
+        f"and a damping per unit mass of {c_rows[i]:.3g} 1/s, beyond what a float64 step can resolve "
+        f"(a stable step would be shorter than 1e-150 s; {rows.size} such particles in all): "
+        "raise the mass, or lower ks, kd or the drag k"
+    )
+    file, marks = getattr(compiled.scene, "_located", None) or (
+        (getattr(compiled.scene, "_source", None) or {}).get("file", "<python>"),
+        None,
+    )
+    path = _scene_path_of(compiled.scene, name)
+    line, column = marks.at(path, prefer_key=True) if marks is not None else (0, 0)
+    raise SceneError([Diagnostic(file, line, column, ".".join(map(str, path)), message)])
+
+
+def _scene_path_of(scene: Any, pid: str) -> tuple[str | int, ...]:
+    """Where particle ``pid`` is made in the scene: its entry, structure or emitter."""
+    from animsim.scene.structures import parse_structure_id
+
+    for j, p in enumerate(scene.particles):
+        if p.id == pid:
+            return ("particles", j, "mass")
+    parsed = parse_structure_id(pid)
+    for j, s in enumerate(scene.structures):
+        if parsed is not None and s.id == parsed[0]:
+            return ("structures", j, "mass")
+    base = pid.split("#", 1)[0]
+    for j, e in enumerate(scene.emitters):
+        if e.name == base:
+            return ("emitters", j)
+    return ()
 
 
 def scene_modes(compiled: Any) -> tuple[np.ndarray, np.ndarray]:

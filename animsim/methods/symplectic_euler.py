@@ -22,7 +22,8 @@ def one_step(h: np.ndarray, k: np.ndarray, c: np.ndarray) -> np.ndarray:
 def closed_form_limit(omega: np.ndarray, zeta: np.ndarray) -> np.ndarray:
     """h <= 2 (sqrt(zeta^2 + 1) - zeta) / omega, i.e. (sqrt(c^2 + 4 k m) - c) / k for one spring:
     where the trace of the one-step matrix, 2 - h c - h^2 k, reaches -(1 + det) = -(2 - h c)."""
-    return np.asarray(2.0 * (np.sqrt(zeta * zeta + 1.0) - zeta) / omega)
+    # written without the cancellation (and the inf - inf of a zeta beyond 1e154) of the difference
+    return np.asarray(2.0 / ((np.hypot(zeta, 1.0) + zeta) * omega))
 
 
 register(

@@ -82,6 +82,8 @@ class Limits:
     max_depth: int = DEFAULT_MAX_DEPTH
     max_nodes: int = DEFAULT_MAX_NODES
     max_memory: int = DEFAULT_MAX_MEMORY
+    #: folders besides the scene's own from which mesh files may be read (--mesh-dir)
+    mesh_dirs: tuple[str, ...] = ()
 
     @property
     def max_written_nodes(self) -> int:
@@ -499,20 +501,21 @@ def load_scene_bytes(raw: bytes, file: str, limits: Limits = Limits()) -> Loaded
             if _dotted(p) not in seen:
                 found.append(Diagnostic(file, *marks.at(p, prefer_key=key), _dotted(p), msg))
         raise SceneError(found) from None
-    problems = mesh_problems(scene, file) + check_scene(scene)
+    problems = mesh_problems(scene, file, limits.mesh_dirs) + check_scene(scene)
     if problems:
         raise SceneError(
             [Diagnostic(file, *marks.at(p, prefer_key=key), _dotted(p), msg) for p, msg, key in problems]
         )
+    scene._located = (file, marks)
     return LoadedScene(scene=scene, file=file, sha256=sha, marks=marks, data=body, source=text)
 
 
-def mesh_problems(scene: Scene, file: str) -> list[tuple[Path_, str, bool]]:
+def mesh_problems(scene: Scene, file: str, mesh_dirs: tuple[str, ...] = ()) -> list[tuple[Path_, str, bool]]:
     """Read the mesh files of ``type: mesh`` structures, relative to the scene's folder."""
     if not any(s.type == "mesh" for s in scene.structures):
         return []
     scene_dir = None if file.startswith("<") else Path(file).parent
-    return check_meshes(scene, scene_dir)
+    return check_meshes(scene, scene_dir, mesh_dirs)
 
 
 def _decode(raw: bytes, file: str) -> str:

@@ -47,8 +47,10 @@ Springs
   pairs are merged. On a sphere this joins each vertex to the vertices
   around its antipode; on a torus it joins the two sides of the tube, not
   the two sides of the hole. No random numbers are involved, so the choice is
-  the same on every run. It costs O(n^2) distance evaluations once, at
-  load, which is why soft bodies have the lower vertex limit.
+  the same on every run. The candidates come from a neighbour search
+  along each ray (:func:`_ray_neighbours`): about n^1.5 cheap grid look-ups
+  and O(n log n) tree queries for an evenly meshed body instead of n^2
+  distances (20,000 vertices take seconds).
 
 Mass
 ----
@@ -84,7 +86,9 @@ MAX_MESH_FILE_BYTES = 200 * 1024 * 1024
 STRUTS_PER_VERTEX = 3
 # A triangle counts as zero-area below this fraction of the squared size of the mesh.
 ZERO_AREA_RTOL = 1e-12
-_CHUNK = 64  # rows of the strut distance matrix computed at once
+# A soft body's enclosed volume counts as zero below this fraction of its bounding box's volume.
+ZERO_VOLUME_RTOL = 1e-9
+_SAMPLES_PER_BLOCK = 1 << 20  # ray samples placed at once when choosing struts (about 24 MiB)
 
 MESH_FORMATS = (".obj", ".ply", ".stl")
 _OBJ_SKIPPED = frozenset(
@@ -162,41 +166,92 @@ def read_mesh(path: Path) -> MeshGeometry:
         size = path.stat().st_size
     except FileNotFoundError:
         raise MeshError(f"no such file: {path}") from None
-    except OSError as exc:
-        raise MeshError(f"cannot read {path}: {exc.strerror}") from None
+    except (OSError, ValueError) as exc:  # ValueError: a NUL character in the name
+        raise MeshError(f"cannot read {path}: {getattr(exc, 'strerror', None) or exc}") from None
     if not path.is_file():
         raise MeshError(f"{path} is not a file")
     if size > MAX_MESH_FILE_BYTES:
         raise MeshError(f"{path} is larger than the {MAX_MESH_FILE_BYTES // 2**20} MB limit for meshes")
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise MeshError(f"cannot read {path}: {exc.strerror}") from None
-    digest = hashlib.sha256(raw).hexdigest()
     if suffix == ".obj":
-        vertices, polygons = _parse_obj(raw, path.name)
-    elif suffix == ".ply":
+        return _read_obj(path)
+    digest = _file_digest(path)
+    if suffix == ".ply":
         vertices, polygons = _parse_ply(path)
     else:
         vertices, polygons = _parse_stl(path)
     return check_geometry(vertices, polygons, digest)
 
 
-def _parse_obj(raw: bytes, name: str) -> tuple[np.ndarray, list[tuple[int, list[int]]]]:
-    """Vertices and polygons (line number, 0-based corner indices) of an OBJ file."""
+def _file_digest(path: Path) -> str:
+    try:
+        with open(path, "rb") as fh:
+            return hashlib.file_digest(fh, "sha256").hexdigest()
+    except OSError as exc:
+        raise MeshError(f"cannot read {path}: {exc.strerror}") from None
+
+
+def _obj_lines(path: Path, digest: Any) -> Any:
+    """(line number, text) of an OBJ file, read a line at a time (the whole file is never held).
+
+    ``digest`` is fed every byte. Lines end at LF, CRLF or a lone CR (as
+    str.splitlines would split them); a UTF-8 byte order mark at the start
+    is dropped (some Windows tools write one).
+    """
+    name = path.name
+    lineno = 0
+    try:
+        fh = open(path, "rb", buffering=1 << 16)  # noqa: SIM115 - closed by the with below; this try names the error
+    except OSError as exc:
+        raise MeshError(f"cannot read {path}: {exc.strerror}") from None
+    with fh:
+        if b"\0" in fh.peek(1 << 16)[: 1 << 16]:  # a binary file says so before its first bad line
+            raise MeshError(f"{name} is not a text OBJ file (it holds NUL bytes)")
+        for raw in fh:
+            digest.update(raw)
+            if b"\0" in raw:
+                raise MeshError(f"{name} is not a text OBJ file (it holds NUL bytes)")
+            if lineno == 0 and raw.startswith(b"\xef\xbb\xbf"):
+                raw = raw[3:]
+            text = raw[:-1] if raw.endswith(b"\n") else raw
+            text = text[:-1] if text.endswith(b"\r") else text
+            for part in text.split(b"\r") if b"\r" in text else (text,):
+                lineno += 1
+                try:
+                    yield lineno, part.decode("utf-8")
+                except UnicodeDecodeError:
+                    raise MeshError(
+                        f"{name} line {lineno}: not valid UTF-8 text (not an OBJ file?)"
+                    ) from None
+
+
+def _read_obj(path: Path) -> MeshGeometry:
+    digest = hashlib.sha256()
+    vertices, polygons = _parse_obj(_obj_lines(path, digest), path.name)
+    return check_geometry(vertices, polygons, digest.hexdigest())
+
+
+def _shown(word: str) -> str:
+    """A word of a mesh file fit to quote: short and made of what OBJ keywords are made of.
+
+    A file that is not a mesh at all (a symlink to a password file named
+    x.obj) must not have its contents shown in an error message.
+    """
+    return repr(word) if len(word) <= 16 and word.replace("_", "").isalnum() and word.isascii() else ""
+
+
+def _parse_obj(lines: Any, name: str) -> tuple[np.ndarray, list[tuple[int, list[int]]]]:
+    """Vertices and polygons (line number, 0-based corner indices) of an OBJ file's lines.
+
+    Stops as soon as the vertex or triangle limit is passed, so a huge file
+    costs what the limit allows, not what the file holds.
+    """
     import numpy as np
 
-    if b"\0" in raw:
-        raise MeshError(f"{name} is not a text OBJ file (it holds NUL bytes)")
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        line = raw.count(b"\n", 0, exc.start) + 1
-        raise MeshError(f"{name} line {line}: not valid UTF-8 text (not an OBJ file?)") from None
     verts: list[list[float]] = []
     polygons: list[tuple[int, list[int]]] = []
     pending = ""
-    for lineno, line in enumerate(text.splitlines(), start=1):
+    triangles = 0
+    for lineno, line in lines:
         line = pending + line.split("#", 1)[0]
         if line.endswith("\\"):
             pending = line[:-1] + " "
@@ -212,12 +267,15 @@ def _parse_obj(raw: bytes, name: str) -> tuple[np.ndarray, list[tuple[int, list[
             try:
                 xyz = [float(w) for w in words[1:4]]
             except ValueError:
-                raise MeshError(
-                    f"{name} line {lineno}: {' '.join(words[1:4])!r} is not three numbers"
-                ) from None
+                raise MeshError(f"{name} line {lineno}: a vertex needs three numbers x y z") from None
             if not all(math.isfinite(c) for c in xyz):
                 raise MeshError(f"{name} line {lineno}: vertex coordinates must be finite")
             verts.append(xyz)
+            if len(verts) > MAX_MESH_VERTICES:
+                raise MeshError(
+                    f"the mesh has more than {MAX_MESH_VERTICES} vertices, the limit "
+                    f"(stopped reading at line {lineno})"
+                )
         elif kw == "f":
             if len(words) < 4:
                 raise MeshError(f"{name} line {lineno}: a face needs at least 3 corners")
@@ -227,7 +285,9 @@ def _parse_obj(raw: bytes, name: str) -> tuple[np.ndarray, list[tuple[int, list[
                 try:
                     k = int(head)
                 except ValueError:
-                    raise MeshError(f"{name} line {lineno}: {w!r} is not a vertex index") from None
+                    raise MeshError(
+                        f"{name} line {lineno}: {_shown(w) or 'a corner'} is not a vertex index"
+                    ) from None
                 if k == 0:
                     raise MeshError(f"{name} line {lineno}: vertex indices start at 1, not 0")
                 if k < 0:
@@ -239,10 +299,20 @@ def _parse_obj(raw: bytes, name: str) -> tuple[np.ndarray, list[tuple[int, list[
                         )
                 corners.append(k - 1)
             polygons.append((lineno, corners))
+            triangles += len(corners) - 2
+            if triangles > MAX_MESH_FACES:
+                raise MeshError(
+                    f"the mesh has more than {MAX_MESH_FACES} triangles, the limit "
+                    f"(stopped reading at line {lineno})"
+                )
         elif kw in _OBJ_SKIPPED:
             continue
         else:
-            raise MeshError(f"{name} line {lineno}: unknown or unsupported OBJ statement {kw!r}")
+            shown = _shown(kw)
+            raise MeshError(
+                f"{name} line {lineno}: unknown or unsupported OBJ statement"
+                + (f" {shown}" if shown else " (is it an OBJ file?)")
+            )
     n = len(verts)
     for lineno, corners in polygons:
         bad = [c + 1 for c in corners if c >= n]
@@ -257,28 +327,28 @@ def _parse_ply(path: Path) -> tuple[np.ndarray, list[tuple[int, list[int]]]]:
     import numpy as np
 
     # lazy as numpy is here: loading a scene without a mesh does not pay for it
-    from animsim.ply_reader import PlyFormatError, read_ply
+    from animsim.ply_reader import PlyFormatError, read_ply, read_ply_header
 
     try:
+        elements = read_ply_header(path)
+    except PlyFormatError as exc:
+        raise MeshError(f"{path.name}: {exc}") from None
+    _check_ply_header(path.name, {e.name: e for e in elements})
+    try:
         v = read_ply(path, "vertex")
-        names = {e.name for e in v.elements}
-        if "face" not in names:
-            raise MeshError(f"{path.name} has no face element: it is a point cloud, not a mesh")
         f = read_ply(path, "face")
     except PlyFormatError as exc:
         raise MeshError(f"{path.name}: {exc}") from None
-    if not all(c in v for c in "xyz"):
-        raise MeshError(f"{path.name}: the vertex element has no x, y, z")
-    key = "vertex_indices" if "vertex_indices" in f else "vertex_index" if "vertex_index" in f else None
-    if key is None:
-        raise MeshError(f"{path.name}: the face element has no vertex_indices list")
+    key = "vertex_indices" if "vertex_indices" in f else "vertex_index"
     vertices = np.stack([np.asarray(v[c], dtype=np.float64) for c in "xyz"], axis=1)
     if not np.all(np.isfinite(vertices)):
         raise MeshError(f"{path.name}: vertex coordinates must be finite")
     n = len(vertices)
     polygons = []
     for i, corners in enumerate(f[key]):
-        idx = [int(c) for c in np.atleast_1d(corners)]
+        if len(corners) < 3:
+            raise MeshError(f"{path.name}: face {i} has {len(corners)} corners; a face needs at least 3")
+        idx = [int(c) for c in corners]
         bad = [c for c in idx if not 0 <= c < n]
         if bad:
             raise MeshError(
@@ -286,6 +356,37 @@ def _parse_ply(path: Path) -> tuple[np.ndarray, list[tuple[int, list[int]]]]:
             )
         polygons.append((0, idx))
     return vertices, polygons
+
+
+def _check_ply_header(name: str, elements: dict[str, Any]) -> None:
+    """Refuse from the header alone what cannot be a mesh within the limits, before any row is read."""
+    from animsim.ply_reader import PLY_SCALAR_TYPES
+
+    if "vertex" not in elements:
+        raise MeshError(f"{name}: no vertex element")
+    if "face" not in elements:
+        raise MeshError(f"{name} has no face element: it is a point cloud, not a mesh")
+    vertex, face = elements["vertex"], elements["face"]
+    if vertex.count > MAX_MESH_VERTICES:
+        raise MeshError(f"the mesh has {vertex.count} vertices, more than the limit of {MAX_MESH_VERTICES}")
+    if face.count > MAX_MESH_FACES:  # every face is at least one triangle
+        raise MeshError(f"the mesh has {face.count} faces, more than the limit of {MAX_MESH_FACES} triangles")
+    props = {p.name: p for p in vertex.properties}
+    for c in "xyz":
+        if c not in props:
+            raise MeshError(f"{name}: the vertex element has no x, y, z")
+        if props[c].list_count_type is not None:
+            raise MeshError(f"{name}: vertex property {c!r} is a list; x, y and z must be single numbers")
+    fprops = {p.name: p for p in face.properties}
+    prop = fprops.get("vertex_indices", fprops.get("vertex_index"))
+    if prop is None:
+        raise MeshError(f"{name}: the face element has no vertex_indices list")
+    if prop.list_count_type is None:
+        raise MeshError(f"{name}: the face property {prop.name!r} must be a list of vertex indices")
+    if PLY_SCALAR_TYPES[prop.type].startswith("f"):
+        raise MeshError(
+            f"{name}: the face indices have the type {prop.type!r}; vertex indices must be integers"
+        )
 
 
 def _parse_stl(path: Path) -> tuple[np.ndarray, list[tuple[int, list[int]]]]:
@@ -297,13 +398,39 @@ def _parse_stl(path: Path) -> tuple[np.ndarray, list[tuple[int, list[int]]]]:
         raise MeshError(
             "reading STL needs trimesh: pip install 'animsim[mesh]' (or convert the file to OBJ or PLY)"
         ) from None
+    _sniff_stl(path)
     try:
         mesh = trimesh.load_mesh(str(path), file_type="stl", process=True)
     except Exception as exc:  # trimesh raises many kinds; all mean "not a usable STL"
-        raise MeshError(f"{path.name} is not a readable STL file ({type(exc).__name__}: {exc})") from None
+        # its message may quote the file or name a module it lacks: neither helps the user
+        raise MeshError(f"{path.name} is not a readable STL file ({type(exc).__name__})") from None
     vertices = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
     faces = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
     return vertices, [(0, f) for f in faces.tolist()]
+
+
+def _sniff_stl(path: Path) -> None:
+    """Refuse what is neither STL form before trimesh parses it, and too many triangles from the header.
+
+    Binary STL: an 80-byte header, a little-endian uint32 triangle count n,
+    then 50 bytes per triangle, so the size is exactly 84 + 50 n. ASCII STL
+    starts with ``solid``.
+    """
+    size = path.stat().st_size
+    with open(path, "rb") as fh:
+        head = fh.read(84)
+    if len(head) == 84:
+        n = int.from_bytes(head[80:84], "little")
+        if size == 84 + 50 * n:
+            if n > MAX_MESH_FACES:
+                raise MeshError(f"the mesh has {n} triangles, more than the limit of {MAX_MESH_FACES}")
+            return
+    if head.lstrip().startswith(b"solid"):
+        return
+    raise MeshError(
+        f"{path.name} is not an STL file (neither binary STL, whose size is 84 + 50 bytes per "
+        "triangle, nor ASCII STL, which starts with 'solid')"
+    )
 
 
 def check_geometry(
@@ -330,10 +457,20 @@ def check_geometry(
             where.append(k)
     if len(tris) > MAX_MESH_FACES:
         raise MeshError(f"the mesh has {len(tris)} triangles, more than the limit of {MAX_MESH_FACES}")
+    if not tris:
+        raise MeshError("not a mesh: no face has 3 corners")
     tri = np.array(tris, dtype=np.int64)
-    p = vertices[tri]
+    lo = vertices.min(axis=0)
+    with np.errstate(over="ignore"):
+        span = vertices.max(axis=0) - lo
+    if not np.all(np.isfinite(span)):
+        raise MeshError("the vertex coordinates span more than a float64 can hold (about 1.8e308); rescale")
+    # Areas relative to the size of the mesh, in coordinates scaled to it: the same test at
+    # 1e-300 and 1e300 without underflow or overflow (the squared size of 1e300 is inf).
+    size = float(span.max()) or 1.0
+    p = ((vertices - lo) / size)[tri]
     area2 = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
-    extent = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
+    extent = float(np.linalg.norm(span / size))
     flat = np.flatnonzero(area2 <= ZERO_AREA_RTOL * extent**2)
     if flat.size:
         k = where[int(flat[0])]
@@ -361,11 +498,12 @@ def check_geometry(
 Problem = tuple[tuple[str | int, ...], str, bool]
 
 
-def check_meshes(scene: Scene, scene_dir: Path | None) -> list[Problem]:
+def check_meshes(scene: Scene, scene_dir: Path | None, mesh_dirs: tuple[str, ...] = ()) -> list[Problem]:
     """Read every mesh structure's file, attach the geometry, and list the problems.
 
     ``scene_dir``: the folder relative paths start from (the scene file's);
-    None means the current directory.
+    None means the current directory. A mesh file must lie under that folder
+    or under one of ``mesh_dirs`` (``--mesh-dir``), see :func:`resolve_allowed`.
     """
     out: list[Problem] = []
     for i, s in enumerate(scene.structures):
@@ -373,16 +511,76 @@ def check_meshes(scene: Scene, scene_dir: Path | None) -> list[Problem]:
             continue
         if s.volume is not None and s.mode != "soft_body":
             out.append((("structures", i, "volume"), "volume springs apply only to mode: soft_body", True))
-        path = resolve(s.file, scene_dir)
         try:
+            path = resolve_allowed(s.file, scene_dir, mesh_dirs)
             geom = read_mesh(path)
             _check_mode(s, geom)
         except MeshError as exc:
             out.append((("structures", i, "file"), str(exc), False))
             continue
+        placed = _check_placed(s, geom)
+        if placed is not None:
+            out.append((("structures", i, "scale"), placed, False))
+            continue
         s._geometry = geom
         out.extend(((("structures", i, *p)), msg, key) for p, msg, key in _check_pins(s, geom))
     return out
+
+
+def _check_placed(s: MeshStructure, geom: MeshGeometry) -> str | None:
+    """Why the placed mesh cannot carry its mass (None when it can).
+
+    Masses are shares of the triangles' areas in world units (vertex_masses): a
+    scale of 1e-300 makes every area underflow to 0 and every mass 0/0, one of
+    1e300 makes positions or areas overflow.
+    """
+    import numpy as np
+
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+        x = place(s, geom.vertices)
+        if not np.all(np.isfinite(x)):
+            return f"scale {s.scale:g} puts vertices beyond what a float64 can hold; use a smaller scale"
+        mass = vertex_masses(s.mass, x, geom.triangles)
+    if not np.all(np.isfinite(mass) & (mass > 0)):
+        return (
+            f"scale {s.scale:g} makes the triangles' areas underflow or overflow, so the mass cannot be "
+            "shared among the vertices; use a scale that gives the mesh a size between about 1e-100 "
+            "and 1e100 m"
+        )
+    return None
+
+
+def resolve_allowed(file: str, scene_dir: Path | None, mesh_dirs: tuple[str, ...] = ()) -> Path:
+    """The mesh file a scene names, if it may read it (else :class:`MeshError`).
+
+    A scene may come from someone else, so by default it reads meshes only
+    from its own folder and below: the path is taken relative to the scene's
+    folder (the current one for a scene given as text), ``~`` is not expanded,
+    and after symlinks are resolved the file must still lie under that folder.
+    Each ``--mesh-dir DIR`` allows the files under DIR too (absolute paths
+    included). The message names the path as written, never what the file holds.
+    """
+    if "\0" in file:
+        raise MeshError("the path holds a NUL character, which no file name can contain")
+    if file.startswith("~"):
+        raise MeshError(
+            f"{file!r}: '~' is not expanded in scenes; give the path relative to the scene file "
+            "(or allow the mesh's folder with --mesh-dir)"
+        )
+    base = Path.cwd() if scene_dir is None else scene_dir
+    candidate = base / file  # an absolute ``file`` replaces base
+    try:
+        real = candidate.resolve()
+        roots = [base.resolve(), *(Path(d).expanduser().resolve() for d in mesh_dirs)]
+    except (OSError, RuntimeError) as exc:  # a symlink loop
+        raise MeshError(f"cannot resolve {file!r}: {exc}") from None
+    if not any(real.is_relative_to(root) for root in roots):
+        where = "the scene's folder" if scene_dir is not None else "the current folder"
+        raise MeshError(
+            f"{file!r} lies outside {where} ({base}); scenes read meshes only from their own folder "
+            "and below: move the mesh there, or allow its folder with --mesh-dir DIR"
+        )
+    return candidate
 
 
 def resolve(file: str, scene_dir: Path | None) -> Path:
@@ -400,7 +598,7 @@ def _check_mode(s: MeshStructure, geom: MeshGeometry) -> None:
     if geom.vertex_count > MAX_SOFT_BODY_VERTICES:
         raise MeshError(
             f"a soft body may have at most {MAX_SOFT_BODY_VERTICES} vertices (choosing its interior "
-            f"struts costs n^2), this mesh has {geom.vertex_count}; simplify it"
+            f"struts grows faster than n), this mesh has {geom.vertex_count}; simplify it"
         )
     topo = geom.topology
     if not geom.closed:
@@ -416,6 +614,15 @@ def _check_mode(s: MeshStructure, geom: MeshGeometry) -> None:
         raise MeshError(
             f"mode soft_body needs a closed surface, but the edge between vertices {a} and {b} "
             f"is shared by {topo.edge_faces[many[0]]} faces (non-manifold)"
+        )
+    # Volume relative to the mesh's size (scaled as in check_geometry, so no overflow): a closed
+    # surface folded flat (a sheet and its copy, wound both ways) encloses nothing to hold.
+    x = geom.vertices - geom.vertices.min(axis=0)
+    size = float(x.max()) or 1.0
+    if enclosed_volume(x / size, geom.triangles) <= ZERO_VOLUME_RTOL:
+        raise MeshError(
+            "mode soft_body needs a surface that encloses a volume, but this closed surface encloses "
+            "none (it is folded flat); use mode: cloth"
         )
 
 
@@ -508,33 +715,87 @@ def enclosed_volume(x: np.ndarray, tri: np.ndarray) -> float:
 
 
 def struts(x: np.ndarray, tri: np.ndarray) -> np.ndarray:
-    """Interior strut pairs of a closed surface (module docstring, "volume")."""
+    """Interior strut pairs of a closed surface (module docstring, "volume").
+
+    The candidates of each ray come from a neighbour search instead of all n
+    vertices (:func:`_ray_neighbours`), then the rule is applied to them
+    exactly. Near ties (squared distances from the ray equal to within 1e-9 of
+    h^2) go to the lower vertex index, so rounding cannot change the choice.
+    """
     import numpy as np
 
     n = len(x)
     normal = vertex_normals(x, tri)
     edges = _topology(tri, n).edges
     h = float(np.linalg.norm(x[edges[:, 0]] - x[edges[:, 1]], axis=1).max())
-    pairs = []
-    for start in range(0, n, _CHUNK):
-        rows = slice(start, min(start + _CHUNK, n))
-        d = x[None, :, :] - x[rows, None, :]  # (r, n, 3): from i to every j
-        t = -np.einsum("rnk,rk->rn", d, normal[rows])  # distance along the inward ray
-        perp2 = np.einsum("rnk,rnk->rn", d, d) - t * t  # squared distance from the ray
-        facing_away = (normal[rows] @ normal.T) < 0
-        near_ray = (t > 0) & facing_away & (perp2 < h * h)
-        first = np.where(near_ray, t, np.inf).min(axis=1, keepdims=True)  # the first surface hit
-        ok = near_ray & (t <= first + h)
-        score = np.where(ok, perp2, np.inf)
-        k = min(STRUTS_PER_VERTEX, n - 1)
-        best = np.argpartition(score, k - 1, axis=1)[:, :k]
-        good = np.take_along_axis(score, best, axis=1) < np.inf
-        i = np.broadcast_to(np.arange(rows.start, rows.stop)[:, None], best.shape)
-        pairs.append(np.stack([i[good], best[good]], axis=1))
-    if not pairs:
+    i, j = _ray_neighbours(x, normal, h)
+    key = np.unique(i * n + j)
+    i, j = key // n, key % n
+    d = x[j] - x[i]
+    t = -np.einsum("ij,ij->i", d, normal[i])  # distance along the inward ray
+    perp2 = np.einsum("ij,ij->i", d, d) - t * t  # squared distance from the ray
+    near_ray = (t > 0) & (perp2 < h * h) & (np.einsum("ij,ij->i", normal[i], normal[j]) < 0)
+    i, j, t, perp2 = i[near_ray], j[near_ray], t[near_ray], perp2[near_ray]
+    first = np.full(n, np.inf)
+    np.minimum.at(first, i, t)  # the first surface hit
+    ok = t <= first[i] + h
+    i, j, perp2 = i[ok], j[ok], perp2[ok]
+    order = np.lexsort((j, np.round(perp2 / (h * h) * 1e9), i))
+    i, j = i[order], j[order]
+    rank = np.arange(len(i)) - np.searchsorted(i, i, side="left")
+    best = rank < STRUTS_PER_VERTEX
+    if not best.any():
         return np.zeros((0, 2), dtype=np.int64)
-    p = np.sort(np.concatenate(pairs), axis=1)
+    p = np.sort(np.stack([i[best], j[best]], axis=1), axis=1)
     return np.unique(p, axis=0).astype(np.int64)
+
+
+def _ray_neighbours(x: np.ndarray, normal: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """(i, j): a superset of the vertices j within h of vertex i's inward ray.
+
+    Each ray is sampled every h up to the mesh's diameter L. A vertex within
+    h of the ray lies within r = sqrt(h^2 + (h/2)^2) of the nearest sample, so
+    the balls of radius r around the samples hold every candidate. Most
+    samples lie in the empty inside: a sample is looked up in a grid of
+    cells of size r, and only one whose cell or a neighbouring cell holds a
+    vertex gets a ball query (a k-d tree). Cost: n L/h grid look-ups (about
+    n^1.5 for an evenly meshed body) plus O(log n) per ball query near the
+    surface, against n^2 distances for the search over all pairs; memory is
+    bounded by doing the samples in blocks.
+    """
+    import numpy as np
+    from scipy.spatial import cKDTree
+
+    n = len(x)
+    reach = float(np.hypot(h, 0.5 * h))
+    lo = x.min(axis=0)
+    span = float(np.linalg.norm(x.max(axis=0) - lo))
+    cells = np.floor((x - lo) / reach).astype(np.int64) + 1  # from 1, so the -1 neighbours stay >= 0
+    dims = cells.max(axis=0) + 2
+    around = np.stack(np.meshgrid([-1, 0, 1], [-1, 0, 1], [-1, 0, 1], indexing="ij"), -1).reshape(-1, 3)
+    near = (cells[:, None, :] + around[None, :, :]).reshape(-1, 3)
+    occupied = np.unique((near[:, 0] * dims[1] + near[:, 1]) * dims[2] + near[:, 2])
+    steps = np.arange(math.ceil(span / h) + 2) * h
+    rows_per_block = max(1, _SAMPLES_PER_BLOCK // len(steps))
+    tree = cKDTree(x)
+    out_i, out_j = [], []
+    for start in range(0, n, rows_per_block):
+        rows = np.arange(start, min(start + rows_per_block, n))
+        pts = x[rows, None, :] - steps[None, :, None] * normal[rows, None, :]
+        c = np.floor((pts - lo) / reach).astype(np.int64) + 1
+        inside = np.all((c >= 0) & (c < dims), axis=-1)
+        key = (c[..., 0] * dims[1] + c[..., 1]) * dims[2] + c[..., 2]
+        at = np.minimum(np.searchsorted(occupied, key), len(occupied) - 1)
+        r, k = np.nonzero(inside & (occupied[at] == key))
+        if not r.size:
+            continue
+        found = tree.query_ball_point(pts[r, k], reach, return_sorted=False)
+        counts = np.fromiter(map(len, found), dtype=np.int64, count=len(found))
+        out_j.append(np.fromiter((v for f in found for v in f), dtype=np.int64, count=int(counts.sum())))
+        out_i.append(np.repeat(rows[r], counts))
+    if not out_i:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    return np.concatenate(out_i), np.concatenate(out_j)
 
 
 @dataclass(frozen=True)

@@ -407,17 +407,27 @@ class Plane(Model):
 Restitution = Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)]
 
 
-def _unit_quaternion(v: list[float]) -> tuple[float, float, float, float]:
-    norm = sum(c * c for c in v) ** 0.5
-    if abs(norm - 1.0) > 1e-6:
-        raise ValueError(f"a unit quaternion [w, x, y, z] is needed; this one has length {norm:.9g}")
-    return tuple(c / norm for c in v)  # type: ignore[return-value]
+#: how far from unit length a written quaternion may be and still be normalised
+QUATERNION_TOLERANCE = 1e-6
+
+
+def _normalise_close(q: list[float]) -> tuple[float, float, float, float]:
+    """Normalise a quaternion written within QUATERNION_TOLERANCE of unit length.
+
+    Others are kept as written: the scene check (animsim.scene.validate) refuses them with
+    their line, the zero quaternion and any other far from unit length alike. This is the
+    one quaternion type of the language: bodies and box colliders use it.
+    """
+    n = sum(c * c for c in q) ** 0.5
+    if n > 0 and abs(n - 1.0) <= QUATERNION_TOLERANCE:
+        return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
+    return (q[0], q[1], q[2], q[3])
 
 
 Quaternion = Annotated[
     list[FiniteFloat],
     Field(min_length=4, max_length=4, description="unit quaternion [w, x, y, z]"),
-    AfterValidator(_unit_quaternion),
+    AfterValidator(_normalise_close),
 ]
 
 
@@ -797,9 +807,6 @@ STRUCTURE_TYPES = ("cloth", "strand", "soft_box", "mesh")
 
 # --- rigid bodies ------------------------------------------------------------
 
-#: how far from unit length a written quaternion may be and still be normalised
-QUATERNION_TOLERANCE = 1e-6
-
 
 class BodyBox(Model):
     type: Literal["box"] = Doc(description="selects this shape")
@@ -825,24 +832,6 @@ class BodyCapsule(Model):
 
 BodyShape = Annotated[BodyBox | BodySphere | BodyCapsule, Field(discriminator="type")]
 BODY_SHAPE_TYPES = ("box", "sphere", "capsule")
-
-
-def _normalise_close(q: list[float]) -> tuple[float, float, float, float]:
-    """Normalise a quaternion written within QUATERNION_TOLERANCE of unit length.
-
-    Others are kept as written: the scene check reports them with their line.
-    """
-    n = sum(c * c for c in q) ** 0.5
-    if n > 0 and abs(n - 1.0) <= QUATERNION_TOLERANCE:
-        return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
-    return (q[0], q[1], q[2], q[3])
-
-
-Quaternion = Annotated[
-    list[FiniteFloat],
-    Field(min_length=4, max_length=4, description="unit quaternion [w, x, y, z]"),
-    AfterValidator(_normalise_close),
-]
 
 
 class Body(Model):
@@ -948,6 +937,8 @@ class Scene(Model):
 
     #: where a loaded scene came from ({"file", "sha256"}), for the metadata; not part of the scene
     _source: dict[str, str] | None = PrivateAttr(default=None)
+    #: (file, marks) of a scene read from YAML, so that checks made after compiling can name a line
+    _located: tuple[str, Any] | None = PrivateAttr(default=None)
 
     name: StrictStr | None = Doc(None, "the scene's name; defaults to the file stem", example="projectile")
     duration: Positive = Doc(description="simulated time", unit="s", example=2.0)

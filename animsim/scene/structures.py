@@ -205,20 +205,7 @@ def expand(s: Structure, scene_dir: Path | None = None) -> Expanded:
         return _expand_mesh(s, scene_dir)
     shape = grid_shape(s)
     n = int(np.prod(shape))
-    if isinstance(s, Cloth):
-        u_axis, v_axis = _PLANE_AXES[s.plane]
-        i, j = np.indices(shape).reshape(2, -1).astype(np.float64)
-        pos = np.tile(np.asarray(s.origin, dtype=np.float64), (n, 1))
-        pos[:, u_axis] += s.size[0] * i / (shape[0] - 1)
-        pos[:, v_axis] += s.size[1] * j / (shape[1] - 1)
-    elif isinstance(s, Strand):
-        f = np.linspace(0.0, 1.0, n)[:, None]
-        pos = np.asarray(s.start) * (1 - f) + np.asarray(s.end) * f
-    else:
-        assert isinstance(s, SoftBox)
-        frac = [np.linspace(-0.5, 0.5, k) for k in shape]
-        grid = np.stack(np.meshgrid(*frac, indexing="ij"), axis=-1).reshape(-1, 3)
-        pos = np.asarray(s.center) + grid * np.asarray(s.size)
+    pos = initial_positions(s)
     pinned = np.zeros(n, dtype=bool)
     for pid in s.pin:
         li = local_index(s, pid)
@@ -245,6 +232,34 @@ def expand(s: Structure, scene_dir: Path | None = None) -> Expanded:
         faces=_grid_faces(s, shape),
         curves=np.arange(n, dtype=np.int64)[None, :] if isinstance(s, Strand) else None,
     )
+
+
+def initial_positions(s: Structure, scene_dir: Path | None = None) -> np.ndarray:
+    """The (n, 3) starting positions of ``s``'s particles, without its springs (the pre-flight's
+    contact count needs only these)."""
+    import numpy as np
+
+    if isinstance(s, MeshStructure):
+        from animsim.scene.meshes import geometry_of, place
+
+        return place(s, geometry_of(s, scene_dir).vertices)
+    shape = grid_shape(s)
+    n = int(np.prod(shape))
+    if isinstance(s, Cloth):
+        u_axis, v_axis = _PLANE_AXES[s.plane]
+        i, j = np.indices(shape).reshape(2, -1).astype(np.float64)
+        pos = np.tile(np.asarray(s.origin, dtype=np.float64), (n, 1))
+        pos[:, u_axis] += s.size[0] * i / (shape[0] - 1)
+        pos[:, v_axis] += s.size[1] * j / (shape[1] - 1)
+    elif isinstance(s, Strand):
+        f = np.linspace(0.0, 1.0, n)[:, None]
+        pos = np.asarray(s.start) * (1 - f) + np.asarray(s.end) * f
+    else:
+        assert isinstance(s, SoftBox)
+        frac = [np.linspace(-0.5, 0.5, k) for k in shape]
+        grid = np.stack(np.meshgrid(*frac, indexing="ij"), axis=-1).reshape(-1, 3)
+        pos = np.asarray(s.center) + grid * np.asarray(s.size)
+    return np.ascontiguousarray(pos, dtype=np.float64)
 
 
 def _grid_faces(s: Structure, shape: tuple[int, ...]) -> np.ndarray | None:

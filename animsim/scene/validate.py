@@ -201,6 +201,9 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
             )
 
     body_ids = _check_bodies(bodies, first_seen, structure_of, out)
+    for i, c in enumerate(scene.colliders or []):
+        if c is not None and hasattr(c, "orientation"):
+            _check_orientation(("colliders", i, "orientation"), c.orientation, out)
     known = list(first_seen)
     # A renamed particle breaks every spring that names it: report each
     # missing id once, at its first use, and list the other places there,
@@ -280,20 +283,32 @@ def _check_bodies(
             seen[b.id] = i
         if b.id in particle_ids or structure_of(b.id) is not None:
             out.append((("bodies", i, "id"), f"id {b.id!r} is also a particle's; ids must be unique", False))
-        if isinstance(b, Body) and isinstance(b.orientation, tuple):
-            norm = math.sqrt(sum(c * c for c in b.orientation))
-            if norm == 0.0:
-                out.append((("bodies", i, "orientation"), "a zero quaternion is not a rotation", False))
-            elif abs(norm - 1.0) > QUATERNION_TOLERANCE:
-                out.append(
-                    (
-                        ("bodies", i, "orientation"),
-                        f"not a unit quaternion (length {norm:.6g}); write [w, x, y, z] of length 1, "
-                        "or {axis: [x, y, z], angle: DEGREES}",
-                        False,
-                    )
-                )
+        if isinstance(b, Body):
+            _check_orientation(("bodies", i, "orientation"), b.orientation, out)
     return seen
+
+
+def _check_orientation(path: tuple[str | int, ...], q: Any, out: list[Problem]) -> None:
+    """The one rule for every quaternion the language accepts (bodies, box colliders).
+
+    The model normalises one within QUATERNION_TOLERANCE of unit length; any
+    other is refused here, with its line, rather than silently normalised (or,
+    for the zero quaternion, turned into a shape that collides with nothing).
+    """
+    if not isinstance(q, tuple):  # {axis, angle}: always a rotation
+        return
+    norm = math.sqrt(sum(c * c for c in q))
+    if norm == 0.0:
+        out.append((path, "a zero quaternion is not a rotation", False))
+    elif abs(norm - 1.0) > QUATERNION_TOLERANCE:
+        out.append(
+            (
+                path,
+                f"not a unit quaternion (length {norm:.6g}); write [w, x, y, z] of length 1, "
+                "or {axis: [x, y, z], angle: DEGREES}",
+                False,
+            )
+        )
 
 
 def _check_body_ends(

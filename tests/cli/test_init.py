@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+from pathlib import Path
 
 import jsonschema
 import pytest
@@ -88,3 +90,31 @@ def test_a_missing_folder_is_a_usage_error(tmp_path):
     proc = run_cli("init", str(tmp_path / "no" / "x.yaml"))
     assert proc.returncode == 2
     assert "does not exist" in proc.stderr
+
+
+def _unwritable_folder(tmp_path):
+    """A folder this user cannot create files in: a read-only one, or for root (whom modes do
+    not stop) a system folder that refuses new files; None when there is none to find."""
+    import tempfile
+
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o555)
+    for folder in (ro, Path("/sys/kernel"), Path("/proc/self")):
+        try:
+            fd, probe = tempfile.mkstemp(dir=folder)
+        except OSError:
+            return folder
+        os.close(fd)
+        os.unlink(probe)
+    return None
+
+
+def test_a_folder_that_refuses_new_files_is_a_usage_error(tmp_path):
+    folder = _unwritable_folder(tmp_path)
+    if folder is None:
+        pytest.skip("no folder here refuses new files to this user")
+    r = run_cli("init", folder / "scene.yaml")
+    assert r.returncode == 2, r.stderr
+    assert "cannot create files in" in r.stderr and "Traceback" not in r.stderr
+    assert not (folder / "scene.yaml").exists() and not (folder / "scene.schema.json").exists()

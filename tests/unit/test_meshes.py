@@ -9,12 +9,14 @@ import numpy as np
 import pytest
 
 from animsim.scene import meshes
-from animsim.scene.loader import load_scene, load_scene_text
+from animsim.scene.loader import Limits, load_scene, load_scene_text
 from animsim.scene.meshes import MeshError, check_geometry, enclosed_volume, read_mesh
 from animsim.scene.structures import connectivity, expand
 from tests.conftest import SCENES, simulate_text
 
 MESHES = SCENES / "meshes"
+# the shipped meshes, read from scenes written in tmp_path (outside the meshes' folder)
+ALLOW_MESHES = Limits(mesh_dirs=(str(MESHES),))
 
 
 def obj(tmp_path: Path, text: str, name: str = "m.obj") -> Path:
@@ -138,7 +140,7 @@ def test_stl_through_trimesh(tmp_path: Path) -> None:
 def load_mesh_structure(text: str, tmp_path: Path):
     path = tmp_path / "scene.yaml"
     path.write_text(text, encoding="utf-8")
-    return load_scene(path).scene.structures[0]
+    return load_scene(path, ALLOW_MESHES).scene.structures[0]
 
 
 def test_icosphere_soft_body_springs(tmp_path: Path) -> None:
@@ -213,10 +215,10 @@ def test_springs_and_particles_may_name_mesh_vertices(tmp_path: Path) -> None:
     )
     path = tmp_path / "s.yaml"
     path.write_text(text)
-    load_scene(path)  # no error: m[288] exists
+    load_scene(path, ALLOW_MESHES)  # no error: m[288] exists
     path.write_text(text.replace("m[288]", "m[289]"))
     with pytest.raises(Exception, match="no particle with id 'm\\[289\\]'"):
-        load_scene(path)
+        load_scene(path, ALLOW_MESHES)
 
 
 def test_grid_structures_record_their_shapes() -> None:
