@@ -81,6 +81,39 @@ def _point_rows(system: Any) -> np.ndarray:
     return np.ones(system.particle_count, dtype=bool) if rows is None else np.asarray(rows, dtype=bool)
 
 
+def collider_shape(c: Any) -> Any:
+    """The :class:`animsim.colliders.Shape` of one scene collider, at its written position."""
+    from animsim.colliders import (
+        BOX,
+        CAPSULE,
+        SPHERE,
+        Shape,
+        axis_angle_quaternion,
+        quaternion_matrix,
+    )
+
+    if isinstance(c, m.SphereCollider):
+        shape = Shape(SPHERE, np.array(c.center), radius=c.radius)
+    elif isinstance(c, m.BoxCollider):
+        o = c.orientation
+        q = axis_angle_quaternion(np.array(o.axis), o.angle) if isinstance(o, m.AxisAngle) else np.array(o)
+        shape = Shape(BOX, np.array(c.center), half=0.5 * np.array(c.size), rotation=quaternion_matrix(q))
+    else:
+        a, b = np.array(c.a), np.array(c.b)
+        mid = 0.5 * (a + b)
+        shape = Shape(CAPSULE, mid, radius=c.radius, segment=b - mid)
+    return Shape(
+        shape.kind,
+        shape.center,
+        shape.radius,
+        shape.half,
+        shape.rotation,
+        shape.segment,
+        c.restitution,
+        c.friction,
+    )
+
+
 def build(scene: m.Scene, system: Any, backend: str, springs: Any | None, positions: np.ndarray) -> Built:
     """Every stage this module owns that ``scene`` uses (see the module docstring).
 
@@ -135,49 +168,14 @@ def build(scene: m.Scene, system: Any, backend: str, springs: Any | None, positi
     # --- solid colliders ------------------------------------------------------------------
     colliders = None
     if scene.colliders:
-        from animsim.colliders import (
-            BOX,
-            CAPSULE,
-            SPHERE,
-            Colliders,
-            Shape,
-            axis_angle_quaternion,
-            quaternion_matrix,
-        )
+        from animsim.colliders import Colliders
 
-        shapes: list[Shape] = []
+        shapes: list[Any] = []
         motion_keys: list[list[Any]] = []
         motion_smooth: list[bool] = []
         moving: list[int] = []
         for c in scene.colliders:
-            if isinstance(c, m.SphereCollider):
-                shape = Shape(SPHERE, np.array(c.center), radius=c.radius)
-            elif isinstance(c, m.BoxCollider):
-                o = c.orientation
-                q = (
-                    axis_angle_quaternion(np.array(o.axis), o.angle)
-                    if isinstance(o, m.AxisAngle)
-                    else np.array(o)
-                )
-                shape = Shape(
-                    BOX, np.array(c.center), half=0.5 * np.array(c.size), rotation=quaternion_matrix(q)
-                )
-            else:
-                a, b = np.array(c.a), np.array(c.b)
-                mid = 0.5 * (a + b)
-                shape = Shape(CAPSULE, mid, radius=c.radius, segment=b - mid)
-            shapes.append(
-                Shape(
-                    shape.kind,
-                    shape.center,
-                    shape.radius,
-                    shape.half,
-                    shape.rotation,
-                    shape.segment,
-                    c.restitution,
-                    c.friction,
-                )
-            )
+            shapes.append(collider_shape(c))
             if c.motion is not None:
                 moving.append(len(motion_keys))
                 motion_keys.append(list(c.motion.keyframes))

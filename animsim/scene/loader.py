@@ -14,6 +14,7 @@ this module turns nodes into plain Python data itself so that it can
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import hashlib
 import re
@@ -484,26 +485,41 @@ def load_scene_bytes(raw: bytes, file: str, limits: Limits = Limits()) -> Loaded
         )
     # Top-level keys starting with x- are free for anchors (as in Compose files).
     body = {k: v for k, v in data.items() if not (isinstance(k, str) and k.startswith("x-"))}
-    from animsim.scene.validate import check_scene, partial_scene  # late: validate imports structures
+    from animsim.scene.validate import check_scene  # late: validate imports structures
 
     try:
         scene = Scene.model_validate(body, context={"marks": True})
     except ValidationError as exc:
-        # Report the cross-field problems of the parts that did validate too,
-        # so one round of fixes is enough (never twice for one key).
-        found = _diagnostics(exc, body, marks, file)
-        partial, ids_complete = partial_scene(body)
-        seen = {d.path for d in found}
-        for p, msg, key in check_scene(partial, ids_complete=ids_complete, partial=True):
-            if _dotted(p) not in seen:
-                found.append(Diagnostic(file, *marks.at(p, prefer_key=key), _dotted(p), msg))
-        raise SceneError(found) from None
+        raise scene_error(exc, body, marks, file) from None
     problems = mesh_problems(scene, file) + check_scene(scene)
     if problems:
         raise SceneError(
             [Diagnostic(file, *marks.at(p, prefer_key=key), _dotted(p), msg) for p, msg, key in problems]
         )
     return LoadedScene(scene=scene, file=file, sha256=sha, marks=marks, data=body, source=text)
+
+
+def scene_error(exc: ValidationError, body: Any, marks: Marks | None, file: str) -> SceneError:
+    """Every problem of a scene that did not validate, as one SceneError.
+
+    ``marks`` None: a scene built in Python, which has no lines to point at
+    (its diagnostics have line 0, shown as the file name alone).
+    """
+    from animsim.scene.validate import check_scene, partial_scene  # late: validate imports structures
+
+    place = marks or Marks()
+    found = _diagnostics(exc, body if isinstance(body, dict) else {}, place, file)
+    if isinstance(body, dict):
+        # Report the cross-field problems of the parts that did validate too,
+        # so one round of fixes is enough (never twice for one key).
+        partial, ids_complete = partial_scene(body)
+        seen = {d.path for d in found}
+        for p, msg, key in check_scene(partial, ids_complete=ids_complete, partial=True):
+            if _dotted(p) not in seen:
+                found.append(Diagnostic(file, *place.at(p, prefer_key=key), _dotted(p), msg))
+    if marks is None:
+        found = [dataclasses.replace(d, line=0, column=0) for d in found]
+    return SceneError(found)
 
 
 def mesh_problems(scene: Scene, file: str) -> list[tuple[Path_, str, bool]]:

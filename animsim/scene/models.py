@@ -23,6 +23,7 @@ from pydantic import (
     StrictBool,
     StrictInt,
     StrictStr,
+    ValidationError,
     field_validator,
     model_validator,
 )
@@ -176,7 +177,12 @@ class Particle(Model):
     mass: NonNegative | None = Doc(
         None, "mass, > 0; may be omitted or 0 only when pinned", unit="kg", example=1.0
     )
-    position: Vec3 = Doc(description="position at t = 0; [x, y] means z = 0", unit="m", example=[0, 1, 0])
+    position: Vec3 | None = Doc(
+        None,
+        "position at t = 0; [x, y] means z = 0. Required, except with keyframes: then the path at t = 0",
+        unit="m",
+        example=[0, 1, 0],
+    )
     velocity: Vec3 = Doc([0.0, 0.0, 0.0], "velocity at t = 0", unit="m/s", example=[10, 10, 0])
     pinned: StrictBool = Doc(
         False, "forces never move it; it keeps its velocity (a moving anchor)", example=True
@@ -202,6 +208,14 @@ class Particle(Model):
     def _interpolation_needs_keys(self) -> Particle:
         if self.interpolation is not None and self.keyframes is None:
             raise ValueError("interpolation applies only with keyframes")
+        if self.position is None and self.keyframes is not None:
+            # The first key already says where the particle starts: its path at
+            # t = 0 (held at the first key before it) is the default position.
+            from animsim.keyframes import make_paths
+
+            smooth = self.interpolation == "smooth"
+            at0, _ = make_paths([self.keyframes], [smooth]).evaluate(0.0)
+            object.__setattr__(self, "position", tuple(float(x) for x in at0[0]))
         return self
 
 
@@ -873,7 +887,15 @@ class Record(Model):
         return self
 
 
-class Scene(Model):
+class _SceneType(type(Model)):  # type: ignore[misc]
+    def __call__(cls, /, **data: Any) -> Any:
+        try:
+            return super().__call__(**data)
+        except ValidationError as exc:
+            raise _python_scene_error(exc, data) from None
+
+
+class Scene(Model, metaclass=_SceneType):
     """A whole scene file."""
 
     model_config = ConfigDict(
@@ -959,6 +981,33 @@ class Scene(Model):
         example=[{"id": "die", "shape": {"type": "box", "size": [0.1, 0.1, 0.1]}, "mass": 0.2}],
     )
 
+    # A scene built in Python gets the loader's diagnostics (key path and
+    # message) as one SceneError, never pydantic's own error type: the Python
+    # API promises one error type for every bad scene. (Scene(**data) is
+    # covered by the metaclass: a custom __init__ would make pydantic call it
+    # for every validation and drop the loader's context.)
+    @classmethod
+    def model_validate(cls, obj: Any, **kw: Any) -> Scene:
+        try:
+            return super().model_validate(obj, **kw)
+        except ValidationError as exc:
+            context = kw.get("context")
+            if context and context.get("marks"):
+                raise  # the loader turns it into diagnostics with lines
+            raise _python_scene_error(exc, obj) from None
+
+    @classmethod
+    def model_validate_json(cls, json_data: Any, **kw: Any) -> Scene:
+        import json
+
+        try:
+            data = json.loads(json_data)
+        except ValueError as exc:
+            from animsim.errors import Diagnostic, SceneError
+
+            raise SceneError([Diagnostic(PYTHON_SOURCE, 0, 0, "", f"not JSON: {exc}")]) from None
+        return cls.model_validate(data, **kw)
+
     @model_validator(mode="after")
     def _cross_checks(self, info: Any) -> Scene:
         """The rules that span sections (a spring to an unknown id, ...), for scenes built in
@@ -985,3 +1034,9 @@ class Scene(Model):
     @property
     def adaptive(self) -> Adaptive | None:
         return None if isinstance(self.integrator, str) else self.integrator.adaptive
+
+
+def _python_scene_error(exc: ValidationError, data: Any) -> Exception:
+    from animsim.scene.loader import scene_error
+
+    return scene_error(exc, data, None, PYTHON_SOURCE)
