@@ -48,12 +48,11 @@ class Built:
 def spring_max_strain(scene: m.Scene) -> np.ndarray:
     """Per spring, in the compiler's order (listed springs, then each structure's families),
     the tearing limit; +inf where the spring cannot tear."""
-    from animsim.scene.structures import expand, structure_spring_count
+    from animsim.scene.structures import expand, structure_spring_count, tears
 
     parts = [np.array([np.inf if sp.max_strain is None else sp.max_strain for sp in scene.springs])]
     for s in scene.structures:
-        families = [getattr(s, name, None) for name in type(s).model_fields]
-        if any(isinstance(f, m.SpringFamily) and f.max_strain is not None for f in families):
+        if tears(s):
             for group in expand(s).springs:
                 parts.append(np.full(len(group.index), group.max_strain))
         else:
@@ -139,7 +138,7 @@ def build(scene: m.Scene, system: Any, backend: str, springs: Any | None, positi
             rows.append(i)
             base.append(np.zeros(3))
     if scene.structures:
-        from animsim.scene.structures import local_index
+        from animsim.scene.structures import pinned_rows
 
         for s, (first, _shape, _f0, _f1) in zip(scene.structures, system.structure_grids, strict=True):
             if getattr(s, "pin_motion", None) is None:
@@ -147,10 +146,7 @@ def build(scene: m.Scene, system: Any, backend: str, springs: Any | None, positi
             path = len(keys)
             keys.append(list(s.pin_motion.keyframes))
             smooth.append(s.pin_motion.interpolation == "smooth")
-            for pid in s.pin:
-                li = local_index(s, pid)
-                if li is None:
-                    continue
+            for li in pinned_rows(s).tolist():
                 which.append(path)
                 rows.append(first + li)
                 base.append(positions[first + li])
@@ -224,10 +220,14 @@ def build(scene: m.Scene, system: Any, backend: str, springs: Any | None, positi
     if system.spring_count and np.isfinite(limits).any():
         from animsim.tearing import Tearing
 
-        tear = Tearing(system.spring_index, system.spring_rest_length, limits, numba)
+        tear = Tearing(
+            system.spring_index, system.spring_rest_length, limits, numba, families=system.spring_families
+        )
         tear.springs = springs
         out.back.append(tear)
         out.tearing = tear
     else:
-        out.left_out.append("tearing: no spring has a max_strain")
+        out.left_out.append(
+            "tearing: needs a max_strain on a spring, a spring family or a structure; none has one"
+        )
     return out

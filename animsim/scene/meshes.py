@@ -421,16 +421,14 @@ def _check_mode(s: MeshStructure, geom: MeshGeometry) -> None:
 
 
 def _check_pins(s: MeshStructure, geom: MeshGeometry) -> list[Problem]:
-    import numpy as np
 
     from animsim.scene.models import PinInside
 
     n = geom.vertex_count
     if isinstance(s.pin, PinInside):
-        box = s.pin.inside
-        x = place(s, geom.vertices)
-        inside = np.all((x >= np.asarray(box.min)) & (x <= np.asarray(box.max)), axis=1)
-        if not inside.any():
+        from animsim.scene.structures import inside_box
+
+        if not inside_box(place(s, geom.vertices), s.pin.inside).any():
             return [
                 (("pin", "inside"), "no vertex of the mesh is inside this box (world coordinates)", False)
             ]
@@ -559,8 +557,9 @@ def mesh_parts(s: MeshStructure, scene_dir: Path | None = None) -> MeshParts:
     n = len(x)
     pinned = np.zeros(n, dtype=bool)
     if isinstance(s.pin, PinInside):
-        lo, hi = np.asarray(s.pin.inside.min), np.asarray(s.pin.inside.max)
-        pinned = np.all((x >= lo) & (x <= hi), axis=1)
+        from animsim.scene.structures import inside_box
+
+        pinned = inside_box(x, s.pin.inside)
     else:
         pinned[[v for v in s.pin if v < n]] = True
     topo = geom.topology

@@ -569,13 +569,38 @@ def _lattice(dims: int) -> Any:
     ]
 
 
+class PinBox(Model):
+    """An axis-aligned box in world coordinates."""
+
+    min: Vec3 = Doc(description="the corner with the smallest x, y, z", unit="m", example=[-1, 1.9, -1])
+    max: Vec3 = Doc(description="the corner with the largest x, y, z", unit="m", example=[1, 2.1, 1])
+
+    @model_validator(mode="after")
+    def _ordered(self) -> PinBox:
+        if any(a > b for a, b in zip(self.min, self.max, strict=True)):
+            raise ValueError("min must not exceed max in any axis")
+        return self
+
+
+class PinInside(Model):
+    """Pins chosen by place instead of by index."""
+
+    inside: PinBox = Doc(
+        description="pin every particle inside this box (world coordinates; a mesh's vertices after "
+        "scale, rotation and position)",
+        example={"min": [-1, 1.9, -1], "max": [1, 2.1, 1]},
+    )
+
+
 class _StructureCommon(Model):
     """What every structure has: an id prefix, per-particle mass, start velocity, pins."""
 
     id: StrictStr = Doc(description="particle ids become <id>[i,j]", min_length=1, example="sheet")
     mass: Positive = Doc(description="mass of each particle", unit="kg", example=0.01)
     velocity: Vec3 = Doc([0.0, 0.0, 0.0], "initial velocity of every particle", unit="m/s")
-    pin: list[Id] = Doc([], "ids of particles held in place", example=["sheet[0,0]", "sheet[19,0]"])
+    pin: list[Id] | PinInside = Doc(
+        [], "ids of particles held in place, or {inside: {min, max}}", example=["sheet[0,0]", "sheet[19,0]"]
+    )
     pin_motion: Motion | None = Doc(
         None,
         "keyframed offsets [[t, [dx, dy, dz]], ...] added to every pinned particle's "
@@ -584,6 +609,12 @@ class _StructureCommon(Model):
     )
     radius: NonNegative | None = Doc(
         None, "each particle's radius, for contacts and colliders", unit="m", example=0.01
+    )
+    max_strain: MaxStrain = Doc(
+        None,
+        "tearing for every spring family of the structure that sets no max_strain of its own: "
+        "a spring breaks for good once |L| / rest - 1 exceeds this",
+        example=0.5,
     )
 
 
@@ -622,7 +653,9 @@ class Strand(_StructureCommon):
     type: Literal["strand"] = Doc(description="selects this structure")
     # id and pin again only for examples that fit a strand (the order of keys stays the common one)
     id: StrictStr = Doc(description="particle ids become <id>[i]", min_length=1, example="hair")
-    pin: list[Id] = Doc([], "ids of particles held in place", example=["hair[0]"])
+    pin: list[Id] | PinInside = Doc(
+        [], "ids of particles held in place, or {inside: {min, max}}", example=["hair[0]"]
+    )
     start: Vec3 = Doc(description="position of particle [0]", unit="m", example=[0, 2, 0])
     end: Vec3 = Doc(description="position of the last particle [count-1]", unit="m", example=[0, 1, 0])
     count: Annotated[StrictInt, Field(ge=2, le=MAX_STRAND_COUNT)] = Doc(
@@ -643,7 +676,9 @@ class SoftBox(_StructureCommon):
 
     type: Literal["soft_box"] = Doc(description="selects this structure")
     id: StrictStr = Doc(description="particle ids become <id>[i,j,k]", min_length=1, example="jello")
-    pin: list[Id] = Doc([], "ids of particles held in place", example=["jello[0,0,0]"])
+    pin: list[Id] | PinInside = Doc(
+        [], "ids of particles held in place, or {inside: {min, max}}", example=["jello[0,0,0]"]
+    )
     center: Vec3 = Doc([0.0, 0.0, 0.0], "centre of the box", unit="m", example=[0, 1, 0])
     size: Annotated[list[Positive], Field(min_length=3, max_length=3)] = Doc(
         description="edge lengths along x, y, z", unit="m", example=[0.5, 0.5, 0.5]
@@ -680,28 +715,6 @@ class AxisAngle(Model):
         if v == (0.0, 0.0, 0.0):
             raise ValueError("the axis must not be zero")
         return v
-
-
-class PinBox(Model):
-    """An axis-aligned box in world coordinates."""
-
-    min: Vec3 = Doc(description="the corner with the smallest x, y, z", unit="m", example=[-1, 1.9, -1])
-    max: Vec3 = Doc(description="the corner with the largest x, y, z", unit="m", example=[1, 2.1, 1])
-
-    @model_validator(mode="after")
-    def _ordered(self) -> PinBox:
-        if any(a > b for a, b in zip(self.min, self.max, strict=True)):
-            raise ValueError("min must not exceed max in any axis")
-        return self
-
-
-class PinInside(Model):
-    """Pins chosen by place instead of by index."""
-
-    inside: PinBox = Doc(
-        description="pin every vertex inside this box (world coordinates, after scale, rotation and position)",
-        example={"min": [-1, 1.9, -1], "max": [1, 2.1, 1]},
-    )
 
 
 MAX_MESH_VERTICES = 200_000
@@ -741,6 +754,12 @@ class MeshStructure(Model):
     )
     volume: SpringFamily | None = Doc(
         None, "soft_body only: interior struts that keep the volume", example={"ks": 200, "kd": 0.2}
+    )
+    max_strain: MaxStrain = Doc(
+        None,
+        "tearing for every spring family of the mesh that sets no max_strain of its own: "
+        "a spring breaks for good once |L| / rest - 1 exceeds this",
+        example=0.5,
     )
     pin: list[Annotated[StrictInt, Field(ge=0)]] | PinInside = Doc(
         [], "vertex indices, or {inside: {min, max}}", example=[0, 5]

@@ -30,7 +30,16 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:  # numpy is imported where arrays are built, so validating a scene
     import numpy as np  # (and refusing a bad one) does not pay for importing it
 
-from animsim.scene.models import Cloth, MeshStructure, SoftBox, SpringFamily, Strand, Structure
+from animsim.scene.models import (
+    Cloth,
+    MeshStructure,
+    PinBox,
+    PinInside,
+    SoftBox,
+    SpringFamily,
+    Strand,
+    Structure,
+)
 
 _PLANE_AXES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}
 
@@ -165,6 +174,20 @@ def _offset_pairs(shape: tuple[int, ...], offset: tuple[int, ...]) -> np.ndarray
     return _pairs(shape, tuple(a), tuple(b))
 
 
+def family_max_strain(s: Structure, fam: SpringFamily) -> float:
+    """The tearing limit of one spring family: its own max_strain, else the structure's
+    (which tears every family that sets none), else +inf (never breaks)."""
+    limit = fam.max_strain if fam.max_strain is not None else s.max_strain
+    return float("inf") if limit is None else float(limit)
+
+
+def tears(s: Structure) -> bool:
+    """Whether any spring family of ``s`` has a tearing limit."""
+    if s.max_strain is not None:
+        return True
+    return any(isinstance(f, SpringFamily) and f.max_strain is not None for f in vars(s).values())
+
+
 def _family_offsets(s: Structure) -> list[tuple[str, SpringFamily, list[tuple[int, ...]]]]:
     """The spring families a structure asks for, each with its grid offsets."""
     if isinstance(s, Cloth):
@@ -206,32 +229,16 @@ def expand(s: Structure, scene_dir: Path | None = None) -> Expanded:
         return _expand_mesh(s, scene_dir)
     shape = grid_shape(s)
     n = int(np.prod(shape))
-    if isinstance(s, Cloth):
-        u_axis, v_axis = _PLANE_AXES[s.plane]
-        i, j = np.indices(shape).reshape(2, -1).astype(np.float64)
-        pos = np.tile(np.asarray(s.origin, dtype=np.float64), (n, 1))
-        pos[:, u_axis] += s.size[0] * i / (shape[0] - 1)
-        pos[:, v_axis] += s.size[1] * j / (shape[1] - 1)
-    elif isinstance(s, Strand):
-        f = np.linspace(0.0, 1.0, n)[:, None]
-        pos = np.asarray(s.start) * (1 - f) + np.asarray(s.end) * f
-    else:
-        assert isinstance(s, SoftBox)
-        frac = [np.linspace(-0.5, 0.5, k) for k in shape]
-        grid = np.stack(np.meshgrid(*frac, indexing="ij"), axis=-1).reshape(-1, 3)
-        pos = np.asarray(s.center) + grid * np.asarray(s.size)
+    pos = grid_positions(s)
     pinned = np.zeros(n, dtype=bool)
-    for pid in s.pin:
-        li = local_index(s, pid)
-        if li is not None:
-            pinned[li] = True
+    pinned[pinned_rows(s)] = True
     groups = [
         SpringGroup(
             f"{s.type} {s.id}: {name}",
             pairs,
             fam.ks,
             fam.kd,
-            float("inf") if fam.max_strain is None else fam.max_strain,
+            family_max_strain(s, fam),
         )
         for name, pairs, fam in _families(s, shape)
     ]
@@ -246,6 +253,48 @@ def expand(s: Structure, scene_dir: Path | None = None) -> Expanded:
         faces=_grid_faces(s, shape),
         curves=np.arange(n, dtype=np.int64)[None, :] if isinstance(s, Strand) else None,
     )
+
+
+def grid_positions(s: Structure) -> np.ndarray:
+    """(n, 3) positions of a cloth, strand or soft box, in creation order."""
+    import numpy as np
+
+    shape = grid_shape(s)
+    n = int(np.prod(shape))
+    if isinstance(s, Cloth):
+        u_axis, v_axis = _PLANE_AXES[s.plane]
+        i, j = np.indices(shape).reshape(2, -1).astype(np.float64)
+        pos = np.tile(np.asarray(s.origin, dtype=np.float64), (n, 1))
+        pos[:, u_axis] += s.size[0] * i / (shape[0] - 1)
+        pos[:, v_axis] += s.size[1] * j / (shape[1] - 1)
+    elif isinstance(s, Strand):
+        f = np.linspace(0.0, 1.0, n)[:, None]
+        pos = np.asarray(s.start) * (1 - f) + np.asarray(s.end) * f
+    else:
+        assert isinstance(s, SoftBox)
+        frac = [np.linspace(-0.5, 0.5, k) for k in shape]
+        grid = np.stack(np.meshgrid(*frac, indexing="ij"), axis=-1).reshape(-1, 3)
+        pos = np.asarray(s.center) + grid * np.asarray(s.size)
+    return pos
+
+
+def inside_box(x: np.ndarray, box: PinBox) -> np.ndarray:
+    """(n,) True where a point of ``x`` (n, 3) lies in ``box``, faces included
+    (``pin: {inside: {min, max}}`` of every structure and mesh)."""
+    import numpy as np
+
+    return np.all((x >= np.asarray(box.min)) & (x <= np.asarray(box.max)), axis=1)
+
+
+def pinned_rows(s: Structure) -> np.ndarray:
+    """Local indices of the pinned particles of a cloth, strand or soft box: the listed ids
+    (one that names no particle is reported by the scene check), or those inside the box."""
+    import numpy as np
+
+    if isinstance(s.pin, PinInside):
+        return np.flatnonzero(inside_box(grid_positions(s), s.pin.inside))
+    rows = [local_index(s, pid) for pid in s.pin]
+    return np.array(sorted({r for r in rows if r is not None}), dtype=np.int64)
 
 
 def _grid_faces(s: Structure, shape: tuple[int, ...]) -> np.ndarray | None:
@@ -294,7 +343,7 @@ def _expand_mesh(s: MeshStructure, scene_dir: Path | None) -> Expanded:
             np.ascontiguousarray(pairs, dtype=np.int64),
             fam.ks,
             fam.kd,
-            float("inf") if fam.max_strain is None else fam.max_strain,  # tearing
+            family_max_strain(s, fam),  # tearing
         )
         for name, pairs, fam in parts.families
     ]

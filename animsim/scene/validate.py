@@ -19,8 +19,20 @@ from typing import Any, get_args
 
 from pydantic import TypeAdapter, ValidationError
 
-from animsim.scene.models import QUATERNION_TOLERANCE, Body, BodyPoint, Id, MeshStructure, Particle, Scene
-from animsim.scene.structures import grid_shape, local_index, parse_structure_id
+from animsim.scene.models import (
+    QUATERNION_TOLERANCE,
+    Body,
+    BodyPoint,
+    Id,
+    MeshStructure,
+    Particle,
+    PinInside,
+    Scene,
+)
+from animsim.scene.structures import grid_shape, local_index, parse_structure_id, particle_count, pinned_rows
+
+#: a pin box is checked against a lattice of at most this many particles (8 bytes x 3 each)
+PIN_BOX_CHECK_LIMIT = 4_000_000
 
 Problem = tuple[tuple[str | int, ...], str, bool]
 
@@ -181,6 +193,17 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
             structures[s.id] = s
         if isinstance(s, MeshStructure):
             continue  # its pins are vertex numbers, checked with the file (animsim.scene.meshes)
+        if isinstance(s.pin, PinInside):
+            # Lattices too large to place here are refused by the memory check anyway.
+            if particle_count(s) <= PIN_BOX_CHECK_LIMIT and not len(pinned_rows(s)):
+                out.append(
+                    (
+                        ("structures", i, "pin", "inside"),
+                        f"no particle of {s.type} {s.id!r} is inside this box (world coordinates)",
+                        False,
+                    )
+                )
+            continue
         for k, pid in enumerate(s.pin):
             if local_index(s, pid) is None:
                 out.append(
