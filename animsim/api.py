@@ -464,7 +464,9 @@ def run(
     threshold = check_threshold(DEFAULT_DRIFT_WARN_PERCENT if drift_warn is None else drift_warn)
     to_stdout = output is not None and str(output) == "-"
     fmt = format_for(None if output is None else Path(output), fmt)
-    name_of = Path(source).stem if isinstance(source, str | Path) else (source.name or "scene")
+    from animsim.scene.loader import scene_stem
+
+    name_of = scene_stem(source) if isinstance(source, str | Path) else (source.name or "scene")
     out = Path(output) if output is not None else Path(f"{name_of}.{fmt}")
     if to_stdout and fmt != "csv":
         raise UsageError(f"--format {fmt} cannot go to stdout; give a file with -o")

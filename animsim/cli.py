@@ -123,6 +123,59 @@ def _root(
 
 # --- shared options ---------------------------------------------------------------
 
+
+# Tab completion of option values. The names come from where the code keeps them;
+# each import happens only when the shell asks for a completion.
+def _matching(names: Any, incomplete: str) -> list[str]:
+    return [n for n in names if n.startswith(incomplete)]
+
+
+def _complete_integrator(incomplete: str) -> list[str]:
+    from animsim.scene.models import INTEGRATOR_NAMES
+
+    return _matching(INTEGRATOR_NAMES, incomplete)
+
+
+def _complete_integrators(incomplete: str) -> list[str]:
+    """A comma-separated list: complete its last name, offer none twice."""
+    from animsim.scene.models import INTEGRATOR_NAMES
+
+    head, _, last = incomplete.rpartition(",")
+    given = set(head.split(",")) if head else set()
+    prefix = f"{head}," if head else ""
+    return [prefix + n for n in INTEGRATOR_NAMES if n.startswith(last) and n not in given]
+
+
+def _complete_backend(incomplete: str) -> list[str]:
+    from animsim.backends import BACKENDS
+
+    return _matching(BACKENDS, incomplete)
+
+
+def _complete_template(incomplete: str) -> list[str]:
+    from animsim.templates import TEMPLATES
+
+    return _matching(TEMPLATES, incomplete)
+
+
+def _complete_render_view(incomplete: str) -> list[str]:
+    from animsim.export.raster import VIEWS
+
+    return _matching(VIEWS, incomplete)
+
+
+def _complete_viewer_view(incomplete: str) -> list[str]:
+    from animsim.export.viewer import VIEWS
+
+    return _matching(VIEWS, incomplete)
+
+
+def _complete_plot_view(incomplete: str) -> list[str]:
+    from animsim.export.raster import ORTHO_VIEWS
+
+    return _matching(ORTHO_VIEWS, incomplete)
+
+
 SceneArg = Annotated[Path, typer.Argument(help="The scene file (YAML).", show_default=False, metavar="SCENE")]
 BackendOpt = Annotated[
     str,
@@ -130,6 +183,7 @@ BackendOpt = Annotated[
         "--backend",
         help="auto (the default: numba when installed, else numpy), numpy, or numba (compiled; needs "
         'pip install -e ".\\[fast]").',
+        autocompletion=_complete_backend,
     ),
 ]
 
@@ -319,7 +373,9 @@ def run(
             "-o", "--output", help="Trajectory file; default <scene stem>.csv here; '-' for stdout."
         ),
     ] = None,
-    integrator: Annotated[str | None, typer.Option(help="Override the scene's integrator.")] = None,
+    integrator: Annotated[
+        str | None, typer.Option(help="Override the scene's integrator.", autocompletion=_complete_integrator)
+    ] = None,
     dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
     duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
     seed: Annotated[int | None, typer.Option(help="Override the random seed.")] = None,
@@ -482,7 +538,10 @@ def _summary_notes(compiled: Any, result: Any) -> list[str]:
 @limit_options
 def explain(
     scene: SceneArg,
-    integrator: Annotated[str | None, typer.Option(help="Explain with this integrator instead.")] = None,
+    integrator: Annotated[
+        str | None,
+        typer.Option(help="Explain with this integrator instead.", autocompletion=_complete_integrator),
+    ] = None,
     backend: BackendOpt = "auto",
     *,
     limits: Any = None,
@@ -524,7 +583,9 @@ def init(
     path: Annotated[
         Path, typer.Argument(help="The scene file to write, e.g. my_scene.yaml.", show_default=False)
     ],
-    template: Annotated[str, typer.Option("--template", "-t", help=_template_help())] = "projectile",
+    template: Annotated[
+        str, typer.Option("--template", "-t", help=_template_help(), autocompletion=_complete_template)
+    ] = "projectile",
     force: Annotated[bool, typer.Option("--force", help="Replace an existing file.")] = False,
 ) -> None:
     """Write a commented starter scene, and scene.schema.json beside it for editors."""
@@ -584,6 +645,7 @@ def render(
             help="xy, xz, yz, zy (orthographic: the across axis, then the up one) or 3d "
             "(perspective); default: from the side, up drawn upward, when gravity points down y or z "
             "(from above when the motion is flat), else the two axes along which it is widest.",
+            autocompletion=_complete_render_view,
         ),
     ] = None,
     size: Annotated[
@@ -605,14 +667,18 @@ def render(
     dot_radius: Annotated[
         float, typer.Option("--dot-radius", help="Radius in pixels of particles that have no size.")
     ] = 3.0,
-    integrator: Annotated[str | None, typer.Option(help="Override the scene's integrator.")] = None,
+    integrator: Annotated[
+        str | None, typer.Option(help="Override the scene's integrator.", autocompletion=_complete_integrator)
+    ] = None,
     dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
     duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
     integrators: Annotated[
         str | None,
         typer.Option(
-            "--integrators", help="Comma-separated methods: the scene once per method, panels side by side."
+            "--integrators",
+            help="Comma-separated methods: the scene once per method, panels side by side.",
+            autocompletion=_complete_integrators,
         ),
     ] = None,
     *,
@@ -683,15 +749,28 @@ def view(
     output: Annotated[Path, typer.Option("-o", "--output", help="The HTML file to write.")],
     integrators: Annotated[
         str | None,
-        typer.Option("--integrators", help="Comma-separated methods: one panel per method, played in step."),
+        typer.Option(
+            "--integrators",
+            help="Comma-separated methods: one panel per method, played in step.",
+            autocompletion=_complete_integrators,
+        ),
     ] = None,
     fps: Annotated[float, typer.Option("--fps", help="Frames per second recorded for playback.")] = 25.0,
-    view: Annotated[str, typer.Option("--view", help="The view it opens with: 3d, xy, xz, yz or zy.")] = "3d",
+    view: Annotated[
+        str,
+        typer.Option(
+            "--view",
+            help="The view it opens with: 3d, xy, xz, yz or zy.",
+            autocompletion=_complete_viewer_view,
+        ),
+    ] = "3d",
     scene: Annotated[
         Path | None,
         typer.Option("--scene", help="The scene of a trajectory, for springs, pins, planes and energy."),
     ] = None,
-    integrator: Annotated[str | None, typer.Option(help="Override the scene's integrator.")] = None,
+    integrator: Annotated[
+        str | None, typer.Option(help="Override the scene's integrator.", autocompletion=_complete_integrator)
+    ] = None,
     dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
     duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
@@ -756,7 +835,12 @@ def sweep(
         ),
     ] = [],  # noqa: B006 (typer reads the default; never mutated)
     integrators: Annotated[
-        str | None, typer.Option("--integrators", help="Comma-separated methods: one more axis.")
+        str | None,
+        typer.Option(
+            "--integrators",
+            help="Comma-separated methods: one more axis.",
+            autocompletion=_complete_integrators,
+        ),
     ] = None,
     reference: Annotated[
         ReferenceKind | None,
@@ -856,7 +940,8 @@ def compare(
     integrators: Annotated[
         str | None,
         typer.Option(
-            help="Comma-separated methods, e.g. euler,midpoint,rk4; default every fixed-step method."
+            help="Comma-separated methods, e.g. euler,midpoint,rk4; default every fixed-step method.",
+            autocompletion=_complete_integrators,
         ),
     ] = None,
     dt: Annotated[
@@ -1063,14 +1148,24 @@ def plot(
     ] = None,
     view: Annotated[
         str | None,
-        typer.Option("--view", help="xy, xz, yz or zy; default: chosen as render chooses it."),
+        typer.Option(
+            "--view",
+            help="xy, xz, yz or zy; default: chosen as render chooses it.",
+            autocompletion=_complete_plot_view,
+        ),
     ] = None,
-    integrator: Annotated[str | None, typer.Option(help="Override the scene's integrator.")] = None,
+    integrator: Annotated[
+        str | None, typer.Option(help="Override the scene's integrator.", autocompletion=_complete_integrator)
+    ] = None,
     dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
     duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
     integrators: Annotated[
         str | None,
-        typer.Option("--integrators", help="--kind phase: comma-separated methods, overlaid."),
+        typer.Option(
+            "--integrators",
+            help="--kind phase: comma-separated methods, overlaid.",
+            autocompletion=_complete_integrators,
+        ),
     ] = None,
     particles: Annotated[
         str | None,

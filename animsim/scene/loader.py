@@ -119,7 +119,7 @@ class LoadedScene:
 
     @property
     def name(self) -> str:
-        return self.scene.name or Path(self.file).stem
+        return self.scene.name or scene_stem(self.file)
 
 
 class _Fault(Exception):
@@ -417,6 +417,41 @@ class _Builder:
         return out
 
 
+#: the scene argument that means "read the scene from standard input", and its name in messages
+STDIN_ARG = "-"
+STDIN_FILE = "<stdin>"
+
+
+def read_stdin(limits: Limits = Limits()) -> bytes:
+    """The scene piped to standard input (``animsim run -``), within the file size limit."""
+    import sys
+
+    if sys.stdin is None or sys.stdin.isatty():
+        raise UsageError(
+            "-: the scene is read from standard input, but that is a terminal; "
+            "pipe one in (cat scene.yaml | animsim run -) or give a file"
+        )
+    stream = getattr(sys.stdin, "buffer", None)
+    chunks: list[bytes] = []
+    total = 0
+    while True:
+        chunk = stream.read(_READ_CHUNK) if stream is not None else sys.stdin.read(_READ_CHUNK).encode()
+        if not chunk:
+            break
+        total += len(chunk)
+        if total > limits.max_file_bytes:
+            raise UsageError(
+                f"{STDIN_FILE}: more than the {limits.max_file_bytes}-byte limit (raise it with --max-file-size)"
+            )
+        chunks.append(chunk)
+    return b"".join(chunks)
+
+
+def scene_stem(path: str | Path) -> str:
+    """The stem outputs and names take from a scene path (``stdin`` for ``-``)."""
+    return "stdin" if str(path) in (STDIN_ARG, STDIN_FILE) else Path(path).stem
+
+
 def read_scene_file(path: str | Path, limits: Limits = Limits()) -> bytes:
     """Read a scene's bytes, refusing what is not a regular file of sane size."""
     p = Path(path)
@@ -454,7 +489,9 @@ def read_scene_file(path: str | Path, limits: Limits = Limits()) -> bytes:
 
 
 def load_scene(path: str | Path, limits: Limits = Limits()) -> LoadedScene:
-    """Read, parse and validate a scene file; raise SceneError with every problem."""
+    """Read, parse and validate a scene file (``-``: standard input); raise SceneError with every problem."""
+    if str(path) == STDIN_ARG:
+        return load_scene_bytes(read_stdin(limits), STDIN_FILE, limits)
     data = read_scene_file(path, limits)
     return load_scene_bytes(data, str(path), limits)
 

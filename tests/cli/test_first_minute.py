@@ -1,0 +1,92 @@
+"""What a new user meets in the first minutes: a scene piped to ``run -``, option values
+offered by tab completion, the starter templates, and honest summaries."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from tests.conftest import ROOT, SCENES, run_cli
+
+OSCILLATOR = (SCENES / "oscillator.yaml").read_text(encoding="utf-8")
+
+
+# --- animsim run - ------------------------------------------------------------------------------
+
+
+def test_run_reads_the_scene_from_stdin(tmp_path):
+    r = run_cli("run", "-", "--backend", "numpy", cwd=tmp_path, input=OSCILLATOR)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "stdin.csv").exists()
+    meta = json.loads((tmp_path / "stdin.csv.meta.json").read_text())
+    assert meta["status"] == "ok"
+    import hashlib
+
+    assert meta["scene_sha256"] == hashlib.sha256(OSCILLATOR.encode()).hexdigest()
+    # the same frames as the file itself gives
+    r2 = run_cli("run", SCENES / "oscillator.yaml", "-o", tmp_path / "file.csv", "--backend", "numpy")
+    assert r2.returncode == 0, r2.stderr
+    assert (tmp_path / "file.csv").read_text() == (tmp_path / "stdin.csv").read_text()
+
+
+def test_stdin_to_stdout():
+    r = run_cli("run", "-", "-o", "-", "-q", "--backend", "numpy", cwd=ROOT, input=OSCILLATOR)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.splitlines()[0] == "t,id,x,y,z,vx,vy,vz"
+
+
+def test_a_bad_scene_on_stdin_is_named_stdin(tmp_path):
+    text = "duration: 1\nparticles: [{id: a, mas: 1, position: [0, 0, 0]}]\n"
+    r = run_cli("run", "-", cwd=tmp_path, input=text)
+    assert r.returncode == 2
+    assert r.stderr.startswith("<stdin>:2:21: particles.0.mas: unknown key; did you mean 'mass'?")
+    assert "Traceback" not in r.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_explain_and_check_read_stdin_too():
+    r = run_cli("explain", "-", "--backend", "numpy", cwd=ROOT, input=OSCILLATOR)
+    assert r.returncode == 0 and "2 particles (1 pinned)" in r.stdout, r.stderr
+    r = run_cli("check", "-", "-q", cwd=ROOT, input=OSCILLATOR)
+    assert r.returncode == 0, r.stderr
+
+
+# --- tab completion of option values -----------------------------------------------------------
+
+
+def _complete(words: str) -> list[str]:
+    line = f"animsim {words}"
+    index = len(line.split()) if line.endswith(" ") else len(line.split()) - 1
+    r = run_cli(
+        cwd=ROOT,
+        env_extra={"_ANIMSIM_COMPLETE": "complete_bash", "COMP_WORDS": line, "COMP_CWORD": str(index)},
+    )
+    assert r.returncode == 0, r.stderr
+    return r.stdout.split()
+
+
+def test_completion_offers_option_values():
+    from animsim.backends import BACKENDS
+    from animsim.export.raster import ORTHO_VIEWS, VIEWS
+    from animsim.export.viewer import VIEWS as VIEWER_VIEWS
+    from animsim.scene.models import INTEGRATOR_NAMES
+    from animsim.templates import TEMPLATES
+
+    assert _complete("run x.yaml --backend ") == list(BACKENDS)
+    assert _complete("run x.yaml --integrator ") == list(INTEGRATOR_NAMES)
+    assert _complete("explain x.yaml --integrator r") == ["rk4"]
+    assert _complete("init x.yaml --template ") == list(TEMPLATES)
+    assert _complete("render x.yaml --view ") == list(VIEWS)
+    assert _complete("view x.yaml -o v.html --view ") == list(VIEWER_VIEWS)
+    assert _complete("plot x.csv paths.png --view ") == list(ORTHO_VIEWS)
+    # a comma-separated list: the last name, never one already given
+    offered = _complete("compare x.yaml --integrators euler,")
+    assert offered == [f"euler,{n}" for n in INTEGRATOR_NAMES if n != "euler"]
+    assert _complete("compare x.yaml --integrators euler,r") == ["euler,rk4"]
+
+
+@pytest.mark.parametrize("words", ["run x.yaml --backend nu", "sweep x.yaml --integrators mid"])
+def test_completion_narrows_by_prefix(words):
+    offered = _complete(words)
+    assert offered and all(o.split(",")[-1].startswith(words.split()[-1].split(",")[-1]) for o in offered)
