@@ -244,34 +244,44 @@ def simulate(
     holds the metadata only. ``sinks``: more frame sinks to feed; ``keep=False``
     keeps no frames in memory (the sinks have them).
     """
+    from animsim.backends.compile_notice import compile_notices
     from animsim.engine import run
     from animsim.export.trajectory import TrajectoryCollector
 
     if isinstance(scene, Scene):
         sc, _ = prepare(scene, integrator=integrator, dt=dt, duration=duration, seed=seed, limits=limits)
-        compiled = compile(sc, backend)
+        numba = _uses_numba(backend)
     else:
         if any(v is not None for v in (integrator, dt, duration, seed)):
             raise UsageError("overrides go with a Scene, not with an already compiled scene")
-        compiled = scene
-        sc = compiled.scene
-    targets = list(sinks)
-    collector = None
-    if output is not None:
-        from animsim.export.sinks import open_sink
+        sc = scene.scene
+        numba = scene.backend == "numba"
+    # one announcement per kernel numba compiles, whether for the scene or in the run
+    with compile_notices(notice, numba=numba):
+        compiled = compile(sc, backend) if isinstance(scene, Scene) else scene
+        targets = list(sinks)
+        collector = None
+        if output is not None:
+            from animsim.export.sinks import open_sink
 
-        targets.append(open_sink(Path(output), None, meta_rate=sc.record.fps))
-    elif keep:
-        collector = TrajectoryCollector()
-        targets.append(collector)
-    extra = dict(meta or {})
-    source = getattr(sc, "_source", None)
-    if source:
-        extra.setdefault("scene_sha256", source["sha256"])
-        extra.setdefault("scene_file", source["file"])
-    result = run(
-        compiled, targets, stop=stop, progress=progress, notice=notice, observers=observers, meta_extra=extra
-    )
+            targets.append(open_sink(Path(output), None, meta_rate=sc.record.fps))
+        elif keep:
+            collector = TrajectoryCollector()
+            targets.append(collector)
+        extra = dict(meta or {})
+        source = getattr(sc, "_source", None)
+        if source:
+            extra.setdefault("scene_sha256", source["sha256"])
+            extra.setdefault("scene_file", source["file"])
+        result = run(
+            compiled,
+            targets,
+            stop=stop,
+            progress=progress,
+            notice=notice,
+            observers=observers,
+            meta_extra=extra,
+        )
     if collector is None:
         empty = np.zeros((0, 0, 3))
         traj = Trajectory(np.zeros(0), [], empty, empty)
@@ -285,6 +295,12 @@ def simulate(
     traj.result = result
     traj.compiled = compiled
     return traj
+
+
+def _uses_numba(backend: str) -> bool:
+    from animsim.backends import choose_backend
+
+    return choose_backend(backend)[0] == "numba"
 
 
 def _fill_bodies(traj: Trajectory, compiled: Any) -> None:
@@ -479,24 +495,28 @@ def run(
     elif not to_stdout:
         _check_output(out, scene_path)
         check_disk(out, est, fmt, sc, limits)
-    compiled = compile(sc, backend, name=name)
-    report = stability.analyse(compiled)
-    if report.dt_exceeds_limit and warn is not None:  # before the first step; the watchdog judges the run
-        warn(f"warning: {report.verdict()}")
-    sink: Any = open_sink(
-        Path("-") if to_stdout else out,
-        fmt,
-        # the frame rate recorded at, when there is one (the scene's, or the 60 fps default)
-        meta_rate=recording_rule(sc.record.every, sc.record.fps, compiled.clock.dt)[1],
-        extra_columns=extra_columns,
-        expected_frames=len(compiled.record_steps),
-    )
-    extra: dict[str, Any] = {META_THRESHOLD_KEY: threshold}
-    if loaded is not None:
-        extra.update(scene_sha256=loaded.sha256, scene_file=str(source))
-    result = simulate(
-        compiled, sinks=[sink], keep=False, stop=stop, progress=progress, meta=extra, notice=notice
-    ).result
+    from animsim.backends.compile_notice import compile_notices
+
+    # every kernel numba compiles (scene compile, first steps, births) is announced as it starts
+    with compile_notices(notice, numba=_uses_numba(backend)):
+        compiled = compile(sc, backend, name=name)
+        report = stability.analyse(compiled)
+        if report.dt_exceeds_limit and warn is not None:  # before the first step; the watchdog judges
+            warn(f"warning: {report.verdict()}")
+        sink: Any = open_sink(
+            Path("-") if to_stdout else out,
+            fmt,
+            # the frame rate recorded at, when there is one (the scene's, or the 60 fps default)
+            meta_rate=recording_rule(sc.record.every, sc.record.fps, compiled.clock.dt)[1],
+            extra_columns=extra_columns,
+            expected_frames=len(compiled.record_steps),
+        )
+        extra: dict[str, Any] = {META_THRESHOLD_KEY: threshold}
+        if loaded is not None:
+            extra.update(scene_sha256=loaded.sha256, scene_file=str(source))
+        result = simulate(
+            compiled, sinks=[sink], keep=False, stop=stop, progress=progress, meta=extra, notice=notice
+        ).result
     wrote: str | None = None if to_stdout else f"{out} and {out}.meta.json"
     if fmt == "ply" and sink.written:
         first, last = sink.written[0], sink.written[-1]
@@ -515,15 +535,17 @@ def explain(
     """What a scene compiles to, as the lines ``animsim explain`` prints: counts, the
     stages each step runs, and what was left out because the scene does not need it."""
     from animsim.analysis.effective import fallback_note
+    from animsim.console import count_text, point_particles
 
     sc, name, _, _ = _prepared(source, limits, integrator=integrator)
     c = compile(sc, backend, name=name)
     s = c.system
+    points, pinned = point_particles(s)
     lines = [
         f"scene {c.name!r} ({_source_label(source)})",
-        f"  {s.particle_count} particles ({int(s.particle_pinned.sum())} pinned), {s.spring_count} springs, "
+        f"  {points} particles ({pinned} pinned), {s.spring_count} springs, "
         f"{len(sc.planes)} planes, {len(sc.emitters)} emitters"
-        + (f", {s.body_count} rigid bodies (their centres counted as particles)" if s.body_count else ""),
+        + (f", {count_text(s.body_count, 'rigid body', 'rigid bodies')}" if s.body_count else ""),
         f"  {c.clock.steps} steps of {c.clock.dt:g} s to t = {c.clock.duration:g} s, seed {c.seed}",
         "each step runs:",
     ]

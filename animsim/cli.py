@@ -438,26 +438,45 @@ def run(
         raise typer.Exit(EXIT_INTERRUPTED)
 
 
+#: a run's progress bar opens once it has gone on this long (s): a run that ends sooner
+#: needs none, and a longer one should not look hung
+PROGRESS_AFTER_SECONDS = 2.0
+
+
 @contextmanager
-def _progress(quiet: bool, label: str = "simulating", at_least: int = 20_000):
-    """A rich progress bar on stderr, only on a terminal and only for long runs: the
-    callback gets (done, total) and opens the bar on its first call with a large total."""
+def _progress(
+    quiet: bool,
+    label: str = "simulating",
+    at_least: int | None = None,
+    after: float = PROGRESS_AFTER_SECONDS,
+    clock: Any = None,
+):
+    """A rich progress bar on stderr, only on a terminal and only for long work: the
+    callback gets (done, total) and opens the bar once ``after`` seconds have passed since
+    its first call (or at once when ``total`` is at least ``at_least``)."""
     if quiet or not sys.stderr.isatty():
         yield None
         return
+    import time
+
     from rich.progress import Progress
 
+    now = clock or time.monotonic
     bar: Any = None
     task: Any = None
+    first: float | None = None
 
     def update(done: int, total: int) -> None:
-        nonlocal bar, task
+        nonlocal bar, task, first
         if bar is None:
-            if total < at_least:
+            t = now()
+            first = t if first is None else first
+            long_run = at_least is not None and total >= at_least
+            if done >= total or not (long_run or t - first >= after):
                 return
             bar = Progress(transient=True, console=_stderr_console())
             bar.start()
-            task = bar.add_task(label, total=total)
+            task = bar.add_task(label, total=total, completed=done)
         if done % max(1, total // 200) == 0 or done == total:
             bar.update(task, completed=done)
 
@@ -484,11 +503,11 @@ def _stderr_console():
 
 def _summary(compiled: Any, result: Any, wrote: str | None) -> None:
     """Print the run summary; ``wrote`` names the files written (None: the trajectory went to stdout)."""
-    from animsim.console import steps_text
+    from animsim.console import scene_counts, steps_text
 
     stream_err = wrote is None  # trajectory went to stdout: keep stdout clean
     lines = [
-        f"{compiled.name}: {compiled.system.particle_count} particles, {compiled.system.spring_count} springs, "
+        f"{compiled.name}: {scene_counts(compiled.system)}, "
         f"{steps_text(compiled, result)} with {compiled.integrator_name}",
         f"  wall time {result.wall_time:.3f} s, {result.frames} frames, {result.force_evals} force evaluations",
         f"  energy {result.energy_start:.6g} J -> {result.energy_end:.6g} J, status {result.status}, "

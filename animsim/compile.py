@@ -97,6 +97,11 @@ def with_overrides(
             raise UsageError(
                 f"--integrator: unknown method {integrator!r}{hint} (valid: {', '.join(m.INTEGRATOR_NAMES)})"
             )
+        if scene.bodies and integrator not in m.BODY_INTEGRATORS:
+            raise UsageError(
+                f"--integrator {integrator}: does not integrate rigid bodies (its linearisation covers "
+                f"particle positions only); use one of {', '.join(m.BODY_INTEGRATORS)}"
+            )
         adaptive = scene.adaptive
         update["integrator"] = (
             integrator if adaptive is None else m.IntegratorSpec(method=integrator, adaptive=adaptive)

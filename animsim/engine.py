@@ -212,8 +212,10 @@ def run(
     the run, and numba's own count is put back after it.
     """
     from animsim.backends import numba_threads
+    from animsim.backends.compile_notice import compile_notices
 
-    with numba_threads(compiled):
+    # every kernel numba compiles for this run (a disk-cache miss) is announced as it starts
+    with numba_threads(compiled), compile_notices(notice, numba=compiled.backend == "numba"):
         return _run(
             compiled,
             sinks,

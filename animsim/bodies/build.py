@@ -19,8 +19,7 @@ from animsim.bodies.springs import BodySprings
 from animsim.errors import UsageError
 from animsim.scene import models as m
 
-#: methods that integrate bodies (the implicit one is linearised for particles only)
-BODY_INTEGRATORS = ("euler", "symplectic_euler", "euler_average", "midpoint", "heun", "rk4", "verlet")
+BODY_INTEGRATORS = m.BODY_INTEGRATORS  # (the scene check refuses the others with their line)
 
 
 def has_body_end(spring: m.Spring) -> bool:

@@ -179,7 +179,7 @@ def read_mesh(path: Path) -> MeshGeometry:
         vertices, polygons = _parse_ply(path)
     else:
         vertices, polygons = _parse_stl(path)
-    return check_geometry(vertices, polygons, digest)
+    return check_geometry(vertices, polygons, digest, path.name)
 
 
 def _parse_obj(raw: bytes, name: str) -> tuple[np.ndarray, list[tuple[int, list[int]]]]:
@@ -306,9 +306,12 @@ def _parse_stl(path: Path) -> tuple[np.ndarray, list[tuple[int, list[int]]]]:
 
 
 def check_geometry(
-    vertices: np.ndarray, polygons: list[tuple[int, list[int]]], digest: str = ""
+    vertices: np.ndarray, polygons: list[tuple[int, list[int]]], digest: str = "", name: str = ""
 ) -> MeshGeometry:
-    """Triangulate and check a mesh (module docstring); raises :class:`MeshError`."""
+    """Triangulate and check a mesh (module docstring); raises :class:`MeshError`.
+
+    ``name``: the file's name, which every message starts with.
+    """
     import numpy as np
 
     n = len(vertices)
@@ -322,25 +325,50 @@ def check_geometry(
     where: list[int] = []
     for k, (lineno, corners) in enumerate(polygons):
         if len(set(corners)) != len(corners):
-            at = f"line {lineno}" if lineno else f"face {k}"
-            raise MeshError(f"{at}: the face repeats a vertex (a degenerate face)")
+            raise MeshError(f"{_face_at(name, k, lineno, corners)} repeats a vertex (a degenerate face)")
         for j in range(1, len(corners) - 1):
             tris.append([corners[0], corners[j], corners[j + 1]])
             where.append(k)
     if len(tris) > MAX_MESH_FACES:
         raise MeshError(f"the mesh has {len(tris)} triangles, more than the limit of {MAX_MESH_FACES}")
     tri = np.array(tris, dtype=np.int64)
-    p = vertices[tri]
-    area2 = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
     extent = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
-    flat = np.flatnonzero(area2 <= ZERO_AREA_RTOL * extent**2)
+    tiny = ZERO_AREA_RTOL * extent**2
+
+    def degenerate(t: np.ndarray) -> np.ndarray:
+        p = vertices[t]
+        return np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1) <= tiny
+
+    flat = np.flatnonzero(degenerate(tri))
     if flat.size:
-        k = where[int(flat[0])]
-        lineno = polygons[k][0]
-        at = f"line {lineno}" if lineno else f"face {k}"
-        raise MeshError(
-            f"{at}: the face has zero area (a degenerate face; {flat.size} such triangles in all)"
-        )
+        # A polygon with three corners on one line (a corner on an edge) is a good face whose
+        # fan from its first corner has a sliver: fan it from another corner instead.
+        first_tri = np.searchsorted(np.asarray(where), np.arange(len(polygons)))
+        bad_faces: list[int] = []
+        for k in dict.fromkeys(where[int(i)] for i in flat):
+            corners = polygons[k][1]
+            m = len(corners)
+            for r in range(1, m):
+                c = corners[r:] + corners[:r]
+                fan = np.array([[c[0], c[j], c[j + 1]] for j in range(1, m - 1)], dtype=np.int64)
+                if m > 3 and not degenerate(fan).any():
+                    tri[first_tri[k] : first_tri[k] + m - 2] = fan
+                    break
+            else:
+                bad_faces.append(k)
+        if bad_faces:
+            k = bad_faces[0]
+            lineno, corners = polygons[k]
+            p = vertices[corners]
+            # Newell's normal: twice the polygon's vector area (zero when the face is flat)
+            area = 0.5 * np.linalg.norm(np.cross(p, np.roll(p, -1, axis=0)).sum(axis=0))
+            what = (
+                "has zero area"
+                if area <= tiny
+                else "cannot be split into triangles of nonzero area from any corner (split it in the file)"
+            )
+            more = f"; {len(bad_faces)} such faces in all" if len(bad_faces) > 1 else ""
+            raise MeshError(f"{_face_at(name, k, lineno, corners)} {what} (a degenerate face{more})")
     used = np.zeros(n, dtype=bool)
     used[tri.ravel()] = True
     if not used.all():
@@ -353,6 +381,15 @@ def check_geometry(
     closed = bool(np.all(geom.topology.edge_faces == 2))
     object.__setattr__(geom, "closed", closed)
     return geom
+
+
+def _face_at(name: str, k: int, lineno: int, corners: list[int]) -> str:
+    """A face as the file wrote it: ``m.obj line 12: the face f 1 2 3 4`` (OBJ indices start
+    at 1), or ``m.ply: face 7 (vertices 0 1 2)`` (PLY and STL faces, 0-based)."""
+    prefix = f"{name} " if name else ""
+    if lineno:
+        return f"{prefix}line {lineno}: the face f {' '.join(str(c + 1) for c in corners)}"
+    return f"{prefix.rstrip()}{': ' if name else ''}face {k} (vertices {' '.join(map(str, corners))})"
 
 
 # --- checks the loader runs ----------------------------------------------------------

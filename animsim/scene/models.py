@@ -43,6 +43,8 @@ PYTHON_SOURCE = "<python>"
 #: the names, in the order of the integrator table
 INTEGRATOR_NAMES: tuple[str, ...] = get_args(IntegratorName)
 DEFAULT_INTEGRATOR = "symplectic_euler"
+#: methods that integrate rigid bodies (implicit Euler is linearised over particle positions only)
+BODY_INTEGRATORS: tuple[str, ...] = tuple(n for n in INTEGRATOR_NAMES if n != "implicit_euler")
 DEFAULT_DT = 0.01
 # Bounds that keep a typo from asking for an absurd lattice; the memory
 # budget (animsim.preflight) is the real guard, these only catch nonsense early.

@@ -20,6 +20,7 @@ from typing import Any, get_args
 from pydantic import TypeAdapter, ValidationError
 
 from animsim.scene.models import (
+    BODY_INTEGRATORS,
     QUATERNION_TOLERANCE,
     Body,
     BodyPoint,
@@ -281,6 +282,18 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
     out.extend(_inside_colliders(scene))
 
     body_ids = _check_bodies(bodies, first_seen, structure_of, out)
+    integrator = getattr(scene, "integrator", None)
+    if bodies and integrator is not None:
+        method = integrator if isinstance(integrator, str) else integrator.method
+        if method not in BODY_INTEGRATORS:
+            out.append(
+                (
+                    ("integrator",) if isinstance(integrator, str) else ("integrator", "method"),
+                    f"{method} does not integrate rigid bodies (its linearisation covers particle "
+                    f"positions only), and this scene has {len(bodies)}; use one of {', '.join(BODY_INTEGRATORS)}",
+                    False,
+                )
+            )
     known = list(first_seen)
     # A renamed particle breaks every spring that names it: report each
     # missing id once, at its first use, and list the other places there,

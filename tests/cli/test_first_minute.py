@@ -90,3 +90,62 @@ def test_completion_offers_option_values():
 def test_completion_narrows_by_prefix(words):
     offered = _complete(words)
     assert offered and all(o.split(",")[-1].startswith(words.split()[-1].split(",")[-1]) for o in offered)
+
+
+# --- the progress bar opens for runs longer than a couple of seconds ----------------------------
+
+
+def test_progress_bar_opens_after_two_seconds_whatever_the_step_count(monkeypatch):
+    import io
+    import sys
+
+    from rich.console import Console
+
+    from animsim import cli
+
+    out = io.StringIO()
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True, raising=False)
+    monkeypatch.setattr(cli, "_stderr_console", lambda: Console(file=out, force_terminal=True, width=80))
+    now = [100.0]
+    with cli._progress(False, clock=lambda: now[0]) as update:
+        update(10, 1000)  # a 1,000-step run: no bar in its first two seconds
+        now[0] += 1.9
+        update(500, 1000)
+        assert out.getvalue() == ""
+        now[0] += 0.2  # past 2 s and not done: the bar opens
+        update(600, 1000)
+        assert "simulating" in out.getvalue()
+    out.truncate(0)
+    now[0] = 0.0
+    with cli._progress(False, clock=lambda: now[0]) as update:
+        update(10, 10**6)  # many steps, but quick: nothing
+        update(10**6, 10**6)
+    assert out.getvalue() == ""
+
+
+# --- summaries count rigid bodies as bodies ------------------------------------------------------
+
+
+def test_a_bodies_only_scene_reports_its_body_not_one_particle(tmp_path):
+    scene = ROOT / "tests" / "bad_scenes" / "good_bodies_only.yaml"
+    r = run_cli("run", scene, "-o", tmp_path / "b.csv", "--backend", "numpy")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith("good_bodies_only: 1 rigid body, 0 springs, 20 steps")
+    r = run_cli("explain", scene, "--backend", "numpy")
+    assert "  0 particles (0 pinned), 0 springs, 1 planes, 0 emitters, 1 rigid body" in r.stdout
+
+
+def test_implicit_euler_with_bodies_is_refused_at_its_line(tmp_path):
+    scene = tmp_path / "die.yaml"
+    scene.write_text(
+        "duration: 1\nintegrator: implicit_euler\n"
+        "bodies:\n  - {id: die, shape: {type: box, size: [0.1, 0.1, 0.1]}, mass: 0.2, position: [0, 1, 0]}\n"
+    )
+    r = run_cli("run", scene, "-o", tmp_path / "d.csv")
+    assert r.returncode == 2
+    assert r.stderr.startswith(f"{scene}:2:13: integrator: implicit_euler does not integrate rigid bodies")
+    r = run_cli(
+        "run", ROOT / "tests" / "bad_scenes" / "good_bodies_only.yaml", "--integrator", "implicit_euler"
+    )
+    assert r.returncode == 2
+    assert r.stderr.startswith("--integrator implicit_euler: does not integrate rigid bodies")
