@@ -11,6 +11,7 @@ Bad scenes raise :class:`animsim.SceneError`, whose ``diagnostics`` are the
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -813,11 +814,13 @@ def sweep(
     scheduler: str | None = None,
     limits: Any = None,
     progress: Callable[[int, int], None] | None = None,
+    duration: float | None = None,
 ) -> Any:
     """Run a scene file for every combination of ``sets`` values (``"KEY=V1,V2,..."``) and
     ``integrators``: ``animsim sweep``. Writes the table as CSV (``output``) and a plot
-    of ``y`` over ``x`` (``plot``) when asked. Returns
-    :class:`animsim.analysis.sweep.SweepTable`; unstable and invalid cases are rows."""
+    of ``y`` over ``x`` (``plot``) when asked. ``duration`` replaces the scene's in every
+    case. Returns :class:`animsim.analysis.sweep.SweepTable`; unstable and invalid cases
+    are rows."""
     from animsim.analysis import sweep as sw
     from animsim.preflight import RunLimits
     from animsim.scene.loader import load_scene
@@ -835,6 +838,13 @@ def sweep(
         raise UsageError("sweep: give at least one --set KEY=V1,V2,... or --integrators")
     sw.check_axes(axes)
     keys = [a.key for a in axes]
+    data = loaded.data
+    if duration is not None:
+        if not (math.isfinite(duration) and duration > 0):
+            raise UsageError(f"--duration: must be a finite number > 0, not {duration!r}")
+        if "duration" in keys:
+            raise UsageError("--duration: the duration is swept (--set duration=...); give one or the other")
+        data = {**data, "duration": float(duration)}
     x_key = x or keys[0]
     y_col = y or ("error" if reference is not None else "drift")
     if plot is not None:
@@ -847,7 +857,7 @@ def sweep(
     if output is not None:
         _check_output(Path(output), src)
     table = sw.sweep(
-        loaded.data,
+        data,
         loaded.name,
         str(src),
         axes,

@@ -881,6 +881,9 @@ def sweep(
             'needs pip install "animsim\\[dask]".',
         ),
     ] = None,
+    duration: Annotated[
+        float | None, typer.Option(help="Override the duration (s) of every case (a short sweep first).")
+    ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No table, only the files.")] = False,
     *,
     limits: Any = None,
@@ -911,6 +914,7 @@ def sweep(
             scheduler=scheduler,
             limits=limits,
             progress=progress,
+            duration=duration,
         )
     if not quiet:
         sw.print_table(table, _stdout_console())

@@ -149,3 +149,40 @@ def test_implicit_euler_with_bodies_is_refused_at_its_line(tmp_path):
     )
     assert r.returncode == 2
     assert r.stderr.startswith("--integrator implicit_euler: does not integrate rigid bodies")
+
+
+# --- sweep --duration ------------------------------------------------------------------------------
+
+
+def test_sweep_duration_shortens_every_case(tmp_path):
+    out = tmp_path / "t.csv"
+    r = run_cli(
+        "sweep",
+        SCENES / "spring_pendulum.yaml",
+        "--set",
+        "dt=0.01,0.02",
+        "--duration",
+        "0.5",
+        "-o",
+        out,
+        "-q",
+    )
+    assert r.returncode == 0, r.stderr
+    import csv
+
+    rows = list(csv.DictReader(out.open()))
+    # 0.5 s at 0.01 s and 0.02 s, whatever the scene's own duration
+    assert [int(row["steps"]) for row in rows] == [50, 25]
+
+
+@pytest.mark.parametrize(
+    "extra,message",
+    [
+        (["--duration", "-1"], "--duration: must be a finite number > 0"),
+        (["--set", "duration=1,2", "--duration", "0.5"], "--duration: the duration is swept"),
+    ],
+)
+def test_sweep_duration_is_checked(extra, message):
+    r = run_cli("sweep", SCENES / "spring_pendulum.yaml", "--set", "dt=0.01,0.02", *extra)
+    assert r.returncode == 2
+    assert message in r.stderr
