@@ -509,7 +509,9 @@ def compare(
         # On the rows' backend: numba's RK4 is the same method, several times faster.
         floor = {} if fine_min_steps is None else {"min_steps": fine_min_steps}
         ref_start = time.perf_counter()
-        ref = rk4_reference(scene, name, times, dts[-1], smallest, distance, backend, **floor)
+        ref = rk4_reference(
+            scene, name, times, dts[-1], smallest, distance, backend, **floor, roundoff=roundoff_floor
+        )
         ref_seconds += time.perf_counter() - ref_start
     notes.extend(ref.notes)
 

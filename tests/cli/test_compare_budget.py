@@ -214,9 +214,34 @@ def test_the_rk4_reference_runs_the_step_sizes_its_estimate_counts(monkeypatch):
         never = refs.rk4_reference(
             scene, "b", np.array([0.0, 0.05]), 0.001, lambda _: 1e-3, lambda a, b: 1.0, **kw
         )
-        assert "did not converge" in never.notes[0]
+        assert "the RK4 reference stopped at" in never.notes[0]
+        # the note's numbers agree: the change it names is above the target it names
+        assert "changed it by 1.0e+00 m, more than the 1.0e-06 m it aims for" in never.notes[0]
         assert ran == pytest.approx(cmp.rk4_reference_dts(0.001, 0.05, floor))
     assert len(cmp.rk4_reference_dts(0.001, 0.05, None)) > len(cmp.rk4_reference_dts(0.001, 0.05, 0)) == 2
+
+
+def test_a_reference_whose_change_is_round_off_has_converged():
+    """A change at the round-off floor cannot shrink by halving: converged, and no note says
+    it did not (the notes never read 'did not converge (last change 1e-12 m)')."""
+    import animsim.analysis.references as refs
+
+    scene = load_scene(SCENES / "bouncing_balls.yaml").scene.model_copy(update={"duration": 0.05})
+    tiny = 1.4e-12
+    ref = refs.rk4_reference(
+        scene,
+        "b",
+        np.array([0.0, 0.05]),
+        0.001,
+        lambda _: 1e-12,  # every compared error at round-off: the target is 1e-15 m
+        lambda a, b: tiny,
+        roundoff=lambda traj, steps: 2e-12,
+    )
+    assert ref.notes == []
+    ref = refs.rk4_reference(
+        scene, "b", np.array([0.0, 0.05]), 0.001, lambda _: 1e-12, lambda a, b: tiny, min_steps=0
+    )
+    assert "did not converge" not in ref.notes[0] and "1.4e-12 m, more than the 1.0e-15 m" in ref.notes[0]
 
 
 def test_the_real_probe_measures_each_method_and_the_reference():
