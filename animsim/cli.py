@@ -1075,8 +1075,11 @@ def compare(
     with _compare_progress() as (progress, planned):
 
         def announce(plan: Any) -> None:
-            for line in plan.lines():
-                _err(line)
+            from animsim.analysis.check import wrap
+            from animsim.console import table_width
+
+            for line in plan.lines():  # at the screen's width, as the table under it
+                _err(wrap(line, table_width(sys.stderr)))
             planned(len(plan.integrators) * len(plan.dts))
 
         result = api.compare(

@@ -1086,19 +1086,16 @@ def make_plan(
         )
 
     def longest_window(level: tuple[list[str], list[float], int | None], shortest: float) -> float | None:
-        """The longest record time of the coarsest run, >= shortest, whose plan fits (None: none)."""
+        """The longest window on the ladder (window_ladder), >= shortest, whose plan fits (None: none).
+
+        The rungs are a factor of 2 apart, so the probe's timing noise cannot move the window
+        a little on every rerun: a rerun gives the same window unless the estimate crosses
+        the budget at a rung."""
         times, _ = common_times(scene, level[1], DEFAULT_MAX_STEPS * 1000)
-        candidates = [float(t) for t in times if t >= shortest - 1e-12 and t > 0]
-        best = None
-        lo, hi = 0, len(candidates) - 1
-        while lo <= hi:  # the cost grows with the window: bisect
-            mid = (lo + hi) // 2
-            if fits(level, candidates[mid]):
-                best = candidates[mid]
-                lo = mid + 1
-            else:
-                hi = mid - 1
-        return best
+        for w in window_ladder(times, total, shortest):
+            if fits(level, w):
+                return w
+        return None
 
     first = (method_sets[0], dt_sets[0], None)
     # Everything named, or no budget: run as asked (the estimate says what it costs).
@@ -1129,6 +1126,26 @@ def make_plan(
         times, _ = common_times(scene, level[1], DEFAULT_MAX_STEPS * 1000)
         w = next((float(t) for t in times if t >= shortest - 1e-12 and t > 0), total)
     return plan(level, w)
+
+
+def window_ladder(times: np.ndarray, total: float, shortest: float) -> list[float]:
+    """The windows a budget may cut the comparison to, longest first: total / 2^k, each
+    taken down to the record time at or before it, none shorter than ``shortest``."""
+    record = np.asarray([t for t in times if t > 0], dtype=np.float64)
+    out: list[float] = []
+    w = total
+    while record.size:
+        at = record[record <= w * (1 + 1e-12)]
+        if not at.size or at[-1] < shortest - 1e-12:
+            break
+        if not out or at[-1] < out[-1]:
+            out.append(float(at[-1]))
+        w /= 2
+    if not out or out[-1] > shortest + 1e-12:  # the shortest window itself is the last rung
+        first = record[record >= shortest - 1e-12]
+        if first.size and (not out or first[0] < out[-1]):
+            out.append(float(first[0]))
+    return out
 
 
 def window_scene(scene: m.Scene, duration: float) -> m.Scene:

@@ -103,9 +103,11 @@ def test_default_options_pick_a_plan_that_fits_and_say_what_they_cut(pendulum, b
         assert plan.window < 2.5, "methods are dropped only when half the scene does not fit"
         assert "verlet" in plan.integrators, "the scene's own method is kept"
         assert set(cmp.CORE_INTEGRATORS) <= set(plan.integrators)
-    # nothing longer would have fitted: the next record time after the window is over budget
+    # nothing longer would have fitted: the next rung of the window ladder is over budget
     if plan.window < 5.0:
-        longer = plan.window + 1 / 60
+        times, _ = cmp.common_times(pendulum.scene, plan.dts, cmp.DEFAULT_MAX_STEPS)
+        ladder = cmp.window_ladder(times, 5.0, cmp.MIN_WINDOW_STEPS * max(plan.dts))
+        longer = ladder[ladder.index(plan.window) - 1]
         bigger = cmp.estimate_from(plan.probe, plan.integrators, plan.dts, longer, plan.repeat)
         assert bigger.seconds > plan.run_budget
 
@@ -296,3 +298,28 @@ def test_help_documents_the_budget():
     r = run_cli("compare", "--help", env_extra={"COLUMNS": "200"})
     assert r.returncode == 0
     assert "--budget" in r.stdout and "--duration" in r.stdout
+
+
+def test_the_window_is_a_rung_of_a_ladder_halving_the_scene():
+    times = np.linspace(0.0, 2.0, 201)
+    assert cmp.window_ladder(times, 2.0, 0.3) == [2.0, 1.0, 0.5, 0.3]
+    # rungs land on record times (here every 0.2 s), never below the shortest window
+    assert cmp.window_ladder(np.linspace(0.0, 2.0, 11), 2.0, 0.05) == [2.0, 1.0, 0.4, 0.2]
+
+
+@pytest.mark.parametrize("noise", [0.8, 0.9, 1.1, 1.25])
+def test_timing_noise_does_not_move_the_window(monkeypatch, noise):
+    """The same command on a machine a little faster or slower (the probe's timings off by up
+    to 25 %) compares over the same window: the table is reproducible."""
+    loaded = load_scene(SCENES / "spring_pendulum.yaml")
+
+    def plan_with(factor: float) -> cmp.Plan:
+        found = fake_probe(loaded.scene)
+        found.curve_w = found.curve_w * factor
+        found.per_step = {k: v * factor for k, v in found.per_step.items()}
+        monkeypatch.setattr(cmp, "probe", lambda *a, **k: found)
+        return cmp.make_plan(loaded.scene, loaded.name, budget=3.0)
+
+    base = plan_with(1.0)
+    assert base.window < loaded.scene.duration  # the budget does cut the window here
+    assert plan_with(noise).window == base.window
