@@ -1071,7 +1071,15 @@ def make_plan(
         if len(methods) < len(all_methods):
             cuts.append(f"the methods {', '.join(methods)} instead of all {len(all_methods)}")
         if w < total and not window_given:
-            cuts.append(f"compared over the first {w:g} s of {total:g} s")
+            events = _events(scene)
+            cuts.append(
+                f"compared over the first {w:g} s of {total:g} s"
+                + (
+                    f" (the {', '.join(events)} after it are not compared; --duration sets the window)"
+                    if events
+                    else ""
+                )
+            )
         return Plan(
             list(methods),
             list(steps),
@@ -1126,6 +1134,26 @@ def make_plan(
         times, _ = common_times(scene, level[1], DEFAULT_MAX_STEPS * 1000)
         w = next((float(t) for t in times if t >= shortest - 1e-12 and t > 0), total)
     return plan(level, w)
+
+
+def _events(scene: m.Scene) -> list[str]:
+    """What a scene does at moments of its own that a window cut short may leave out."""
+    out = []
+    if scene.planes or scene.colliders or scene.particle_collisions is not None or scene.bodies:
+        out.append("contacts")
+    if scene.emitters:
+        out.append("births")
+    if any(sp.max_strain is not None for sp in scene.springs) or any(
+        getattr(s, "max_strain", None) is not None
+        or any(
+            getattr(f, "max_strain", None) is not None
+            for f in vars(s).values()
+            if isinstance(f, m.SpringFamily)
+        )
+        for s in scene.structures
+    ):
+        out.append("tearing")
+    return out
 
 
 def window_ladder(times: np.ndarray, total: float, shortest: float) -> list[float]:

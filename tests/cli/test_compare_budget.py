@@ -323,3 +323,20 @@ def test_timing_noise_does_not_move_the_window(monkeypatch, noise):
     base = plan_with(1.0)
     assert base.window < loaded.scene.duration  # the budget does cut the window here
     assert plan_with(noise).window == base.window
+
+
+def test_a_window_cut_short_names_the_events_it_leaves_out(monkeypatch):
+    """A budget that cuts the window of a scene with contacts says they may be left out."""
+    loaded = load_scene(SCENES / "bouncing_balls.yaml")  # planes: contacts
+    found = fake_probe(loaded.scene)
+    monkeypatch.setattr(cmp, "probe", lambda *a, **k: found)
+    plan = cmp.make_plan(loaded.scene, loaded.name, budget=3.0)
+    assert plan.window < loaded.scene.duration
+    (cut,) = [c for c in plan.cuts if c.startswith("compared over the first")]
+    assert cut.endswith("(the contacts after it are not compared; --duration sets the window)")
+    # a scene with nothing happening at moments of its own says nothing more
+    pendulum = load_scene(SCENES / "spring_pendulum.yaml")
+    monkeypatch.setattr(cmp, "probe", lambda *a, **k: fake_probe(pendulum.scene))
+    plan = cmp.make_plan(pendulum.scene, pendulum.name, budget=3.0)
+    (cut,) = [c for c in plan.cuts if c.startswith("compared over the first")]
+    assert cut.endswith(" s of 5 s")
