@@ -11,6 +11,7 @@ Bad scenes raise :class:`animsim.SceneError`, whose ``diagnostics`` are the
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -258,6 +259,7 @@ def simulate(
     keeps no frames in memory (the sinks have them).
     """
     from animsim.compile import Compiled
+    from animsim.compile_notice import compile_notices
     from animsim.engine import run
     from animsim.export.trajectory import TrajectoryCollector
 
@@ -268,29 +270,38 @@ def simulate(
         )
     if isinstance(scene, Scene):
         sc, _ = prepare(scene, integrator=integrator, dt=dt, duration=duration, seed=seed, limits=limits)
-        compiled = compile(sc, backend)
+        numba = _uses_numba(backend)
     else:
         if any(v is not None for v in (integrator, dt, duration, seed)):
             raise UsageError("overrides go with a Scene, not with an already compiled scene")
-        compiled = scene
-        sc = compiled.scene
-    targets = list(sinks)
-    collector = None
-    if output is not None:
-        from animsim.export.sinks import open_sink
+        sc = scene.scene
+        numba = scene.backend == "numba"
+    # one announcement per kernel numba compiles, whether for the scene or in the run
+    with compile_notices(notice, numba=numba):
+        compiled = compile(sc, backend) if isinstance(scene, Scene) else scene
+        targets = list(sinks)
+        collector = None
+        if output is not None:
+            from animsim.export.sinks import open_sink
 
-        targets.append(open_sink(Path(output), None, meta_rate=sc.record.fps))
-    elif keep:
-        collector = TrajectoryCollector()
-        targets.append(collector)
-    extra = dict(meta or {})
-    source = getattr(sc, "_source", None)
-    if source:
-        extra.setdefault("scene_sha256", source["sha256"])
-        extra.setdefault("scene_file", source["file"])
-    result = run(
-        compiled, targets, stop=stop, progress=progress, notice=notice, observers=observers, meta_extra=extra
-    )
+            targets.append(open_sink(Path(output), None, meta_rate=sc.record.fps))
+        elif keep:
+            collector = TrajectoryCollector()
+            targets.append(collector)
+        extra = dict(meta or {})
+        source = getattr(sc, "_source", None)
+        if source:
+            extra.setdefault("scene_sha256", source["sha256"])
+            extra.setdefault("scene_file", source["file"])
+        result = run(
+            compiled,
+            targets,
+            stop=stop,
+            progress=progress,
+            notice=notice,
+            observers=observers,
+            meta_extra=extra,
+        )
     if collector is None:
         empty = np.zeros((0, 0, 3))
         traj = Trajectory(np.zeros(0), [], empty, empty)
@@ -320,6 +331,12 @@ def _check_overrides(*, dt: Any = None, duration: Any = None, seed: Any = None) 
             raise TypeError(f"{key} must be a number of seconds, not {_type_name(value)} {value!r}")
     if seed is not None and (isinstance(seed, bool) or not isinstance(seed, numbers.Integral)):
         raise TypeError(f"seed must be a whole number from 0 to {MAX_SEED}, not {_type_name(seed)} {seed!r}")
+
+
+def _uses_numba(backend: str) -> bool:
+    from animsim.backends import choose_backend
+
+    return choose_backend(backend)[0] == "numba"
 
 
 def _fill_bodies(traj: Trajectory, compiled: Any) -> None:
@@ -499,7 +516,9 @@ def run(
     threshold = check_threshold(DEFAULT_DRIFT_WARN_PERCENT if drift_warn is None else drift_warn)
     to_stdout = output is not None and str(output) == "-"
     fmt = format_for(None if output is None else Path(output), fmt)
-    name_of = Path(source).stem if isinstance(source, str | Path) else (source.name or "scene")
+    from animsim.scene.loader import scene_stem
+
+    name_of = scene_stem(source) if isinstance(source, str | Path) else (source.name or "scene")
     out = Path(output) if output is not None else Path(f"{name_of}.{fmt}")
     if to_stdout and fmt != "csv":
         raise UsageError(f"--format {fmt} cannot go to stdout; give a file with -o")
@@ -512,24 +531,28 @@ def run(
     elif not to_stdout:
         _check_output(out, scene_path)
         check_disk(out, est, fmt, sc, limits)
-    compiled = compile(sc, backend, name=name)
-    report = stability.analyse(compiled)
-    if report.dt_exceeds_limit and warn is not None:  # before the first step; the watchdog judges the run
-        warn(f"warning: {report.verdict()}")
-    sink: Any = open_sink(
-        Path("-") if to_stdout else out,
-        fmt,
-        # the frame rate recorded at, when there is one (the scene's, or the 60 fps default)
-        meta_rate=recording_rule(sc.record.every, sc.record.fps, compiled.clock.dt)[1],
-        extra_columns=extra_columns,
-        expected_frames=len(compiled.record_steps),
-    )
-    extra: dict[str, Any] = {META_THRESHOLD_KEY: threshold}
-    if loaded is not None:
-        extra.update(scene_sha256=loaded.sha256, scene_file=str(source))
-    result = simulate(
-        compiled, sinks=[sink], keep=False, stop=stop, progress=progress, meta=extra, notice=notice
-    ).result
+    from animsim.compile_notice import compile_notices
+
+    # every kernel numba compiles (scene compile, first steps, births) is announced as it starts
+    with compile_notices(notice, numba=_uses_numba(backend)):
+        compiled = compile(sc, backend, name=name)
+        report = stability.analyse(compiled)
+        if report.dt_exceeds_limit and warn is not None:  # before the first step; the watchdog judges
+            warn(f"warning: {report.verdict()}")
+        sink: Any = open_sink(
+            Path("-") if to_stdout else out,
+            fmt,
+            # the frame rate recorded at, when there is one (the scene's, or the 60 fps default)
+            meta_rate=recording_rule(sc.record.every, sc.record.fps, compiled.clock.dt)[1],
+            extra_columns=extra_columns,
+            expected_frames=len(compiled.record_steps),
+        )
+        extra: dict[str, Any] = {META_THRESHOLD_KEY: threshold}
+        if loaded is not None:
+            extra.update(scene_sha256=loaded.sha256, scene_file=str(source))
+        result = simulate(
+            compiled, sinks=[sink], keep=False, stop=stop, progress=progress, meta=extra, notice=notice
+        ).result
     wrote: str | None = None if to_stdout else f"{out} and {out}.meta.json"
     if fmt == "ply" and sink.written:
         first, last = sink.written[0], sink.written[-1]
@@ -547,16 +570,18 @@ def explain(
 ) -> list[str]:
     """What a scene compiles to, as the lines ``animsim explain`` prints: counts, the
     stages each step runs, and what was left out because the scene does not need it."""
+    from animsim.console import count_text, point_particles
     from animsim.measures.effective import fallback_note
 
     sc, name, _, _ = _prepared(source, limits, integrator=integrator)
     c = compile(sc, backend, name=name)
     s = c.system
+    points, pinned = point_particles(s)
     lines = [
         f"scene {c.name!r} ({_source_label(source)})",
-        f"  {s.particle_count} particles ({int(s.particle_pinned.sum())} pinned), {s.spring_count} springs, "
+        f"  {points} particles ({pinned} pinned), {s.spring_count} springs, "
         f"{len(sc.planes)} planes, {len(sc.emitters)} emitters"
-        + (f", {s.body_count} rigid bodies (their centres counted as particles)" if s.body_count else ""),
+        + (f", {count_text(s.body_count, 'rigid body', 'rigid bodies')}" if s.body_count else ""),
         f"  {c.clock.steps} steps of {c.clock.dt:g} s to t = {c.clock.duration:g} s, seed {c.seed}",
         "each step runs:",
     ]
@@ -839,11 +864,13 @@ def sweep(
     limits: Any = None,
     progress: Callable[[int, int], None] | None = None,
     backend: str = "auto",
+    duration: float | None = None,
 ) -> Any:
     """Run a scene file for every combination of ``sets`` values (``"KEY=V1,V2,..."``) and
-    ``integrators`` on ``backend``: ``animsim sweep``. Writes the table as CSV (``output``) and a plot
-    of ``y`` over ``x`` (``plot``) when asked. Returns
-    :class:`animsim.analysis.sweep.SweepTable`; unstable and invalid cases are rows."""
+    ``integrators`` on ``backend``: ``animsim sweep``. Writes the table as CSV (``output``) and a
+    plot of ``y`` over ``x`` (``plot``) when asked. ``duration`` replaces the scene's in every
+    case. Returns :class:`animsim.analysis.sweep.SweepTable`; unstable and invalid cases
+    are rows."""
     from animsim.analysis import sweep as sw
     from animsim.preflight import RunLimits
     from animsim.scene.loader import load_scene
@@ -861,6 +888,13 @@ def sweep(
         raise UsageError("sweep: give at least one --set KEY=V1,V2,... or --integrators")
     sw.check_axes(axes)
     keys = [a.key for a in axes]
+    data = loaded.data
+    if duration is not None:
+        if not (math.isfinite(duration) and duration > 0):
+            raise UsageError(f"--duration: must be a finite number > 0, not {duration!r}")
+        if "duration" in keys:
+            raise UsageError("--duration: the duration is swept (--set duration=...); give one or the other")
+        data = {**data, "duration": float(duration)}
     x_key = x or keys[0]
     y_col = y or ("error" if reference is not None else "drift")
     if plot is not None:
@@ -873,7 +907,7 @@ def sweep(
     if output is not None:
         _check_output(Path(output), src)
     table = sw.sweep(
-        loaded.data,
+        data,
         loaded.name,
         str(src),
         axes,

@@ -123,6 +123,59 @@ def _root(
 
 # --- shared options ---------------------------------------------------------------
 
+
+# Tab completion of option values. The names come from where the code keeps them;
+# each import happens only when the shell asks for a completion.
+def _matching(names: Any, incomplete: str) -> list[str]:
+    return [n for n in names if n.startswith(incomplete)]
+
+
+def _complete_integrator(incomplete: str) -> list[str]:
+    from animsim.scene.models import INTEGRATOR_NAMES
+
+    return _matching(INTEGRATOR_NAMES, incomplete)
+
+
+def _complete_integrators(incomplete: str) -> list[str]:
+    """A comma-separated list: complete its last name, offer none twice."""
+    from animsim.scene.models import INTEGRATOR_NAMES
+
+    head, _, last = incomplete.rpartition(",")
+    given = set(head.split(",")) if head else set()
+    prefix = f"{head}," if head else ""
+    return [prefix + n for n in INTEGRATOR_NAMES if n.startswith(last) and n not in given]
+
+
+def _complete_backend(incomplete: str) -> list[str]:
+    from animsim.backends import BACKENDS
+
+    return _matching(BACKENDS, incomplete)
+
+
+def _complete_template(incomplete: str) -> list[str]:
+    from animsim.templates import TEMPLATES
+
+    return _matching(TEMPLATES, incomplete)
+
+
+def _complete_render_view(incomplete: str) -> list[str]:
+    from animsim.export.raster import VIEWS
+
+    return _matching(VIEWS, incomplete)
+
+
+def _complete_viewer_view(incomplete: str) -> list[str]:
+    from animsim.export.viewer import VIEWS
+
+    return _matching(VIEWS, incomplete)
+
+
+def _complete_plot_view(incomplete: str) -> list[str]:
+    from animsim.export.raster import ORTHO_VIEWS
+
+    return _matching(ORTHO_VIEWS, incomplete)
+
+
 SceneArg = Annotated[Path, typer.Argument(help="The scene file (YAML).", show_default=False, metavar="SCENE")]
 BackendOpt = Annotated[
     str,
@@ -130,6 +183,7 @@ BackendOpt = Annotated[
         "--backend",
         help="auto (the default of every command: numba when installed, else numpy), numpy, or numba "
         '(compiled; needs pip install -e ".\\[fast]").',
+        autocompletion=_complete_backend,
     ),
 ]
 
@@ -341,7 +395,9 @@ def run(
             "-o", "--output", help="Trajectory file; default <scene stem>.csv here; '-' for stdout."
         ),
     ] = None,
-    integrator: Annotated[str | None, typer.Option(help="Override the scene's integrator.")] = None,
+    integrator: Annotated[
+        str | None, typer.Option(help="Override the scene's integrator.", autocompletion=_complete_integrator)
+    ] = None,
     dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
     duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
     seed: Annotated[int | None, typer.Option(help="Override the random seed.")] = None,
@@ -406,26 +462,45 @@ def run(
         raise typer.Exit(EXIT_INTERRUPTED)
 
 
+#: a run's progress bar opens once it has gone on this long (s): a run that ends sooner
+#: needs none, and a longer one should not look hung
+PROGRESS_AFTER_SECONDS = 2.0
+
+
 @contextmanager
-def _progress(quiet: bool, label: str = "simulating", at_least: int = 20_000):
-    """A rich progress bar on stderr, only on a terminal and only for long runs: the
-    callback gets (done, total) and opens the bar on its first call with a large total."""
+def _progress(
+    quiet: bool,
+    label: str = "simulating",
+    at_least: int | None = None,
+    after: float = PROGRESS_AFTER_SECONDS,
+    clock: Any = None,
+):
+    """A rich progress bar on stderr, only on a terminal and only for long work: the
+    callback gets (done, total) and opens the bar once ``after`` seconds have passed since
+    its first call (or at once when ``total`` is at least ``at_least``)."""
     if quiet or not sys.stderr.isatty():
         yield None
         return
+    import time
+
     from rich.progress import Progress
 
+    now = clock or time.monotonic
     bar: Any = None
     task: Any = None
+    first: float | None = None
 
     def update(done: int, total: int) -> None:
-        nonlocal bar, task
+        nonlocal bar, task, first
         if bar is None:
-            if total < at_least:
+            t = now()
+            first = t if first is None else first
+            long_run = at_least is not None and total >= at_least
+            if done >= total or not (long_run or t - first >= after):
                 return
             bar = Progress(transient=True, console=_stderr_console())
             bar.start()
-            task = bar.add_task(label, total=total)
+            task = bar.add_task(label, total=total, completed=done)
         if done % max(1, total // 200) == 0 or done == total:
             bar.update(task, completed=done)
 
@@ -452,11 +527,11 @@ def _stderr_console():
 
 def _summary(compiled: Any, result: Any, wrote: str | None) -> None:
     """Print the run summary; ``wrote`` names the files written (None: the trajectory went to stdout)."""
-    from animsim.console import steps_text
+    from animsim.console import scene_counts, steps_text
 
     stream_err = wrote is None  # trajectory went to stdout: keep stdout clean
     lines = [
-        f"{compiled.name}: {compiled.system.particle_count} particles, {compiled.system.spring_count} springs, "
+        f"{compiled.name}: {scene_counts(compiled.system)}, "
         f"{steps_text(compiled, result)} with {compiled.integrator_name}",
         f"  wall time {result.wall_time:.3f} s, {result.frames} frames, {result.force_evals} force evaluations",
         f"  energy {result.energy_start:.6g} J -> {result.energy_end:.6g} J, status {result.status}, "
@@ -506,7 +581,10 @@ def _summary_notes(compiled: Any, result: Any) -> list[str]:
 @limit_options
 def explain(
     scene: SceneArg,
-    integrator: Annotated[str | None, typer.Option(help="Explain with this integrator instead.")] = None,
+    integrator: Annotated[
+        str | None,
+        typer.Option(help="Explain with this integrator instead.", autocompletion=_complete_integrator),
+    ] = None,
     backend: BackendOpt = "auto",
     *,
     limits: Any = None,
@@ -548,7 +626,9 @@ def init(
     path: Annotated[
         Path, typer.Argument(help="The scene file to write, e.g. my_scene.yaml.", show_default=False)
     ],
-    template: Annotated[str, typer.Option("--template", "-t", help=_template_help())] = "projectile",
+    template: Annotated[
+        str, typer.Option("--template", "-t", help=_template_help(), autocompletion=_complete_template)
+    ] = "projectile",
     force: Annotated[bool, typer.Option("--force", help="Replace an existing file.")] = False,
 ) -> None:
     """Write a commented starter scene, and scene.schema.json beside it for editors."""
@@ -617,6 +697,7 @@ def render(
             help="xy, xz, yz, zy (orthographic: the across axis, then the up one) or 3d "
             "(perspective); default: from the side, up drawn upward, when gravity points down y or z "
             "(from above when the motion is flat), else the two axes along which it is widest.",
+            autocompletion=_complete_render_view,
         ),
     ] = None,
     size: Annotated[
@@ -638,14 +719,18 @@ def render(
     dot_radius: Annotated[
         float, typer.Option("--dot-radius", help="Radius in pixels of particles that have no size.")
     ] = 3.0,
-    integrator: Annotated[str | None, typer.Option(help="Override the scene's integrator.")] = None,
+    integrator: Annotated[
+        str | None, typer.Option(help="Override the scene's integrator.", autocompletion=_complete_integrator)
+    ] = None,
     dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
     duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
     integrators: Annotated[
         str | None,
         typer.Option(
-            "--integrators", help="Comma-separated methods: the scene once per method, panels side by side."
+            "--integrators",
+            help="Comma-separated methods: the scene once per method, panels side by side.",
+            autocompletion=_complete_integrators,
         ),
     ] = None,
     backend: BackendOpt = "auto",
@@ -718,15 +803,28 @@ def view(
     output: Annotated[Path, typer.Option("-o", "--output", help="The HTML file to write.")],
     integrators: Annotated[
         str | None,
-        typer.Option("--integrators", help="Comma-separated methods: one panel per method, played in step."),
+        typer.Option(
+            "--integrators",
+            help="Comma-separated methods: one panel per method, played in step.",
+            autocompletion=_complete_integrators,
+        ),
     ] = None,
     fps: Annotated[float, typer.Option("--fps", help="Frames per second recorded for playback.")] = 25.0,
-    view: Annotated[str, typer.Option("--view", help="The view it opens with: 3d, xy, xz, yz or zy.")] = "3d",
+    view: Annotated[
+        str,
+        typer.Option(
+            "--view",
+            help="The view it opens with: 3d, xy, xz, yz or zy.",
+            autocompletion=_complete_viewer_view,
+        ),
+    ] = "3d",
     scene: Annotated[
         Path | None,
         typer.Option("--scene", help="The scene of a trajectory, for springs, pins, planes and energy."),
     ] = None,
-    integrator: Annotated[str | None, typer.Option(help="Override the scene's integrator.")] = None,
+    integrator: Annotated[
+        str | None, typer.Option(help="Override the scene's integrator.", autocompletion=_complete_integrator)
+    ] = None,
     dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
     duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
@@ -793,7 +891,12 @@ def sweep(
         ),
     ] = [],  # noqa: B006 (typer reads the default; never mutated)
     integrators: Annotated[
-        str | None, typer.Option("--integrators", help="Comma-separated methods: one more axis.")
+        str | None,
+        typer.Option(
+            "--integrators",
+            help="Comma-separated methods: one more axis.",
+            autocompletion=_complete_integrators,
+        ),
     ] = None,
     reference: Annotated[
         ReferenceKind | None,
@@ -814,6 +917,9 @@ def sweep(
             # \\[ keeps rich markup from eating the extra's name.
             'needs pip install "animsim\\[dask]".',
         ),
+    ] = None,
+    duration: Annotated[
+        float | None, typer.Option(help="Override the duration (s) of every case (a short sweep first).")
     ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No table, only the files.")] = False,
     backend: BackendOpt = "auto",
@@ -847,6 +953,7 @@ def sweep(
             limits=limits,
             progress=progress,
             backend=_backend(backend),
+            duration=duration,
         )
     if not quiet:
         sw.print_table(table, _stdout_console())
@@ -895,7 +1002,8 @@ def compare(
     integrators: Annotated[
         str | None,
         typer.Option(
-            help="Comma-separated methods, e.g. euler,midpoint,rk4; default every fixed-step method."
+            help="Comma-separated methods, e.g. euler,midpoint,rk4; default every fixed-step method.",
+            autocompletion=_complete_integrators,
         ),
     ] = None,
     dt: Annotated[
@@ -1006,8 +1114,11 @@ def compare(
     with _compare_progress() as (progress, planned):
 
         def announce(plan: Any) -> None:
-            for line in plan.lines():
-                _err(line)
+            from animsim.analysis.check import wrap
+            from animsim.console import table_width
+
+            for line in plan.lines():  # at the screen's width, as the table under it
+                _err(wrap(line, table_width(sys.stderr)))
             planned(len(plan.integrators) * len(plan.dts))
 
         result = api.compare(
@@ -1102,14 +1213,24 @@ def plot(
     ] = None,
     view: Annotated[
         str | None,
-        typer.Option("--view", help="xy, xz, yz or zy; default: chosen as render chooses it."),
+        typer.Option(
+            "--view",
+            help="xy, xz, yz or zy; default: chosen as render chooses it.",
+            autocompletion=_complete_plot_view,
+        ),
     ] = None,
-    integrator: Annotated[str | None, typer.Option(help="Override the scene's integrator.")] = None,
+    integrator: Annotated[
+        str | None, typer.Option(help="Override the scene's integrator.", autocompletion=_complete_integrator)
+    ] = None,
     dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
     duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
     integrators: Annotated[
         str | None,
-        typer.Option("--integrators", help="--kind phase: comma-separated methods, overlaid."),
+        typer.Option(
+            "--integrators",
+            help="--kind phase: comma-separated methods, overlaid.",
+            autocompletion=_complete_integrators,
+        ),
     ] = None,
     particles: Annotated[
         str | None,

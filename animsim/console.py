@@ -83,3 +83,30 @@ def steps_text(compiled: Any, result: Any) -> str:
     if taken < planned:
         return f"{taken} of {planned} steps of {compiled.clock.dt:g} s"
     return f"{planned} steps of {compiled.clock.dt:g} s"
+
+
+def count_text(n: int, word: str, plural: str | None = None) -> str:
+    """``1 rigid body``, ``2 rigid bodies``."""
+    return f"{n} {word if n == 1 else (plural or word + 's')}"
+
+
+def point_particles(system: Any) -> tuple[int, int]:
+    """(particles, pinned ones) without the rows that hold rigid bodies' centres of mass:
+    a scene of one die has no particle, though the engine keeps its centre in a row."""
+    import numpy as np
+
+    n = system.particle_count - system.body_count
+    pinned = np.asarray(system.particle_pinned, dtype=bool).copy()
+    pinned[system.body_first : system.body_first + system.body_count] = False
+    return n, int(pinned.sum())
+
+
+def scene_counts(system: Any) -> str:
+    """``2 particles, 1 springs`` (as the run summary has always said it), with the rigid
+    bodies counted on their own: ``1 rigid body, 0 springs`` for a bodies-only scene."""
+    n, _ = point_particles(system)
+    parts = [] if n == 0 and system.body_count else [f"{n} particles"]
+    if system.body_count:
+        parts.append(count_text(system.body_count, "rigid body", "rigid bodies"))
+    parts.append(f"{system.spring_count} springs")
+    return ", ".join(parts)

@@ -33,7 +33,7 @@ from animsim.colliders import BOX, CAPSULE, SPHERE, Colliders, Shape, axis_angle
 from animsim.keyframes import KeyframeDrive, PathEvaluator, make_paths
 from animsim.particle_contacts import ParticleContacts, spring_exclusions
 from animsim.scene import models as m
-from animsim.scene.structures import expand, local_index, structure_spring_count
+from animsim.scene.structures import expand, pinned_rows, structure_spring_count, tears
 from animsim.tearing import Tearing
 
 
@@ -55,8 +55,7 @@ def spring_max_strain(scene: m.Scene) -> np.ndarray:
     the tearing limit; +inf where the spring cannot tear."""
     parts = [np.array([np.inf if sp.max_strain is None else sp.max_strain for sp in scene.springs])]
     for s in scene.structures:
-        families = [getattr(s, name, None) for name in type(s).model_fields]
-        if any(isinstance(f, m.SpringFamily) and f.max_strain is not None for f in families):
+        if tears(s):
             for group in expand(s).springs:
                 parts.append(np.full(len(group.index), group.max_strain))
         else:
@@ -82,6 +81,34 @@ def _point_rows(system: Any) -> np.ndarray:
     """Rows colliders and contacts act on: particles, not rigid-body centres (when bodies exist)."""
     rows = getattr(system, "point_rows", None)
     return np.ones(system.particle_count, dtype=bool) if rows is None else np.asarray(rows, dtype=bool)
+
+
+def collider_shape(c: Any) -> Any:
+    """The :class:`animsim.colliders.Shape` of one scene collider, at its written position."""
+    from animsim.colliders import (
+        Shape,
+    )
+
+    if isinstance(c, m.SphereCollider):
+        shape = Shape(SPHERE, np.array(c.center), radius=c.radius)
+    elif isinstance(c, m.BoxCollider):
+        o = c.orientation
+        q = axis_angle_quaternion(np.array(o.axis), o.angle) if isinstance(o, m.AxisAngle) else np.array(o)
+        shape = Shape(BOX, np.array(c.center), half=0.5 * np.array(c.size), rotation=quaternion_matrix(q))
+    else:
+        a, b = np.array(c.a), np.array(c.b)
+        mid = 0.5 * (a + b)
+        shape = Shape(CAPSULE, mid, radius=c.radius, segment=b - mid)
+    return Shape(
+        shape.kind,
+        shape.center,
+        shape.radius,
+        shape.half,
+        shape.rotation,
+        shape.segment,
+        c.restitution,
+        c.friction,
+    )
 
 
 def build(scene: m.Scene, system: Any, backend: str, springs: Any | None, positions: np.ndarray) -> Built:
@@ -115,10 +142,7 @@ def build(scene: m.Scene, system: Any, backend: str, springs: Any | None, positi
             path = len(keys)
             keys.append(list(s.pin_motion.keyframes))
             smooth.append(s.pin_motion.interpolation == "smooth")
-            for pid in s.pin:
-                li = local_index(s, pid)
-                if li is None:
-                    continue
+            for li in pinned_rows(s).tolist():
                 which.append(path)
                 rows.append(first + li)
                 base.append(positions[first + li])
@@ -139,34 +163,7 @@ def build(scene: m.Scene, system: Any, backend: str, springs: Any | None, positi
         motion_smooth: list[bool] = []
         moving: list[int] = []
         for c in scene.colliders:
-            if isinstance(c, m.SphereCollider):
-                shape = Shape(SPHERE, np.array(c.center), radius=c.radius)
-            elif isinstance(c, m.BoxCollider):
-                o = c.orientation
-                q = (
-                    axis_angle_quaternion(np.array(o.axis), o.angle)
-                    if isinstance(o, m.AxisAngle)
-                    else np.array(o)
-                )
-                shape = Shape(
-                    BOX, np.array(c.center), half=0.5 * np.array(c.size), rotation=quaternion_matrix(q)
-                )
-            else:
-                a, b = np.array(c.a), np.array(c.b)
-                mid = 0.5 * (a + b)
-                shape = Shape(CAPSULE, mid, radius=c.radius, segment=b - mid)
-            shapes.append(
-                Shape(
-                    shape.kind,
-                    shape.center,
-                    shape.radius,
-                    shape.half,
-                    shape.rotation,
-                    shape.segment,
-                    c.restitution,
-                    c.friction,
-                )
-            )
+            shapes.append(collider_shape(c))
             if c.motion is not None:
                 moving.append(len(motion_keys))
                 motion_keys.append(list(c.motion.keyframes))
@@ -209,10 +206,52 @@ def build(scene: m.Scene, system: Any, backend: str, springs: Any | None, positi
     # --- tearing ----------------------------------------------------------------------------------
     limits = spring_max_strain(scene)
     if system.spring_count and np.isfinite(limits).any():
-        tear = Tearing(system.spring_index, system.spring_rest_length, limits, numba)
+        tear = Tearing(
+            system.spring_index, system.spring_rest_length, limits, numba, families=system.spring_families
+        )
         tear.springs = springs
         out.back.append(tear)
         out.tearing = tear
     else:
-        out.left_out.append("tearing: no spring has a max_strain")
+        out.left_out.append(
+            "tearing: needs a max_strain on a spring, a spring family or a structure; none has one"
+        )
+    return out
+
+
+def particles_inside_colliders(scene: Any) -> list[tuple[tuple[str | int, ...], str, bool]]:
+    """A listed particle that starts inside a solid collider would be thrown out to its
+    surface by the first step: say so instead (pinned ones stay where they are)."""
+    colliders = [c for c in getattr(scene, "colliders", None) or [] if c is not None]
+    particles = [
+        (i, p)
+        for i, p in enumerate(scene.particles)
+        if isinstance(p, m.Particle) and not p.pinned and p.position is not None
+    ]
+    if not colliders or not particles:
+        return []
+    pc = getattr(scene, "particle_collisions", None)
+    default = pc.radius if pc is not None else 0.0
+    x = np.array([p.position for _, p in particles], dtype=np.float64)
+    r = np.array([default if p.radius is None else p.radius for _, p in particles])
+    out: list[tuple[tuple[str | int, ...], str, bool]] = []
+    for j, c in enumerate(colliders):
+        shape = collider_shape(c)
+        offset = None
+        if c.motion is not None:
+            at0, _ = make_paths([c.motion.keyframes], [c.motion.interpolation == "smooth"]).evaluate(0.0)
+            offset = at0[0] - shape.center
+        d, _ = shape.signed_distance(x, offset)
+        for k in np.flatnonzero(d < r):
+            i, p = particles[k]
+            depth = float(r[k] - d[k])
+            grown = f" (grown by the particle's radius {r[k]:g} m)" if r[k] > 0 else ""
+            out.append(
+                (
+                    ("particles", i, "position"),
+                    f"starts {depth:.3g} m inside colliders.{j} ({c.type}){grown} at t = 0: the first "
+                    "step would throw it out to the surface; move it outside",
+                    False,
+                )
+            )
     return out

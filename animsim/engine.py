@@ -19,6 +19,7 @@ import numpy as np
 
 from animsim.backends import numba_threads
 from animsim.compile import Compiled
+from animsim.compile_notice import compile_notices
 from animsim.export.meta import run_facts
 from animsim.guard import Failure, Guard
 from animsim.measures.drift import annotate
@@ -85,7 +86,8 @@ def run(
     On the numba backend, ``compiled.threads`` (when set) is numba's thread count for
     the run, and numba's own count is put back after it.
     """
-    with numba_threads(compiled):
+    # every kernel numba compiles for this run (a disk-cache miss) is announced as it starts
+    with numba_threads(compiled), compile_notices(notice, numba=compiled.backend == "numba"):
         return _run(
             compiled,
             sinks,

@@ -33,6 +33,10 @@ from numba.core import sigutils
 from numba.core.compiler_lock import global_compiler_lock
 from numba.core.runtime import rtsys
 
+from animsim.compile_notice import listen
+
+listen()  # every compilation (a disk-cache miss) from here on is heard (compile_notice)
+
 
 def load_cached(dispatcher: Any, sig: Any) -> bool:
     """Make ``dispatcher``'s overload for ``sig`` (a signature, or a tuple of argument

@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from animsim import methods
+from animsim.contact_stages import particles_inside_colliders
 from animsim.errors import Diagnostic, SceneError, UsageError
 from animsim.export.meta import meta_path
 from animsim.export.ply import PLY_SUFFIX
@@ -324,6 +325,11 @@ def check_limits(
         )
         dotted = ".".join(str(p) for p in path)
         raise SceneError([Diagnostic(loaded.file, *_where(loaded, path), dotted, msg)])
+    inside = particles_inside_colliders(scene)
+    if inside:
+        raise SceneError(
+            [Diagnostic(loaded.file, *_where(loaded, p), ".".join(map(str, p)), msg) for p, msg, _ in inside]
+        )
     _contact_radius_problem(loaded, scene)
     # Contacts are counted once the rest is known to fit: counting them places the
     # structures' particles, which the estimate above has just bounded.

@@ -245,19 +245,10 @@ def _compile_numba(stepper: Any, state: State, notice: Callable[[str], None] | N
     if emitters is not None:  # newborns fly on with the same force sum (a full evaluation a step)
         emitters.dynamics = integ.dynamics
         emitters.use_numba(state)  # births and deaths in compiled calls (the same slots)
-    if notice is not None and not _kernels_cached():
-        notice("compiling numba kernels (first run only, cached afterwards)...")
     scratch = np.zeros_like(state.particle_position)
     stepper.forces.acceleration(state.particle_position, state.particle_velocity, state.time, scratch)
     dyn.evaluations -= 1
     return time.perf_counter() - t0
-
-
-def _kernels_cached() -> bool:
-    """Cheap guess whether numba has compiled animsim's kernels on this machine before."""
-    from pathlib import Path
-
-    return any(Path(__file__).parent.glob("__pycache__/*.nbi"))
 
 
 class _NumbaDynamics:
@@ -333,8 +324,6 @@ class Fused(_Base):
         t0 = time.perf_counter()
         from animsim.backends.fused import FusedStepper
 
-        if notice is not None and not _kernels_cached():
-            notice("compiling numba kernels (first run only, cached afterwards)...")
         self.fused = FusedStepper(self.compiled)
         # the same watchdog rhythm as step by step, so both backends report the same failures
         self.check_stride = CHECK_STRIDE if self.replayable else 1

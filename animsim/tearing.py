@@ -85,7 +85,14 @@ class Tearing(StepStage):
     dissipative = True  # a breaking spring takes its stored energy with it
     no_closed_form = "tearing springs"
 
-    def __init__(self, index: np.ndarray, rest: np.ndarray, max_strain: np.ndarray, backend: str = "numpy"):
+    def __init__(
+        self,
+        index: np.ndarray,
+        rest: np.ndarray,
+        max_strain: np.ndarray,
+        backend: str = "numpy",
+        families: list[tuple[str, int, int]] | None = None,
+    ):
         self.a = np.ascontiguousarray(index[:, 0], dtype=np.int64)
         self.b = np.ascontiguousarray(index[:, 1], dtype=np.int64)
         self.rest = np.ascontiguousarray(rest, dtype=np.float64)
@@ -97,9 +104,10 @@ class Tearing(StepStage):
         self.first_break: float | None = None
         #: the spring element (animsim.forces.springs.Springs) whose broken springs are switched off
         self.springs = None
-        self.label = (
-            f"tearing: {self.which.size} spring(s) break for good past their max_strain "
-            f"({', '.join(f'{v:g}' for v in np.unique(self.limit[self.which])[:6])})"
+        self.label = f"tearing: {self.which.size} spring(s) break for good past their max_strain " + (
+            _families_text(self.limit, families)
+            if families
+            else f"({', '.join(f'{v:g}' for v in np.unique(self.limit[self.which])[:6])})"
         )
 
     def stability_note(self, dt: float) -> str:
@@ -137,3 +145,21 @@ class Tearing(StepStage):
 
     def run_summary(self) -> dict[str, float | int | None]:
         return {"springs_broken": self.broken, "first_break_time": self.first_break}
+
+
+def _families_text(limit: np.ndarray, families: list[tuple[str, int, int]]) -> str:
+    """Which spring families tear (with their limits) and which never do, so a structure
+    whose stretch springs tear while its bend springs hold it together is seen before the run."""
+    tear, hold = [], []
+    for name, a, b in families:
+        if b <= a:
+            continue
+        part = limit[a:b]
+        finite = np.unique(part[np.isfinite(part)])
+        if finite.size == 0:
+            hold.append(name)
+            continue
+        values = ", ".join(f"{v:g}" for v in finite[:3]) + (", ..." if finite.size > 3 else "")
+        count = int(np.isfinite(part).sum())
+        tear.append(f"{name} {values}" + (f" ({count} of {b - a})" if count < b - a else ""))
+    return f"({'; '.join(tear)})" + (f"; never: {', '.join(hold)}" if hold else "")

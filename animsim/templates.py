@@ -1,8 +1,9 @@
 """Starter scenes for ``animsim init PATH [--template NAME]``.
 
 Each template is a complete, commented scene a newcomer can run at once and
-then edit. They are the four steps of the tutorial in ``docs/scenes.md``: a
-projectile, a pendulum, a cloth on a floor, a fountain.
+then edit. The first four are the steps of the tutorial in ``docs/scenes.md``:
+a projectile, a pendulum, a cloth on a floor, a fountain; then rigid bodies, a
+soft body from a mesh file (written beside the scene) and contacts.
 
 The editor modeline. A scene's first line,
 ``# yaml-language-server: $schema=scene.schema.json``, tells editors (VS Code
@@ -21,7 +22,7 @@ committed. A schema file already there is left alone when it is current;
 from __future__ import annotations
 
 import difflib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from animsim.atomic import write_text_atomic
@@ -36,6 +37,8 @@ MODELINE = f"# yaml-language-server: $schema={SCHEMA_NAME}"
 class Template:
     summary: str  # one line for --help and the message after writing
     text: str  # the scene, without the modeline
+    #: files the scene needs, written beside it: {name: text} (a mesh's OBJ file)
+    files: dict[str, str] = field(default_factory=dict)
 
 
 PROJECTILE = """\
@@ -141,11 +144,115 @@ emitters:
     max_particles: 2000    # at most this many alive at once
 """
 
+BODIES = """\
+# Rigid bodies: a die and a ball thrown onto a floor. Bodies have a shape
+# (box, sphere or capsule), a mass (or a density) and an orientation; they
+# tumble, bounce on their corners and slide with friction.
+#   animsim render SCENE --gif bodies.gif
+duration: 1.5
+dt: 0.002                 # bodies on a floor want small steps
+record: {fps: 30}
+forces:
+  - {type: gravity}
+planes:
+  - {point: [0, 0, 0], normal: [0, 1, 0], restitution: 0.4, friction: 0.4}
+bodies:
+  - id: die
+    shape: {type: box, size: [0.2, 0.2, 0.2]}   # edge lengths, m
+    mass: 0.3
+    position: [-1.0, 0.8, 0]
+    orientation: {axis: [1, 1, 0], angle: 35}   # or a quaternion [w, x, y, z]
+    velocity: [2.0, 1.0, 0.0]
+    angular_velocity: [4, -3, 9]                # rad/s
+  - id: ball
+    shape: {type: sphere, radius: 0.1}
+    density: 500          # kg/m^3: the mass follows from the shape
+    position: [0.5, 1.2, 0]
+    velocity: [-1.0, 0.0, 0.0]
+"""
+
+MESH = """\
+# A soft cube from a mesh file: cube.obj (written beside this scene) becomes
+# particles at its corners, a spring along every edge, bend springs across
+# them and interior struts that keep it full. It drops, squashes and bounces.
+# Any OBJ or PLY file works: a closed one as a soft_body, an open one as cloth.
+duration: 2.0
+dt: 0.0005
+record: {fps: 50}
+structures:
+  - type: mesh
+    id: cube              # particles are cube[0], cube[1], ... (the file's vertex order)
+    file: cube.obj        # relative to this scene
+    mode: soft_body
+    mass: 0.5             # kg, spread over the vertices by area
+    scale: 0.3            # the file's 1 m cube becomes 0.3 m
+    position: [0, 1, 0]
+    rotation: {axis: [1, 0, 1], angle: 30}
+    stretch: {ks: 400, kd: 0.4}
+    bend: {ks: 100, kd: 0.1}
+    volume: {ks: 300, kd: 0.3}
+planes:
+  - {point: [0, 0, 0], normal: [0, 1, 0], restitution: 0.3, friction: 0.4}
+forces:
+  - {type: gravity}
+"""
+
+#: a unit cube centred on the origin, its faces wound counter-clockwise seen from outside
+CUBE_OBJ = """\
+# a unit cube: 8 corners, 6 square faces
+v -0.5 -0.5 -0.5
+v 0.5 -0.5 -0.5
+v 0.5 0.5 -0.5
+v -0.5 0.5 -0.5
+v -0.5 -0.5 0.5
+v 0.5 -0.5 0.5
+v 0.5 0.5 0.5
+v -0.5 0.5 0.5
+f 1 4 3 2
+f 5 6 7 8
+f 1 2 6 5
+f 4 8 7 3
+f 1 5 8 4
+f 2 3 7 6
+"""
+
+CONTACTS = """\
+# Contacts: balls poured onto a solid sphere. particle_collisions makes the
+# particles collide with each other as spheres; colliders are solid shapes
+# (sphere, box, capsule) they cannot enter. The balls pile up and roll off.
+#   animsim render SCENE --gif contacts.gif
+duration: 1.5
+dt: 0.004
+seed: 2
+record: {fps: 25}
+emitters:
+  - name: ball            # particles are ball#0, ball#1, ...
+    rate: 100             # births per second
+    shape: {type: sphere, center: [0, 1.2, 0], radius: 0.05}
+    velocity: {mean: [0, -1, 0], spread: 0.1}
+    lifetime: {mean: 100}
+    mass: 0.01
+    size: {start: 0.04, end: 0.04}
+    max_particles: 150
+particle_collisions: {radius: 0.02, restitution: 0.2, friction: 0.3}   # radius in m
+colliders:
+  - {type: sphere, center: [0, 0.3, 0], radius: 0.3, restitution: 0.2, friction: 0.4}
+planes:
+  - {point: [0, 0, 0], normal: [0, 1, 0], restitution: 0.2, friction: 0.5}
+forces:
+  - {type: gravity}
+"""
+
 TEMPLATES: dict[str, Template] = {
     "projectile": Template("a ball thrown at 45 degrees, bouncing on the ground", PROJECTILE),
     "pendulum": Template("a bob on a damped spring under an anchor", PENDULUM),
     "cloth": Template("a cloth held by two corners draping onto the floor", CLOTH),
     "fountain": Template("a particle system: drops up from a disc, down onto the ground", FOUNTAIN),
+    "bodies": Template("rigid bodies: a die and a ball thrown onto a floor", BODIES),
+    "mesh": Template(
+        "a soft cube from a mesh file (cube.obj, written beside it)", MESH, {"cube.obj": CUBE_OBJ}
+    ),
+    "contacts": Template("balls poured onto a solid sphere, colliding with each other", CONTACTS),
 }
 DEFAULT_TEMPLATE = "projectile"
 
@@ -187,6 +294,15 @@ def write_starter(path: Path, name: str, force: bool = False) -> list[str]:
         raise UsageError(f"{path}: cannot create files in {folder}: {exc.strerror}") from None
     os.close(fd)
     os.unlink(probe)
+    extra = {folder / name: content for name, content in TEMPLATES[name].files.items()}
+    for extra_path, content in extra.items():
+        if extra_path.resolve() == path.resolve():
+            raise UsageError(f"{path}: that name is kept for {extra_path.name}, which the scene reads")
+        if extra_path.exists() and not force and extra_path.read_text(errors="replace") != content:
+            raise UsageError(
+                f"{extra_path}: already exists and differs from the template's; "
+                "choose another folder or add --force to replace it"
+            )
     done = []
     schema = schema_text()
     if not schema_path.exists():
@@ -201,6 +317,10 @@ def write_starter(path: Path, name: str, force: bool = False) -> list[str]:
                 f"note: {schema_path} differs from this animsim's schema; "
                 f"refresh it with `animsim schema > {schema_path}` (or init --force)"
             )
+    for extra_path, content in extra.items():
+        if not extra_path.exists() or extra_path.read_text(errors="replace") != content:
+            write_text_atomic(extra_path, content)
+            done.append(f"wrote {extra_path} (the scene reads it)")
     write_text_atomic(path, text)
     done.insert(0, f"wrote {path}: {TEMPLATES[name].summary}")
     done.append(f"next: animsim run {path}")

@@ -14,7 +14,10 @@ by a fenced block holding what the command printed:
 
 ``<!-- stdout: ... -->`` quotes stdout alone (for ``run -o -``, where the summary
 goes to stderr). Leading ``NAME=VALUE`` words set environment variables
-(``COLUMNS=100`` sets the table width; 100 when not given). The command runs
+(``COLUMNS=100`` sets the table width; 100 when not given), except
+``WITHOUT=numba`` (comma-separated packages): the command runs as if those were not
+installed, so an output quoted after an install without the ``fast`` extra is what
+that install prints (the NumPy backend, its timings). The command runs
 in a scratch folder that links the repository's ``scenes``, ``docs``,
 ``tests`` and ``schemas``, so relative paths in it work and files it writes
 are thrown away; ``animsim`` means this checkout's ``python -m animsim``.
@@ -80,17 +83,31 @@ def run_command(command: str, stdout_only: bool) -> str:
     env = dict(os.environ)
     env.pop("ANIMSIM_DEBUG", None)
     env["COLUMNS"] = DEFAULT_COLUMNS
+    without: list[str] = []
     while words and re.match(r"^[A-Z_]+=", words[0]):
         name, value = words.pop(0).split("=", 1)
-        env[name] = value
+        if name == "WITHOUT":
+            without = [w for w in value.split(",") if w]
+        else:
+            env[name] = value
     if not words or words[0] != "animsim":
         raise SystemExit(f"a quoted command must start with animsim: {command!r}")
-    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
     env["PYTHONUNBUFFERED"] = "1"  # stdout and stderr interleave as on a terminal
     env["TERM"] = "dumb"
     with tempfile.TemporaryDirectory(prefix="animsim-docs-") as scratch:
         for name in LINKED:
             os.symlink(ROOT / name, Path(scratch) / name)
+        path = [str(ROOT)]
+        if without:
+            # A None in sys.modules makes `import x` fail and importlib.util.find_spec(x)
+            # answer None: exactly what an environment without the package does.
+            site = Path(scratch) / ".without"
+            site.mkdir()
+            (site / "sitecustomize.py").write_text(
+                f"import sys\nsys.modules.update(dict.fromkeys({without!r}))\n", encoding="utf-8"
+            )
+            path.insert(0, str(site))
+        env["PYTHONPATH"] = os.pathsep.join([*path, env.get("PYTHONPATH", "")])
         proc = subprocess.run(
             [sys.executable, "-m", "animsim", *words[1:]],
             cwd=scratch,

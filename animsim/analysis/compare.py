@@ -508,7 +508,9 @@ def compare(
         # On the rows' backend: numba's RK4 is the same method, several times faster.
         floor = {} if fine_min_steps is None else {"min_steps": fine_min_steps}
         ref_start = time.perf_counter()
-        ref = rk4_reference(scene, name, times, dts[-1], smallest, distance, backend, **floor)
+        ref = rk4_reference(
+            scene, name, times, dts[-1], smallest, distance, backend, **floor, roundoff=roundoff_floor
+        )
         ref_seconds += time.perf_counter() - ref_start
     notes.extend(ref.notes)
 
@@ -1052,7 +1054,15 @@ def make_plan(
         if len(methods) < len(all_methods):
             cuts.append(f"the methods {', '.join(methods)} instead of all {len(all_methods)}")
         if w < total and not window_given:
-            cuts.append(f"compared over the first {w:g} s of {total:g} s")
+            events = _events(scene)
+            cuts.append(
+                f"compared over the first {w:g} s of {total:g} s"
+                + (
+                    f" (the {', '.join(events)} after it are not compared; --duration sets the window)"
+                    if events
+                    else ""
+                )
+            )
         return Plan(
             list(methods),
             list(steps),
@@ -1067,19 +1077,16 @@ def make_plan(
         )
 
     def longest_window(level: tuple[list[str], list[float], int | None], shortest: float) -> float | None:
-        """The longest record time of the coarsest run, >= shortest, whose plan fits (None: none)."""
+        """The longest window on the ladder (window_ladder), >= shortest, whose plan fits (None: none).
+
+        The rungs are a factor of 2 apart, so the probe's timing noise cannot move the window
+        a little on every rerun: a rerun gives the same window unless the estimate crosses
+        the budget at a rung."""
         times, _ = common_times(scene, level[1], DEFAULT_MAX_STEPS * 1000)
-        candidates = [float(t) for t in times if t >= shortest - 1e-12 and t > 0]
-        best = None
-        lo, hi = 0, len(candidates) - 1
-        while lo <= hi:  # the cost grows with the window: bisect
-            mid = (lo + hi) // 2
-            if fits(level, candidates[mid]):
-                best = candidates[mid]
-                lo = mid + 1
-            else:
-                hi = mid - 1
-        return best
+        for w in window_ladder(times, total, shortest):
+            if fits(level, w):
+                return w
+        return None
 
     first = (method_sets[0], dt_sets[0], None)
     # Everything named, or no budget: run as asked (the estimate says what it costs).
@@ -1110,6 +1117,46 @@ def make_plan(
         times, _ = common_times(scene, level[1], DEFAULT_MAX_STEPS * 1000)
         w = next((float(t) for t in times if t >= shortest - 1e-12 and t > 0), total)
     return plan(level, w)
+
+
+def _events(scene: m.Scene) -> list[str]:
+    """What a scene does at moments of its own that a window cut short may leave out."""
+    out = []
+    if scene.planes or scene.colliders or scene.particle_collisions is not None or scene.bodies:
+        out.append("contacts")
+    if scene.emitters:
+        out.append("births")
+    if any(sp.max_strain is not None for sp in scene.springs) or any(
+        getattr(s, "max_strain", None) is not None
+        or any(
+            getattr(f, "max_strain", None) is not None
+            for f in vars(s).values()
+            if isinstance(f, m.SpringFamily)
+        )
+        for s in scene.structures
+    ):
+        out.append("tearing")
+    return out
+
+
+def window_ladder(times: np.ndarray, total: float, shortest: float) -> list[float]:
+    """The windows a budget may cut the comparison to, longest first: total / 2^k, each
+    taken down to the record time at or before it, none shorter than ``shortest``."""
+    record = np.asarray([t for t in times if t > 0], dtype=np.float64)
+    out: list[float] = []
+    w = total
+    while record.size:
+        at = record[record <= w * (1 + 1e-12)]
+        if not at.size or at[-1] < shortest - 1e-12:
+            break
+        if not out or at[-1] < out[-1]:
+            out.append(float(at[-1]))
+        w /= 2
+    if not out or out[-1] > shortest + 1e-12:  # the shortest window itself is the last rung
+        first = record[record >= shortest - 1e-12]
+        if first.size and (not out or first[0] < out[-1]):
+            out.append(float(first[0]))
+    return out
 
 
 def window_scene(scene: m.Scene, duration: float) -> m.Scene:

@@ -836,6 +836,7 @@ def rk4_reference(
     distance: Callable[[Trajectory, Trajectory], float],
     backend: str = "numpy",
     min_steps: int = FINE_MIN_STEPS,
+    roundoff: Callable[[Trajectory, int], float] | None = None,
 ) -> Reference:
     """RK4 with dt halved until the change is far below the smallest error measured.
 
@@ -844,7 +845,9 @@ def rk4_reference(
     off by about change/15). Stops when the change is below a thousandth of
     ``smallest_error(reference)`` (re-measured against each new reference), or
     at :data:`FINE_MAX_STEPS` or :data:`FINE_MAX_FACTOR` times the finest
-    compared run's steps (but never below ``min_steps``), saying so.
+    compared run's steps (but never below ``min_steps``), saying so. A change at the
+    round-off floor (``roundoff(trajectory, steps)``, m) is convergence too: halving
+    further cannot make it smaller.
     """
     dt = finest_dt / FINE_START_DIVISOR
     first = record_at(scene, name, "rk4", dt, times, backend)
@@ -865,11 +868,15 @@ def rk4_reference(
         prev = cur
         if change <= target or change == 0.0:
             break
+        if roundoff is not None and change <= roundoff(cur, compiled.clock.steps):
+            break  # rounding, not truncation: as converged as double precision allows
         limit = min(FINE_MAX_STEPS, max(min_steps, FINE_MAX_FACTOR * finest_steps))
         if compiled.clock.steps * 2 > limit:
             notes.append(
-                f"the RK4 reference did not converge within {limit} steps "
-                f"(last change {change:.1e} m); errors near it are not trusted"
+                f"the RK4 reference stopped at {compiled.clock.steps} steps (the limit is {limit}): its last "
+                f"halving changed it by {change:.1e} m, more than the {target:.1e} m it aims for (a "
+                f"thousandth of the smallest error measured); errors within about {change:.1e} m of "
+                "it are not trusted"
             )
             break
     desc = f"RK4 at dt = {dt:.3g} s ({compiled.clock.steps} steps; last halving changed it by {change:.1e} m)"

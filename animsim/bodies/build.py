@@ -21,11 +21,6 @@ from animsim.errors import UsageError
 from animsim.scene import models as m
 
 
-def body_integrators() -> tuple[str, ...]:
-    """The methods that integrate bodies (each method declares it in animsim.methods)."""
-    return tuple(m.name for m in methods.all_methods() if m.integrates_bodies)
-
-
 def has_body_end(spring: m.Spring) -> bool:
     return any(isinstance(e, m.BodyPoint) for e in spring.between)
 
@@ -94,7 +89,7 @@ def check_integrator(scene: m.Scene) -> None:
     if scene.bodies and not methods.get(scene.integrator_name).integrates_bodies:
         raise UsageError(
             f"integrator {scene.integrator_name!r} does not integrate rigid bodies (its linearisation "
-            f"covers particle positions only); use one of {', '.join(body_integrators())}"
+            f"covers particle positions only); use one of {', '.join(methods.body_methods())}"
         )
 
 

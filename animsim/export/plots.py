@@ -100,7 +100,9 @@ def compare_figure(comparison: Any) -> Any:
     drawn = [item for item in _series(comparison) if item[1]]
     if drawn:  # the guides span the drawn points only
         drawn_dts = [r.dt for _, rows, _ in drawn for r in rows]
-        _guides(conv, drawn, min(drawn_dts), max(drawn_dts))
+        notes = _guides(conv, drawn, min(drawn_dts), max(drawn_dts))
+    else:
+        notes = []
     for ax in (work, conv):
         ax.set_xscale("log")
         ax.set_yscale("log")
@@ -140,7 +142,28 @@ def compare_figure(comparison: Any) -> Any:
             fontsize="small",
             color="firebrick",
         )
+    _spread_labels(fig, notes)
     return fig
+
+
+def _spread_labels(fig: Any, notes: list[Any]) -> None:
+    """Move guide labels down until none overlaps the one above it (two guides can end at
+    nearly the same height, and their labels were drawn over each other)."""
+    if len(notes) < 2:
+        return
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = fig.canvas if isinstance(fig.canvas, FigureCanvasAgg) else FigureCanvasAgg(fig)
+    canvas.draw()  # the final layout (constrained), so the extents are the saved ones
+    renderer = canvas.get_renderer()
+    above = None
+    for note in sorted(notes, key=lambda a: -a.get_window_extent(renderer).y1):
+        box = note.get_window_extent(renderer)
+        if above is not None and box.y1 > above.y0 and box.x0 < above.x1 and above.x0 < box.x1:
+            dx, dy = note.xyann
+            note.xyann = (dx, dy - (box.y1 - above.y0 + 1.0) * 72.0 / fig.dpi)  # pixels -> points
+            box = note.get_window_extent(renderer)
+        above = box
 
 
 def _unstable_text(rows: list[Any], unstable: list[Any]) -> str:
@@ -177,33 +200,37 @@ def _log_ticks(axis: Any, lo: float, hi: float) -> None:
     axis.set_minor_formatter(NullFormatter())
 
 
-def _guides(ax: Any, series: list[tuple[str, list[Any], Any]], dt_lo: float, dt_hi: float) -> None:
+def _guides(ax: Any, series: list[tuple[str, list[Any], Any]], dt_lo: float, dt_hi: float) -> list[Any]:
     """Dashed lines of slope 1, 2 and 4 across the whole dt range.
 
     Each guide runs parallel just below the first integrator whose expected
     order is its slope (anchored at that integrator's smallest-dt point), so a
     line that follows its guide has the order it should. A slope no compared
-    method claims is anchored below the lowest line.
+    method claims is anchored below the lowest line. Returns the labels' annotations.
     """
     import numpy as np
 
     lowest = min(r.error for _, rows, _ in series for r in rows)
     x = np.geomspace(dt_lo, dt_hi, 20)
+    notes: list[Any] = []
     for p in GUIDE_SLOPES:
         match = next((rows for _, rows, fit in series if fit.expected == p and rows), None)
         anchor = GUIDE_OFFSET * (match[0].error if match else lowest)
         y = anchor * (x / (match[0].dt if match else dt_lo)) ** p
         ax.plot(x, y, ls="--", color="0.45", lw=1.0, zorder=1)
-        ax.annotate(
-            f"slope {p}",
-            (x[-1], y[-1]),
-            textcoords="offset points",
-            xytext=(-2, -3),
-            ha="right",
-            va="top",
-            fontsize="small",
-            color="0.35",
+        notes.append(
+            ax.annotate(
+                f"slope {p}",
+                (x[-1], y[-1]),
+                textcoords="offset points",
+                xytext=(-2, -3),
+                ha="right",
+                va="top",
+                fontsize="small",
+                color="0.35",
+            )
         )
+    return notes
 
 
 def write_compare_plot(comparison: Any, path: str | Path) -> None:

@@ -194,6 +194,11 @@ def names() -> tuple[str, ...]:
     return tuple(m.name for m in all_methods())
 
 
+def body_methods() -> tuple[str, ...]:
+    """The methods that integrate rigid bodies, in table order."""
+    return tuple(m.name for m in all_methods() if m.integrates_bodies)
+
+
 def aliases() -> dict[str, str]:
     """Other spelling -> method name."""
     return {alias: m.name for m in all_methods() for alias in m.aliases}

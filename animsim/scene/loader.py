@@ -14,6 +14,7 @@ this module turns nodes into plain Python data itself so that it can
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import hashlib
 import re
@@ -123,7 +124,7 @@ class LoadedScene:
 
     @property
     def name(self) -> str:
-        return self.scene.name or Path(self.file).stem
+        return self.scene.name or scene_stem(self.file)
 
 
 class _Fault(Exception):
@@ -421,6 +422,41 @@ class _Builder:
         return out
 
 
+#: the scene argument that means "read the scene from standard input", and its name in messages
+STDIN_ARG = "-"
+STDIN_FILE = "<stdin>"
+
+
+def read_stdin(limits: Limits = Limits()) -> bytes:
+    """The scene piped to standard input (``animsim run -``), within the file size limit."""
+    import sys
+
+    if sys.stdin is None or sys.stdin.isatty():
+        raise UsageError(
+            "-: the scene is read from standard input, but that is a terminal; "
+            "pipe one in (cat scene.yaml | animsim run -) or give a file"
+        )
+    stream = getattr(sys.stdin, "buffer", None)
+    chunks: list[bytes] = []
+    total = 0
+    while True:
+        chunk = stream.read(_READ_CHUNK) if stream is not None else sys.stdin.read(_READ_CHUNK).encode()
+        if not chunk:
+            break
+        total += len(chunk)
+        if total > limits.max_file_bytes:
+            raise UsageError(
+                f"{STDIN_FILE}: more than the {limits.max_file_bytes}-byte limit (raise it with --max-file-size)"
+            )
+        chunks.append(chunk)
+    return b"".join(chunks)
+
+
+def scene_stem(path: str | Path) -> str:
+    """The stem outputs and names take from a scene path (``stdin`` for ``-``)."""
+    return "stdin" if str(path) in (STDIN_ARG, STDIN_FILE) else Path(path).stem
+
+
 def read_scene_file(path: str | Path, limits: Limits = Limits()) -> bytes:
     """Read a scene's bytes, refusing what is not a regular file of sane size."""
     p = Path(path)
@@ -458,7 +494,9 @@ def read_scene_file(path: str | Path, limits: Limits = Limits()) -> bytes:
 
 
 def load_scene(path: str | Path, limits: Limits = Limits()) -> LoadedScene:
-    """Read, parse and validate a scene file; raise SceneError with every problem."""
+    """Read, parse and validate a scene file (``-``: standard input); raise SceneError with every problem."""
+    if str(path) == STDIN_ARG:
+        return load_scene_bytes(read_stdin(limits), STDIN_FILE, limits)
     data = read_scene_file(path, limits)
     return load_scene_bytes(data, str(path), limits)
 
@@ -492,15 +530,7 @@ def load_scene_bytes(raw: bytes, file: str, limits: Limits = Limits()) -> Loaded
     try:
         scene = Scene.model_validate(body, context={"marks": True})
     except ValidationError as exc:
-        # Report the cross-field problems of the parts that did validate too,
-        # so one round of fixes is enough (never twice for one key).
-        found = diagnostics(exc, body, marks, file)
-        partial, ids_complete = partial_scene(body)
-        seen = {d.path for d in found}
-        for p, msg, key in check_scene(partial, ids_complete=ids_complete, partial=True):
-            if _dotted(p) not in seen:
-                found.append(Diagnostic(file, *marks.at(p, prefer_key=key), _dotted(p), msg))
-        raise SceneError(found) from None
+        raise scene_error(exc, body, marks, file) from None
     problems = mesh_problems(scene, file, limits.mesh_dirs) + check_scene(scene)
     if problems:
         raise SceneError(
@@ -508,6 +538,27 @@ def load_scene_bytes(raw: bytes, file: str, limits: Limits = Limits()) -> Loaded
         )
     scene._located = (file, marks)
     return LoadedScene(scene=scene, file=file, sha256=sha, marks=marks, data=body, source=text)
+
+
+def scene_error(exc: ValidationError, body: Any, marks: Marks | None, file: str) -> SceneError:
+    """Every problem of a scene that did not validate, as one SceneError.
+
+    ``marks`` None: a scene built in Python, which has no lines to point at
+    (its diagnostics have line 0, shown as the file name alone).
+    """
+    place = marks or Marks()
+    found = diagnostics(exc, body if isinstance(body, dict) else {}, place, file)
+    if isinstance(body, dict):
+        # Report the cross-field problems of the parts that did validate too,
+        # so one round of fixes is enough (never twice for one key).
+        partial, ids_complete = partial_scene(body)
+        seen = {d.path for d in found}
+        for p, msg, key in check_scene(partial, ids_complete=ids_complete, partial=True):
+            if _dotted(p) not in seen:
+                found.append(Diagnostic(file, *place.at(p, prefer_key=key), _dotted(p), msg))
+    if marks is None:
+        found = [dataclasses.replace(d, line=0, column=0) for d in found]
+    return SceneError(found)
 
 
 def mesh_problems(scene: Scene, file: str, mesh_dirs: tuple[str, ...] = ()) -> list[tuple[Path_, str, bool]]:

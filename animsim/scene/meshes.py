@@ -179,7 +179,7 @@ def read_mesh(path: Path) -> MeshGeometry:
         vertices, polygons = _parse_ply(path)
     else:
         vertices, polygons = _parse_stl(path)
-    return check_geometry(vertices, polygons, digest)
+    return check_geometry(vertices, polygons, digest, path.name)
 
 
 def _file_digest(path: Path) -> str:
@@ -434,9 +434,12 @@ def _sniff_stl(path: Path) -> None:
 
 
 def check_geometry(
-    vertices: np.ndarray, polygons: list[tuple[int, list[int]]], digest: str = ""
+    vertices: np.ndarray, polygons: list[tuple[int, list[int]]], digest: str = "", name: str = ""
 ) -> MeshGeometry:
-    """Triangulate and check a mesh (module docstring); raises :class:`MeshError`."""
+    """Triangulate and check a mesh (module docstring); raises :class:`MeshError`.
+
+    ``name``: the file's name, which every message starts with.
+    """
     import numpy as np
 
     n = len(vertices)
@@ -450,8 +453,7 @@ def check_geometry(
     where: list[int] = []
     for k, (lineno, corners) in enumerate(polygons):
         if len(set(corners)) != len(corners):
-            at = f"line {lineno}" if lineno else f"face {k}"
-            raise MeshError(f"{at}: the face repeats a vertex (a degenerate face)")
+            raise MeshError(f"{_face_at(name, k, lineno, corners)} repeats a vertex (a degenerate face)")
         for j in range(1, len(corners) - 1):
             tris.append([corners[0], corners[j], corners[j + 1]])
             where.append(k)
@@ -468,17 +470,44 @@ def check_geometry(
     # Areas relative to the size of the mesh, in coordinates scaled to it: the same test at
     # 1e-300 and 1e300 without underflow or overflow (the squared size of 1e300 is inf).
     size = float(span.max()) or 1.0
-    p = ((vertices - lo) / size)[tri]
-    area2 = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    scaled = (vertices - lo) / size
     extent = float(np.linalg.norm(span / size))
-    flat = np.flatnonzero(area2 <= ZERO_AREA_RTOL * extent**2)
+    tiny = ZERO_AREA_RTOL * extent**2
+
+    def degenerate(t: np.ndarray) -> np.ndarray:
+        p = scaled[t]
+        return np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1) <= tiny
+
+    flat = np.flatnonzero(degenerate(tri))
     if flat.size:
-        k = where[int(flat[0])]
-        lineno = polygons[k][0]
-        at = f"line {lineno}" if lineno else f"face {k}"
-        raise MeshError(
-            f"{at}: the face has zero area (a degenerate face; {flat.size} such triangles in all)"
-        )
+        # A polygon with three corners on one line (a corner on an edge) is a good face whose
+        # fan from its first corner has a sliver: fan it from another corner instead.
+        first_tri = np.searchsorted(np.asarray(where), np.arange(len(polygons)))
+        bad_faces: list[int] = []
+        for k in dict.fromkeys(where[int(i)] for i in flat):
+            corners = polygons[k][1]
+            m = len(corners)
+            for r in range(1, m):
+                c = corners[r:] + corners[:r]
+                fan = np.array([[c[0], c[j], c[j + 1]] for j in range(1, m - 1)], dtype=np.int64)
+                if m > 3 and not degenerate(fan).any():
+                    tri[first_tri[k] : first_tri[k] + m - 2] = fan
+                    break
+            else:
+                bad_faces.append(k)
+        if bad_faces:
+            k = bad_faces[0]
+            lineno, corners = polygons[k]
+            p = scaled[corners]
+            # Newell's normal: twice the polygon's vector area (zero when the face is flat)
+            area = 0.5 * np.linalg.norm(np.cross(p, np.roll(p, -1, axis=0)).sum(axis=0))
+            what = (
+                "has zero area"
+                if area <= tiny
+                else "cannot be split into triangles of nonzero area from any corner (split it in the file)"
+            )
+            more = f"; {len(bad_faces)} such faces in all" if len(bad_faces) > 1 else ""
+            raise MeshError(f"{_face_at(name, k, lineno, corners)} {what} (a degenerate face{more})")
     used = np.zeros(n, dtype=bool)
     used[tri.ravel()] = True
     if not used.all():
@@ -491,6 +520,15 @@ def check_geometry(
     closed = bool(np.all(geom.topology.edge_faces == 2))
     object.__setattr__(geom, "closed", closed)
     return geom
+
+
+def _face_at(name: str, k: int, lineno: int, corners: list[int]) -> str:
+    """A face as the file wrote it: ``m.obj line 12: the face f 1 2 3 4`` (OBJ indices start
+    at 1), or ``m.ply: face 7 (vertices 0 1 2)`` (PLY and STL faces, 0-based)."""
+    prefix = f"{name} " if name else ""
+    if lineno:
+        return f"{prefix}line {lineno}: the face f {' '.join(str(c + 1) for c in corners)}"
+    return f"{prefix.rstrip()}{': ' if name else ''}face {k} (vertices {' '.join(map(str, corners))})"
 
 
 # --- checks the loader runs ----------------------------------------------------------
@@ -627,14 +665,12 @@ def _check_mode(s: MeshStructure, geom: MeshGeometry) -> None:
 
 
 def _check_pins(s: MeshStructure, geom: MeshGeometry) -> list[Problem]:
-    import numpy as np
 
     n = geom.vertex_count
     if isinstance(s.pin, PinInside):
-        box = s.pin.inside
-        x = place(s, geom.vertices)
-        inside = np.all((x >= np.asarray(box.min)) & (x <= np.asarray(box.max)), axis=1)
-        if not inside.any():
+        from animsim.scene.structures import inside_box
+
+        if not inside_box(place(s, geom.vertices), s.pin.inside).any():
             return [
                 (("pin", "inside"), "no vertex of the mesh is inside this box (world coordinates)", False)
             ]
@@ -815,8 +851,9 @@ def mesh_parts(s: MeshStructure, scene_dir: Path | None = None) -> MeshParts:
     n = len(x)
     pinned = np.zeros(n, dtype=bool)
     if isinstance(s.pin, PinInside):
-        lo, hi = np.asarray(s.pin.inside.min), np.asarray(s.pin.inside.max)
-        pinned = np.all((x >= lo) & (x <= hi), axis=1)
+        from animsim.scene.structures import inside_box
+
+        pinned = inside_box(x, s.pin.inside)
     else:
         pinned[[v for v in s.pin if v < n]] = True
     topo = geom.topology

@@ -26,6 +26,7 @@ from pydantic import (
     StrictBool,
     StrictInt,
     StrictStr,
+    ValidationError,
     field_validator,
     model_validator,
 )
@@ -196,7 +197,12 @@ class Particle(Model):
     mass: NonNegative | None = Doc(
         None, "mass, > 0; may be omitted or 0 only when pinned", unit="kg", example=1.0
     )
-    position: Vec3 = Doc(description="position at t = 0; [x, y] means z = 0", unit="m", example=[0, 1, 0])
+    position: Vec3 | None = Doc(
+        None,
+        "position at t = 0; [x, y] means z = 0. Required, except with keyframes: then the path at t = 0",
+        unit="m",
+        example=[0, 1, 0],
+    )
     velocity: Vec3 = Doc([0.0, 0.0, 0.0], "velocity at t = 0", unit="m/s", example=[10, 10, 0])
     pinned: StrictBool = Doc(
         False, "forces never move it; it keeps its velocity (a moving anchor)", example=True
@@ -222,6 +228,14 @@ class Particle(Model):
     def _interpolation_needs_keys(self) -> Particle:
         if self.interpolation is not None and self.keyframes is None:
             raise ValueError("interpolation applies only with keyframes")
+        if self.position is None and self.keyframes is not None:
+            # The first key already says where the particle starts: its path at
+            # t = 0 (held at the first key before it) is the default position.
+            from animsim.paths import make_paths
+
+            smooth = self.interpolation == "smooth"
+            at0, _ = make_paths([self.keyframes], [smooth]).evaluate(0.0)
+            object.__setattr__(self, "position", tuple(float(x) for x in at0[0]))
         return self
 
 
@@ -619,13 +633,38 @@ def _lattice(dims: int) -> Any:
     ]
 
 
+class PinBox(Model):
+    """An axis-aligned box in world coordinates."""
+
+    min: Vec3 = Doc(description="the corner with the smallest x, y, z", unit="m", example=[-1, 1.9, -1])
+    max: Vec3 = Doc(description="the corner with the largest x, y, z", unit="m", example=[1, 2.1, 1])
+
+    @model_validator(mode="after")
+    def _ordered(self) -> PinBox:
+        if any(a > b for a, b in zip(self.min, self.max, strict=True)):
+            raise ValueError("min must not exceed max in any axis")
+        return self
+
+
+class PinInside(Model):
+    """Pins chosen by place instead of by index."""
+
+    inside: PinBox = Doc(
+        description="pin every particle inside this box (world coordinates; a mesh's vertices after "
+        "scale, rotation and position)",
+        example={"min": [-1, 1.9, -1], "max": [1, 2.1, 1]},
+    )
+
+
 class _StructureCommon(Model):
     """What every structure has: an id prefix, per-particle mass, start velocity, pins."""
 
     id: StrictStr = Doc(description="particle ids become <id>[i,j]", min_length=1, example="sheet")
     mass: Positive = Doc(description="mass of each particle", unit="kg", example=0.01)
     velocity: Vec3 = Doc([0.0, 0.0, 0.0], "initial velocity of every particle", unit="m/s")
-    pin: list[Id] = Doc([], "ids of particles held in place", example=["sheet[0,0]", "sheet[19,0]"])
+    pin: list[Id] | PinInside = Doc(
+        [], "ids of particles held in place, or {inside: {min, max}}", example=["sheet[0,0]", "sheet[19,0]"]
+    )
     pin_motion: Motion | None = Doc(
         None,
         "keyframed offsets [[t, [dx, dy, dz]], ...] added to every pinned particle's "
@@ -634,6 +673,12 @@ class _StructureCommon(Model):
     )
     radius: NonNegative | None = Doc(
         None, "each particle's radius, for contacts and colliders", unit="m", example=0.01
+    )
+    max_strain: MaxStrain = Doc(
+        None,
+        "tearing for every spring family of the structure that sets no max_strain of its own: "
+        "a spring breaks for good once |L| / rest - 1 exceeds this",
+        example=0.5,
     )
 
 
@@ -672,7 +717,9 @@ class Strand(_StructureCommon):
     type: Literal["strand"] = Doc(description="selects this structure")
     # id and pin again only for examples that fit a strand (the order of keys stays the common one)
     id: StrictStr = Doc(description="particle ids become <id>[i]", min_length=1, example="hair")
-    pin: list[Id] = Doc([], "ids of particles held in place", example=["hair[0]"])
+    pin: list[Id] | PinInside = Doc(
+        [], "ids of particles held in place, or {inside: {min, max}}", example=["hair[0]"]
+    )
     start: Vec3 = Doc(description="position of particle [0]", unit="m", example=[0, 2, 0])
     end: Vec3 = Doc(description="position of the last particle [count-1]", unit="m", example=[0, 1, 0])
     count: Annotated[StrictInt, Field(ge=2, le=MAX_STRAND_COUNT)] = Doc(
@@ -693,7 +740,9 @@ class SoftBox(_StructureCommon):
 
     type: Literal["soft_box"] = Doc(description="selects this structure")
     id: StrictStr = Doc(description="particle ids become <id>[i,j,k]", min_length=1, example="jello")
-    pin: list[Id] = Doc([], "ids of particles held in place", example=["jello[0,0,0]"])
+    pin: list[Id] | PinInside = Doc(
+        [], "ids of particles held in place, or {inside: {min, max}}", example=["jello[0,0,0]"]
+    )
     center: Vec3 = Doc([0.0, 0.0, 0.0], "centre of the box", unit="m", example=[0, 1, 0])
     size: Annotated[list[Positive], Field(min_length=3, max_length=3)] = Doc(
         description="edge lengths along x, y, z", unit="m", example=[0.5, 0.5, 0.5]
@@ -730,28 +779,6 @@ class AxisAngle(Model):
         if v == (0.0, 0.0, 0.0):
             raise ValueError("the axis must not be zero")
         return v
-
-
-class PinBox(Model):
-    """An axis-aligned box in world coordinates."""
-
-    min: Vec3 = Doc(description="the corner with the smallest x, y, z", unit="m", example=[-1, 1.9, -1])
-    max: Vec3 = Doc(description="the corner with the largest x, y, z", unit="m", example=[1, 2.1, 1])
-
-    @model_validator(mode="after")
-    def _ordered(self) -> PinBox:
-        if any(a > b for a, b in zip(self.min, self.max, strict=True)):
-            raise ValueError("min must not exceed max in any axis")
-        return self
-
-
-class PinInside(Model):
-    """Pins chosen by place instead of by index."""
-
-    inside: PinBox = Doc(
-        description="pin every vertex inside this box (world coordinates, after scale, rotation and position)",
-        example={"min": [-1, 1.9, -1], "max": [1, 2.1, 1]},
-    )
 
 
 MAX_MESH_VERTICES = 200_000
@@ -791,6 +818,12 @@ class MeshStructure(Model):
     )
     volume: SpringFamily | None = Doc(
         None, "soft_body only: interior struts that keep the volume", example={"ks": 200, "kd": 0.2}
+    )
+    max_strain: MaxStrain = Doc(
+        None,
+        "tearing for every spring family of the mesh that sets no max_strain of its own: "
+        "a spring breaks for good once |L| / rest - 1 exceeds this",
+        example=0.5,
     )
     pin: list[Annotated[StrictInt, Field(ge=0)]] | PinInside = Doc(
         [], "vertex indices, or {inside: {min, max}}", example=[0, 5]
@@ -923,7 +956,15 @@ class Record(Model):
 CROSS_CHECKS: list[Callable[[Scene], list[tuple[tuple[str | int, ...], str, bool]]]] = []
 
 
-class Scene(Model):
+class _SceneType(type(Model)):  # type: ignore[misc]
+    def __call__(cls, /, **data: Any) -> Any:
+        try:
+            return super().__call__(**data)
+        except ValidationError as exc:
+            raise _python_scene_error(exc, data) from None
+
+
+class Scene(Model, metaclass=_SceneType):
     """A whole scene file."""
 
     model_config = ConfigDict(
@@ -1011,6 +1052,33 @@ class Scene(Model):
         example=[{"id": "die", "shape": {"type": "box", "size": [0.1, 0.1, 0.1]}, "mass": 0.2}],
     )
 
+    # A scene built in Python gets the loader's diagnostics (key path and
+    # message) as one SceneError, never pydantic's own error type: the Python
+    # API promises one error type for every bad scene. (Scene(**data) is
+    # covered by the metaclass: a custom __init__ would make pydantic call it
+    # for every validation and drop the loader's context.)
+    @classmethod
+    def model_validate(cls, obj: Any, **kw: Any) -> Scene:
+        try:
+            return super().model_validate(obj, **kw)
+        except ValidationError as exc:
+            context = kw.get("context")
+            if context and context.get("marks"):
+                raise  # the loader turns it into diagnostics with lines
+            raise _python_scene_error(exc, obj) from None
+
+    @classmethod
+    def model_validate_json(cls, json_data: Any, **kw: Any) -> Scene:
+        import json
+
+        try:
+            data = json.loads(json_data)
+        except ValueError as exc:
+            from animsim.errors import Diagnostic, SceneError
+
+            raise SceneError([Diagnostic(PYTHON_SOURCE, 0, 0, "", f"not JSON: {exc}")]) from None
+        return cls.model_validate(data, **kw)
+
     @model_validator(mode="after")
     def _cross_checks(self, info: Any) -> Scene:
         """The rules that span sections (a spring to an unknown id, ...), for scenes built in
@@ -1034,3 +1102,9 @@ class Scene(Model):
     @property
     def adaptive(self) -> Adaptive | None:
         return None if isinstance(self.integrator, str) else self.integrator.adaptive
+
+
+def _python_scene_error(exc: ValidationError, data: Any) -> Exception:
+    from animsim.scene.loader import scene_error
+
+    return scene_error(exc, data, None, PYTHON_SOURCE)

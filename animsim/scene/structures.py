@@ -31,7 +31,16 @@ if TYPE_CHECKING:  # numpy is imported where arrays are built, so validating a s
     import numpy as np  # (and refusing a bad one) does not pay for importing it
 
 from animsim.scene.meshes import mesh_parts, mesh_spring_count
-from animsim.scene.models import Cloth, MeshStructure, SoftBox, SpringFamily, Strand, Structure
+from animsim.scene.models import (
+    Cloth,
+    MeshStructure,
+    PinBox,
+    PinInside,
+    SoftBox,
+    SpringFamily,
+    Strand,
+    Structure,
+)
 
 _PLANE_AXES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}
 
@@ -164,6 +173,20 @@ def _offset_pairs(shape: tuple[int, ...], offset: tuple[int, ...]) -> np.ndarray
     return _pairs(shape, tuple(a), tuple(b))
 
 
+def family_max_strain(s: Structure, fam: SpringFamily) -> float:
+    """The tearing limit of one spring family: its own max_strain, else the structure's
+    (which tears every family that sets none), else +inf (never breaks)."""
+    limit = fam.max_strain if fam.max_strain is not None else s.max_strain
+    return float("inf") if limit is None else float(limit)
+
+
+def tears(s: Structure) -> bool:
+    """Whether any spring family of ``s`` has a tearing limit."""
+    if s.max_strain is not None:
+        return True
+    return any(isinstance(f, SpringFamily) and f.max_strain is not None for f in vars(s).values())
+
+
 def family_offsets(s: Structure) -> list[tuple[str, SpringFamily, list[tuple[int, ...]]]]:
     """The spring families a structure asks for, each with its grid offsets."""
     if isinstance(s, Cloth):
@@ -205,19 +228,16 @@ def expand(s: Structure, scene_dir: Path | None = None) -> Expanded:
         return _expand_mesh(s, scene_dir)
     shape = grid_shape(s)
     n = int(np.prod(shape))
-    pos = initial_positions(s)
+    pos = grid_positions(s)
     pinned = np.zeros(n, dtype=bool)
-    for pid in s.pin:
-        li = local_index(s, pid)
-        if li is not None:
-            pinned[li] = True
+    pinned[pinned_rows(s)] = True
     groups = [
         SpringGroup(
             f"{s.type} {s.id}: {name}",
             pairs,
             fam.ks,
             fam.kd,
-            float("inf") if fam.max_strain is None else fam.max_strain,
+            family_max_strain(s, fam),
         )
         for name, pairs, fam in _families(s, shape)
     ]
@@ -237,12 +257,17 @@ def expand(s: Structure, scene_dir: Path | None = None) -> Expanded:
 def initial_positions(s: Structure, scene_dir: Path | None = None) -> np.ndarray:
     """The (n, 3) starting positions of ``s``'s particles, without its springs (the pre-flight's
     contact count needs only these)."""
-    import numpy as np
-
     if isinstance(s, MeshStructure):
         from animsim.scene.meshes import geometry_of, place
 
         return place(s, geometry_of(s, scene_dir).vertices)
+    return grid_positions(s)
+
+
+def grid_positions(s: Structure) -> np.ndarray:
+    """(n, 3) positions of a cloth, strand or soft box, in creation order."""
+    import numpy as np
+
     shape = grid_shape(s)
     n = int(np.prod(shape))
     if isinstance(s, Cloth):
@@ -260,6 +285,25 @@ def initial_positions(s: Structure, scene_dir: Path | None = None) -> np.ndarray
         grid = np.stack(np.meshgrid(*frac, indexing="ij"), axis=-1).reshape(-1, 3)
         pos = np.asarray(s.center) + grid * np.asarray(s.size)
     return np.ascontiguousarray(pos, dtype=np.float64)
+
+
+def inside_box(x: np.ndarray, box: PinBox) -> np.ndarray:
+    """(n,) True where a point of ``x`` (n, 3) lies in ``box``, faces included
+    (``pin: {inside: {min, max}}`` of every structure and mesh)."""
+    import numpy as np
+
+    return np.all((x >= np.asarray(box.min)) & (x <= np.asarray(box.max)), axis=1)
+
+
+def pinned_rows(s: Structure) -> np.ndarray:
+    """Local indices of the pinned particles of a cloth, strand or soft box: the listed ids
+    (one that names no particle is reported by the scene check), or those inside the box."""
+    import numpy as np
+
+    if isinstance(s.pin, PinInside):
+        return np.flatnonzero(inside_box(grid_positions(s), s.pin.inside))
+    rows = [local_index(s, pid) for pid in s.pin]
+    return np.array(sorted({r for r in rows if r is not None}), dtype=np.int64)
 
 
 def _grid_faces(s: Structure, shape: tuple[int, ...]) -> np.ndarray | None:
@@ -306,7 +350,7 @@ def _expand_mesh(s: MeshStructure, scene_dir: Path | None) -> Expanded:
             np.ascontiguousarray(pairs, dtype=np.int64),
             fam.ks,
             fam.kd,
-            float("inf") if fam.max_strain is None else fam.max_strain,  # tearing
+            family_max_strain(s, fam),  # tearing
         )
         for name, pairs, fam in parts.families
     ]

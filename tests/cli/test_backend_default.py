@@ -40,23 +40,6 @@ def test_compile_notice_goes_to_stderr_on_a_terminal_only(monkeypatch, capsys):
     assert cli._notice(quiet=False) is None
 
 
-@pytest.mark.skipif(not HAS_NUMBA, reason="numba is not installed")
-def test_engine_hands_the_notice_to_a_first_numba_run(monkeypatch):
-    """With no cached kernels the stepper's prepare() speaks through ``notice``."""
-    from animsim import steppers
-    from animsim.compile import compile_scene
-    from animsim.engine import run
-    from animsim.scene.loader import load_scene
-
-    monkeypatch.setattr(steppers, "_kernels_cached", lambda: False)
-    heard: list[str] = []
-    compiled = compile_scene(load_scene(SCENES / "spring_pendulum.yaml").scene, "p", backend="numba")
-    result = run(compiled, [], notice=heard.append)
-    assert result.status == "ok"
-    assert heard and heard[0].startswith("compiling numba kernels (first run only")
-    assert result.meta["compile_time"] > 0 and result.wall_time > 0
-
-
 #: a scene small and short enough that each command's run costs nothing but its compile
 TINY = """
 duration: 0.2

@@ -103,9 +103,11 @@ def test_default_options_pick_a_plan_that_fits_and_say_what_they_cut(pendulum, b
         assert plan.window < 2.5, "methods are dropped only when half the scene does not fit"
         assert "verlet" in plan.integrators, "the scene's own method is kept"
         assert set(cmp.CORE_INTEGRATORS) <= set(plan.integrators)
-    # nothing longer would have fitted: the next record time after the window is over budget
+    # nothing longer would have fitted: the next rung of the window ladder is over budget
     if plan.window < 5.0:
-        longer = plan.window + 1 / 60
+        times, _ = cmp.common_times(pendulum.scene, plan.dts, cmp.DEFAULT_MAX_STEPS)
+        ladder = cmp.window_ladder(times, 5.0, cmp.MIN_WINDOW_STEPS * max(plan.dts))
+        longer = ladder[ladder.index(plan.window) - 1]
         bigger = cmp.estimate_from(plan.probe, plan.integrators, plan.dts, longer, plan.repeat)
         assert bigger.seconds > plan.run_budget
 
@@ -214,9 +216,34 @@ def test_the_rk4_reference_runs_the_step_sizes_its_estimate_counts(monkeypatch):
         never = refs.rk4_reference(
             scene, "b", np.array([0.0, 0.05]), 0.001, lambda _: 1e-3, lambda a, b: 1.0, **kw
         )
-        assert "did not converge" in never.notes[0]
+        assert "the RK4 reference stopped at" in never.notes[0]
+        # the note's numbers agree: the change it names is above the target it names
+        assert "changed it by 1.0e+00 m, more than the 1.0e-06 m it aims for" in never.notes[0]
         assert ran == pytest.approx(cmp.rk4_reference_dts(0.001, 0.05, floor))
     assert len(cmp.rk4_reference_dts(0.001, 0.05, None)) > len(cmp.rk4_reference_dts(0.001, 0.05, 0)) == 2
+
+
+def test_a_reference_whose_change_is_round_off_has_converged():
+    """A change at the round-off floor cannot shrink by halving: converged, and no note says
+    it did not (the notes never read 'did not converge (last change 1e-12 m)')."""
+    import animsim.analysis.references as refs
+
+    scene = load_scene(SCENES / "bouncing_balls.yaml").scene.model_copy(update={"duration": 0.05})
+    tiny = 1.4e-12
+    ref = refs.rk4_reference(
+        scene,
+        "b",
+        np.array([0.0, 0.05]),
+        0.001,
+        lambda _: 1e-12,  # every compared error at round-off: the target is 1e-15 m
+        lambda a, b: tiny,
+        roundoff=lambda traj, steps: 2e-12,
+    )
+    assert ref.notes == []
+    ref = refs.rk4_reference(
+        scene, "b", np.array([0.0, 0.05]), 0.001, lambda _: 1e-12, lambda a, b: tiny, min_steps=0
+    )
+    assert "did not converge" not in ref.notes[0] and "1.4e-12 m, more than the 1.0e-15 m" in ref.notes[0]
 
 
 def test_the_real_probe_measures_each_method_and_the_reference():
@@ -271,3 +298,45 @@ def test_help_documents_the_budget():
     r = run_cli("compare", "--help", env_extra={"COLUMNS": "200"})
     assert r.returncode == 0
     assert "--budget" in r.stdout and "--duration" in r.stdout
+
+
+def test_the_window_is_a_rung_of_a_ladder_halving_the_scene():
+    times = np.linspace(0.0, 2.0, 201)
+    assert cmp.window_ladder(times, 2.0, 0.3) == [2.0, 1.0, 0.5, 0.3]
+    # rungs land on record times (here every 0.2 s), never below the shortest window
+    assert cmp.window_ladder(np.linspace(0.0, 2.0, 11), 2.0, 0.05) == [2.0, 1.0, 0.4, 0.2]
+
+
+@pytest.mark.parametrize("noise", [0.8, 0.9, 1.1, 1.25])
+def test_timing_noise_does_not_move_the_window(monkeypatch, noise):
+    """The same command on a machine a little faster or slower (the probe's timings off by up
+    to 25 %) compares over the same window: the table is reproducible."""
+    loaded = load_scene(SCENES / "spring_pendulum.yaml")
+
+    def plan_with(factor: float) -> cmp.Plan:
+        found = fake_probe(loaded.scene)
+        found.curve_w = found.curve_w * factor
+        found.per_step = {k: v * factor for k, v in found.per_step.items()}
+        monkeypatch.setattr(cmp, "probe", lambda *a, **k: found)
+        return cmp.make_plan(loaded.scene, loaded.name, budget=3.0)
+
+    base = plan_with(1.0)
+    assert base.window < loaded.scene.duration  # the budget does cut the window here
+    assert plan_with(noise).window == base.window
+
+
+def test_a_window_cut_short_names_the_events_it_leaves_out(monkeypatch):
+    """A budget that cuts the window of a scene with contacts says they may be left out."""
+    loaded = load_scene(SCENES / "bouncing_balls.yaml")  # planes: contacts
+    found = fake_probe(loaded.scene)
+    monkeypatch.setattr(cmp, "probe", lambda *a, **k: found)
+    plan = cmp.make_plan(loaded.scene, loaded.name, budget=3.0)
+    assert plan.window < loaded.scene.duration
+    (cut,) = [c for c in plan.cuts if c.startswith("compared over the first")]
+    assert cut.endswith("(the contacts after it are not compared; --duration sets the window)")
+    # a scene with nothing happening at moments of its own says nothing more
+    pendulum = load_scene(SCENES / "spring_pendulum.yaml")
+    monkeypatch.setattr(cmp, "probe", lambda *a, **k: fake_probe(pendulum.scene))
+    plan = cmp.make_plan(pendulum.scene, pendulum.name, budget=3.0)
+    (cut,) = [c for c in plan.cuts if c.startswith("compared over the first")]
+    assert cut.endswith(" s of 5 s")

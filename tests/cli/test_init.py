@@ -118,3 +118,29 @@ def test_a_folder_that_refuses_new_files_is_a_usage_error(tmp_path):
     assert r.returncode == 2, r.stderr
     assert "cannot create files in" in r.stderr and "Traceback" not in r.stderr
     assert not (folder / "scene.yaml").exists() and not (folder / "scene.schema.json").exists()
+
+
+def test_the_mesh_template_writes_its_mesh_and_runs(tmp_path):
+    proc = run_cli("init", "soft.yaml", "--template", "mesh", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert f"wrote {tmp_path / 'cube.obj'}" in proc.stdout or "wrote cube.obj" in proc.stdout
+    proc = run_cli("run", "soft.yaml", "-q", "--backend", "numpy", "--duration", "0.05", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    # the cube's 8 corners are the particles, one per vertex of the file
+    assert (tmp_path / "soft.csv").read_text().count("\n0.0,cube[") == 8
+    # a second init beside it keeps the same cube.obj; a changed one is refused, then forced
+    assert run_cli("init", "soft2.yaml", "--template", "mesh", cwd=tmp_path).returncode == 0
+    (tmp_path / "cube.obj").write_text("# mine\n")
+    proc = run_cli("init", "soft3.yaml", "--template", "mesh", cwd=tmp_path)
+    assert proc.returncode == 2 and "cube.obj: already exists and differs" in proc.stderr
+    assert not (tmp_path / "soft3.yaml").exists()
+    assert run_cli("init", "soft3.yaml", "--template", "mesh", "--force", cwd=tmp_path).returncode == 0
+    assert (tmp_path / "cube.obj").read_text().startswith("# a unit cube")
+
+
+@pytest.mark.parametrize("name", ["bodies", "contacts"])
+def test_the_bodies_and_contacts_templates_run(tmp_path, name):
+    assert run_cli("init", "s.yaml", "--template", name, cwd=tmp_path).returncode == 0
+    proc = run_cli("run", "s.yaml", "--backend", "numpy", "--duration", "0.1", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert "status ok" in proc.stdout

@@ -73,7 +73,12 @@ def huge_obj() -> str:
             "cloth",
             "line 4: face index 9 is out of range",
         ),
-        ("flat.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", "cloth", "line 4: the face has zero area"),
+        (
+            "flat.obj",
+            "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n",
+            "cloth",
+            "flat.obj line 4: the face f 1 2 3 has zero area",
+        ),
         (
             "huge.obj",
             "HUGE",

@@ -63,3 +63,43 @@ def test_plot_errors(tmp_path):
     r = run_cli("plot", traj, "-o", tmp_path / "e.png", "--view", "3d")
     assert r.returncode == 2
     assert not (tmp_path / "e.png").exists()
+
+
+def test_guide_labels_never_overlap_when_two_guides_end_together():
+    """Slope 2 and slope 4 guides anchored so they end at the same height at the largest dt:
+    their labels are moved apart, not drawn over each other."""
+    from types import SimpleNamespace
+
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from animsim.export.plots import _guides, _spread_labels
+
+    def rows(err_at_hi: float, p: int) -> list[SimpleNamespace]:
+        # errors along err_at_hi * (dt / 0.02)^p, so each guide (anchored at the smallest dt,
+        # a fixed factor below) ends at the same height err_at_hi * GUIDE_OFFSET
+        return [SimpleNamespace(dt=d, error=err_at_hi * (d / 0.02) ** p) for d in (0.0025, 0.005, 0.01, 0.02)]
+
+    series = [
+        ("midpoint", rows(1e-3, 2), SimpleNamespace(expected=2)),
+        ("rk4", rows(1e-3, 4), SimpleNamespace(expected=4)),
+    ]
+    fig = Figure(figsize=(6, 4), dpi=100, layout="constrained")
+    ax = fig.subplots()
+    for _, rs, _ in series:
+        ax.plot([r.dt for r in rs], [r.error for r in rs])
+    notes = _guides(ax, series, 0.0025, 0.02)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    renderer = canvas.get_renderer()
+    by_text = {n.get_text(): n for n in notes}
+    a, b = (by_text[f"slope {p}"].get_window_extent(renderer) for p in (2, 4))
+    assert a.overlaps(b), "the case must start with overlapping labels"
+    _spread_labels(fig, notes)
+    canvas.draw()
+    boxes = [n.get_window_extent(renderer) for n in notes]
+    for i in range(len(boxes)):
+        for j in range(i + 1, len(boxes)):
+            assert not boxes[i].overlaps(boxes[j]), (notes[i].get_text(), notes[j].get_text())

@@ -164,12 +164,14 @@ bodies:
 
 
 def test_implicit_euler_refuses_bodies_with_a_clear_message() -> None:
-    scene = animsim.loads(
-        "duration: 0.1\nintegrator: implicit_euler\nbodies:\n  - " + _box(extra="position: [0, 0, 0]"),
-        name="t",
-    )
+    text = "duration: 0.1\nintegrator: implicit_euler\nbodies:\n  - " + _box(extra="position: [0, 0, 0]")
+    with pytest.raises(animsim.SceneError) as caught:
+        animsim.loads(text, name="t")  # refused where the integrator is written
+    (d,) = caught.value.diagnostics
+    assert (d.line, d.path) == (2, "integrator") and "does not integrate rigid bodies" in d.message
+    scene = animsim.loads(text.replace("implicit_euler", "rk4"), name="t")
     with pytest.raises(animsim.errors.UsageError, match="does not integrate rigid bodies"):
-        animsim.simulate(scene)
+        animsim.simulate(scene, integrator="implicit_euler")  # and as an override
 
 
 # --- contacts -----------------------------------------------------------------------------

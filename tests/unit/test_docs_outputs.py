@@ -158,3 +158,11 @@ def test_normalise_hides_timings_in_plain_tables_too():
     assert mdo.normalise(a) != mdo.normalise(a.replace("   200", "   201"))
     # the table ends at the first line at the left margin: its words are kept
     assert "analytic" in mdo.normalise(a)
+
+
+def test_a_quote_after_an_install_without_numba_runs_without_it():
+    """The README's first output follows `pip install -e .` (no numba): it is made the same way."""
+    out = mdo.run_command("WITHOUT=numba animsim explain scenes/oscillator.yaml", False)
+    assert "backend: numpy; auto: numba is not installed" in out
+    (first,) = [b for b in mdo.find_blocks(ROOT / "README.md") if b.command.endswith("run scenes/cloth.yaml")]
+    assert first.command == "WITHOUT=numba animsim run scenes/cloth.yaml"

@@ -87,8 +87,8 @@ def test_ply_meshes_read_with_animsim_reader(tmp_path: Path) -> None:
             "line 4: face index 4 is out of range (the file has 3 vertices)",
         ),
         ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 0\n", "line 4: vertex indices start at 1"),
-        ("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", "line 4: the face has zero area"),
-        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 2\n", "line 4: the face repeats a vertex"),
+        ("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", "line 4: the face f 1 2 3 has zero area"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 2\n", "line 4: the face f 1 2 2 repeats a vertex"),
         ("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 5 5 5\nf 1 2 3\n", "vertex 3 (0-based) is used by no face"),
         ("v 0 0 nan\n", "line 1: vertex coordinates must be finite"),
         ("v 0 0\n", "line 1: a vertex needs x y z"),
@@ -100,6 +100,29 @@ def test_bad_obj_files_say_what_is_wrong(tmp_path: Path, text: str, message: str
     with pytest.raises(MeshError, match=None) as err:
         read_mesh(obj(tmp_path, text))
     assert message in str(err.value)
+
+
+def test_a_polygon_with_a_corner_on_an_edge_is_fanned_from_another_corner(tmp_path: Path) -> None:
+    # a 2 x 1 rectangle written with a fifth corner in the middle of its bottom edge: the fan
+    # from corner 1 would hold the sliver (1, 2, 3); the face itself is fine
+    text = "v 0 0 0\nv 1 0 0\nv 2 0 0\nv 2 1 0\nv 0 1 0\nf 1 2 3 4 5\n"
+    g = read_mesh(obj(tmp_path, text))
+    p = g.vertices[g.triangles]
+    cross = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    assert len(g.triangles) == 3
+    assert np.all(cross[:, 2] > 0)  # every triangle non-degenerate, wound as the face (+z)
+    assert math.isclose(0.5 * cross[:, 2].sum(), 2.0)  # they cover the 2 m^2 face exactly
+
+
+def test_a_flat_polygon_is_named_as_written_with_its_file(tmp_path: Path) -> None:
+    text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nv 3 0 0\nv 4 0 0\nf 1 2 3\nf 4 5 6 -3\n"
+    with pytest.raises(MeshError) as err:
+        read_mesh(obj(tmp_path, text, "strip.obj"))
+    assert str(err.value) == "strip.obj line 8: the face f 4 5 6 4 repeats a vertex (a degenerate face)"
+    text = text.replace("f 4 5 6 -3", "f 4 5 6 2")
+    with pytest.raises(MeshError) as err:
+        read_mesh(obj(tmp_path, text, "strip.obj"))
+    assert str(err.value) == "strip.obj line 8: the face f 4 5 6 2 has zero area (a degenerate face)"
 
 
 def test_binary_and_unknown_files_are_refused(tmp_path: Path) -> None:

@@ -1,0 +1,154 @@
+"""Cold start: the first `animsim run` of each `init` template and of some example scenes,
+with an empty numba cache, as a new user meets it.
+
+    python -m benchmarks.cold_start                      # every template and the scenes below
+    python -m benchmarks.cold_start --only fountain      # some of them
+    python -m benchmarks.cold_start --markdown out.md    # also write the table
+    python -m benchmarks.cold_start --from-table out.md  # file a table into RESULTS.md
+
+The section goes to ``benchmarks/cold_start.md``, which ``python -m benchmarks``
+keeps in ``RESULTS.md`` (after its start-up table), and into ``RESULTS.md`` now.
+
+Each case is a fresh process (``python -m animsim run SCENE -o OUT -q --backend
+numba``) with ``NUMBA_CACHE_DIR`` pointing at a new, empty folder, so every kernel
+the scene uses compiles; then the same command again, which loads them all from that
+cache. The table gives the wall seconds of both, the CPU seconds of the first (on a
+loaded machine wall time grows, CPU time much less), and what the run itself reports
+as compile time (``compile_time`` in the .meta.json: the kernels compiled when the
+stepper starts; those compiled while the scene compiles are not in it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENES = ["cloth", "fountain", "die_throw", "sand_pour", "soft_ball"]
+
+
+def _cases(only: list[str] | None, work: Path) -> list[tuple[str, Path]]:
+    sys.path.insert(0, str(ROOT))
+    from animsim.templates import TEMPLATES
+
+    out: list[tuple[str, Path]] = []
+    for name in TEMPLATES:
+        path = work / f"template_{name}.yaml"
+        subprocess.run(
+            [sys.executable, "-m", "animsim", "init", str(path), "--template", name, "--force"],
+            cwd=work,
+            check=True,
+            capture_output=True,
+            env=_env(None),
+        )
+        out.append((f"init --template {name}", path))
+    out.extend((f"scenes/{s}.yaml", ROOT / "scenes" / f"{s}.yaml") for s in SCENES)
+    if only:
+        out = [c for c in out if any(o in c[0] for o in only)]
+    return out
+
+
+def _env(cache: Path | None) -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
+    if cache is not None:
+        env["NUMBA_CACHE_DIR"] = str(cache)
+    return env
+
+
+def _run(scene: Path, out: Path, cache: Path) -> tuple[float, float, dict]:
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    r = subprocess.run(
+        [sys.executable, "-m", "animsim", "run", str(scene), "-o", str(out), "-q", "--backend", "numba"],
+        cwd=scene.parent,
+        capture_output=True,
+        text=True,
+        env=_env(cache),
+    )
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if r.returncode != 0:
+        raise SystemExit(f"{scene}: exit {r.returncode}\n{r.stderr}")
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    meta = json.loads(Path(f"{out}.meta.json").read_text())
+    return wall, cpu, meta
+
+
+HERE = Path(__file__).resolve().parent
+SECTION_FILE = HERE / "cold_start.md"
+RESULTS = HERE / "RESULTS.md"
+TITLE = "## Cold start: the first run with an empty numba cache (`benchmarks/cold_start.py`)"
+EXPLAIN = (
+    "Each row is a fresh `animsim run SCENE -q --backend numba` with `NUMBA_CACHE_DIR` set to a new, "
+    "empty folder (every kernel the scene uses compiles), then the same command again (every kernel "
+    "loads from that cache). Compiling is single-threaded, so on a quiet machine the cold wall time is "
+    "about its CPU time; on a loaded one the wall time grows with the load and the CPU time does not."
+)
+
+
+def file_section(table: str) -> None:
+    """Write the section to cold_start.md and put it into RESULTS.md (replacing an older one)."""
+    lines = table.strip().splitlines()
+    if len(lines) > 1 and not lines[1].startswith("| ---"):  # a table printed row by row
+        lines.insert(1, "| --- | ---: | ---: | ---: | ---: |")
+    text = f"{TITLE}\n\n{EXPLAIN}\n\n" + "\n".join(lines) + "\n"
+    SECTION_FILE.write_text(text, encoding="utf-8")
+    results = RESULTS.read_text(encoding="utf-8")
+    if TITLE in results:
+        start = results.index(TITLE)
+        end = results.find("\n## ", start + len(TITLE))
+        results = results[:start] + text + ("\n" + results[end + 1 :] if end >= 0 else "")
+    else:
+        anchor = "\n## Start-up (fresh process, numba kernels from the on-disk cache)"
+        at = results.find("\n## ", results.find(anchor) + len(anchor)) if anchor in results else -1
+        results = results[: at + 1] + text + "\n" + results[at + 1 :] if at >= 0 else results + "\n" + text
+    RESULTS.write_text(results, encoding="utf-8")
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--only", nargs="*", help="cases whose name contains one of these")
+    ap.add_argument("--markdown", type=Path, help="write the table here too")
+    ap.add_argument("--from-table", type=Path, help="file this table (written by --markdown) and stop")
+    args = ap.parse_args(argv)
+    if args.from_table:
+        file_section(args.from_table.read_text(encoding="utf-8"))
+        return
+    rows = [
+        "| first run of | cold: wall s | cold: CPU s | cold: compile_time s | warm: wall s |",
+        "| --- | ---: | ---: | ---: | ---: |",
+    ]
+    print(rows[0], rows[1], sep="\n", flush=True)
+    load = os.getloadavg()
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        for label, scene in _cases(args.only, work):
+            cache = work / f"cache_{abs(hash(label))}"
+            cache.mkdir()
+            out = work / "out.csv"
+            cold, cpu, meta = _run(scene, out, cache)
+            warm, _, _ = _run(scene, out, cache)
+            row = f"| {label} | {cold:.1f} | {cpu:.1f} | {meta.get('compile_time', 0.0):.1f} | {warm:.1f} |"
+            rows.append(row)
+            print(row, flush=True)
+    load_end = os.getloadavg()
+    note = (
+        f"\nLoad average (1 min) at the start {load[0]:.1f}, at the end {load_end[0]:.1f}, "
+        f"on {os.cpu_count()} cores.\n"
+    )
+    print(note)
+    if args.markdown:
+        args.markdown.write_text("\n".join(rows) + "\n" + note, encoding="utf-8")
+    file_section("\n".join(rows) + "\n" + note)
+
+
+if __name__ == "__main__":
+    main()
