@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 import pytest
-from animsim.analysis.stability import largest_stable_dt
+from animsim.measures.stability import largest_stable_dt
 
 from animsim.errors import SceneError
 from tests.conftest import run_cli
