@@ -10,7 +10,7 @@ how long it took, per family.
 
 This module imports nothing heavy: the listener is registered with numba by
 :func:`listen`, called where numba is imported for a run
-(:mod:`animsim.backends.numba_cache`).
+(:mod:`animsim.numba_cache`).
 """
 
 from __future__ import annotations
