@@ -46,8 +46,9 @@ from animsim.scene.models import INTEGRATOR_NAMES
 #: explicit methods that amplify an undamped oscillation at every step size
 #: (|R(iy)| > 1 for every real y != 0; euler_average has det = 1 + (h omega)^2 / 2)
 WEAKLY_UNSTABLE = ("euler", "euler_average", "midpoint", "heun")
-#: methods without a step-size limit on linear damped springs
-UNCONDITIONAL = ("implicit_euler",)
+#: methods without a step-size limit on linear damped springs (xpbd projects springs as
+#: constraints: animsim.integrators.xpbd, ``springs_limit_dt = False``)
+UNCONDITIONAL = ("implicit_euler", "xpbd")
 #: order in which the analysis lists methods
 METHOD_ORDER = INTEGRATOR_NAMES  # the order of the spec's table
 #: stability polynomials R(z) of the explicit Runge-Kutta methods (coefficients of z^0, z^1, ...)
@@ -422,6 +423,9 @@ def _row_bounds(compiled: Any) -> tuple[np.ndarray, np.ndarray, float, list[str]
         note = getattr(stage, "stability_note", None)
         if note is not None:
             notes.append(note(compiled.clock.dt))
+    note = getattr(compiled.integrator, "stability_note", None)  # what limits a method without a dt limit
+    if isinstance(note, str):
+        notes.append(note)
     return k_rows, c_rows, penalty_k, notes
 
 

@@ -44,7 +44,7 @@ class _Methods(Mapping[str, type[Integrator]]):
 
 REGISTRY = _Methods(
     (Euler, SymplecticEuler, EulerAverage, Midpoint, Heun, RK4, Verlet),
-    {"implicit_euler": "animsim.integrators.implicit"},
+    {"implicit_euler": "animsim.integrators.implicit", "xpbd": "animsim.integrators.xpbd"},
 )
 
 #: the fixed-step methods, in the order the spec's table lists them

@@ -1,0 +1,413 @@
+"""XPBD: springs as compliant distance constraints, solved once per substep.
+
+Macklin, Mueller and Chentanez, "XPBD: Position-Based Simulation of Compliant
+Constrained Dynamics" (MIG 2016), with the substepping of Macklin, Storey, Lu,
+Terdiman, Chentanez, Jeschke and Mueller, "Small Steps in Physics Simulation"
+(SCA 2019): each step of dt is ``substeps`` substeps of h = dt / substeps, and
+each substep makes one constraint iteration, with the Lagrange multipliers
+starting from zero (Small Steps, Algorithm 1):
+
+    v += h a_ext(x, v, t)          every force but the springs (gravity, drag,
+    p  = x + h v                   wind, attractors, turbulence, vortex)
+    solve the distance constraints and the planes once, moving p
+    v  = (p - x) / h;  x = p
+    plane velocity pass (dynamic friction, restitution)
+
+**Springs as constraints.** A spring a-b of rest length R is the constraint
+C = |x_a - x_b| - R with gradient n = (x_a - x_b) / |x_a - x_b| at a and -n at b.
+Its compliance is alpha = 1 / ks: the XPBD potential (1/2) alpha^-1 C^2 is the
+spring's (1/2) ks C^2 (XPBD eq. 4). Its damping is the Rayleigh dissipation
+(1/2) beta Cdot^2 with beta = kd: the force -beta grad C grad C^T v it gives is
+-kd ((v_a - v_b).n) n, exactly Lander's damping term of the force-based spring
+(:mod:`animsim.forces.springs`). XPBD eq. 26 with alpha~ = alpha / h^2,
+beta~ = h^2 beta and gamma = alpha~ beta~ / h = kd / (ks h), starting from
+lambda = 0, is
+
+    dlambda = (-C - gamma grad C.(p - x)) / ((1 + gamma) (w_a + w_b) + alpha~)
+
+and multiplying numerator and denominator by ks gives the form computed here,
+
+    dlambda = (-ks C - (kd / h) g) / ((ks + kd / h) (w_a + w_b) + 1 / h^2),
+    g = n.((p_a - x_a) - (p_b - x_b)),
+
+    p_a += w_a dlambda n,   p_b -= w_b dlambda n
+
+(w = 1 / m), which stays finite for a pure damper (ks = 0). A spring with
+``ks: inf`` is inextensible: alpha = 0, so dlambda = -C / (w_a + w_b) (PBD's
+projection; its damping vanishes with its compliance, gamma = 0). One such
+substep is one step of implicit Euler on the spring (the constraint force
+-alpha^-1 C(p) at the end of the substep), linearised once: as the substeps
+grow it converges, at first order in h, to the solution of the same scene with
+the springs as forces (tests/numerics/test_xpbd.py measures it).
+
+**Order of the solve.** Gauss-Seidel over independent groups: the springs are
+coloured greedily once (no two springs of a colour share a particle), and the
+constraints of one colour are projected together, vectorised (no Python loop
+over constraints), each colour seeing the positions the colours before it
+moved. This converges like the paper's sequential Gauss-Seidel (Jacobi with
+averaging would need more substeps for the same stiffness).
+
+**Immovable particles.** Pinned particles and dead emitter slots have w = 0:
+the constraints never move them. A pinned particle's prediction follows its
+velocity, a keyframed one is put on its path at each substep's end time.
+
+**Planes** (impulse response) are position constraints n.x - offset >= 0
+projected after the springs in every substep, with Coulomb friction after
+Mueller, Macklin, Chentanez, Jeschke and Kim, "Detailed Rigid Body Simulation
+with Extended Position Based Dynamics" (SCA 2020), sec. 3.5: static friction
+undoes the substep's tangential motion when it is below mu times the
+penetration just corrected; in the velocity pass, dynamic friction removes at
+most mu d / h of the tangential speed (the normal impulse per unit mass,
+d / h, times mu, eq. 30), and restitution sets the normal speed to -e times
+the normal speed before the solve (eq. 34), with e = 0 below
+2 |a_ext . n| h so resting contacts do not jitter. The plane's one ``friction``
+coefficient is both the static and the dynamic one.
+
+**Tearing**: a torn spring (``state.spring_intact`` false) is no constraint.
+
+**Stability.** Constraints impose no step-size limit, whatever ks (up to
+``inf``): the projection is unconditionally stable. What remains is accuracy
+(a stiff spring is softer than its ks at few substeps) and contacts at speed:
+a particle crossing a plane by more than its thickness in one substep is
+pushed back out (planes are infinite, so nothing tunnels), but friction and
+restitution see the substep's motion only.
+"""
+
+from __future__ import annotations
+
+import itertools
+from typing import Any, ClassVar
+
+import numpy as np
+
+from animsim.dynamics import Dynamics
+from animsim.integrators import register
+from animsim.integrators.base import Integrator
+from animsim.system import State
+
+#: substeps per step when the scene names none. Ten makes the 32 x 32 cloth with ks 1e5
+#: at one step per 30 fps frame sag within 2 % of the force-based reference after 1 s
+#: (benchmarks/xpbd_cloth.py), and is what the small-steps paper and animation tools use as
+#: a starting point (Macklin et al. 2019, sec. 5: a few to tens of substeps per frame)
+DEFAULT_SUBSTEPS = 10
+#: a contact approaching slower than this many substeps of the external acceleration
+#: along its normal bounces with restitution 0 (Mueller et al. 2020, sec. 3.5: 2 |g| h)
+RESTING_SUBSTEPS = 2.0
+
+
+def realised_stiffness(system: Any, h: float) -> np.ndarray:
+    """The stiffness each spring has as a constraint solved once per substep of h:
+    ks / (1 + ks (w_a + w_b) h^2), and 1 / ((w_a + w_b) h^2) for ks = inf.
+
+    One substep moves a lone constraint so that its stretch becomes C / (1 + ks w h^2)
+    (w = w_a + w_b), and its force is then ks times that stretch: the response of a spring
+    of compliance 1 / ks + w h^2 to the stretch the prediction made. Where ks w h^2 << 1
+    this is ks (the springs are as stiff as written); where it is large (very stiff or
+    inextensible springs) one iteration caps it at 1 / (w h^2). The watched energy of an
+    xpbd run uses it: the positions a single Gauss-Seidel pass leaves keep a small stretch
+    that is solver error, not elastic energy at ks (at ks 1e9 it would read as a blow-up).
+    """
+    inv = system.particle_inv_mass
+    w = inv[system.spring_index[:, 0]] + inv[system.spring_index[:, 1]]
+    ks = system.spring_ks
+    cap = w * h * h
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = np.where(np.isinf(ks), np.where(cap > 0, 1.0 / cap, 0.0), ks / (1.0 + ks * cap))
+    return out
+
+
+def spring_energy_term(system: Any, label: str, dt: float, substeps: int | None) -> Any:
+    """The force term that stands for the springs in an xpbd run of steps ``dt``: it is never
+    summed into a step (the constraints move the particles), but the energy watch, ``explain``
+    and the stability report read it; its stiffness is :func:`realised_stiffness`."""
+    from animsim.forces.springs import Springs
+
+    h = dt / (DEFAULT_SUBSTEPS if substeps is None else substeps)
+
+    stiff = int(np.isinf(system.spring_ks).sum())
+    return Springs(
+        system.spring_index,
+        system.spring_rest_length,
+        realised_stiffness(system, h),
+        system.spring_kd,
+        system.particle_count,
+        f"{label}, as xpbd distance constraints" + (f" ({stiff} inextensible)" if stiff else ""),
+    )
+
+
+def colour_springs(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """A colour per spring, greedily in spring order (the lowest colour neither end uses yet),
+    so that no two springs of a colour share a particle. Made once per run; the solve then
+    treats each colour as one vectorised Gauss-Seidel group."""
+    n = int(max(a.max(initial=-1), b.max(initial=-1))) + 1
+    used = [0] * n  # per particle, a bit mask of the colours its springs have
+    colour = np.empty(len(a), dtype=np.int64)
+    for s, (i, j) in enumerate(zip(a.tolist(), b.tolist(), strict=True)):
+        taken = used[i] | used[j]
+        c = (~taken & (taken + 1)).bit_length() - 1  # the lowest clear bit
+        colour[s] = c
+        used[i] |= 1 << c
+        used[j] |= 1 << c
+    return colour
+
+
+class _Groups:
+    """The springs that are constraints, sorted by colour: one contiguous slice per colour."""
+
+    def __init__(self, index: np.ndarray, rest: np.ndarray, ks: np.ndarray, kd: np.ndarray):
+        active = np.flatnonzero((ks > 0) | (kd > 0))  # ks = kd = 0 is no constraint at all
+        colour = colour_springs(index[active, 0], index[active, 1]) if len(active) else np.zeros(0, int)
+        order = np.argsort(colour, kind="stable")
+        self.spring = active[order]  # the scene's spring index of each constraint
+        self.a = np.ascontiguousarray(index[self.spring, 0])
+        self.b = np.ascontiguousarray(index[self.spring, 1])
+        self.rest = rest[self.spring]
+        ks = ks[self.spring]
+        self.inextensible = np.isinf(ks)
+        self.ks = np.where(self.inextensible, 0.0, ks)
+        self.kd = np.where(self.inextensible, 0.0, kd[self.spring])
+        counts = np.bincount(colour, minlength=1) if len(colour) else np.zeros(0, int)
+        bounds = np.concatenate([[0], np.cumsum(counts)])
+        self.slices = [slice(int(lo), int(hi)) for lo, hi in itertools.pairwise(bounds)]
+        self.any_inextensible = bool(self.inextensible.any())
+
+    @property
+    def count(self) -> int:
+        return len(self.spring)
+
+
+class _Tethers:
+    """Long range attachments for the inextensible springs (Kim, Chentanez and Mueller, "Long
+    Range Attachments - A Method to Simulate Inextensible Clothing in Computer Games", SCA 2012).
+
+    Every free particle joined to a pinned one through a path of inextensible springs may be
+    at most the shortest such path's rest length from it (the geodesic distance, by
+    Dijkstra's algorithm over the rest lengths). The exact solution meets these inequalities
+    already, so they change nothing it allows; they only stop a single Gauss-Seidel pass per
+    substep from letting a long hanging chain stretch (at 10 substeps a 32 x 32 hanging cloth
+    stretched 15 % without them). Each pin's tethers move only the free ends (the pin is
+    immovable), all together, one pin after the other.
+    """
+
+    def __init__(self, index: np.ndarray, rest: np.ndarray, ks: np.ndarray, pinned: np.ndarray):
+        self.pins: list[tuple[int, np.ndarray, np.ndarray]] = []  # (pin, free rows, limits)
+        stiff = np.flatnonzero(np.isinf(ks))
+        if not len(stiff) or not pinned.any():
+            return
+        from scipy.sparse import csr_matrix
+        from scipy.sparse.csgraph import dijkstra
+
+        n = len(pinned)
+        a, b = index[stiff, 0], index[stiff, 1]
+        graph = csr_matrix((rest[stiff], (a, b)), shape=(n, n))
+        on_graph = np.zeros(n, dtype=bool)
+        on_graph[a] = on_graph[b] = True
+        pins = np.flatnonzero(pinned & on_graph)
+        if not len(pins):
+            return
+        dist = dijkstra(graph, directed=False, indices=pins)
+        for k, pin in enumerate(pins):
+            rows = np.flatnonzero(np.isfinite(dist[k]) & ~pinned)
+            if len(rows):
+                self.pins.append((int(pin), rows, dist[k, rows]))
+
+    @property
+    def count(self) -> int:
+        return sum(len(rows) for _, rows, _ in self.pins)
+
+    def project(self, x: np.ndarray) -> None:
+        for pin, rows, limit in self.pins:
+            d = x[rows] - x[pin]
+            length = np.sqrt(np.einsum("ij,ij->i", d, d))
+            over = length > limit
+            if over.any():
+                r = rows[over]
+                x[r] -= ((length[over] - limit[over]) / length[over])[:, None] * d[over]
+
+
+@register
+class XPBD(Integrator):
+    name = "xpbd"
+    order = 1
+    #: external-force evaluations per step: one per substep (set per run from ``substeps``)
+    evaluations_per_step = DEFAULT_SUBSTEPS
+    description = "XPBD: springs as compliant distance constraints, one Gauss-Seidel pass per substep"
+    #: stability, declared: springs impose no step-size limit (the projection is
+    #: unconditionally stable for any ks, up to inf); see the module docstring
+    springs_limit_dt: ClassVar[bool] = False
+    #: what is left to limit dt: accuracy, and contacts at speed
+    stability_note: ClassVar[str] = (
+        "xpbd: no dt limit from springs (constraints are projected, any ks up to inf); "
+        "stiff springs are softer than ks at few substeps, and plane friction and "
+        "restitution see each substep's motion only"
+    )
+
+    def __init__(self, dynamics: Dynamics, substeps: int = DEFAULT_SUBSTEPS):
+        super().__init__(dynamics)
+        from animsim.forces.springs import Springs
+
+        self._counted = dynamics  # evaluations are counted on the run's own dynamics
+        system = dynamics.system
+        self.substeps = substeps
+        self.evaluations_per_step = substeps  # type: ignore[misc]
+        # every force but the springs acts in the substep's prediction
+        self._external = Dynamics(system, [t for t in dynamics.terms if not isinstance(t, Springs)])
+        self._drivers = tuple(dynamics.drivers)
+        self.groups = _Groups(
+            system.spring_index, system.spring_rest_length, system.spring_ks, system.spring_kd
+        )
+        self.tethers = _Tethers(
+            system.spring_index, system.spring_rest_length, system.spring_ks, system.particle_pinned
+        )
+        #: impulse planes projected inside the substeps (animsim.collisions.ImpulsePlane)
+        self.planes: list[Any] = []
+        n = system.particle_count
+        self._a = np.zeros((n, 3))
+        self._p_old = np.zeros((n, 3))
+        self._v_new = np.zeros((n, 3))
+        self._v_pre = np.zeros((n, 3))
+        self._describe()
+
+    def _describe(self) -> None:
+        g = self.groups
+        parts = [f"{self.substeps} substep{'s' if self.substeps != 1 else ''} per step"]
+        if g.count:
+            stiff = int(g.inextensible.sum())
+            parts.append(
+                f"{g.count} distance constraint{'s' if g.count != 1 else ''} in {len(g.slices)} "
+                f"independent colour group{'s' if len(g.slices) != 1 else ''} (Gauss-Seidel by group)"
+                + (f", {stiff} inextensible" if stiff else "")
+            )
+        if self.tethers.pins:
+            parts.append(
+                f"{self.tethers.count} long range attachments to {len(self.tethers.pins)} pinned "
+                "particle(s) (Kim et al. 2012) keep the inextensible springs from stretching"
+            )
+        if self.planes:
+            parts.append(f"{len(self.planes)} plane constraint(s) with friction and restitution")
+        self.description = (
+            "XPBD (Macklin et al. 2016, 2019): springs as compliant distance constraints, "
+            "one iteration per substep; " + "; ".join(parts)
+        )
+
+    def configure(self, substeps: int | None, post_step: list[Any]) -> list[Any]:
+        """Take the run's options and the stages that become constraints here (compile time):
+        the impulse planes are projected inside every substep, so their post-step stage goes.
+        Returns the post-step stages that remain."""
+        from animsim.collisions import PlaneColliders
+
+        self.substeps = substeps = DEFAULT_SUBSTEPS if substeps is None else substeps
+        self.evaluations_per_step = substeps  # type: ignore[misc]
+        kept = []
+        for stage in post_step:
+            if isinstance(stage, PlaneColliders):
+                self.planes.extend(stage.planes)
+            else:
+                kept.append(stage)
+        self._describe()
+        return kept
+
+    def step(self, state: State, dt: float) -> None:
+        x, v = state.particle_position, state.particle_velocity
+        ext = self._external
+        if ext.mass is not state.particle_mass or ext.inv_mass is not state.particle_inv_mass:
+            ext.bind(state)  # the run's live masses (pools switch them on)
+        w = state.particle_inv_mass
+        movable = (w > 0)[:, None]
+        intact = state.spring_intact
+        n = self.substeps
+        h = dt / n
+        a, p_old, v_new = self._a, self._p_old, self._v_new
+        for k in range(n):
+            t = state.time + k * h
+            t_end = state.time + dt if k == n - 1 else t + h
+            ext.acceleration(x, v, t, a)
+            self._counted.evaluations += 1
+            a *= h
+            v += a  # v += h a_ext
+            np.copyto(p_old, x)
+            np.multiply(v, h, out=v_new)
+            x += v_new  # the prediction p = x + h v (pinned rows: their own velocity)
+            for drive in self._drivers:  # keyframed rows on their path at the substep's end
+                drive.drive(t_end, x, v)
+            if self.planes:
+                np.copyto(self._v_pre, v)
+            self._springs(x, p_old, w, h, intact)
+            if intact is None:  # a torn spring changes the paths: no tethers where springs tear
+                self.tethers.project(x)
+            contacts = self._planes_position(x, p_old, w) if self.planes else None
+            np.subtract(x, p_old, out=v_new)
+            v_new /= h
+            np.copyto(v, v_new, where=movable)  # immovable rows keep their prescribed velocity
+            if contacts:
+                self._planes_velocity(v, a, h, contacts)
+
+    def _springs(self, x: np.ndarray, p_old: np.ndarray, w: np.ndarray, h: float, intact: Any) -> None:
+        """One Gauss-Seidel pass over the distance constraints, a colour group at a time."""
+        g = self.groups
+        inv_h = 1.0 / h
+        inv_h2 = inv_h * inv_h
+        for sl in g.slices:
+            ia, ib = g.a[sl], g.b[sl]
+            xa, xb = x[ia], x[ib]
+            d = xa - xb
+            length = np.sqrt(np.einsum("ij,ij->i", d, d))
+            with np.errstate(divide="ignore"):
+                inv = np.where(length > 0.0, 1.0 / length, 0.0)  # coincident ends: no direction
+            d *= inv[:, None]  # n
+            c = length - g.rest[sl]
+            moved = (xa - p_old[ia]) - (xb - p_old[ib])
+            gdot = np.einsum("ij,ij->i", d, moved)
+            wa, wb = w[ia], w[ib]
+            wsum = wa + wb
+            ks, kdh = g.ks[sl], g.kd[sl] * inv_h
+            dl = (-ks * c - kdh * gdot) / ((ks + kdh) * wsum + inv_h2)
+            if g.any_inextensible:
+                stiff = g.inextensible[sl]
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    dl = np.where(stiff, np.where(wsum > 0.0, -c / wsum, 0.0), dl)
+            if intact is not None:
+                dl *= intact[g.spring[sl]]  # a torn spring is no constraint
+            x[ia] = xa + (wa * dl)[:, None] * d
+            x[ib] = xb - (wb * dl)[:, None] * d
+
+    def _planes_position(self, x: np.ndarray, p_old: np.ndarray, w: np.ndarray) -> list[Any]:
+        """Project movable particles out of each plane; static friction (Mueller et al. 2020,
+        sec. 3.5). Returns the contacts (plane, rows, penetration corrected) for the velocity pass."""
+        contacts = []
+        for pl in self.planes:
+            normal = pl.normal
+            depth = pl.offset - x @ normal  # > 0: behind the plane
+            rows = np.flatnonzero((depth > 0.0) & (w > 0.0))
+            if not len(rows):
+                continue
+            d = depth[rows]
+            xr = x[rows] + d[:, None] * normal
+            if pl.friction > 0.0:
+                dx = xr - p_old[rows]
+                dxt = dx - np.outer(dx @ normal, normal)
+                stick = np.sqrt(np.einsum("ij,ij->i", dxt, dxt)) < pl.friction * d
+                xr[stick] -= dxt[stick]
+            x[rows] = xr
+            contacts.append((pl, rows, d))
+        return contacts
+
+    def _planes_velocity(self, v: np.ndarray, dv_ext: np.ndarray, h: float, contacts: list[Any]) -> None:
+        """Dynamic friction and restitution of the substep's contacts (Mueller et al. 2020, eqs.
+        30 and 34); ``dv_ext`` is h a_ext, the velocity the external forces added this substep."""
+        for pl, rows, d in contacts:
+            normal = pl.normal
+            vr = v[rows]
+            vn = vr @ normal
+            vt = vr - np.outer(vn, normal)
+            if pl.friction > 0.0:
+                speed = np.sqrt(np.einsum("ij,ij->i", vt, vt))
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    keep = np.where(speed > 0.0, np.maximum(1.0 - pl.friction * d / (h * speed), 0.0), 0.0)
+                vt *= keep[:, None]
+            before = self._v_pre[rows] @ normal  # the normal speed before the solve
+            resting = np.abs(before) <= RESTING_SUBSTEPS * np.abs(dv_ext[rows] @ normal)
+            e = np.where(resting, 0.0, pl.restitution)
+            # approaching: bounce with -e times the speed before the solve; else keep the solve's
+            vn_new = np.where(before < 0.0, -e * before, vn)
+            v[rows] = vt + np.outer(vn_new, normal)
