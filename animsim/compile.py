@@ -374,7 +374,7 @@ def compile_scene(
         raise UsageError(f"integrator {name_!r} is not available in this build") from None
     configure = getattr(integrator, "configure", None)
     if configure is not None:  # xpbd: its substeps, and the planes it projects itself
-        post_step = configure(scene.substeps, post_step)
+        post_step = configure(scene.substeps, post_step, chosen)
 
     clock = Clock.make(scene.duration, scene.dt)
     every, fps = recording_rule(scene.record.every, scene.record.fps, clock.dt)

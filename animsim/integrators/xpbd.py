@@ -95,6 +95,77 @@ DEFAULT_SUBSTEPS = 10
 RESTING_SUBSTEPS = 2.0
 
 
+def _constraints_kernel(x, p_old, w, a, b, rest, ks, kd, stiff, live, h):  # numba: compiled
+    """The Gauss-Seidel pass of :meth:`XPBD._springs`, one constraint after the other in colour
+    order: the constraints of a colour share no particle, so this computes what the NumPy
+    pass computes a colour at a time (the same formulas, to rounding)."""
+    inv_h = 1.0 / h
+    inv_h2 = inv_h * inv_h
+    for s in range(a.shape[0]):
+        i = a[s]
+        j = b[s]
+        d0 = x[i, 0] - x[j, 0]
+        d1 = x[i, 1] - x[j, 1]
+        d2 = x[i, 2] - x[j, 2]
+        length = np.sqrt((d0 * d0 + d1 * d1) + d2 * d2)
+        inv = 1.0 / length if length > 0.0 else 0.0
+        n0 = d0 * inv
+        n1 = d1 * inv
+        n2 = d2 * inv
+        c = length - rest[s]
+        m0 = (x[i, 0] - p_old[i, 0]) - (x[j, 0] - p_old[j, 0])
+        m1 = (x[i, 1] - p_old[i, 1]) - (x[j, 1] - p_old[j, 1])
+        m2 = (x[i, 2] - p_old[i, 2]) - (x[j, 2] - p_old[j, 2])
+        gdot = (n0 * m0 + n1 * m1) + n2 * m2
+        wa = w[i]
+        wb = w[j]
+        wsum = wa + wb
+        if stiff[s]:
+            dl = -c / wsum if wsum > 0.0 else 0.0
+        else:
+            kdh = kd[s] * inv_h
+            dl = (-ks[s] * c - kdh * gdot) / ((ks[s] + kdh) * wsum + inv_h2)
+        dl *= live[s]
+        ua = wa * dl
+        ub = wb * dl
+        x[i, 0] += ua * n0
+        x[i, 1] += ua * n1
+        x[i, 2] += ua * n2
+        x[j, 0] -= ub * n0
+        x[j, 1] -= ub * n1
+        x[j, 2] -= ub * n2
+
+
+def _tethers_kernel(x, pins, ptr, rows, limit):  # numba: compiled
+    """:meth:`_Tethers.project`, a pin after the other, each row after the other."""
+    for k in range(pins.shape[0]):
+        p = pins[k]
+        for r in range(ptr[k], ptr[k + 1]):
+            i = rows[r]
+            d0 = x[i, 0] - x[p, 0]
+            d1 = x[i, 1] - x[p, 1]
+            d2 = x[i, 2] - x[p, 2]
+            length = np.sqrt((d0 * d0 + d1 * d1) + d2 * d2)
+            if length > limit[r]:
+                f = (length - limit[r]) / length
+                x[i, 0] -= f * d0
+                x[i, 1] -= f * d1
+                x[i, 2] -= f * d2
+
+
+_JITTED: dict[str, Any] = {}
+
+
+def _jit(fn: Any) -> Any:
+    """``fn`` compiled by numba (imported when an xpbd run asks for it; cached on disk)."""
+    got = _JITTED.get(fn.__name__)
+    if got is None:
+        import numba
+
+        got = _JITTED[fn.__name__] = numba.njit(cache=True)(fn)
+    return got
+
+
 def realised_stiffness(system: Any, h: float) -> np.ndarray:
     """The stiffness each spring has as a constraint solved once per substep of h:
     ks / (1 + ks (w_a + w_b) h^2), and 1 / ((w_a + w_b) h^2) for ks = inf.
@@ -215,6 +286,15 @@ class _Tethers:
     def count(self) -> int:
         return sum(len(rows) for _, rows, _ in self.pins)
 
+    def flat(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(pins, ptr, rows, limits): pin k's rows are rows[ptr[k]:ptr[k + 1]] (numba kernel)."""
+        pins = np.array([p for p, _, _ in self.pins], dtype=np.int64)
+        sizes = [len(r) for _, r, _ in self.pins]
+        ptr = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        rows = np.concatenate([r for _, r, _ in self.pins]) if self.pins else np.zeros(0, np.int64)
+        limits = np.concatenate([lim for _, _, lim in self.pins]) if self.pins else np.zeros(0)
+        return pins, ptr, rows.astype(np.int64), limits
+
     def project(self, x: np.ndarray) -> None:
         for pin, rows, limit in self.pins:
             d = x[rows] - x[pin]
@@ -266,6 +346,10 @@ class XPBD(Integrator):
         self._p_old = np.zeros((n, 3))
         self._v_new = np.zeros((n, 3))
         self._v_pre = np.zeros((n, 3))
+        self._live = np.ones(self.groups.count)
+        self._live_bool = np.ones(self.groups.count, dtype=bool)
+        #: the constraint solve in numba kernels (``configure`` on the numba backend)
+        self.numba = False
         self._describe()
 
     def _describe(self) -> None:
@@ -290,13 +374,16 @@ class XPBD(Integrator):
             "one iteration per substep; " + "; ".join(parts)
         )
 
-    def configure(self, substeps: int | None, post_step: list[Any]) -> list[Any]:
+    def configure(self, substeps: int | None, post_step: list[Any], backend: str = "numpy") -> list[Any]:
         """Take the run's options and the stages that become constraints here (compile time):
         the impulse planes are projected inside every substep, so their post-step stage goes.
         Returns the post-step stages that remain."""
         from animsim.collisions import PlaneColliders
 
         self.substeps = substeps = DEFAULT_SUBSTEPS if substeps is None else substeps
+        self.numba = backend == "numba"
+        if self.numba:  # compiled (or loaded from numba's cache) now, not inside the timed loop
+            self._kernels = (_jit(_constraints_kernel), _jit(_tethers_kernel), self.tethers.flat())
         self.evaluations_per_step = substeps  # type: ignore[misc]
         kept = []
         for stage in post_step:
@@ -332,15 +419,34 @@ class XPBD(Integrator):
                 drive.drive(t_end, x, v)
             if self.planes:
                 np.copyto(self._v_pre, v)
-            self._springs(x, p_old, w, h, intact)
-            if intact is None:  # a torn spring changes the paths: no tethers where springs tear
-                self.tethers.project(x)
+            if self.numba:
+                self._numba_pass(x, p_old, w, h, intact)
+            else:
+                self._springs(x, p_old, w, h, intact)
+                if intact is None:  # a torn spring changes the paths: no tethers where springs tear
+                    self.tethers.project(x)
             contacts = self._planes_position(x, p_old, w) if self.planes else None
             np.subtract(x, p_old, out=v_new)
             v_new /= h
             np.copyto(v, v_new, where=movable)  # immovable rows keep their prescribed velocity
             if contacts:
                 self._planes_velocity(v, a, h, contacts)
+
+    def _numba_pass(self, x: np.ndarray, p_old: np.ndarray, w: np.ndarray, h: float, intact: Any) -> None:
+        """The springs' and tethers' pass of a substep in numba kernels (the same values)."""
+        g = self.groups
+        kernels = getattr(self, "_kernels", None)
+        if kernels is None:
+            kernels = self._kernels = (_jit(_constraints_kernel), _jit(_tethers_kernel), self.tethers.flat())
+        live = self._live
+        if intact is None:
+            live.fill(1.0)
+        else:
+            np.take(intact, g.spring, out=self._live_bool)
+            np.copyto(live, self._live_bool)
+        kernels[0](x, p_old, w, g.a, g.b, g.rest, g.ks, g.kd, g.inextensible, live, h)
+        if intact is None and self.tethers.pins:
+            kernels[1](x, *kernels[2])
 
     def _springs(self, x: np.ndarray, p_old: np.ndarray, w: np.ndarray, h: float, intact: Any) -> None:
         """One Gauss-Seidel pass over the distance constraints, a colour group at a time."""

@@ -880,17 +880,6 @@ class IntegratorSpec(Model):
         example=10,
     )
 
-    @model_validator(mode="after")
-    def _options_of_the_method(self) -> IntegratorSpec:
-        if self.substeps is not None and self.method != "xpbd":
-            raise ValueError(f"substeps applies only to method: xpbd, not to {self.method}")
-        if self.adaptive is not None and self.method == "xpbd":
-            raise ValueError(
-                "xpbd takes fixed steps (with substeps inside each), not adaptive ones: remove adaptive, "
-                "or use adaptive with a force-based method such as rk4"
-            )
-        return self
-
 
 class Record(Model):
     """Which steps are written to the trajectory; without every or fps, 60 frames per second (every step when dt >= 1/60 s)."""

@@ -259,7 +259,8 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
             lo > hi for lo, hi in zip(e.kill_box.min, e.kill_box.max, strict=True)
         ):
             out.append((("emitters", i, "kill_box"), "kill_box min must not exceed max in any axis", False))
-    out.extend(method_problems(scene))
+    if not partial:  # a partial scene does not carry its integrator (it may not have validated)
+        out.extend(method_problems(scene))
     return out
 
 
@@ -287,6 +288,20 @@ def method_problems(scene: Scene) -> list[Problem]:
     method = getattr(scene, "integrator_name", None) if scene.integrator is not None else None
     if method is None:
         return out
+    spec = scene.integrator if not isinstance(scene.integrator, str) else None
+    if spec is not None and spec.substeps is not None and method != "xpbd":
+        out.append(
+            (("integrator", "substeps"), f"substeps applies only to method: xpbd, not to {method}", True)
+        )
+    if spec is not None and spec.adaptive is not None and method == "xpbd":
+        out.append(
+            (
+                ("integrator", "adaptive"),
+                "xpbd takes fixed steps (with substeps inside each), not adaptive ones: remove "
+                "adaptive, or use adaptive with a force-based method such as rk4",
+                True,
+            )
+        )
     if method == "xpbd":
         for key, what, instead in _XPBD_REFUSES:
             value = getattr(scene, key, None)

@@ -237,3 +237,47 @@ springs:
     length = np.linalg.norm(x[:, 1] - x[:, 0], axis=1)
     assert length.max() < 0.5 * 1.01
     assert x[-1, 1, 0] > 0.5  # dragged along
+
+
+PARITY = """
+duration: 1.0
+dt: 0.03333333333333333
+integrator: {{method: xpbd, substeps: 8}}
+record: {{fps: 30}}
+structures:
+  - type: cloth
+    id: sheet
+    origin: [0, 1, 0]
+    size: [1, 1]
+    plane: xz
+    resolution: [12, 12]
+    mass: 0.01
+    structural: {{ks: inf}}
+    shear: {{ks: 1000, kd: 0.5}}
+    bend: {{ks: 10, kd: 0.01{tear}}}
+    pin: ["sheet[0,0]", "sheet[11,0]"]
+forces:
+  - {{type: gravity}}
+  - {{type: drag, k: 0.001}}
+planes:
+  - {{point: [0, 0.3, 0], normal: [0, 1, 0.1], restitution: 0.3, friction: 0.5}}
+"""
+
+
+@pytest.mark.parametrize("tear", ["", ", max_strain: 0.5"], ids=["tethers", "tearing"])
+def test_numba_kernels_give_numpys_positions_to_1e_12(tear):
+    from animsim.compile import compile_scene
+    from animsim.engine import run
+    from animsim.record import MemorySink
+    from animsim.scene.loader import load_scene_text
+
+    out = []
+    for backend in ("numpy", "numba"):
+        compiled = compile_scene(load_scene_text(PARITY.format(tear=tear)).scene, "p", backend=backend)
+        assert compiled.integrator.numba == (backend == "numba")
+        sink = MemorySink()
+        assert run(compiled, [sink]).status == STATUS_OK
+        out.append(sink.positions())
+    scale = np.abs(out[0]).max(axis=(1, 2))
+    per_frame = np.abs(out[0] - out[1]).max(axis=(1, 2)) / scale
+    assert per_frame.max() < 1e-12
