@@ -65,6 +65,7 @@ INTEGRATOR_VECTORS = {
     "rk4": 10,
     "verlet": 3,
     "implicit_euler": 12,  # CG vectors and the linearised system's work arrays
+    "xpbd": 5,  # external acceleration, substep start, new and pre-solve velocity, constant forces
 }
 # Mass, inverse mass, pinned and alive flags.
 PARTICLE_SCALAR_BYTES = 18

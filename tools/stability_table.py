@@ -84,6 +84,7 @@ NOTES = {
     "rk4": "dissipative below 2.83 (|R(iy)| < 1)",
     "verlet": "as symplectic Euler undamped; with damping lower (its cached force, see below)",
     "implicit_euler": "A-stable: energy x 1/(1 + (omega dt)^2) per step",
+    "xpbd": "on one spring each substep is backward Euler's step of h = dt / substeps: energy x 1/(1 + (omega h)^2)",
 }
 
 

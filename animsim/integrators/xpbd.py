@@ -195,8 +195,23 @@ def spring_energy_term(system: Any, label: str, dt: float, substeps: int | None)
 
     h = dt / (DEFAULT_SUBSTEPS if substeps is None else substeps)
 
+    class ConstraintSprings(Springs):
+        """Springs whose energy is at the realised stiffness, and whose stiffness rows (the
+        stability report's table of every method's dt limit) are at the scene's own ks:
+        the other methods would step these springs as written. Inextensible springs count
+        there as nothing: no force-based method can step them."""
+
+        def stiffness_rows(self, inv_mass: np.ndarray, k_rows: np.ndarray, c_rows: np.ndarray) -> None:
+            realised = self.ks
+            self.ks = scene_ks
+            try:
+                super().stiffness_rows(inv_mass, k_rows, c_rows)
+            finally:
+                self.ks = realised
+
     stiff = int(np.isinf(system.spring_ks).sum())
-    return Springs(
+    scene_ks = np.where(np.isinf(system.spring_ks), 0.0, system.spring_ks)
+    return ConstraintSprings(
         system.spring_index,
         system.spring_rest_length,
         realised_stiffness(system, h),
