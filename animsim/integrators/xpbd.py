@@ -95,12 +95,10 @@ DEFAULT_SUBSTEPS = 10
 RESTING_SUBSTEPS = 2.0
 
 
-def _constraints_kernel(x, p_old, w, a, b, rest, ks, kd, stiff, live, h):  # numba: compiled
-    """The Gauss-Seidel pass of :meth:`XPBD._springs`, one constraint after the other in colour
-    order: the constraints of a colour share no particle, so this computes what the NumPy
-    pass computes a colour at a time (the same formulas, to rounding)."""
-    inv_h = 1.0 / h
-    inv_h2 = inv_h * inv_h
+def _constraints_kernel(x, p_old, a, b, rest, ca, cb, da, db):  # numba: compiled
+    """:meth:`XPBD._springs`, one constraint after the other in colour order: the constraints
+    of a colour share no particle, so this computes what the NumPy pass computes a colour at
+    a time (the same formulas, to rounding)."""
     for s in range(a.shape[0]):
         i = a[s]
         j = b[s]
@@ -109,31 +107,24 @@ def _constraints_kernel(x, p_old, w, a, b, rest, ks, kd, stiff, live, h):  # num
         d2 = x[i, 2] - x[j, 2]
         length = np.sqrt((d0 * d0 + d1 * d1) + d2 * d2)
         inv = 1.0 / length if length > 0.0 else 0.0
-        n0 = d0 * inv
-        n1 = d1 * inv
-        n2 = d2 * inv
         c = length - rest[s]
-        m0 = (x[i, 0] - p_old[i, 0]) - (x[j, 0] - p_old[j, 0])
-        m1 = (x[i, 1] - p_old[i, 1]) - (x[j, 1] - p_old[j, 1])
-        m2 = (x[i, 2] - p_old[i, 2]) - (x[j, 2] - p_old[j, 2])
-        gdot = (n0 * m0 + n1 * m1) + n2 * m2
-        wa = w[i]
-        wb = w[j]
-        wsum = wa + wb
-        if stiff[s]:
-            dl = -c / wsum if wsum > 0.0 else 0.0
-        else:
-            kdh = kd[s] * inv_h
-            dl = (-ks[s] * c - kdh * gdot) / ((ks[s] + kdh) * wsum + inv_h2)
-        dl *= live[s]
-        ua = wa * dl
-        ub = wb * dl
-        x[i, 0] += ua * n0
-        x[i, 1] += ua * n1
-        x[i, 2] += ua * n2
-        x[j, 0] -= ub * n0
-        x[j, 1] -= ub * n1
-        x[j, 2] -= ub * n2
+        fa = ca[s] * c
+        fb = cb[s] * c
+        if da[s] != 0.0 or db[s] != 0.0:
+            m0 = d0 - (p_old[i, 0] - p_old[j, 0])
+            m1 = d1 - (p_old[i, 1] - p_old[j, 1])
+            m2 = d2 - (p_old[i, 2] - p_old[j, 2])
+            gdot = ((d0 * m0 + d1 * m1) + d2 * m2) * inv
+            fa += da[s] * gdot
+            fb += db[s] * gdot
+        fa *= inv
+        fb *= inv
+        x[i, 0] -= fa * d0
+        x[i, 1] -= fa * d1
+        x[i, 2] -= fa * d2
+        x[j, 0] += fb * d0
+        x[j, 1] += fb * d1
+        x[j, 2] += fb * d2
 
 
 def _tethers_kernel(x, pins, ptr, rows, limit):  # numba: compiled
@@ -256,6 +247,8 @@ class _Groups:
         bounds = np.concatenate([[0], np.cumsum(counts)])
         self.slices = [slice(int(lo), int(hi)) for lo, hi in itertools.pairwise(bounds)]
         self.any_inextensible = bool(self.inextensible.any())
+        #: per colour, whether any of its springs damps (the others skip the velocity term)
+        self.damped = [bool((self.kd[sl] > 0).any()) for sl in self.slices]
 
     @property
     def count(self) -> int:
@@ -361,8 +354,6 @@ class XPBD(Integrator):
         self._p_old = np.zeros((n, 3))
         self._v_new = np.zeros((n, 3))
         self._v_pre = np.zeros((n, 3))
-        self._live = np.ones(self.groups.count)
-        self._live_bool = np.ones(self.groups.count, dtype=bool)
         #: the constraint solve in numba kernels (``configure`` on the numba backend)
         self.numba = False
         self._describe()
@@ -420,6 +411,7 @@ class XPBD(Integrator):
         n = self.substeps
         h = dt / n
         a, p_old, v_new = self._a, self._p_old, self._v_new
+        coef = self._coefficients(w, h, intact)
         for k in range(n):
             t = state.time + k * h
             t_end = state.time + dt if k == n - 1 else t + h
@@ -434,11 +426,12 @@ class XPBD(Integrator):
                 drive.drive(t_end, x, v)
             if self.planes:
                 np.copyto(self._v_pre, v)
+            # a torn spring changes the paths: no tethers where springs can tear
             if self.numba:
-                self._numba_pass(x, p_old, w, h, intact)
+                self._numba_pass(x, p_old, coef, intact is None)
             else:
-                self._springs(x, p_old, w, h, intact)
-                if intact is None:  # a torn spring changes the paths: no tethers where springs tear
+                self._springs(x, p_old, coef)
+                if intact is None:
                     self.tethers.project(x)
             contacts = self._planes_position(x, p_old, w) if self.planes else None
             np.subtract(x, p_old, out=v_new)
@@ -447,50 +440,67 @@ class XPBD(Integrator):
             if contacts:
                 self._planes_velocity(v, a, h, contacts)
 
-    def _numba_pass(self, x: np.ndarray, p_old: np.ndarray, w: np.ndarray, h: float, intact: Any) -> None:
+    def _numba_pass(
+        self, x: np.ndarray, p_old: np.ndarray, coef: tuple[np.ndarray, ...], tethers: bool
+    ) -> None:
         """The springs' and tethers' pass of a substep in numba kernels (the same values)."""
         g = self.groups
         kernels = getattr(self, "_kernels", None)
         if kernels is None:
             kernels = self._kernels = (_jit(_constraints_kernel), _jit(_tethers_kernel), self.tethers.flat())
-        live = self._live
-        if intact is None:
-            live.fill(1.0)
-        else:
-            np.take(intact, g.spring, out=self._live_bool)
-            np.copyto(live, self._live_bool)
-        kernels[0](x, p_old, w, g.a, g.b, g.rest, g.ks, g.kd, g.inextensible, live, h)
-        if intact is None and self.tethers.pins:
+        kernels[0](x, p_old, g.a, g.b, g.rest, *coef)
+        if tethers and self.tethers.pins:
             kernels[1](x, *kernels[2])
 
-    def _springs(self, x: np.ndarray, p_old: np.ndarray, w: np.ndarray, h: float, intact: Any) -> None:
-        """One Gauss-Seidel pass over the distance constraints, a colour group at a time."""
+    def _coefficients(self, w: np.ndarray, h: float, intact: Any) -> tuple[np.ndarray, ...]:
+        """Per constraint, what does not change within a step: with den = (ks + kd / h)
+        (w_a + w_b) + 1 / h^2 the update of the module docstring is
+
+            p_a -= (ca C + da g) n,   p_b += (cb C + db g) n,
+            ca = w_a ks / den,  da = w_a (kd / h) / den  (cb, db with w_b),
+
+        and for an inextensible spring ca = w_a / (w_a + w_b), da = 0. A torn spring's are 0."""
         g = self.groups
-        inv_h = 1.0 / h
-        inv_h2 = inv_h * inv_h
-        for sl in g.slices:
+        wa, wb = w[g.a], w[g.b]
+        wsum = wa + wb
+        kdh = g.kd / h
+        den = (g.ks + kdh) * wsum + 1.0 / (h * h)
+        ks_den = g.ks / den
+        kd_den = kdh / den
+        if g.any_inextensible:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ks_den = np.where(g.inextensible, np.where(wsum > 0.0, 1.0 / wsum, 0.0), ks_den)
+        if intact is not None:
+            live = intact[g.spring]  # a torn spring is no constraint
+            ks_den = ks_den * live
+            kd_den = kd_den * live
+        return wa * ks_den, wb * ks_den, wa * kd_den, wb * kd_den
+
+    def _springs(self, x: np.ndarray, p_old: np.ndarray, coef: tuple[np.ndarray, ...]) -> None:
+        """One Gauss-Seidel pass over the distance constraints, a colour group at a time.
+
+        With d = x_a - x_b and L = |d|: n = d / L, g = d.moved / L, so each end moves by
+        (c C + e g) n = ((c C + e g) / L) d, computed on d (one division per constraint)."""
+        g = self.groups
+        ca, cb, da, db = coef
+        for k, sl in enumerate(g.slices):
             ia, ib = g.a[sl], g.b[sl]
             xa, xb = x[ia], x[ib]
             d = xa - xb
             length = np.sqrt(np.einsum("ij,ij->i", d, d))
-            with np.errstate(divide="ignore"):
-                inv = np.where(length > 0.0, 1.0 / length, 0.0)  # coincident ends: no direction
-            d *= inv[:, None]  # n
+            inv = np.divide(1.0, length, out=np.zeros_like(length), where=length > 0.0)  # coincident: none
             c = length - g.rest[sl]
-            moved = (xa - p_old[ia]) - (xb - p_old[ib])
-            gdot = np.einsum("ij,ij->i", d, moved)
-            wa, wb = w[ia], w[ib]
-            wsum = wa + wb
-            ks, kdh = g.ks[sl], g.kd[sl] * inv_h
-            dl = (-ks * c - kdh * gdot) / ((ks + kdh) * wsum + inv_h2)
-            if g.any_inextensible:
-                stiff = g.inextensible[sl]
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    dl = np.where(stiff, np.where(wsum > 0.0, -c / wsum, 0.0), dl)
-            if intact is not None:
-                dl *= intact[g.spring[sl]]  # a torn spring is no constraint
-            x[ia] = xa + (wa * dl)[:, None] * d
-            x[ib] = xb - (wb * dl)[:, None] * d
+            fa = ca[sl] * c
+            fb = cb[sl] * c
+            if g.damped[k]:
+                moved = d - (p_old[ia] - p_old[ib])  # (x_a - p_a) - (x_b - p_b)
+                gdot = np.einsum("ij,ij->i", d, moved) * inv
+                fa += da[sl] * gdot
+                fb += db[sl] * gdot
+            fa *= inv
+            fb *= inv
+            x[ia] = xa - fa[:, None] * d
+            x[ib] = xb + fb[:, None] * d
 
     def _planes_position(self, x: np.ndarray, p_old: np.ndarray, w: np.ndarray) -> list[Any]:
         """Project movable particles out of each plane; static friction (Mueller et al. 2020,
