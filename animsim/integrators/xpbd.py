@@ -144,6 +144,33 @@ def _tethers_kernel(x, pins, ptr, rows, limit):  # numba: compiled
                 x[i, 2] -= f * d2
 
 
+def _steps_kernel(
+    x, v, p_old, dv, movable, substeps, h, a, b, rest, ca, cb, da, db, tethers, tp, tptr, tr, tl
+):
+    """A whole step of :meth:`XPBD.step` when every external force is constant (``dv`` = h a,
+    0 on immovable rows) and nothing is driven or touches a plane: for each substep the
+    prediction, the constraints' and the tethers' passes (the kernels above) and the new
+    velocities, the NumPy step's operations in its order (numba: compiled)."""
+    n = x.shape[0]
+    for _ in range(substeps):
+        for i in range(n):
+            for k in range(3):
+                v[i, k] += dv[i, k]
+                p_old[i, k] = x[i, k]
+                x[i, k] += v[i, k] * h
+        _constraints_pass(x, p_old, a, b, rest, ca, cb, da, db)
+        if tethers:
+            _tethers_pass(x, tp, tptr, tr, tl)
+        for i in range(n):
+            if movable[i]:
+                for k in range(3):
+                    v[i, k] = (x[i, k] - p_old[i, k]) / h
+
+
+#: what _steps_kernel calls: the pure functions here, their compiled twins once _jit runs it
+_constraints_pass = _constraints_kernel
+_tethers_pass = _tethers_kernel
+
 _JITTED: dict[str, Any] = {}
 
 
@@ -153,6 +180,9 @@ def _jit(fn: Any) -> Any:
     if got is None:
         import numba
 
+        if fn is _steps_kernel:  # it calls the two passes: their compiled twins
+            fn.__globals__["_constraints_pass"] = _jit(_constraints_kernel)
+            fn.__globals__["_tethers_pass"] = _jit(_tethers_kernel)
         got = _JITTED[fn.__name__] = numba.njit(cache=True)(fn)
     return got
 
@@ -389,7 +419,12 @@ class XPBD(Integrator):
         self.substeps = substeps = DEFAULT_SUBSTEPS if substeps is None else substeps
         self.numba = backend == "numba"
         if self.numba:  # compiled (or loaded from numba's cache) now, not inside the timed loop
-            self._kernels = (_jit(_constraints_kernel), _jit(_tethers_kernel), self.tethers.flat())
+            self._kernels = (
+                _jit(_constraints_kernel),
+                _jit(_tethers_kernel),
+                self.tethers.flat(),
+                _jit(_steps_kernel),
+            )
         self.evaluations_per_step = substeps  # type: ignore[misc]
         kept = []
         for stage in post_step:
@@ -412,6 +447,16 @@ class XPBD(Integrator):
         h = dt / n
         a, p_old, v_new = self._a, self._p_old, self._v_new
         coef = self._coefficients(w, h, intact)
+        a0 = ext.constant_acceleration
+        if self.numba and a0 is not None and not self._drivers and not self.planes:
+            # every external force constant: the whole step in one compiled call
+            np.multiply(a0, h, out=a)
+            self._counted.evaluations += n
+            pins, ptr, rows, limits = self._kernels[2]
+            tethers = intact is None and bool(self.tethers.pins)
+            self._kernels[3](x, v, p_old, a, w > 0, n, h, self.groups.a, self.groups.b, self.groups.rest,
+                             *coef, tethers, pins, ptr, rows, limits)  # fmt: skip
+            return
         for k in range(n):
             t = state.time + k * h
             t_end = state.time + dt if k == n - 1 else t + h
@@ -445,9 +490,7 @@ class XPBD(Integrator):
     ) -> None:
         """The springs' and tethers' pass of a substep in numba kernels (the same values)."""
         g = self.groups
-        kernels = getattr(self, "_kernels", None)
-        if kernels is None:
-            kernels = self._kernels = (_jit(_constraints_kernel), _jit(_tethers_kernel), self.tethers.flat())
+        kernels = self._kernels  # made by configure on the numba backend
         kernels[0](x, p_old, g.a, g.b, g.rest, *coef)
         if tethers and self.tethers.pins:
             kernels[1](x, *kernels[2])

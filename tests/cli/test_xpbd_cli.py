@@ -92,3 +92,19 @@ def test_check_states_no_spring_limit_for_xpbd_and_the_real_limits_of_the_others
     # the other methods' limits are those of the springs as written (ks 1e5), not xpbd's
     line = next(x for x in out.splitlines() if x.strip().startswith("symplectic_euler"))
     assert float(line.split()[1]) < 2e-4
+
+
+def test_compare_and_view_put_xpbd_beside_the_others(tmp_path):
+    r = run_cli(
+        "compare", SCENES / "damped_oscillator.yaml", "--integrators", "symplectic_euler,xpbd",
+        "--dt", "0.02,0.01,0.005", "--repeat", "0", "--backend", "numpy",
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    order = next(
+        line for line in r.stdout.splitlines() if line.strip().startswith("xpbd ") and "expected" in line
+    )
+    assert 0.9 < float(order.split()[1]) < 1.1  # first order against the closed form
+    page = tmp_path / "v.html"
+    r = run_cli("view", SCENES / "oscillator.yaml", "--integrators", "symplectic_euler,xpbd", "-o", page)
+    assert r.returncode == 0, r.stderr
+    assert "2 panels" in r.stdout and page.stat().st_size > 0

@@ -258,14 +258,19 @@ structures:
     pin: ["sheet[0,0]", "sheet[11,0]"]
 forces:
   - {{type: gravity}}
-  - {{type: drag, k: 0.001}}
+{more}"""
+DRAG_AND_PLANE = """  - {type: drag, k: 0.001}
 planes:
-  - {{point: [0, 0.3, 0], normal: [0, 1, 0.1], restitution: 0.3, friction: 0.5}}
+  - {point: [0, 0.3, 0], normal: [0, 1, 0.1], restitution: 0.3, friction: 0.5}
 """
 
 
-@pytest.mark.parametrize("tear", ["", ", max_strain: 0.5"], ids=["tethers", "tearing"])
-def test_numba_kernels_give_numpys_positions_to_1e_12(tear):
+@pytest.mark.parametrize(
+    ("tear", "more"),
+    [("", DRAG_AND_PLANE), (", max_strain: 0.5", DRAG_AND_PLANE), ("", "")],
+    ids=["tethers", "tearing", "whole-step-kernel"],
+)
+def test_numba_kernels_give_numpys_positions_to_1e_12(tear, more):
     from animsim.compile import compile_scene
     from animsim.engine import run
     from animsim.record import MemorySink
@@ -273,7 +278,9 @@ def test_numba_kernels_give_numpys_positions_to_1e_12(tear):
 
     out = []
     for backend in ("numpy", "numba"):
-        compiled = compile_scene(load_scene_text(PARITY.format(tear=tear)).scene, "p", backend=backend)
+        compiled = compile_scene(
+            load_scene_text(PARITY.format(tear=tear, more=more)).scene, "p", backend=backend
+        )
         assert compiled.integrator.numba == (backend == "numba")
         sink = MemorySink()
         assert run(compiled, [sink]).status == STATUS_OK
