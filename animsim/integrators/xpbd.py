@@ -386,6 +386,8 @@ class XPBD(Integrator):
         self._v_pre = np.zeros((n, 3))
         #: the constraint solve in numba kernels (``configure`` on the numba backend)
         self.numba = False
+        self._coef: tuple[Any, tuple[np.ndarray, ...]] | None = None  # (what they were made for, them)
+        self._coef_w: np.ndarray | None = None
         self._describe()
 
     def _describe(self) -> None:
@@ -435,6 +437,13 @@ class XPBD(Integrator):
         self._describe()
         return kept
 
+    def reset(self) -> None:
+        """Forget the constraint coefficients (a new run, or a replay from another state). Only
+        spring ends enter them, and their masses never change during a run (births switch on
+        emitter slots, which no spring joins)."""
+        self._coef = None
+        self._coef_w = None
+
     def step(self, state: State, dt: float) -> None:
         x, v = state.particle_position, state.particle_velocity
         ext = self._external
@@ -446,7 +455,12 @@ class XPBD(Integrator):
         n = self.substeps
         h = dt / n
         a, p_old, v_new = self._a, self._p_old, self._v_new
-        coef = self._coefficients(w, h, intact)
+        # the coefficients change only with the masses (births), the substep and torn springs
+        key = (w.ctypes.data, h, None if intact is None else int(np.count_nonzero(intact)))
+        if self._coef is None or self._coef[0] != key or self._coef_w is not w:
+            self._coef = (key, self._coefficients(w, h, intact))
+            self._coef_w = w
+        coef = self._coef[1]
         a0 = ext.constant_acceleration
         if self.numba and a0 is not None and not self._drivers and not self.planes:
             # every external force constant: the whole step in one compiled call
