@@ -102,8 +102,17 @@ def with_overrides(
                 f"particle positions only); use one of {', '.join(methods.body_methods())}"
             )
         adaptive = scene.adaptive
+        if adaptive is not None and integrator == "xpbd":
+            raise UsageError(
+                "--integrator xpbd: the scene asks for adaptive steps, which xpbd does not take "
+                "(it takes fixed steps with substeps inside each); remove adaptive from the scene"
+            )
+        # substeps belong to xpbd: kept when the override is xpbd, dropped for another method
+        substeps = scene.substeps if integrator == "xpbd" else None
         update["integrator"] = (
-            integrator if adaptive is None else m.IntegratorSpec(method=integrator, adaptive=adaptive)
+            integrator
+            if adaptive is None and substeps is None
+            else m.IntegratorSpec(method=integrator, adaptive=adaptive, substeps=substeps)
         )
     for key, value in (("dt", dt), ("duration", duration)):
         if value is not None:
@@ -306,7 +315,15 @@ def compile_scene(
     if system.spring_count:
         label = f"springs: {system.spring_count} in {len(families)} famil{'y' if len(families) == 1 else 'ies'} ({', '.join(f'{name} {b - a}' for name, a, b in families)})"
         # tearing switches single springs off: the generic kernel, not grid slices
-        springs_term = build_spring_term(system, label, grid=backend != BACKEND_REFERENCE and not can_tear)
+        if scene.integrator_name == "xpbd":
+            # the springs are xpbd's constraints; the term keeps their energy for the watchdog
+            from animsim.integrators.xpbd import spring_energy_term
+
+            springs_term = spring_energy_term(system, label, scene.dt, scene.substeps)
+        else:
+            springs_term = build_spring_term(
+                system, label, grid=backend != BACKEND_REFERENCE and not can_tear
+            )
         terms.insert(sum(1 for e in terms if not isinstance(e, PenaltyPlane)), springs_term)
     else:
         left_out.append("springs: none, so no spring forces or scatter")
@@ -338,10 +355,17 @@ def compile_scene(
         emitters.attach(dynamics, [st for st in post_step if st.collides_newborns])
         post_step.append(emitters)  # births run after the step and its collisions
     name_ = scene.integrator_name
+    from animsim.scene.validate import method_problems
+
+    refused = method_problems(scene)  # the file's own are refused with their line when loaded
+    if refused:
+        raise UsageError("; ".join(f"{'.'.join(map(str, path))}: {msg}" for path, msg, _ in refused))
     try:
         integrator = integrator_class(name_)(dynamics)
     except KeyError:
         raise UsageError(f"integrator {name_!r} is not available in this build") from None
+    # a method's own options (xpbd: its substeps, and the planes it projects itself)
+    post_step = integrator.configure(scene.substeps, post_step, chosen)
 
     clock = Clock.make(scene.duration, scene.dt)
     every, fps = recording_rule(scene.record.every, scene.record.fps, clock.dt)

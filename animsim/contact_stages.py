@@ -30,8 +30,9 @@ from typing import Any
 import numpy as np
 
 from animsim.colliders import BOX, CAPSULE, SPHERE, Colliders, Shape, axis_angle_quaternion, quaternion_matrix
-from animsim.keyframes import KeyframeDrive, PathEvaluator, make_paths
+from animsim.keyframes import KeyframeDrive, PathEvaluator
 from animsim.particle_contacts import ParticleContacts, spring_exclusions
+from animsim.paths import make_paths
 from animsim.scene import models as m
 from animsim.scene.structures import expand, pinned_rows, structure_spring_count, tears
 from animsim.tearing import Tearing

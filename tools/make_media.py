@@ -30,6 +30,20 @@ JOBS: list[list[str]] = [
     ],
     ["render", "scenes/smoke.yaml", "--gif", "docs/media/smoke.gif", "--view", "xy", "--size", "300x360"],
     ["plot", "scenes/spring_pendulum.yaml", "--kind", "energy", "-o", "docs/media/pendulum_energy.png"],
+    [
+        "render",
+        "scenes/stiff_cloth_xpbd.yaml",
+        "--integrators",
+        "symplectic_euler,implicit_euler,xpbd",
+        "--gif",
+        "docs/media/stiff_cloth_side_by_side.gif",
+        "--view",
+        "3d",
+        "--size",
+        "240x220",
+        "--duration",
+        "1.6",
+    ],
 ]
 
 

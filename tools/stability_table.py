@@ -85,6 +85,7 @@ NOTES = {
     "rk4": "dissipative below 2.83 (|R(iy)| < 1)",
     "verlet": "as symplectic Euler undamped; with damping lower (its cached force, see below)",
     "implicit_euler": "A-stable: energy x 1/(1 + (omega dt)^2) per step",
+    "xpbd": "on one spring each substep is backward Euler's step of h = dt / substeps: energy x 1/(1 + (omega h)^2)",
 }
 
 
@@ -191,6 +192,49 @@ would leave less than dt_min before a record time is stretched to land on it,
 or the rest is split in two equal steps); the metadata
 counts accepted and rejected steps, and a step that would fall below dt_min
 stops the run as `unstable`.
+
+## When each method is the better choice
+
+`xpbd` is the position-based method of animation tools (Macklin, Mueller and
+Chentanez 2016; Macklin et al. 2019): each spring is a distance constraint of
+compliance 1/ks, with damping from kd, solved once per substep
+(`integrator: {{method: xpbd, substeps: N}}`, 10 by default); every other force
+acts between the constraints. On one spring each substep is exactly backward
+Euler's step of h = dt / substeps, so it has no step-size limit at any
+stiffness, including `ks: inf` (an inextensible spring, which the force-based
+methods refuse). But one pass per substep cannot make a spring stiffer than
+about m / h^2: where ks (1/m_a + 1/m_b) h^2 is well below 1 xpbd converges to
+the force-based solution at first order in h (tested against the damped
+oscillator's closed form and an RK4 run of a small cloth), and where it is large
+the spring behaves as a softer one until the substeps grow.
+
+The figures below are from `python benchmarks/xpbd_cloth.py --cpu`
+(benchmarks/RESULTS.md, on a shared machine): a 32 x 32 cloth with
+ks = 1e5 N/m on every structural, shear and bend spring and 10 g particles,
+pinned at two corners of one edge and falling from horizontal for 1 s; its sag
+(the drop of the mean height) is compared with symplectic Euler at half its
+largest stable step, 0.06 ms.
+
+| need | choose | on the stiff cloth |
+| --- | --- | --- |
+| the motion of the springs as written | an explicit method at its stable step (`check` prints each one's largest dt) | the reference itself: symplectic Euler on numba at 0.06 ms steps |
+| any step, springs as forces | `implicit_euler` | one step per frame: 1.76 simulated s per CPU s on NumPy, but its damping nearly stops the swing: sag 1251 % off; still 141 % off at 1 ms steps and 21 % at 0.13 ms (0.014 simulated s per CPU s) |
+| any step and any stiffness, inextensible springs, a look that never blows up | `xpbd` | one step per frame, 10 substeps: 13.1 simulated s per CPU s on numba (7.4x implicit Euler), 1.32 on NumPy (0.75x), sag 211 % off (the cloth is softer than ks); within 2 % at 2560 substeps (1.37 %, 0.087 simulated s per CPU s) |
+
+So `xpbd` is the better choice where the look matters more than the numbers:
+cloth, hair and ropes stepped once per frame that must never blow up, and
+inextensible cloth (a hanging 16 x 16 cloth with `ks: inf` stretches below
+1 %: long range attachments from its pins (Kim, Chentanez and Mueller 2012)
+keep every particle within its rest distance along the cloth from them). Where
+the numbers matter, an explicit method at its stable step is both the accurate
+and, on this cloth, the cheapest way to them; `animsim compare` reports every
+method's error against its cost on a scene. `animsim render SCENE
+--integrators symplectic_euler,implicit_euler,xpbd` shows the three side by
+side (`scenes/stiff_cloth_xpbd.yaml`: at one step per frame symplectic Euler
+is stopped as unstable at its second step, implicit Euler swings down as a
+stiff sheet and xpbd as a soft cloth):
+
+![symplectic Euler, implicit Euler and xpbd on the stiff cloth at one step per frame](media/stiff_cloth_side_by_side.gif)
 """
 
 

@@ -55,6 +55,15 @@ class Integrator(ABC):
         cls.evaluations_per_step = method.evaluations_per_step
         cls.description = method.description
 
+    #: what limits the step of a method without a stiffness limit (said by ``check``), or None
+    stability_note: ClassVar[str | None] = None
+
+    def configure(self, substeps: int | None, post_step: list[Any], backend: str = "numpy") -> list[Any]:
+        """Take the run's options and the post-step stages at compile time; return the stages
+        that still run after each step (a method that makes some of them constraints of its
+        own, as xpbd does with the planes, keeps the rest). Most methods keep them all."""
+        return post_step
+
     def body_rule(self, state: State, dt: float) -> bool:
         """How a step advances rigid bodies with the particles: a rule of
         animsim.bodies.integrate; True when q still needs normalising after it. A method

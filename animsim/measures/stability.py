@@ -371,6 +371,8 @@ def _row_bounds(compiled: Any) -> tuple[np.ndarray, np.ndarray, float, list[str]
         if note is not None:
             notes.append(note)
     _refuse_overflow(compiled, k_rows, c_rows)
+    if compiled.integrator.stability_note is not None:  # what limits a method without a dt limit
+        notes.append(compiled.integrator.stability_note)
     return k_rows, c_rows, penalty_k, notes
 
 

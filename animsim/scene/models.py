@@ -20,6 +20,7 @@ from typing import Annotated, Any, Literal, get_args
 from pydantic import (
     AfterValidator,
     BaseModel,
+    BeforeValidator,
     ConfigDict,
     Field,
     PrivateAttr,
@@ -63,6 +64,9 @@ IntegratorName = Annotated[str, _MethodName]
 #: the "file" of diagnostics about a scene built in Python (it has no lines)
 PYTHON_SOURCE = "<python>"
 DEFAULT_INTEGRATOR = "symplectic_euler"
+#: xpbd's substeps per step when the scene names none (animsim.integrators.xpbd.DEFAULT_SUBSTEPS)
+DEFAULT_XPBD_SUBSTEPS = 10
+MAX_SUBSTEPS = 10_000
 DEFAULT_DT = 0.01
 # Bounds that keep a typo from asking for an absurd lattice; the memory
 # budget (animsim.preflight) is the real guard, these only catch nonsense early.
@@ -94,6 +98,15 @@ Vec3 = Annotated[
     Field(min_length=2, max_length=3, description="[x, y, z]; [x, y] means z = 0"),
     AfterValidator(_to_vec3),
 ]
+
+
+def _inf_word(v: Any) -> Any:
+    """``inf`` (or YAML's ``.inf``) written as a word: an infinite stiffness."""
+    return float("inf") if isinstance(v, str) and v.strip().lower() in ("inf", ".inf") else v
+
+
+#: a spring stiffness: >= 0, or inf for an inextensible spring (integrator: xpbd only)
+Stiffness = Annotated[float, Field(ge=0, allow_inf_nan=True), BeforeValidator(_inf_word)]
 Vec2Positive = Annotated[list[Positive], Field(min_length=2, max_length=2)]
 Id = Annotated[
     StrictStr | StrictInt,
@@ -185,7 +198,9 @@ class Motion(Model):
 class SpringFamily(Model):
     """Stiffness and damping of one family of generated springs."""
 
-    ks: NonNegative = Doc(description="stiffness", unit="N/m", example=500)
+    ks: Stiffness = Doc(
+        description="stiffness; inf: inextensible (integrator: xpbd only)", unit="N/m", example=500
+    )
     kd: NonNegative = Doc(0.0, "damping along the spring", unit="N*s/m", example=0.5)
     max_strain: MaxStrain = None
 
@@ -259,7 +274,9 @@ class Spring(Model):
         description="the two ends it joins: particle ids, or {body: ID, at: [x, y, z]}",
         example=["anchor", "bob"],
     )
-    ks: NonNegative = Doc(description="stiffness", unit="N/m", example=100)
+    ks: Stiffness = Doc(
+        description="stiffness; inf: inextensible (integrator: xpbd only)", unit="N/m", example=100
+    )
     kd: NonNegative = Doc(0.0, "damping along the spring", unit="N*s/m", example=0.5)
     rest: Literal["auto"] | NonNegative = Doc(
         "auto", "rest length, or auto = the initial distance", unit="m", example=0.6
@@ -932,6 +949,11 @@ class IntegratorSpec(Model):
         "adapt the step size by step doubling",
         example={"tolerance": 1e-4, "dt_min": 1e-6, "dt_max": 0.1},
     )
+    substeps: Annotated[StrictInt, Field(ge=1, le=MAX_SUBSTEPS)] | None = Doc(
+        None,
+        f"xpbd only: substeps per step, each one constraint iteration (default {DEFAULT_XPBD_SUBSTEPS})",
+        example=10,
+    )
 
 
 class Record(Model):
@@ -985,7 +1007,9 @@ class Scene(Model, metaclass=_SceneType):
     duration: Positive = Doc(description="simulated time", unit="s", example=2.0)
     dt: Positive = Doc(DEFAULT_DT, "step size; at most duration", unit="s", example=0.001)
     integrator: IntegratorName | IntegratorSpec = Doc(
-        DEFAULT_INTEGRATOR, "a method name, or {method, adaptive} for step-size control", example="rk4"
+        DEFAULT_INTEGRATOR,
+        "a method name, or {method, adaptive} for step-size control ({method: xpbd, substeps} for xpbd)",
+        example="rk4",
     )
     seed: Annotated[StrictInt, Field(ge=0, le=2**63 - 1)] = Doc(
         0, "seeds every random draw (emitters, turbulence): same seed, same result", example=7
@@ -1102,6 +1126,11 @@ class Scene(Model, metaclass=_SceneType):
     @property
     def adaptive(self) -> Adaptive | None:
         return None if isinstance(self.integrator, str) else self.integrator.adaptive
+
+    @property
+    def substeps(self) -> int | None:
+        """xpbd's substeps per step, when the scene names them."""
+        return None if isinstance(self.integrator, str) else self.integrator.substeps
 
 
 def _python_scene_error(exc: ValidationError, data: Any) -> Exception:

@@ -311,6 +311,81 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
             lo > hi for lo, hi in zip(e.kill_box.min, e.kill_box.max, strict=True)
         ):
             out.append((("emitters", i, "kill_box"), "kill_box min must not exceed max in any axis", False))
+    if not partial:  # a partial scene does not carry its integrator (it may not have validated)
+        out.extend(method_problems(scene))
+    return out
+
+
+#: what xpbd does not take yet, and what to use instead
+_XPBD_REFUSES = (
+    ("bodies", "rigid bodies", "use symplectic_euler, verlet or rk4 for a scene with bodies"),
+    (
+        "colliders",
+        "solid colliders",
+        "use a plane (response: impulse), or a force-based method such as verlet",
+    ),
+    (
+        "particle_collisions",
+        "particle contacts",
+        "use a force-based method such as symplectic_euler for particle contacts",
+    ),
+)
+
+
+def method_problems(scene: Scene) -> list[Problem]:
+    """What the scene's integrator cannot step: xpbd's refused elements, and inextensible
+    springs (ks: inf) under a force-based method. Also run at compile time, so a method
+    given on the command line is refused the same way."""
+    out: list[Problem] = []
+    method = getattr(scene, "integrator_name", None) if scene.integrator is not None else None
+    if method is None:
+        return out
+    spec = scene.integrator if not isinstance(scene.integrator, str) else None
+    if spec is not None and spec.substeps is not None and method != "xpbd":
+        out.append(
+            (("integrator", "substeps"), f"substeps applies only to method: xpbd, not to {method}", True)
+        )
+    if spec is not None and spec.adaptive is not None and method == "xpbd":
+        out.append(
+            (
+                ("integrator", "adaptive"),
+                "xpbd takes fixed steps (with substeps inside each), not adaptive ones: remove "
+                "adaptive, or use adaptive with a force-based method such as rk4",
+                True,
+            )
+        )
+    if method == "xpbd":
+        for key, what, instead in _XPBD_REFUSES:
+            value = getattr(scene, key, None)
+            if value:
+                where: tuple[str | int, ...] = (key, 0) if isinstance(value, list) else (key,)
+                out.append((where, f"integrator xpbd does not handle {what} yet; {instead}", True))
+        for i, pl in enumerate(scene.planes or []):
+            if pl is not None and pl.response == "penalty":
+                out.append(
+                    (
+                        ("planes", i, "response"),
+                        "integrator xpbd projects planes as constraints and does not take penalty "
+                        "planes; use response: impulse (or a force-based method for penalty contact)",
+                        True,
+                    )
+                )
+        return out
+    why = "ks: inf (an inextensible spring) needs integrator: xpbd; give a finite ks for " + method
+    for i, sp in enumerate(scene.springs or []):
+        if sp is not None and math.isinf(sp.ks):
+            out.append((("springs", i, "ks"), why, True))
+    for i, st in enumerate(scene.structures or []):
+        if st is None:
+            continue
+        for key in type(st).model_fields:
+            family = getattr(st, key, None)
+            if (
+                family is not None
+                and isinstance(getattr(family, "ks", None), float)
+                and math.isinf(family.ks)
+            ):
+                out.append((("structures", i, key, "ks"), why, True))
     return out
 
 

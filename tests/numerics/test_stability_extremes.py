@@ -11,9 +11,9 @@ import math
 
 import numpy as np
 import pytest
-from animsim.measures.stability import largest_stable_dt
 
 from animsim.errors import SceneError
+from animsim.measures.stability import largest_stable_dt
 from tests.conftest import run_cli
 
 

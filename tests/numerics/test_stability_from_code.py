@@ -17,7 +17,6 @@ import pytest
 
 from animsim import methods
 from animsim.compile import compile_scene
-from animsim.integrators import FIXED_STEP
 from animsim.measures.stability import (
     analyse,
     initial_state_map,
@@ -78,7 +77,7 @@ def measured_one_step_matrix(method: str, h: float, omega: float, zeta: float) -
     return out
 
 
-@pytest.mark.parametrize("method", [*FIXED_STEP, "implicit_euler"])
+@pytest.mark.parametrize("method", methods.names())
 @pytest.mark.parametrize(
     "h,omega,zeta", [(0.3, 1.0, 0.0), (0.05, 20.0, 0.1), (0.7, 2.0, 0.5), (0.01, 7.0, 1.5)]
 )
@@ -102,7 +101,7 @@ def amplitude(x: np.ndarray, v: np.ndarray, omega: np.ndarray) -> np.ndarray:
     return np.hypot(x, v / omega)
 
 
-@pytest.mark.parametrize("method", [*FIXED_STEP, "implicit_euler"])
+@pytest.mark.parametrize("method", methods.names())
 def test_printed_limits_against_measured_ones(method):
     """At 0.98x the printed limit the code stays bounded for STEPS steps; at 1.05x it grows.
 

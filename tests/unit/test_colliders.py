@@ -16,7 +16,8 @@ from animsim.colliders import (
     axis_angle_quaternion,
     quaternion_matrix,
 )
-from animsim.keyframes import PathEvaluator, make_paths
+from animsim.keyframes import PathEvaluator
+from animsim.paths import make_paths
 
 
 def _backends() -> list[str]:

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from animsim.keyframes import KeyframeDrive, PathEvaluator, make_paths
+from animsim.keyframes import KeyframeDrive, PathEvaluator
+from animsim.paths import make_paths
 
 KEYS = [
     (0.0, (0.0, 2.0, 0.0)),
