@@ -350,6 +350,9 @@ def compile_scene(
         integrator = integrator_class(name_)(dynamics)
     except KeyError:
         raise UsageError(f"integrator {name_!r} is not available in this build") from None
+    for st in post_step:  # contact impulses move what they touch as the integrator moves positions
+        if hasattr(st, "follow_weight"):
+            st.follow_weight = contact_stages.follow_weight(integrator)
 
     clock = Clock.make(scene.duration, scene.dt)
     every, fps = recording_rule(scene.record.every, scene.record.fps, clock.dt)

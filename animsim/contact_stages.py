@@ -45,6 +45,22 @@ class Built:
     collider_surface: Any = None
 
 
+#: c in "a constant acceleration a over a step of dt moves a position by c dt^2 a", per method:
+#: x1 = x0 + dt v1 for symplectic and implicit Euler (c = 1), x1 = x0 + dt v0 for explicit Euler
+#: (c = 0), and the exact dt^2 a / 2 of every method of order 2 or more (Runge-Kutta, Verlet,
+#: the averaged Euler). Contact stages move what they touch by c dt times the velocity change
+#: of their resting and sliding impulses, which stand for forces acting during the step.
+FOLLOW_WEIGHT = {"symplectic_euler": 1.0, "implicit_euler": 1.0, "euler": 0.0}
+
+
+def follow_weight(integrator: Any) -> float:
+    """The integrator's c (its own ``follow_weight`` if it declares one)."""
+    declared = getattr(integrator, "follow_weight", None)
+    if declared is not None:
+        return float(declared)
+    return FOLLOW_WEIGHT.get(integrator.name, 0.5)
+
+
 def spring_max_strain(scene: m.Scene) -> np.ndarray:
     """Per spring, in the compiler's order (listed springs, then each structure's families),
     the tearing limit; +inf where the spring cannot tear."""
