@@ -366,6 +366,9 @@ def compile_scene(
         raise UsageError(f"integrator {name_!r} is not available in this build") from None
     # a method's own options (xpbd: its substeps, and the planes it projects itself)
     post_step = integrator.configure(scene.substeps, post_step, chosen)
+    for st in post_step:  # contact impulses move what they touch as the integrator moves positions
+        if st.follow_weight is not None:
+            st.follow_weight = contact_stages.follow_weight(integrator)
 
     clock = Clock.make(scene.duration, scene.dt)
     every, fps = recording_rule(scene.record.every, scene.record.fps, clock.dt)

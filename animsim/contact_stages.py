@@ -51,6 +51,17 @@ class Built:
     collider_surface: Any = None
 
 
+#: c in "a constant acceleration a over a step of dt moves a position by c dt^2 a", per method:
+def follow_weight(integrator: Any) -> float:
+    """The integrator's c in x1 = x0 + dt (v0 + c dv): x1 = x0 + dt v1 for symplectic and
+    implicit Euler (c = 1), x1 = x0 + dt v0 for explicit Euler (c = 0), and the exact
+    dt^2 a / 2 of every method of order 2 or more (Runge-Kutta, Verlet, the averaged Euler),
+    declared by its method or derived from its tableau (animsim.methods.Method.position_weight).
+    Contact stages move what they touch by c dt times the velocity change of their resting and
+    sliding impulses, which stand for forces acting during the step."""
+    return integrator.method.position_weight
+
+
 def spring_max_strain(scene: m.Scene) -> np.ndarray:
     """Per spring, in the compiler's order (listed springs, then each structure's families),
     the tearing limit; +inf where the spring cannot tear."""

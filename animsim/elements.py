@@ -207,6 +207,10 @@ class StepStage:
     fused_between_steps: ClassVar[bool] = False
     #: the impulse planes: particle contacts push out of them after their own pass
     holds_planes: ClassVar[bool] = False
+    #: contact impulses that move what they touch as the integrator moves positions: the
+    #: weight of the step's velocity change in the position update (set at compile time from
+    #: the method, animsim.contact_stages.follow_weight); None for stages that have none
+    follow_weight: float | None = None
 
     def reset(self, state: Any) -> None:
         """Called at the start of every run (and replay) with the run's state."""

@@ -32,6 +32,7 @@ class BodyDynamics:
         self.terms = tuple(terms)
         self._force = np.zeros((system.particle_count, 3))
         self._torque = np.zeros((self.count, 3))
+        self._no_spin = np.zeros((self.count, 3))
         self.numba = backend == "numba"
 
     def accelerations(
@@ -44,11 +45,14 @@ class BodyDynamics:
         t: float,
         a_out: np.ndarray,
         alpha_out: np.ndarray,
+        gyroscopic: bool = True,
     ) -> None:
         """a (N,3) and the bodies' angular accelerations (B,3) at (x, v, q, w, t), into the outs.
 
         The particle forces go through ``dynamics.acceleration`` (so evaluations are counted and
-        the numba backend's kernels run); forces at points of bodies are added on top.
+        the numba backend's kernels run); forces at points of bodies are added on top. With
+        ``gyroscopic`` False the angular acceleration is the torques' part alone, I_w^-1 tau
+        (for an integrator that advances the free rotation itself).
         """
         dynamics.acceleration(x, v, t, a_out)
         torque = self._torque
@@ -59,17 +63,18 @@ class BodyDynamics:
             for term in self.terms:
                 term.accumulate_bodies(x, v, q, w, t, f, torque)
             a_out += f * dynamics.inv_mass[:, None]
+        spin = w if gyroscopic else self._no_spin
         if self.numba:
             quat.numba_angular_acceleration()(
                 np.ascontiguousarray(q),
-                np.ascontiguousarray(w),
+                np.ascontiguousarray(spin),
                 self.inertia,
                 self.inv_inertia,
                 torque,
                 alpha_out,
             )
         else:
-            alpha_out[:] = quat.angular_acceleration(q, w, self.inertia, self.inv_inertia, torque)
+            alpha_out[:] = quat.angular_acceleration(q, spin, self.inertia, self.inv_inertia, torque)
 
     def rotational_energy(self, q: np.ndarray, w: np.ndarray) -> float:
         """sum 1/2 omega . I_w omega over free bodies (pinned ones are driven, as pinned particles)."""

@@ -7,7 +7,9 @@ x' = v and omega' from Euler's equations in place of v' = F/m
 
 * explicit Runge-Kutta tableaux (euler, midpoint, heun, rk4): the same stages on
   the whole system y = (x, v, q, omega), so the order is the method's;
-* symplectic_euler: omega += dt omega'(t); q += dt q'(q, omega(t + dt));
+* symplectic_euler: omega += dt I_w^-1 tau(t) (a kick by the torques), then the free rotation
+  for dt by the implicit midpoint rule on the body-frame angular momentum, which keeps the
+  kinetic energy and |L| (:func:`animsim.bodies.quaternion.advance_rotation`);
 * euler_average: omega1 = omega + dt omega'; q += dt q'(q, (omega + omega1) / 2);
 * verlet: x and v as velocity Verlet; q by a midpoint step with omega at
   t + dt/2 predicted, omega by the trapezoid rule on omega' at the start and at
@@ -104,14 +106,15 @@ def symplectic_euler(integ: Any, state: Any, dt: float) -> bool:
     x, v = state.particle_position, state.particle_velocity
     q, w = state.body_orientation, state.body_angular_velocity
     a, alpha = wk.kv[0], wk.kw[0]
-    dyn.bodies.accelerations(dyn, x, v, q, w, state.time, a, alpha)
+    dyn.bodies.accelerations(dyn, x, v, q, w, state.time, a, alpha, gyroscopic=False)
     v += dt * a
     x += dt * v
-    if dyn.bodies.numba:
-        quat.numba_advance_orientation()(q, w, alpha, dt)
+    bodies = dyn.bodies
+    if bodies.numba:
+        quat.numba_advance_rotation()(q, w, alpha, bodies.inertia, bodies.inv_inertia, dt)
     else:
-        quat.advance_orientation(q, w, alpha, dt)
-    return False  # advance_orientation normalises q itself
+        quat.advance_rotation(q, w, alpha, bodies.inertia, bodies.inv_inertia, dt)
+    return False  # advance_rotation normalises q itself
 
 
 def euler_average(integ: Any, state: Any, dt: float) -> bool:

@@ -123,6 +123,9 @@ class Method:
     aliases: tuple[str, ...] = ()
     #: the method whose numbers an implicit method computes when nothing in the scene is implicit
     explicit_fallback: str | None = None
+    #: c in x1 = x0 + dt (v0 + c dv) for a constant acceleration (dv = dt a): how its position
+    #: update follows the step's velocity change; None: derived from the tableau (b . c)
+    follow_weight: float | None = None
 
     def __post_init__(self) -> None:
         if (self.tableau is None) == (self.one_step is None):
@@ -141,6 +144,17 @@ class Method:
             return self.work_vectors
         assert self.tableau is not None
         return 2 * self.tableau.stages + 2
+
+    @property
+    def position_weight(self) -> float:
+        """c of :attr:`follow_weight`: declared, or for a tableau sum_i b_i c_i (its stages'
+        velocities are v0 + c_i dt a under a constant a): 0 for explicit Euler, 1/2 at
+        order 2 and above. Contact impulses that stand for forces acting during the step
+        move what they touch by c dt times their velocity change (animsim.contact_stages)."""
+        if self.follow_weight is not None:
+            return self.follow_weight
+        assert self.tableau is not None
+        return math.fsum(b * c for b, c in zip(self.tableau.b, self.tableau.c, strict=True))
 
     def one_step_matrix(self, h: np.ndarray, k: np.ndarray, c: np.ndarray) -> np.ndarray:
         """(..., d, d): one step of size h on x'' = -k x - c x' (see :data:`OneStep`)."""

@@ -27,6 +27,7 @@ register(
         description="Euler 2 of the notes: v1 = v + dt*a; x += dt*(v+v1)/2; v = v1",
         evaluations_per_step=1,
         one_step=one_step,
+        follow_weight=0.5,
         stepper="animsim.integrators.symplectic:EulerAverage",
         work_vectors=2,
     )

@@ -25,6 +25,7 @@ register(
         description="backward Euler linearised per step (Baraff & Witkin 1998)",
         evaluations_per_step=1,
         one_step=one_step,
+        follow_weight=1.0,
         stepper="animsim.integrators.implicit:ImplicitEuler",
         # conjugate-gradient vectors and the linearised system's work arrays
         work_vectors=12,

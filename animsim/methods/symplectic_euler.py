@@ -34,6 +34,7 @@ register(
         description="semi-implicit Euler: v += dt*a(t); x += dt*v(t+dt)",
         evaluations_per_step=1,
         one_step=one_step,
+        follow_weight=1.0,
         stepper="animsim.integrators.symplectic:SymplecticEuler",
         closed_form_limit=closed_form_limit,
         work_vectors=1,

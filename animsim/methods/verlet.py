@@ -45,6 +45,7 @@ register(
         description="velocity Verlet; velocity-dependent forces at a predicted velocity",
         evaluations_per_step=1,
         one_step=one_step,
+        follow_weight=0.5,
         stepper="animsim.integrators.symplectic:Verlet",
         state_size=3,
         initial_state=initial_state,

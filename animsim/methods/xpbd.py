@@ -39,6 +39,7 @@ register(
         description="XPBD: springs as compliant distance constraints, one Gauss-Seidel pass per substep",
         evaluations_per_step=DEFAULT_SUBSTEPS,
         one_step=one_step,
+        follow_weight=1.0,
         stepper="animsim.integrators.xpbd:XPBD",
         # external acceleration, substep start, new and pre-solve velocity, constant forces
         work_vectors=5,

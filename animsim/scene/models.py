@@ -914,6 +914,20 @@ class Body(Model):
         0.5, description="Coulomb coefficient against other bodies (geometric mean of the two)"
     )
 
+    @field_validator("inertia")
+    @classmethod
+    def _inertia_of_a_solid(cls, value: list[float] | None) -> list[float] | None:
+        # the principal moments of any mass distribution satisfy A + B >= C for each order
+        # (I_x + I_y = integral of x^2 + y^2 + 2 z^2 dm >= I_z), equal only for a flat plate
+        if value is not None:
+            a, b, c = sorted(value)
+            if a + b < c * (1.0 - 1e-9):
+                raise ValueError(
+                    f"no body has these principal moments: {a:g} + {b:g} < {c:g}, while every solid "
+                    "has each moment at most the sum of the other two (equal for a flat plate)"
+                )
+        return value
+
     @model_validator(mode="after")
     def _mass_or_density(self) -> Body:
         if (self.mass is None) == (self.density is None):
