@@ -24,8 +24,9 @@ What the file holds
             point3f[]  points.timeSamples             # position, m
             color3f[]  primvars:displayColor          # RGB, vertex interpolation
             float[]    primvars:displayOpacity        # alpha, vertex interpolation
+            int[]      primvars:id                    # the same rows as ids (Blender: attribute "id")
             vector3f[] velocities.timeSamples         # m/s (USD: units per second)
-            float[]    widths.timeSamples             # diameter = 2 * size, vertex
+            float[]    widths.timeSamples             # diameter = 2 * radius, vertex
         }
     }
 
@@ -44,7 +45,8 @@ beside ``particles``, named after the structure (sanitised as below):
   time-sampled ``points``, ``velocities``, ``extent``.
 
 ``particles`` then holds only the other particles (listed ones and emitted
-ones) and is left out when there are none and no emitters. With emitters it
+ones) and is left out when there are none and no emitters (a scene of rigid
+bodies alone has none). With emitters it
 also carries ``primvars:age`` (s since birth, vertex interpolation; ``nan``
 for particles that were not emitted).
 
@@ -59,8 +61,12 @@ same time codes. ``ids`` (int64 in ``UsdGeomPoints``) gives each point's
 identity, which is what USD uses to follow points when the count changes
 between samples (emitters); its values are rows of the run's id table (header
 ids then each frame's ``new_ids``), and the table itself is the
-``animsim:idTable`` string array. Frames without size/colour get width
-``2 * DEFAULT_SIZE`` and opaque white, as the PLY export does.
+``animsim:idTable`` string array. Importers that drop ``ids`` (Blender brings
+primvars in as attributes, not ``ids``) still get each point's row as the
+integer primvar ``primvars:id``. A point's width is twice its radius and its
+colour its own (the scene's ``radius`` and ``color``, an emitted particle's size
+and colour over life), else ``2 * DEFAULT_SIZE`` and opaque white, the rule
+every exporter shares (:mod:`animsim.export.look`).
 
 The scene name becomes the root prim's name with every character outside
 ``[A-Za-z0-9_]`` replaced by ``_`` (and a leading ``_`` before a digit); the
@@ -116,8 +122,10 @@ import numpy as np
 from animsim import __version__
 from animsim.atomic import AtomicFile
 from animsim.errors import SimulationError
+from animsim.export.look import DEFAULT_RGBA, DEFAULT_SIZE, SceneLook
 from animsim.export.meta import meta_file
-from animsim.export.ply import DEFAULT_RGBA, DEFAULT_SIZE, validate_frame
+from animsim.export.ply import validate_frame
+from animsim.export.topology import TornShapes
 from animsim.record import Connectivity, Frame, TrajectoryHeader
 
 USDA_MAGIC = "#usda 1.0"
@@ -158,6 +166,8 @@ ATTRIBUTES: tuple[_Attribute, ...] = (
     _Attribute("points", "point3f[]"),
     _Attribute("primvars:displayColor", "color3f[]", VERTEX_INTERPOLATION),
     _Attribute("primvars:displayOpacity", "float[]", VERTEX_INTERPOLATION),
+    # the id-table row again, as a primvar: Blender brings primvars in as attributes, not ``ids``
+    _Attribute("primvars:id", "int[]", VERTEX_INTERPOLATION),
     _Attribute("velocities", "vector3f[]"),
     _Attribute("widths", "float[]", VERTEX_INTERPOLATION),
 )
@@ -169,6 +179,9 @@ SHAPE_ATTRIBUTES: tuple[_Attribute, ...] = (
     _Attribute("points", "point3f[]"),
     _Attribute("velocities", "vector3f[]"),
 )
+# Topology that changes (springs that tear): time-sampled too, beside the shape's samples.
+MESH_TOPOLOGY = (_Attribute("faceVertexCounts", "int[]"), _Attribute("faceVertexIndices", "int[]"))
+CURVE_TOPOLOGY = (_Attribute("curveVertexCounts", "int[]"),)
 
 
 class _Prim:
@@ -181,6 +194,7 @@ class _Prim:
         self.name = name
         self.attributes = attributes
         self.conn = conn
+        self.tears = False  # topology time-sampled (springs of the structure can tear)
 
     def key(self, attr: _Attribute) -> str:
         return f"{self.name}/{attr.name}"
@@ -302,6 +316,8 @@ class UsdaSink:
         self._prims: list[_Prim] = []
         self._has_emitters = False
         self._bodies: _BodyPrims | None = None
+        self._look = SceneLook(None)
+        self._torn = TornShapes(None)
         self._pending: list[AtomicFile] = []  # the .usda, then the metadata
         self._committed: list[Path] = []  # of those, renamed into place by a close in progress
         self._state = "new"
@@ -315,6 +331,8 @@ class UsdaSink:
         self._scene = header.scene_name
         self._has_emitters = header.has_emitters
         self._bodies = _body_plan(header)
+        self._look = SceneLook(header.extra)
+        self._torn = TornShapes(header)
         self._prims = self._plan(header)
         self._state = "open"
         folder = self.path.parent
@@ -388,23 +406,23 @@ class UsdaSink:
 
     # -- encoding ------------------------------------------------------------
 
-    @staticmethod
-    def sample_texts(frame: Frame, n: int) -> dict[str, str]:
+    def sample_texts(self, frame: Frame, n: int) -> dict[str, str]:
         """Each attribute's value for this frame, as USD text on one line."""
         pos = np.asarray(frame.position, dtype=np.float64).reshape(n, 3)
         vel = np.asarray(frame.velocity, dtype=np.float64).reshape(n, 3)
-        if frame.size is None:
+        plain = self._look.empty and frame.size is None and frame.color is None
+        radius, rgba = (None, None) if plain else self._look.row_look(frame.index, frame.size, frame.color)
+        if radius is None:
             widths = np.full(n, 2.0 * DEFAULT_SIZE)
             widths_text = _repeated(repr(2.0 * DEFAULT_SIZE), n)
         else:
-            widths = 2.0 * np.asarray(frame.size, dtype=np.float64).reshape(n)
+            widths = 2.0 * radius
             widths_text = format_floats(widths)
-        if frame.color is None:  # the default colour: repeat its text, no formatting per point
+        if rgba is None:  # the default colour: repeat its text, no formatting per point
             r, g, b, a = map(repr, map(float, DEFAULT_RGBA))
             color_text = _repeated(f"({r}, {g}, {b})", n)
             opacity_text = _repeated(a, n)
         else:
-            rgba = np.asarray(frame.color, dtype=np.float64).reshape(n, 4)
             color_text = format_tuples(srgb_to_linear(rgba[:, :3]), 3)
             opacity_text = format_floats(rgba[:, 3])
         if n:
@@ -418,6 +436,7 @@ class UsdaSink:
             "points": format_tuples(pos, 3),
             "primvars:displayColor": color_text,
             "primvars:displayOpacity": opacity_text,
+            "primvars:id": format_ints(frame.index),
             "velocities": format_tuples(vel, 3),
             "widths": widths_text,
         }
@@ -435,13 +454,20 @@ class UsdaSink:
                 name = f"{base}_{k}"
             taken.add(name)
             usd_type = "Mesh" if conn.kind == "mesh" else "BasisCurves"
-            shapes.append(_Prim(usd_type, name, SHAPE_ATTRIBUTES, conn))
+            attrs = SHAPE_ATTRIBUTES
+            tears = self._torn.tears(conn)
+            if tears:
+                topo = MESH_TOPOLOGY if usd_type == "Mesh" else CURVE_TOPOLOGY
+                attrs = tuple(sorted(SHAPE_ATTRIBUTES + topo, key=lambda a: a.name))
+            shape = _Prim(usd_type, name, attrs, conn)
+            shape.tears = tears
+            shapes.append(shape)
             covered += conn.count
         if self._bodies is not None:
             covered += len(self._bodies.ids)  # bodies are Xforms of their own, not points
         attrs = ATTRIBUTES[:3] + ((AGE_ATTRIBUTE,) if header.has_emitters else ()) + ATTRIBUTES[3:]
         points = _Prim("Points", POINTS_PRIM, attrs, None)
-        if not shapes or header.has_emitters or len(header.ids) > covered:
+        if header.has_emitters or len(header.ids) > covered or not (shapes or self._bodies):
             return [points, *shapes]
         return shapes
 
@@ -458,14 +484,27 @@ class UsdaSink:
             free[rows] = False
             pos = np.asarray(frame.position, dtype=np.float64)[rows]
             vel = np.asarray(frame.velocity, dtype=np.float64)[rows]
+            texts: dict[str, str] = {}
+            if prim.tears and prim.usd_type == "Mesh":
+                # faces that used a spring torn by now are gone (animsim.export.topology)
+                counts, corners = self._torn.faces(c, frame.spring_intact)
+                texts["faceVertexCounts"] = format_ints(counts)
+                texts["faceVertexIndices"] = format_ints(corners)
+            elif prim.tears:
+                # a strand torn apart: its whole runs as curves, over the vertices they use
+                counts, verts = self._torn.curves(c, frame.spring_intact)
+                texts["curveVertexCounts"] = format_ints(counts)
+                pos, vel = pos[verts], vel[verts]
             if prim.usd_type == "BasisCurves":
                 half = DEFAULT_SIZE  # widths / 2
-                extent = np.stack([pos.min(axis=0) - half, pos.max(axis=0) + half])
+                extent = np.stack([pos.min(axis=0) - half, pos.max(axis=0) + half]) if len(pos) else None
             else:
                 extent = np.stack([pos.min(axis=0), pos.max(axis=0)])
-            yield prim.key(SHAPE_ATTRIBUTES[0]), format_tuples(extent, 3)
-            yield prim.key(SHAPE_ATTRIBUTES[1]), format_tuples(pos, 3)
-            yield prim.key(SHAPE_ATTRIBUTES[2]), format_tuples(vel, 3)
+            texts["extent"] = format_tuples(np.zeros((2, 3)) if extent is None else extent, 3)
+            texts["points"] = format_tuples(pos, 3)
+            texts["velocities"] = format_tuples(vel, 3)
+            for attr in prim.attributes:
+                yield prim.key(attr), texts[attr.name]
         points = self._prims[0] if self._prims and self._prims[0].conn is None else None
         if points is None:
             return
@@ -539,11 +578,13 @@ class UsdaSink:
         w(f"{pad}custom uniform string[] animsim:ids = [{ids}]\n")
         if prim.usd_type == "Mesh":
             w(f"{pad}uniform bool doubleSided = true\n")
-            w(f"{pad}int[] faceVertexCounts = {format_ints(c.vertex_counts)}\n")
-            w(f"{pad}int[] faceVertexIndices = {format_ints(c.vertex_indices)}\n")
+            if not prim.tears:
+                w(f"{pad}int[] faceVertexCounts = {format_ints(c.vertex_counts)}\n")
+                w(f"{pad}int[] faceVertexIndices = {format_ints(c.vertex_indices)}\n")
             w(f'{pad}uniform token subdivisionScheme = "none"\n')
         else:
-            w(f"{pad}int[] curveVertexCounts = {format_ints(c.vertex_counts)}\n")
+            if not prim.tears:
+                w(f"{pad}int[] curveVertexCounts = {format_ints(c.vertex_counts)}\n")
             w(f'{pad}uniform token type = "linear"\n')
             w(f"{pad}float[] widths = [{2.0 * DEFAULT_SIZE!r}] (\n")
             w(f'{pad}{INDENT}interpolation = "constant"\n{pad})\n')

@@ -28,6 +28,7 @@ TIME_SAMPLED = {
     "points": "point3f[]",
     "primvars:displayColor": "color3f[]",
     "primvars:displayOpacity": "float[]",
+    "primvars:id": "int[]",
     "velocities": "vector3f[]",
     "widths": "float[]",
 }
@@ -199,6 +200,7 @@ def test_structure_and_metadata(tmp_path: Path) -> None:
     assert parsed.interpolation == {
         "primvars:displayColor": "vertex",
         "primvars:displayOpacity": "vertex",
+        "primvars:id": "vertex",
         "widths": "vertex",
     }
     assert parsed.strings["animsim:idTable"] == ["p0", "p1", "p2"]
