@@ -262,6 +262,8 @@ class Format(StrEnum):
     npz = "npz"
     ply = "ply"  # a sequence of binary PLY files, one per recorded frame
     usda = "usda"  # one USD ASCII file of animated points
+    usdc = "usdc"  # the same stage in USD's binary crate (usd-core)
+    vtp = "vtp"  # VTK PolyData per frame and a .pvd collection (ParaView)
 
 
 def _backend(name: str) -> str:
@@ -327,7 +329,10 @@ def run(
         Format | None,
         typer.Option(
             "--format",
-            help="Trajectory format; default from the suffix (.npz, .ply, .usda; a folder means ply), else csv.",
+            help=(
+                "Trajectory format; default from the suffix (.npz, .ply, .usda, .usdc, .pvd; "
+                "a folder means ply), else csv."
+            ),
         ),
     ] = None,
     extra_columns: Annotated[
@@ -343,7 +348,8 @@ def run(
 
     Formats: CSV; NPZ; PLY (one binary file per frame, for Blender, Houdini,
     ParaView: -o out/frames.ply gives out/frames_0000.ply, ...; an existing
-    folder gives <folder>/frames_0000.ply, ...); USD ASCII (-o anim.usda).
+    folder gives <folder>/frames_0000.ply, ...); USD ASCII (-o anim.usda) or
+    binary (-o anim.usdc); VTK for ParaView (-o run.pvd gives run_0000.vtp, ...).
     The output folder must exist.
     """
     from animsim import api

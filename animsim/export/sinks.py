@@ -15,9 +15,35 @@ from pathlib import Path
 from typing import Any
 
 #: format names, in the order ``--format`` lists them
-FORMATS = ("csv", "npz", "ply", "usda")
+FORMATS = ("csv", "npz", "ply", "usda", "usdc", "vtp")
 #: output suffix -> format (an existing folder means ply; anything else csv)
-SUFFIXES = {".csv": "csv", ".npz": "npz", ".ply": "ply", ".usda": "usda"}
+SUFFIXES = {
+    ".csv": "csv",
+    ".npz": "npz",
+    ".ply": "ply",
+    ".usda": "usda",
+    ".usdc": "usdc",
+    ".usd": "usdc",  # USD's own default for .usd is the binary crate
+    ".pvd": "vtp",
+    ".vtp": "vtp",
+}
+#: formats that need an optional package: format -> (module, extra that brings it)
+NEEDS = {"usdc": ("pxr", "usd"), "vtp": ("vtk", "vtk")}
+
+
+def require(fmt: str) -> None:
+    """UsageError (exit 2, before any work) when ``fmt`` needs a package that is not installed."""
+    import importlib.util
+
+    if fmt in NEEDS:
+        module, extra = NEEDS[fmt]
+        if importlib.util.find_spec(module) is None:
+            from animsim.errors import UsageError
+
+            raise UsageError(
+                f"--format {fmt} needs the {extra!r} extra: pip install 'animsim[{extra}]'"
+                + (" (or write text USD: -o run.usda)" if fmt == "usdc" else "")
+            )
 
 
 def format_for(path: Path | None, requested: str | None = None) -> str:
@@ -54,12 +80,17 @@ def open_sink(
         from animsim.export.ply import PlySequenceSink
 
         return PlySequenceSink(path, expected_frames=expected_frames)
-    if fmt == "usda":
-        from animsim.export.usda import USD_DEFAULT_TIME_CODES_PER_SECOND, UsdaSink
+    if fmt in ("usda", "usdc"):
+        from animsim.export.usda import UsdaSink
 
-        return UsdaSink(
-            path, uneven_rate=meta_rate if meta_rate is not None else USD_DEFAULT_TIME_CODES_PER_SECOND
-        )
+        require(fmt)
+        # no rate given (every=n): the run's own frame rate, from its metadata
+        return UsdaSink(path, uneven_rate=meta_rate, binary=fmt == "usdc")
+    if fmt == "vtp":
+        from animsim.export.vtp import VtpSink
+
+        require(fmt)
+        return VtpSink(path, expected_frames=expected_frames)
     from animsim.export.csv import CsvSink
 
     return CsvSink("-" if str(path) == "-" else path, extra_columns=extra_columns)

@@ -6,6 +6,7 @@ their radius and colour and an integer id Blender keeps (usd-core, plyfile).
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -196,3 +197,104 @@ def test_particles_carry_radius_and_colour_into_ply(tmp_path: Path, cli) -> None
             hexa = BALL_COLOURS[table[k]]
             got = [int(v[c][row]) for c in ("red", "green", "blue")]
             assert got == [int(hexa[i : i + 2], 16) for i in (0, 2, 4)]
+
+
+def test_usdc_is_usds_binary_crate_and_compact(tmp_path: Path) -> None:
+    """The crate reads back to the text's stage (float32) and is at most a quarter of its size."""
+    from animsim.export.usda import UsdaSink
+    from animsim.record import Frame, TrajectoryHeader
+
+    rng = np.random.default_rng(20261127)
+    n, frames = 2000, 51
+    header = TrajectoryHeader("big", [f"p{i}" for i in range(n)], np.zeros((0, 2), np.int64), False)
+    x0, v = rng.normal(size=(n, 3)), rng.normal(size=(n, 3))
+    for suffix, binary in (("usda", False), ("usdc", True)):
+        sink = UsdaSink(tmp_path / f"big.{suffix}", binary=binary, write_meta=False)
+        sink.begin(header)
+        for k in range(frames):
+            sink.write(Frame(k, k * 0.02, np.arange(n), x0 + k * 0.02 * v, v))
+        sink.close({})
+    text, crate = tmp_path / "big.usda", tmp_path / "big.usdc"
+    assert crate.read_bytes()[:8] == b"PXR-USDC"  # the crate's magic
+    assert crate.stat().st_size <= text.stat().st_size / 4
+    a, b = Usd.Stage.Open(str(text)), Usd.Stage.Open(str(crate))
+    assert b.GetTimeCodesPerSecond() == a.GetTimeCodesPerSecond() == 50
+    for code in (0, 25, 50):
+        pa = np.array(UsdGeom.Points(a.GetPrimAtPath("/big/particles")).GetPointsAttr().Get(code))
+        pb = np.array(UsdGeom.Points(b.GetPrimAtPath("/big/particles")).GetPointsAttr().Get(code))
+        assert np.array_equal(pa, pb)
+        assert np.array_equal(pb, (x0 + code * 0.02 * v).astype(np.float32))
+
+
+def test_run_writes_usdc_with_whole_time_codes(tmp_path: Path, cli) -> None:
+    # 25 fps on a 0.7 ms step: frames land on the steps nearest k / 25, never on k / 25 itself
+    out = tmp_path / "balls.usdc"
+    done = cli(
+        "run", SCENES / "bouncing_balls.yaml", "-o", out, "--duration", "0.5", "--dt", "0.0007",
+        "--backend", "numpy", "-q",
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    stage = Usd.Stage.Open(str(out))
+    codes = UsdGeom.Points(stage.GetPrimAtPath("/bouncing_balls/particles")).GetPointsAttr().GetTimeSamples()
+    assert stage.GetTimeCodesPerSecond() == 50  # the scene's record.fps
+    assert codes == [float(k) for k in range(26)]
+
+
+def read_vtp(path: Path):
+    vtk = pytest.importorskip("vtk")
+    reader = vtk.vtkXMLPolyDataReader()
+    reader.SetFileName(str(path))
+    reader.Update()
+    return reader.GetOutput()
+
+
+def vtp_cells(cells) -> list[list[int]]:
+    from vtk.util.numpy_support import vtk_to_numpy
+
+    offsets = vtk_to_numpy(cells.GetOffsetsArray())
+    conn = vtk_to_numpy(cells.GetConnectivityArray())
+    return [conn[a:b].tolist() for a, b in itertools.pairwise(offsets)]
+
+
+def test_paraview_collection_of_a_torn_sheet(torn_sheet: Path, cli) -> None:
+    import xml.etree.ElementTree as ET
+
+    vtk = pytest.importorskip("vtk")
+    from vtk.util.numpy_support import vtk_to_numpy
+
+    out = torn_sheet / "vtk" / "run.pvd"
+    out.parent.mkdir()
+    done = cli("run", torn_sheet / "small_tear.yaml", "-o", out, "--backend", "numpy", "-q")
+    assert done.returncode == 0, done.stderr
+    sets = ET.parse(out).getroot().find("Collection").findall("DataSet")
+    assert [float(d.get("timestep")) for d in sets] == pytest.approx([k / 25 for k in range(26)])
+    table = (out.parent / "run_ids.txt").read_text().splitlines()
+    rest = None
+    for d in sets:
+        poly = read_vtp(out.parent / d.get("file"))
+        pts = vtk_to_numpy(poly.GetPoints().GetData())
+        rest = pts if rest is None else rest
+        assert poly.GetFieldData().GetArray("TimeValue").GetValue(0) == float(d.get("timestep"))
+    pd = poly.GetPointData()
+    ids = vtk_to_numpy(pd.GetArray("id"))
+    assert [table[i] for i in ids[:2]] == ["hook", "sheet[0,0]"]
+    assert vtk_to_numpy(pd.GetArray("color"))[0].tolist() == [0xE0, 0x40, 0x40, 0xFF]
+    assert vtk_to_numpy(pd.GetArray("radius"))[0] == 0.03
+    assert pd.GetArray("velocity").GetNumberOfComponents() == 3
+    faces = np.array(vtp_cells(poly.GetPolys()))
+    assert 0 < len(faces) < 63 and edge_stretch(rest, pts, faces).max() < SLIVER
+    # the hook's two springs are segments; the hook is on them, so no vertex cell is needed
+    hooked = sorted([0, table.index(f"sheet[{i},0]")] for i in (4, 5))
+    assert sorted(map(sorted, vtp_cells(poly.GetLines()))) == hooked
+    assert poly.GetNumberOfVerts() == 0
+    assert isinstance(poly, vtk.vtkPolyData)
+
+
+def test_paraview_gets_hair_as_polylines(tmp_path: Path, cli) -> None:
+    pytest.importorskip("vtk")
+    out = tmp_path / "hair.pvd"
+    done = cli("run", SCENES / "hair.yaml", "-o", out, "--duration", "0.1", "--backend", "numpy", "-q")
+    assert done.returncode == 0, done.stderr
+    poly = read_vtp(tmp_path / "hair_0005.vtp")
+    assert vtp_cells(poly.GetLines()) == [list(range(20))]
+    assert poly.GetNumberOfPoints() == 20 and poly.GetNumberOfPolys() == 0
