@@ -63,6 +63,11 @@ for path in sys.argv[2:]:
             info["points"] = [list(ob.matrix_world @ v.co) for v in mesh.vertices]
             info["faces"] = len(mesh.polygons)
         objects[ob.name] = info
+    scene.frame_set(scene.frame_end)
+    deps = bpy.context.evaluated_depsgraph_get()
+    for ob in scene.objects:
+        if ob.type == "MESH":
+            objects[ob.name]["faces_end"] = len(ob.evaluated_get(deps).to_mesh().polygons)
     r = scene.render
     out[path] = {"fps": r.fps, "fps_base": r.fps_base, "range": [scene.frame_start, scene.frame_end],
                  "objects": objects}
@@ -117,3 +122,15 @@ def test_ply_with_the_documented_axes_lands_where_the_usd_does(cli, tmp_path: Pa
     assert np.allclose(got["ply"], from_usd, atol=1e-6, rtol=0)
     # Blender's default axes for PLY (forward Y) would turn the cloth 180 degrees: the settings matter
     assert not np.allclose(np.array(got["ply"]) * [-1, -1, 1], from_usd, atol=1e-6, rtol=0)
+
+
+def test_blender_plays_the_tear_as_a_hole(tmp_path: Path, cli) -> None:
+    from tests.cli.test_outputs_show_the_run import TORN_SHEET
+
+    scene = tmp_path / "small_tear.yaml"
+    scene.write_text(TORN_SHEET)
+    out = tmp_path / "tear.usda"
+    done = cli("run", scene, "-o", out, "--backend", "numpy", "-q")
+    assert done.returncode == 0, done.stderr
+    sheet = blender(out)[str(out)]["objects"]["sheet"]
+    assert sheet["faces"] == 63 and sheet["faces_end"] < 63
