@@ -50,11 +50,24 @@ DEFAULT_LONG_SIDE = 480
 MAX_ASPECT = 16 / 9
 
 
-def _with_view(opts: RenderOptions, lo: np.ndarray, hi: np.ndarray, up: str | None = None) -> RenderOptions:
+def has_surfaces(header: TrajectoryHeader | None) -> bool:
+    """Whether a run has surfaces or solids to see from an angle: cloth, soft boxes, meshes or
+    rigid bodies. Seen straight from a side, a hanging sheet is a line and a tear in it is
+    invisible; the three-quarter view shows both."""
+    if header is None:
+        return False
+    return any(c.kind == "mesh" for c in header.connectivity) or "bodies" in (header.extra or {})
+
+
+def _with_view(
+    opts: RenderOptions, lo: np.ndarray, hi: np.ndarray, up: str | None = None, surfaces: bool = False
+) -> RenderOptions:
     """``opts`` with a view and a size: as asked, else chosen from the motion's bounds.
 
-    The view is chosen as ``animsim plot`` picks it (:func:`pick_view`: the side
-    view when gravity gives an ``up`` axis, else the widest pair of axes); the
+    A run with surfaces (:func:`has_surfaces`) is seen in the three-quarter 3D
+    view. Otherwise the view is chosen as ``animsim plot`` picks it
+    (:func:`pick_view`: the side view when gravity gives an ``up`` axis, else
+    the widest pair of axes); the
     size is DEFAULT_LONG_SIDE on the longer side and shaped like the motion
     (within MAX_ASPECT), so what moves fills the picture instead of a square
     of empty ground.
@@ -64,7 +77,7 @@ def _with_view(opts: RenderOptions, lo: np.ndarray, hi: np.ndarray, up: str | No
     from animsim.export.pictures import AXES, pick_view
 
     finite = bool(np.isfinite(lo).all() and np.isfinite(hi).all())
-    view = opts.view or (pick_view(lo, hi, up) if finite else "xy")
+    view = opts.view or ("3d" if surfaces else pick_view(lo, hi, up) if finite else "xy")
     size = opts.size
     if size is None:
         size = f"{DEFAULT_LONG_SIDE}x{DEFAULT_LONG_SIDE}"
@@ -235,7 +248,9 @@ def render_scene(
     if first.status == "interrupted":
         return RenderResult(frames=0, outputs=[], status="interrupted")
     bounds = _bounds(bounds_sink.lo, bounds_sink.hi, planes)
-    opts = _with_view(opts, bounds_sink.lo, bounds_sink.hi, view_up(compiled.scene))
+    opts = _with_view(
+        opts, bounds_sink.lo, bounds_sink.hi, view_up(compiled.scene), has_surfaces(compiled.header)
+    )
     sinks = _sinks(gif, mp4, opts, bounds, planes, _up_axis(compiled.scene), progress)
     result = run(compiled, sinks, stop=stop)
     return RenderResult(
@@ -300,7 +315,13 @@ def render_trajectory(
         extra = _extras_for(compiled, traj.ids)
     lo, hi = traj.bounds()
     bounds = _bounds(lo, hi, planes)
-    opts = _with_view(opts, lo, hi, None if compiled is None else view_up(compiled.scene))
+    opts = _with_view(
+        opts,
+        lo,
+        hi,
+        None if compiled is None else view_up(compiled.scene),
+        has_surfaces(None if compiled is None else compiled.header),
+    )
     sinks = _sinks(gif, mp4, opts, bounds, planes, up, progress)
     header = TrajectoryHeader(
         scene_name="trajectory", ids=[], spring_index=spring_index, has_emitters=False, extra=extra

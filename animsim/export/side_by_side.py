@@ -172,7 +172,7 @@ def render_side_by_side(
     from animsim.export.animation import gif_delay_cs
     from animsim.export.raster import make_camera, parse_size
     from animsim.export.viewer import simulate_panel
-    from animsim.render import RenderResult, _bounds, _up_axis, _with_view, view_up
+    from animsim.render import RenderResult, _bounds, _up_axis, _with_view, has_surfaces, view_up
 
     runs = []
     for c in compiled:
@@ -187,7 +187,7 @@ def render_side_by_side(
         if len(finite):
             lo, hi = np.minimum(lo, finite.min(axis=0)), np.maximum(hi, finite.max(axis=0))
     # no --view or --size: chosen from all runs' bounds, as a single render does
-    opts = _with_view(opts, lo, hi, view_up(compiled[0].scene))
+    opts = _with_view(opts, lo, hi, view_up(compiled[0].scene), has_surfaces(compiled[0].header))
     size = parse_size(opts.size)
     camera_opts: dict[str, Any] = {"up": _up_axis(compiled[0].scene), "distance": opts.distance}
     if opts.azimuth is not None:
