@@ -41,7 +41,8 @@ beside ``particles``, named after the structure (sanitised as below):
   ``doubleSided = true``, and time-sampled ``points``, ``velocities``,
   ``extent``; ``animsim:ids`` names the particle behind each point;
 * strands: ``def BasisCurves`` with ``type = "linear"``,
-  ``curveVertexCounts``, a constant ``widths`` of ``2 * DEFAULT_SIZE`` and
+  ``curveVertexCounts``, a constant ``widths`` of twice the strand's particle
+  radius (:data:`STRAND_RADIUS` when the scene gives none: 5 mm wide) and
   time-sampled ``points``, ``velocities``, ``extent``.
 
 ``particles`` then holds only the other particles (listed ones and emitted
@@ -161,6 +162,8 @@ RESERVED_META_KEYS = frozenset({"timeCodes", "frameTimes", "frameSteps"})
 
 INDENT = "    "
 VERTEX_INTERPOLATION = "vertex"
+#: half the width of a strand's curve when its particles have no radius (m): a thick hair, not a rope
+STRAND_RADIUS = 0.0025
 
 
 class _Attribute:
@@ -550,7 +553,7 @@ class UsdaSink:
                 texts["curveVertexCounts"] = format_ints(counts)
                 pos, vel = pos[verts], vel[verts]
             if prim.usd_type == "BasisCurves":
-                half = DEFAULT_SIZE  # widths / 2
+                half = self._strand_radius(c)  # widths / 2
                 extent = np.stack([pos.min(axis=0) - half, pos.max(axis=0) + half]) if len(pos) else None
             else:
                 extent = np.stack([pos.min(axis=0), pos.max(axis=0)])
@@ -629,6 +632,13 @@ class UsdaSink:
             self._bodies.write(w, codes_text, bool(self._prims))
         w("}\n")
 
+    def _strand_radius(self, c: Connectivity) -> float:
+        """A strand's thickness / 2: its particles' radius when the scene gives one, else a hair's."""
+        r = self._look.radius
+        if r is not None and c.first < len(r) and r[c.first] > 0:
+            return float(r[c.first])
+        return STRAND_RADIUS
+
     def _write_topology(self, w: Callable[[str], Any], prim: _Prim) -> None:
         c = prim.conn
         assert c is not None
@@ -645,7 +655,7 @@ class UsdaSink:
             if not prim.tears:
                 w(f"{pad}int[] curveVertexCounts = {format_ints(c.vertex_counts)}\n")
             w(f'{pad}uniform token type = "linear"\n')
-            w(f"{pad}float[] widths = [{2.0 * DEFAULT_SIZE!r}] (\n")
+            w(f"{pad}float[] widths = [{2.0 * self._strand_radius(c)!r}] (\n")
             w(f'{pad}{INDENT}interpolation = "constant"\n{pad})\n')
 
     def _copy_samples(
