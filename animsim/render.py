@@ -279,6 +279,13 @@ def _extras_for(compiled: Any, traj_ids: Any) -> dict[str, Any]:
         out["particle_pinned"] = found & np.asarray(pinned)[np.maximum(rows, 0)]
     colors = src.get("particle_color") or []
     out["particle_color"] = [colors[r] if 0 <= r < len(colors) else None for r in rows.tolist()]
+    bodies = src.get("bodies")
+    ids = list(traj_ids)
+    if bodies is not None and bodies["ids"] and bodies["ids"][0] in ids:
+        # rigid bodies are drawn as their shapes, at the trajectory's rows of their centres
+        first = ids.index(bodies["ids"][0])
+        if ids[first : first + len(bodies["ids"])] == list(bodies["ids"]):
+            out["bodies"] = {**bodies, "first": first}
     return out
 
 
@@ -313,6 +320,15 @@ def render_trajectory(
         spring_count = len(keep)
         spring_index = np.array([p for p in keep if None not in p], dtype=np.int64).reshape(-1, 2)
         extra = _extras_for(compiled, traj.ids)
+    elif getattr(traj, "drawables", None):
+        # an NPZ says what to draw itself: planes, springs (rows of its ids), looks, bodies
+        from animsim.export.npz import header_extra
+
+        extra = header_extra(traj.drawables)
+        planes = extra.pop("planes")
+        spring_index = np.array(traj.drawables.get("springs", []), dtype=np.int64).reshape(-1, 2)
+        spring_count = len(spring_index)
+        kept = np.ones(spring_count, dtype=bool)
     lo, hi = traj.bounds()
     bounds = _bounds(lo, hi, planes)
     opts = _with_view(
@@ -320,7 +336,7 @@ def render_trajectory(
         lo,
         hi,
         None if compiled is None else view_up(compiled.scene),
-        has_surfaces(None if compiled is None else compiled.header),
+        has_surfaces(None if compiled is None else compiled.header) or "bodies" in extra,
     )
     sinks = _sinks(gif, mp4, opts, bounds, planes, up, progress)
     header = TrajectoryHeader(

@@ -605,10 +605,10 @@ def collider_shapes(compiled: Any, times: np.ndarray | None = None) -> list[Shap
     return out
 
 
-def body_shapes(compiled: Any, traj: Any) -> list[Shape]:
-    """The scene's rigid bodies as shapes, placed and turned per frame from the trajectory's
-    body rows (position and orientation quaternion)."""
-    info = compiled.header.extra.get("bodies")
+def body_shapes(compiled: Any, traj: Any, info: dict[str, Any] | None = None) -> list[Shape]:
+    """The scene's rigid bodies (or those ``info`` describes) as shapes, placed and turned per
+    frame from the trajectory's body rows (position and orientation quaternion)."""
+    info = compiled.header.extra.get("bodies") if info is None else info
     orientation = getattr(traj, "orientation", None)
     if info is None or orientation is None:
         return []
@@ -688,6 +688,25 @@ def panel_from_trajectory(
     shapes: list[Shape] = []
     drawn = None
     colors, sizes = dense["color"], dense["size"]
+    if compiled is None and getattr(traj, "drawables", None):
+        # an NPZ says what to draw itself (animsim.export.npz)
+        from animsim.export.look import SceneLook
+        from animsim.export.npz import header_extra
+
+        spec = traj.drawables
+        extra = header_extra(spec)
+        springs = np.array(spec.get("springs", []), dtype=np.int64).reshape(-1, 2)
+        pinned = np.zeros(len(traj.ids), dtype=bool)
+        pinned[: len(extra["particle_pinned"])] = extra["particle_pinned"][: len(traj.ids)]
+        shapes = planes_as_shapes(extra["planes"])
+        if "bodies" in extra:
+            shapes += body_shapes(None, traj, extra["bodies"])
+        look = SceneLook(extra)
+        if not look.empty:
+            radius, rgba = look.row_look(np.arange(len(traj.ids)), None, None)
+            f = traj.frame_count
+            colors = np.broadcast_to(rgba, (f, len(traj.ids), 4)) if colors is None else colors
+            sizes = np.broadcast_to(2.0 * radius, (f, len(traj.ids))) if sizes is None else sizes
     if compiled is not None:
         springs, drawn = _springs_over_time(compiled, traj)
         pinned = _pinned_for(compiled, traj.ids)

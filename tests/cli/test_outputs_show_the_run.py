@@ -298,3 +298,22 @@ def test_paraview_gets_hair_as_polylines(tmp_path: Path, cli) -> None:
     poly = read_vtp(tmp_path / "hair_0005.vtp")
     assert vtp_cells(poly.GetLines()) == [list(range(20))]
     assert poly.GetNumberOfPoints() == 20 and poly.GetNumberOfPolys() == 0
+
+
+@pytest.mark.parametrize("scene", ["bouncing_balls", "die_throw"])
+def test_a_trajectory_file_alone_draws_what_its_scene_draws(scene: str, tmp_path: Path, cli) -> None:
+    """The NPZ carries planes, looks, springs and body shapes: the picture from the file alone is
+    the picture from the file and its scene, byte for byte (colours, radii, a die as a box)."""
+    iio = pytest.importorskip("imageio.v3")
+    npz = tmp_path / f"{scene}.npz"
+    done = cli("run", SCENES / f"{scene}.yaml", "-o", npz, "--duration", "0.6", "--backend", "numpy", "-q")
+    assert done.returncode == 0, done.stderr
+    alone, with_scene = tmp_path / "alone.gif", tmp_path / "scene.gif"
+    assert cli("render", npz, "--gif", alone, "-q").returncode == 0
+    done = cli("render", npz, "--scene", SCENES / f"{scene}.yaml", "--gif", with_scene, "-q")
+    assert done.returncode == 0, done.stderr
+    assert alone.read_bytes() == with_scene.read_bytes()
+    frame = iio.imread(alone, index=0)[..., :3].astype(int)
+    red = (frame[..., 0] > 150) & (frame[..., 1] < 90) & (frame[..., 2] < 90)
+    # the red ball (radius 5 cm, not a 3 px dot) or the die's red faces
+    assert red.sum() > (60 if scene == "bouncing_balls" else 300)
