@@ -558,6 +558,10 @@ def run(
         first, last = sink.written[0], sink.written[-1]
         span = f"{first}" if first == last else f"{first} .. {last.name}"
         wrote = f"{len(sink.written)} PLY frames {span}, {sink.ids_path} and {out}.meta.json"
+    if fmt == "vtp" and sink.times:
+        frames = [p for p in sink.written if p.suffix == ".vtp"]
+        span = f"{frames[0]}" if len(frames) == 1 else f"{frames[0]} .. {frames[-1].name}"
+        wrote = f"{sink.pvd_path} ({len(frames)} VTK frames {span}), {sink.ids_path} and {out}.meta.json"
     return RunOutcome(compiled, result, out, wrote)
 
 

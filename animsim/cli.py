@@ -405,8 +405,8 @@ def run(
         str | None,
         typer.Option(
             "--format",
-            help="Trajectory format (csv, npz, ply, usda, ...); default from the suffix (a folder means "
-            "ply), else csv.",
+            help="Trajectory format (csv, npz, ply, usda, usdc, vtp, ...); default from the suffix "
+            "(.npz, .ply, .usda, .usdc, .pvd; a folder means ply), else csv.",
             autocompletion=_format_names,
         ),
     ] = None,
@@ -423,7 +423,8 @@ def run(
 
     Formats: CSV; NPZ; PLY (one binary file per frame, for Blender, Houdini,
     ParaView: -o out/frames.ply gives out/frames_0000.ply, ...; an existing
-    folder gives <folder>/frames_0000.ply, ...); USD ASCII (-o anim.usda).
+    folder gives <folder>/frames_0000.ply, ...); USD ASCII (-o anim.usda) or
+    binary (-o anim.usdc); VTK for ParaView (-o run.pvd gives run_0000.vtp, ...).
     The output folder must exist.
     """
     from animsim import api

@@ -54,11 +54,24 @@ DEFAULT_LONG_SIDE = 480
 MAX_ASPECT = 16 / 9
 
 
-def with_view(opts: RenderOptions, lo: np.ndarray, hi: np.ndarray, up: str | None = None) -> RenderOptions:
+def has_surfaces(header: TrajectoryHeader | None) -> bool:
+    """Whether a run has surfaces or solids to see from an angle: cloth, soft boxes, meshes or
+    rigid bodies. Seen straight from a side, a hanging sheet is a line and a tear in it is
+    invisible; the three-quarter view shows both."""
+    if header is None:
+        return False
+    return any(c.kind == "mesh" for c in header.connectivity) or "bodies" in (header.extra or {})
+
+
+def with_view(
+    opts: RenderOptions, lo: np.ndarray, hi: np.ndarray, up: str | None = None, surfaces: bool = False
+) -> RenderOptions:
     """``opts`` with a view and a size: as asked, else chosen from the motion's bounds.
 
-    The view is chosen as ``animsim plot`` picks it (:func:`pick_view`: the side
-    view when gravity gives an ``up`` axis, else the widest pair of axes); the
+    A run with surfaces (:func:`has_surfaces`) is seen in the three-quarter 3D
+    view. Otherwise the view is chosen as ``animsim plot`` picks it
+    (:func:`pick_view`: the side view when gravity gives an ``up`` axis, else
+    the widest pair of axes); the
     size is DEFAULT_LONG_SIDE on the longer side and shaped like the motion
     (within MAX_ASPECT), so what moves fills the picture instead of a square
     of empty ground.
@@ -66,7 +79,7 @@ def with_view(opts: RenderOptions, lo: np.ndarray, hi: np.ndarray, up: str | Non
     from dataclasses import replace
 
     finite = bool(np.isfinite(lo).all() and np.isfinite(hi).all())
-    view = opts.view or (pick_view(lo, hi, up) if finite else "xy")
+    view = opts.view or ("3d" if surfaces else pick_view(lo, hi, up) if finite else "xy")
     size = opts.size
     if size is None:
         size = f"{DEFAULT_LONG_SIDE}x{DEFAULT_LONG_SIDE}"
@@ -212,7 +225,9 @@ def render_scene(
     if first.status == "interrupted":
         return RenderResult(frames=0, outputs=[], status="interrupted")
     bounds = picture_bounds(bounds_sink.lo, bounds_sink.hi, planes)
-    opts = with_view(opts, bounds_sink.lo, bounds_sink.hi, view_up(compiled.scene))
+    opts = with_view(
+        opts, bounds_sink.lo, bounds_sink.hi, view_up(compiled.scene), has_surfaces(compiled.header)
+    )
     sinks = _sinks(gif, mp4, opts, bounds, planes, up_axis(compiled.scene), progress)
     result = run(compiled, sinks, stop=stop)
     return RenderResult(
@@ -241,6 +256,13 @@ def _extras_for(compiled: Any, traj_ids: Any) -> dict[str, Any]:
         out["particle_pinned"] = found & np.asarray(pinned)[np.maximum(rows, 0)]
     colors = src.get("particle_color") or []
     out["particle_color"] = [colors[r] if 0 <= r < len(colors) else None for r in rows.tolist()]
+    bodies = src.get("bodies")
+    ids = list(traj_ids)
+    if bodies is not None and bodies["ids"] and bodies["ids"][0] in ids:
+        # rigid bodies are drawn as their shapes, at the trajectory's rows of their centres
+        first = ids.index(bodies["ids"][0])
+        if ids[first : first + len(bodies["ids"])] == list(bodies["ids"]):
+            out["bodies"] = {**bodies, "first": first}
     return out
 
 
@@ -275,9 +297,24 @@ def render_trajectory(
         spring_count = len(keep)
         spring_index = np.array([p for p in keep if None not in p], dtype=np.int64).reshape(-1, 2)
         extra = _extras_for(compiled, traj.ids)
+    elif getattr(traj, "drawables", None):
+        # an NPZ says what to draw itself: planes, springs (rows of its ids), looks, bodies
+        from animsim.export.npz import header_extra
+
+        extra = header_extra(traj.drawables)
+        planes = extra.pop("planes")
+        spring_index = np.array(traj.drawables.get("springs", []), dtype=np.int64).reshape(-1, 2)
+        spring_count = len(spring_index)
+        kept = np.ones(spring_count, dtype=bool)
     lo, hi = traj.bounds()
     bounds = picture_bounds(lo, hi, planes)
-    opts = with_view(opts, lo, hi, None if compiled is None else view_up(compiled.scene))
+    opts = with_view(
+        opts,
+        lo,
+        hi,
+        None if compiled is None else view_up(compiled.scene),
+        has_surfaces(None if compiled is None else compiled.header) or "bodies" in extra,
+    )
     sinks = _sinks(gif, mp4, opts, bounds, planes, up, progress)
     header = TrajectoryHeader(
         scene_name="trajectory", ids=[], spring_index=spring_index, has_emitters=False, extra=extra

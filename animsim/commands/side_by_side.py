@@ -24,7 +24,7 @@ from animsim.errors import SimulationError
 from animsim.export.animation import MP4_QUALITY, FrameRenderer, GifStream, gif_delay_cs, require_ffmpeg
 from animsim.export.raster import make_camera, parse_size, quantise, to_rgb8, up_axis, view_up
 from animsim.panel_runs import simulate_panel
-from animsim.render import RenderResult, picture_bounds, with_view
+from animsim.render import RenderResult, has_surfaces, picture_bounds, with_view
 
 LABEL_RGB = (0.92, 0.92, 0.92)
 MARK_RGB = (1.0, 0.2, 0.2)  # a pure palette red: the GIF palette has it exactly
@@ -175,7 +175,7 @@ def render_side_by_side(
         if len(finite):
             lo, hi = np.minimum(lo, finite.min(axis=0)), np.maximum(hi, finite.max(axis=0))
     # no --view or --size: chosen from all runs' bounds, as a single render does
-    opts = with_view(opts, lo, hi, view_up(compiled[0].scene))
+    opts = with_view(opts, lo, hi, view_up(compiled[0].scene), has_surfaces(compiled[0].header))
     size = parse_size(opts.size)
     camera_opts: dict[str, Any] = {"up": up_axis(compiled[0].scene), "distance": opts.distance}
     if opts.azimuth is not None:

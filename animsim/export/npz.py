@@ -14,6 +14,14 @@ during the run, and ``torn_time`` (K,), the time of the first frame in which
 each is torn; a spring is drawn at a frame only while the frame's time is
 before its ``torn_time``.
 
+``drawables`` (a 0-d string array holding JSON) says what a picture needs
+besides the points, so ``animsim render run.npz`` and ``animsim view
+run.npz`` draw the run without its scene: ``planes`` (``[point, normal]``
+pairs), ``springs`` (pairs of rows of ``ids``), per row of the header's ids
+``radius`` (m, 0: none), ``color`` (``#rrggbb`` or null) and ``pinned``, and
+with rigid bodies ``bodies`` (``first`` row, ``ids``, each ``shape``:
+``kind`` with ``size``, ``radius`` or ``radius`` and ``length``).
+
 Unlike the CSV, the NPZ keeps frames in which no particle is alive (a
 particle system before its first birth), so it round-trips a run exactly.
 
@@ -25,6 +33,7 @@ the end, so memory stays bounded by one frame.
 from __future__ import annotations
 
 import contextlib
+import json
 import shutil
 import tempfile
 import zipfile
@@ -75,6 +84,7 @@ class NpzSink:
                 self._raw[name] = open(Path(self._tmpdir.name) / name, "wb")  # noqa: SIM115
         self._ids = list(header.ids)
         self._torn = TornSprings() if header.extra.get("springs_can_tear") else None
+        self._drawables = drawables(header)
 
     def write(self, frame: Frame) -> None:
         self._ids.extend(frame.new_ids)
@@ -118,6 +128,7 @@ class NpzSink:
                     _write_array(zf, "ids", np.array(self._ids, dtype=str))
                     _write_array(zf, "frame_time", np.array(self._frame_time, dtype=np.float64))
                     _write_array(zf, "frame_start", np.array(self._frame_start, dtype=np.int64))
+                    _write_array(zf, "drawables", np.array(json.dumps(self._drawables, sort_keys=True)))
                     if self._torn is not None:
                         spring, time = self._torn.arrays()
                         _write_array(zf, "torn_spring", spring)
@@ -143,6 +154,68 @@ class NpzSink:
             with contextlib.suppress(OSError):
                 self._tmpdir.cleanup()
             self._tmpdir = None
+
+
+def drawables(header: TrajectoryHeader) -> dict[str, Any]:
+    """What a picture of the run needs besides its points (module docstring), as JSON values."""
+    extra = header.extra or {}
+    n = len(header.ids)
+
+    def rows(values: Any, fill: Any) -> list[Any]:
+        out = [fill] * n
+        if values is not None:
+            for i, v in enumerate(list(values)[:n]):
+                out[i] = v.item() if isinstance(v, np.generic) else v
+        return out
+
+    out: dict[str, Any] = {
+        "planes": [
+            [np.asarray(p, dtype=float).tolist(), np.asarray(q, dtype=float).tolist()]
+            for p, q in extra.get("planes", [])
+        ],
+        "springs": np.asarray(header.spring_index, dtype=np.int64).reshape(-1, 2).tolist(),
+        "radius": [float(r) for r in rows(extra.get("particle_radius"), 0.0)],
+        "color": rows(extra.get("particle_color"), None),
+        "pinned": [bool(p) for p in rows(extra.get("particle_pinned"), False)],
+    }
+    bodies = extra.get("bodies")
+    if bodies is not None:
+        shapes = []
+        for sh in bodies["shapes"]:
+            d: dict[str, Any] = {"kind": sh.kind}
+            for key in ("size", "radius", "length"):
+                if hasattr(sh, key):
+                    value = getattr(sh, key)
+                    d[key] = [float(v) for v in value] if key == "size" else float(value)
+            shapes.append(d)
+        out["bodies"] = {"first": int(bodies["first"]), "ids": list(bodies["ids"]), "shapes": shapes}
+    return out
+
+
+def header_extra(drawn: dict[str, Any]) -> dict[str, Any]:
+    """A trajectory header's ``extra`` (and springs) from an NPZ's drawables, for the drawers."""
+    from animsim.bodies.shapes import Box, Capsule, Sphere
+
+    extra: dict[str, Any] = {
+        "planes": [(np.array(p, dtype=float), np.array(q, dtype=float)) for p, q in drawn.get("planes", [])],
+        "particle_radius": np.array(drawn.get("radius", []), dtype=np.float64),
+        "particle_color": list(drawn.get("color", [])),
+        "particle_pinned": np.array(drawn.get("pinned", []), dtype=bool),
+    }
+    bodies = drawn.get("bodies")
+    if bodies is not None:
+        make = {
+            "box": lambda d: Box(tuple(d["size"])),
+            "sphere": lambda d: Sphere(d["radius"]),
+            "capsule": lambda d: Capsule(d["radius"], d["length"]),
+        }
+        extra["bodies"] = {
+            "first": bodies["first"],
+            "ids": bodies["ids"],
+            "shapes": [make[d["kind"]](d) for d in bodies["shapes"]],
+            "springs": None,
+        }
+    return extra
 
 
 def _write_npy(zf: zipfile.ZipFile, name: str, raw: Path, shape: tuple[int, ...], dtype: Any) -> None:

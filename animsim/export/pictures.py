@@ -197,7 +197,8 @@ def plot_energy_parts(
     total = parts["total"]
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(7.0, 6.0), sharex=True, height_ratios=[2, 1])
     for key, (colour, name) in PART_STYLES.items():
-        if key in parts:
+        # a part the scene has none of (no springs, no rotation) is no line: kinetic always is one
+        if key in parts and (key == "kinetic" or np.any(np.asarray(parts[key]) != 0)):
             top.plot(times, parts[key], label=name, lw=1.2, color=colour)
     top.plot(times, total, label="total", lw=1.8, color="black")
     top.set_ylabel("energy (J)")
@@ -298,9 +299,12 @@ def plot_phase(
             ax.set_ylabel(f"v{'xyz'[a]} (m/s)")
             ax.set_title(f"{runs[0].ids[row]}, {'xyz'[a]}", fontsize=9)
             ax.grid(True, lw=0.3, alpha=0.5)
-    grid[0][0].legend(loc="best", fontsize=7)
+    # one legend below the panels: an unstable method's orbit fills its panel, so any place
+    # inside one would cover a curve
+    handles, labels = grid[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=max(1, len(labels)), fontsize=7, frameon=False)
     fig.suptitle(title or "phase portrait")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.07 / nrows, 1, 1))
     save_figure(fig, path)
     plt.close(fig)
 

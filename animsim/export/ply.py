@@ -24,8 +24,10 @@ property                 PLY type           meaning
                                             Blender's point clouds use
 =======================  =================  ==================================
 
-Frames without ``size`` get :data:`DEFAULT_SIZE`, frames without ``color``
-get opaque white. Colours are sRGB bytes (the scene's ``#rrggbb`` values),
+A particle's size and colour are its own (the scene's ``radius`` and
+``color``, an emitted particle's size and colour over life), else
+:data:`DEFAULT_SIZE` and opaque white (:mod:`animsim.export.look`, the rule
+every exporter shares). Colours are sRGB bytes (the scene's ``#rrggbb`` values),
 which Blender, ParaView and Houdini decode as sRGB; the USD export writes the
 same colours decoded to linear light, so both look alike.
 
@@ -139,7 +141,9 @@ import numpy as np
 from animsim.atomic import AtomicFile
 from animsim.bodies.export import body_mesh_rows
 from animsim.errors import SimulationError
+from animsim.export.look import DEFAULT_RGBA, SceneLook
 from animsim.export.meta import meta_file, meta_path
+from animsim.export.topology import TornShapes
 
 # read_ply and PlyFormatError stay importable from here, beside the writer whose frames they read back
 from animsim.ply_reader import VERTEX_ELEMENT, PlyFormatError, read_ply  # noqa: F401
@@ -152,8 +156,6 @@ IDS_SIDECAR_SUFFIX = "_ids.txt"
 DEFAULT_INDEX_WIDTH = 5
 MIN_INDEX_WIDTH = 4
 
-DEFAULT_SIZE = 0.02  # m, when a frame has no sizes
-DEFAULT_RGBA = (1.0, 1.0, 1.0, 1.0)  # opaque white, when a frame has no colours
 COLOR_MAX = 255  # uchar channel for colour 1.0
 
 GENERATOR = "animsim"
@@ -337,6 +339,8 @@ class PlySequenceSink:
         self._scene = ""
         self._conn: tuple[Connectivity, ...] = ()
         self._bodies: dict[str, Any] | None = None
+        self._look = SceneLook(None)
+        self._torn = TornShapes(None)
         self._created_dirs: list[Path] = []
         self._pending: AtomicFile | None = None
         self._sidecars_pending: list[AtomicFile] = []
@@ -360,6 +364,8 @@ class PlySequenceSink:
         self._scene = header.scene_name
         self._conn = tuple(header.connectivity)
         self._bodies = (header.extra or {}).get("bodies")
+        self._look = SceneLook(header.extra)
+        self._torn = TornShapes(header)
         missing = []
         d = self.directory
         while not d.exists() and d != d.parent:
@@ -456,20 +462,20 @@ class PlySequenceSink:
         for c in self._conn:
             r0 = _first_row(frame, c, n)
             if c.kind == "mesh":
-                k = int(c.vertex_counts[0]) if len(c.vertex_counts) else 0
-                if not len(c.vertex_counts) or np.any(c.vertex_counts != k):
+                # faces that used a spring torn by now are gone (animsim.export.topology)
+                counts, corners = self._torn.faces(c, frame.spring_intact)
+                if not len(counts):
+                    continue
+                k = int(counts[0])
+                if np.any(counts != k):
                     raise ValueError(f"structure {c.name!r}: faces must all have the same corner count")
-                rows = np.empty(len(c.vertex_counts), dtype=np.dtype([("n", "u1"), ("v", "<i4", (k,))]))
+                rows = np.empty(len(counts), dtype=np.dtype([("n", "u1"), ("v", "<i4", (k,))]))
                 rows["n"] = k
-                rows["v"] = c.vertex_indices.reshape(-1, k) + r0
+                rows["v"] = corners.reshape(-1, k) + r0
                 blocks.append(rows.tobytes())
                 count += len(rows)
             else:
-                start = 0
-                for length in c.vertex_counts.tolist():
-                    idx = c.vertex_indices[start : start + length] + r0
-                    edges.append(np.stack([idx[:-1], idx[1:]], axis=1))
-                    start += length
+                edges.append(self._torn.segments(c, frame.spring_intact) + r0)
         pairs = np.concatenate(edges) if edges else np.zeros((0, 2), dtype=np.int64)
         packed = np.empty(len(pairs), dtype=np.dtype([("vertex1", "<i4"), ("vertex2", "<i4")]))
         packed["vertex1"], packed["vertex2"] = pairs[:, 0], pairs[:, 1]
@@ -509,10 +515,11 @@ class PlySequenceSink:
         for j, name in enumerate(VELOCITY_FIELDS):
             rows[name] = vel[:, j]
         rows["id"] = np.asarray(frame.index, dtype=np.int64)
-        rgba = _rgba_bytes(frame.color, n)
+        radius, rgba = self._look.row_look(rows["id"], frame.size, frame.color)
+        rgba8 = _rgba_bytes(rgba, n)
         for j, name in enumerate(COLOR_FIELDS):
-            rows[name] = rgba[:, j]
-        rows["size"] = DEFAULT_SIZE if frame.size is None else np.asarray(frame.size)
+            rows[name] = rgba8[:, j]
+        rows["size"] = radius
         rows["radius"] = rows["size"]
         return rows
 
@@ -548,6 +555,25 @@ def _with_body_meshes(
     pos, vel, idx, tris = body_mesh_rows(frame, info, n)
     if not len(idx):
         return frame, n, faces, face_count
+    # a body is its mesh: its centre row is no vertex of its own (no loose point inside a die)
+    first, count = int(info["first"]), len(info["ids"])
+    index = np.asarray(frame.index, dtype=np.int64)
+    keep = ~((index >= first) & (index < first + count))
+    if not keep.all():
+        dropped = int((~keep).sum())
+        shift = np.cumsum(~keep)  # rows removed before each row: faces of structures follow
+        frame = Frame(
+            step=frame.step,
+            time=frame.time,
+            index=index[keep],
+            position=np.asarray(frame.position)[keep],
+            velocity=np.asarray(frame.velocity)[keep],
+            size=None if frame.size is None else np.asarray(frame.size)[keep],
+            color=None if frame.color is None else np.asarray(frame.color)[keep],
+        )
+        faces = _renumber_faces(faces, face_count, shift)
+        n -= dropped
+        tris = np.asarray(tris) - dropped
     m = len(idx)
     rows = np.empty(len(tris), dtype=np.dtype([("n", "u1"), ("v", "<i4", (3,))]))
     rows["n"] = 3
@@ -566,3 +592,18 @@ def _with_body_meshes(
         color=color,
     )
     return grown, n + m, faces + rows.tobytes(), face_count + len(rows)
+
+
+def _renumber_faces(faces: bytes, count: int, shift: np.ndarray) -> bytes:
+    """Packed ``face`` rows (corner count, then the corners) with each vertex index lowered by
+    the rows removed before it."""
+    if not count:
+        return faces
+    out = bytearray()
+    at = 0
+    for _ in range(count):  # rows may differ in corner count (quads of a cloth, triangles of a mesh)
+        k = faces[at]
+        v = np.frombuffer(faces, dtype="<i4", count=k, offset=at + 1)
+        out += bytes([k]) + (v - shift[v]).astype("<i4").tobytes()
+        at += 1 + 4 * k
+    return bytes(out)

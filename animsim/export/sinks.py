@@ -21,7 +21,8 @@ from animsim.errors import UsageError
 from animsim.export.csv import CsvSink
 from animsim.export.npz import NpzSink
 from animsim.export.ply import PlySequenceSink
-from animsim.export.usda import USD_DEFAULT_TIME_CODES_PER_SECOND, UsdaSink
+from animsim.export.usda import UsdaSink
+from animsim.export.vtp import VtpSink
 
 
 @dataclass(frozen=True)
@@ -141,9 +142,39 @@ def _open_ply(path: Path, options: SinkOptions) -> Any:
     return PlySequenceSink(path, expected_frames=options.expected_frames)
 
 
+#: formats that need an optional package: format -> (module, extra that brings it)
+NEEDS = {"usdc": ("pxr", "usd"), "vtp": ("vtk", "vtk")}
+# USD's binary crate and VTK's appended binary arrays: float32 position and velocity, an
+# integer id, width and colour per point (about twice the bare arrays, with their indices)
+BINARY_ROW_BYTES = 64
+
+
+def require(fmt: str) -> None:
+    """UsageError (exit 2, before any work) when ``fmt`` needs a package that is not installed."""
+    import importlib.util
+
+    if fmt in NEEDS:
+        module, extra = NEEDS[fmt]
+        if importlib.util.find_spec(module) is None:
+            raise UsageError(
+                f"--format {fmt} needs the {extra!r} extra: pip install 'animsim[{extra}]'"
+                + (" (or write text USD: -o run.usda)" if fmt == "usdc" else "")
+            )
+
+
 def _open_usda(path: Path, options: SinkOptions) -> Any:
-    rate = options.meta_rate if options.meta_rate is not None else USD_DEFAULT_TIME_CODES_PER_SECOND
-    return UsdaSink(path, uneven_rate=rate)
+    # no rate given (every=n): the run's own frame rate, from its metadata
+    return UsdaSink(path, uneven_rate=options.meta_rate, binary=False)
+
+
+def _open_usdc(path: Path, options: SinkOptions) -> Any:
+    require("usdc")
+    return UsdaSink(path, uneven_rate=options.meta_rate, binary=True)
+
+
+def _open_vtp(path: Path, options: SinkOptions) -> Any:
+    require("vtp")
+    return VtpSink(path, expected_frames=options.expected_frames)
 
 
 register_format(
@@ -185,5 +216,25 @@ register_format(
         _open_usda,
         CSV_FRAME_BYTES,
         _csv_row_bytes,
+    )
+)
+register_format(
+    OutputFormat(
+        "usdc",
+        (".usdc", ".usd"),  # USD's own default for .usd is the binary crate
+        "one binary USD file (usd-core), the same stage as usda",
+        _open_usdc,
+        CSV_FRAME_BYTES,
+        lambda mean_id_chars: BINARY_ROW_BYTES,
+    )
+)
+register_format(
+    OutputFormat(
+        "vtp",
+        (".pvd", ".vtp"),
+        "ParaView: a VTK PolyData file per frame and a .pvd collection with the times",
+        _open_vtp,
+        CSV_FRAME_BYTES,
+        lambda mean_id_chars: BINARY_ROW_BYTES,
     )
 )

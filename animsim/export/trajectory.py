@@ -12,6 +12,7 @@ same :class:`~animsim.record.Frame` stream the simulator produces.
 from __future__ import annotations
 
 import csv
+import json
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,6 +48,8 @@ class Trajectory:
     #: order) and the time of the first frame in which each is torn (empty arrays: none tore)
     torn_spring: np.ndarray | None = None  # (K,) int64
     torn_time: np.ndarray | None = None  # (K,)
+    #: what a picture needs besides the points (an NPZ's ``drawables``: animsim.export.npz)
+    drawables: dict[str, Any] | None = None
 
     def spring_intact(self, time: float, spring_count: int) -> np.ndarray | None:
         """(spring_count,) bool: the scene's springs not yet torn at ``time`` (None: the file
@@ -190,6 +193,9 @@ def _read_npz(p: Path) -> Trajectory:
         if "torn_spring" in z.files:
             traj.torn_spring = z["torn_spring"].astype(np.int64)
             traj.torn_time = z["torn_time"].astype(np.float64)
+        if "drawables" in z.files:
+            drawn = json.loads(str(z["drawables"]))
+            traj.drawables = drawn if isinstance(drawn, dict) else None
         return traj
 
 

@@ -1,4 +1,4 @@
-"""USD ASCII (``.usda``): the whole run as one animated ``UsdGeomPoints`` prim.
+"""USD (``.usda`` text, ``.usdc`` binary): the whole run as animated prims.
 
 Format sources: Pixar's USD documentation, "UsdGeomPoints" and
 "UsdGeomPointBased" (attribute names and types), "UsdGeom: Stage Metrics"
@@ -24,8 +24,9 @@ What the file holds
             point3f[]  points.timeSamples             # position, m
             color3f[]  primvars:displayColor          # RGB, vertex interpolation
             float[]    primvars:displayOpacity        # alpha, vertex interpolation
+            int[]      primvars:id                    # the same rows as ids (Blender: attribute "id")
             vector3f[] velocities.timeSamples         # m/s (USD: units per second)
-            float[]    widths.timeSamples             # diameter = 2 * size, vertex
+            float[]    widths.timeSamples             # diameter = 2 * radius, vertex
         }
     }
 
@@ -40,11 +41,13 @@ beside ``particles``, named after the structure (sanitised as below):
   ``doubleSided = true``, and time-sampled ``points``, ``velocities``,
   ``extent``; ``animsim:ids`` names the particle behind each point;
 * strands: ``def BasisCurves`` with ``type = "linear"``,
-  ``curveVertexCounts``, a constant ``widths`` of ``2 * DEFAULT_SIZE`` and
+  ``curveVertexCounts``, a constant ``widths`` of twice the strand's particle
+  radius (:data:`STRAND_RADIUS` when the scene gives none: 5 mm wide) and
   time-sampled ``points``, ``velocities``, ``extent``.
 
 ``particles`` then holds only the other particles (listed ones and emitted
-ones) and is left out when there are none and no emitters. With emitters it
+ones) and is left out when there are none and no emitters (a scene of rigid
+bodies alone has none). With emitters it
 also carries ``primvars:age`` (s since birth, vertex interpolation; ``nan``
 for particles that were not emitted).
 
@@ -59,8 +62,12 @@ same time codes. ``ids`` (int64 in ``UsdGeomPoints``) gives each point's
 identity, which is what USD uses to follow points when the count changes
 between samples (emitters); its values are rows of the run's id table (header
 ids then each frame's ``new_ids``), and the table itself is the
-``animsim:idTable`` string array. Frames without size/colour get width
-``2 * DEFAULT_SIZE`` and opaque white, as the PLY export does.
+``animsim:idTable`` string array. Importers that drop ``ids`` (Blender brings
+primvars in as attributes, not ``ids``) still get each point's row as the
+integer primvar ``primvars:id``. A point's width is twice its radius and its
+colour its own (the scene's ``radius`` and ``color``, an emitted particle's size
+and colour over life), else ``2 * DEFAULT_SIZE`` and opaque white, the rule
+every exporter shares (:mod:`animsim.export.look`).
 
 The scene name becomes the root prim's name with every character outside
 ``[A-Za-z0-9_]`` replaced by ``_`` (and a leading ``_`` before a digit); the
@@ -73,12 +80,23 @@ When the recorded frames are evenly spaced in time (within
 ``timeCodesPerSecond`` is the recorded frame rate ``1 / period`` (snapped to
 an integer when within that tolerance). Otherwise (``every=n`` with a
 shortened last interval, ``fps`` recording on a step grid that does not
-divide the frame period, a dt that does not divide the duration) the time
-code of a frame at time ``t`` is ``t * rate`` with ``rate`` the sink's
-``uneven_rate`` (default 24, USD's own default; pass the requested fps). The
-exact frame times and steps are always in ``customLayerData`` (``animsim``
-dictionary, ``frameTimes`` and ``frameSteps``), together with the run's
-``close`` metadata (status and so on).
+divide the frame period, a dt that does not divide the duration)
+``timeCodesPerSecond`` is the sink's ``uneven_rate`` (the scene's recording
+rate; default the run's ``fps``, else 24, USD's own default) and the time code
+of a frame at time ``t`` is the whole number nearest ``t * rate``: a frame
+recorded at the step nearest ``k / fps`` is time code ``k``, so players and
+Blender step through whole frames. Only when two frames would share a whole
+number is the code ``t * rate`` itself. The exact frame times and steps are
+always in ``customLayerData`` (``animsim`` dictionary, ``frameTimes`` and
+``frameSteps``), together with the run's ``close`` metadata (status and so on).
+
+Binary crate
+------------
+``-o run.usdc`` (or ``.usd``) writes the same stage in USD's binary crate
+format, through usd-core (the ``usd`` extra): the text is assembled next to
+the target, read back by usd-core's own parser and exported. The numbers are
+then float32 in the file (the schema's types), and a run of 10,000 particles
+over 51 frames takes about a quarter of the text's size.
 
 Precision
 ---------
@@ -103,9 +121,11 @@ temporary files and leaves no trace.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import math
 import os
 import re
+import shutil
 import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -115,8 +135,10 @@ import numpy as np
 
 from animsim.atomic import AtomicFile
 from animsim.errors import SimulationError
+from animsim.export.look import DEFAULT_RGBA, DEFAULT_SIZE, SceneLook
 from animsim.export.meta import meta_file
-from animsim.export.ply import DEFAULT_RGBA, DEFAULT_SIZE, validate_frame
+from animsim.export.ply import validate_frame
+from animsim.export.topology import TornShapes
 from animsim.record import Connectivity, Frame, TrajectoryHeader
 from animsim.version import __version__
 
@@ -140,6 +162,8 @@ RESERVED_META_KEYS = frozenset({"timeCodes", "frameTimes", "frameSteps"})
 
 INDENT = "    "
 VERTEX_INTERPOLATION = "vertex"
+#: half the width of a strand's curve when its particles have no radius (m): a thick hair, not a rope
+STRAND_RADIUS = 0.0025
 
 
 class _Attribute:
@@ -158,6 +182,8 @@ ATTRIBUTES: tuple[_Attribute, ...] = (
     _Attribute("points", "point3f[]"),
     _Attribute("primvars:displayColor", "color3f[]", VERTEX_INTERPOLATION),
     _Attribute("primvars:displayOpacity", "float[]", VERTEX_INTERPOLATION),
+    # the id-table row again, as a primvar: Blender brings primvars in as attributes, not ``ids``
+    _Attribute("primvars:id", "int[]", VERTEX_INTERPOLATION),
     _Attribute("velocities", "vector3f[]"),
     _Attribute("widths", "float[]", VERTEX_INTERPOLATION),
 )
@@ -169,6 +195,9 @@ SHAPE_ATTRIBUTES: tuple[_Attribute, ...] = (
     _Attribute("points", "point3f[]"),
     _Attribute("velocities", "vector3f[]"),
 )
+# Topology that changes (springs that tear): time-sampled too, beside the shape's samples.
+MESH_TOPOLOGY = (_Attribute("faceVertexCounts", "int[]"), _Attribute("faceVertexIndices", "int[]"))
+CURVE_TOPOLOGY = (_Attribute("curveVertexCounts", "int[]"),)
 
 
 class _Prim:
@@ -181,6 +210,7 @@ class _Prim:
         self.name = name
         self.attributes = attributes
         self.conn = conn
+        self.tears = False  # topology time-sampled (springs of the structure can tear)
 
     def key(self, attr: _Attribute) -> str:
         return f"{self.name}/{attr.name}"
@@ -236,7 +266,7 @@ def format_time_code(code: float) -> str:
 
 
 def time_codes(times: list[float], uneven_rate: float) -> tuple[list[float], float, bool]:
-    """``(codes, timeCodesPerSecond, even)`` for the recorded frame times."""
+    """``(codes, timeCodesPerSecond, even)`` for the recorded frame times (module docstring)."""
     count = len(times)
     if count < 2:
         return [0.0] * count, uneven_rate, True
@@ -248,7 +278,13 @@ def time_codes(times: list[float], uneven_rate: float) -> tuple[list[float], flo
             if abs(rate - round(rate)) <= EVEN_SPACING_RTOL * rate:
                 rate = float(round(rate))
             return [float(k) for k in range(count)], rate, True
-    return [t * uneven_rate for t in times], uneven_rate, False
+    codes = [t * uneven_rate for t in times]
+    # the nearest whole frame of the rate, when no two frames share one (a frame recorded at the
+    # step nearest k / fps lands on k); else the fractions, which keep every frame apart
+    whole = [float(round(c)) for c in codes]
+    if all(b > a for a, b in itertools.pairwise(whole)):
+        return whole, uneven_rate, False
+    return codes, uneven_rate, False
 
 
 def _usd_value(key: str, value: Any, depth: int) -> Iterator[str]:
@@ -277,23 +313,27 @@ class UsdaSink:
 
     ``path``: the ``.usda`` file. ``uneven_rate``: time codes per second
     when the frames are not evenly spaced (see the module docstring; pass
-    the scene's ``record.fps`` when it has one). ``write_meta``: also write
+    the scene's ``record.fps`` when it has one; None: the ``fps`` of the
+    run's metadata, else 24). ``write_meta``: also write
     ``<path>.meta.json`` (:mod:`animsim.export.meta`), as the other
-    trajectory sinks do.
+    trajectory sinks do. ``binary``: write USD's binary crate (``.usdc``)
+    instead of text; needs usd-core.
     """
 
     def __init__(
         self,
         path: str | os.PathLike[str],
         *,
-        uneven_rate: float = USD_DEFAULT_TIME_CODES_PER_SECOND,
+        uneven_rate: float | None = USD_DEFAULT_TIME_CODES_PER_SECOND,
         write_meta: bool = True,
+        binary: bool = False,
     ) -> None:
-        if not (math.isfinite(uneven_rate) and uneven_rate > 0):
+        if uneven_rate is not None and not (math.isfinite(uneven_rate) and uneven_rate > 0):
             raise ValueError(f"uneven_rate must be a positive number, got {uneven_rate}")
         self.path = Path(path)
-        self.uneven_rate = float(uneven_rate)
+        self.uneven_rate = None if uneven_rate is None else float(uneven_rate)
         self.write_meta = write_meta
+        self.binary = binary
         self._ids: list[str] = []
         self._scene = ""
         self._times: list[float] = []
@@ -302,6 +342,8 @@ class UsdaSink:
         self._prims: list[_Prim] = []
         self._has_emitters = False
         self._bodies: _BodyPrims | None = None
+        self._look = SceneLook(None)
+        self._torn = TornShapes(None)
         self._pending: list[AtomicFile] = []  # the .usda, then the metadata
         self._committed: list[Path] = []  # of those, renamed into place by a close in progress
         self._state = "new"
@@ -315,6 +357,8 @@ class UsdaSink:
         self._scene = header.scene_name
         self._has_emitters = header.has_emitters
         self._bodies = _body_plan(header)
+        self._look = SceneLook(header.extra)
+        self._torn = TornShapes(header)
         self._prims = self._plan(header)
         self._state = "open"
         folder = self.path.parent
@@ -356,8 +400,11 @@ class UsdaSink:
         try:
             for _, fh in self._tmp.values():
                 fh.close()
-            self._pending.append(AtomicFile(self.path, "w"))
-            self._assemble(self._pending[0].handle, meta)
+            if self.binary:
+                self._pending.append(self._crate(meta))
+            else:
+                self._pending.append(AtomicFile(self.path, "w"))
+                self._assemble(self._pending[0].handle, meta)
             if self.write_meta:
                 self._pending.append(meta_file(self.path, meta))
         except OSError as exc:
@@ -372,6 +419,34 @@ class UsdaSink:
             raise
         self._discard_temporaries()
         self._state = "closed"
+
+    def _crate(self, meta: dict[str, Any]) -> AtomicFile:
+        """The run as USD's binary crate: the text assembled next to the target, read by
+        usd-core's own parser and exported as ``.usdc``, then copied into the target's
+        temporary file (so it commits with the metadata, as the text does)."""
+        from pxr import Sdf
+
+        folder = self.path.parent
+        with contextlib.ExitStack() as stack:
+            text_dir = stack.enter_context(
+                tempfile.TemporaryDirectory(prefix=f".{self.path.name}.", dir=folder)
+            )
+            text_path = Path(text_dir) / "run.usda"
+            crate_path = Path(text_dir) / "run.usdc"
+            with open(text_path, "w", encoding="utf-8") as fh:
+                self._assemble(fh, meta)
+            layer = Sdf.Layer.OpenAsAnonymous(str(text_path))
+            if layer is None or not layer.Export(str(crate_path)):
+                raise OSError(f"usd-core could not convert {self.path.name} to its binary form")
+            del layer
+            out = AtomicFile(self.path, "wb")
+            try:
+                with open(crate_path, "rb") as src:
+                    shutil.copyfileobj(src, out.handle)
+            except BaseException:
+                out.abort()
+                raise
+            return out
 
     def abort(self) -> None:
         if self._state in ("aborted", "closed"):
@@ -388,23 +463,23 @@ class UsdaSink:
 
     # -- encoding ------------------------------------------------------------
 
-    @staticmethod
-    def sample_texts(frame: Frame, n: int) -> dict[str, str]:
+    def sample_texts(self, frame: Frame, n: int) -> dict[str, str]:
         """Each attribute's value for this frame, as USD text on one line."""
         pos = np.asarray(frame.position, dtype=np.float64).reshape(n, 3)
         vel = np.asarray(frame.velocity, dtype=np.float64).reshape(n, 3)
-        if frame.size is None:
+        plain = self._look.empty and frame.size is None and frame.color is None
+        radius, rgba = (None, None) if plain else self._look.row_look(frame.index, frame.size, frame.color)
+        if radius is None:
             widths = np.full(n, 2.0 * DEFAULT_SIZE)
             widths_text = _repeated(repr(2.0 * DEFAULT_SIZE), n)
         else:
-            widths = 2.0 * np.asarray(frame.size, dtype=np.float64).reshape(n)
+            widths = 2.0 * radius
             widths_text = format_floats(widths)
-        if frame.color is None:  # the default colour: repeat its text, no formatting per point
+        if rgba is None:  # the default colour: repeat its text, no formatting per point
             r, g, b, a = map(repr, map(float, DEFAULT_RGBA))
             color_text = _repeated(f"({r}, {g}, {b})", n)
             opacity_text = _repeated(a, n)
         else:
-            rgba = np.asarray(frame.color, dtype=np.float64).reshape(n, 4)
             color_text = format_tuples(srgb_to_linear(rgba[:, :3]), 3)
             opacity_text = format_floats(rgba[:, 3])
         if n:
@@ -418,6 +493,7 @@ class UsdaSink:
             "points": format_tuples(pos, 3),
             "primvars:displayColor": color_text,
             "primvars:displayOpacity": opacity_text,
+            "primvars:id": format_ints(frame.index),
             "velocities": format_tuples(vel, 3),
             "widths": widths_text,
         }
@@ -435,13 +511,20 @@ class UsdaSink:
                 name = f"{base}_{k}"
             taken.add(name)
             usd_type = "Mesh" if conn.kind == "mesh" else "BasisCurves"
-            shapes.append(_Prim(usd_type, name, SHAPE_ATTRIBUTES, conn))
+            attrs = SHAPE_ATTRIBUTES
+            tears = self._torn.tears(conn)
+            if tears:
+                topo = MESH_TOPOLOGY if usd_type == "Mesh" else CURVE_TOPOLOGY
+                attrs = tuple(sorted(SHAPE_ATTRIBUTES + topo, key=lambda a: a.name))
+            shape = _Prim(usd_type, name, attrs, conn)
+            shape.tears = tears
+            shapes.append(shape)
             covered += conn.count
         if self._bodies is not None:
             covered += len(self._bodies.ids)  # bodies are Xforms of their own, not points
         attrs = ATTRIBUTES[:3] + ((AGE_ATTRIBUTE,) if header.has_emitters else ()) + ATTRIBUTES[3:]
         points = _Prim("Points", POINTS_PRIM, attrs, None)
-        if not shapes or header.has_emitters or len(header.ids) > covered:
+        if header.has_emitters or len(header.ids) > covered or not (shapes or self._bodies):
             return [points, *shapes]
         return shapes
 
@@ -458,14 +541,27 @@ class UsdaSink:
             free[rows] = False
             pos = np.asarray(frame.position, dtype=np.float64)[rows]
             vel = np.asarray(frame.velocity, dtype=np.float64)[rows]
+            texts: dict[str, str] = {}
+            if prim.tears and prim.usd_type == "Mesh":
+                # faces that used a spring torn by now are gone (animsim.export.topology)
+                counts, corners = self._torn.faces(c, frame.spring_intact)
+                texts["faceVertexCounts"] = format_ints(counts)
+                texts["faceVertexIndices"] = format_ints(corners)
+            elif prim.tears:
+                # a strand torn apart: its whole runs as curves, over the vertices they use
+                counts, verts = self._torn.curves(c, frame.spring_intact)
+                texts["curveVertexCounts"] = format_ints(counts)
+                pos, vel = pos[verts], vel[verts]
             if prim.usd_type == "BasisCurves":
-                half = DEFAULT_SIZE  # widths / 2
-                extent = np.stack([pos.min(axis=0) - half, pos.max(axis=0) + half])
+                half = self._strand_radius(c)  # widths / 2
+                extent = np.stack([pos.min(axis=0) - half, pos.max(axis=0) + half]) if len(pos) else None
             else:
                 extent = np.stack([pos.min(axis=0), pos.max(axis=0)])
-            yield prim.key(SHAPE_ATTRIBUTES[0]), format_tuples(extent, 3)
-            yield prim.key(SHAPE_ATTRIBUTES[1]), format_tuples(pos, 3)
-            yield prim.key(SHAPE_ATTRIBUTES[2]), format_tuples(vel, 3)
+            texts["extent"] = format_tuples(np.zeros((2, 3)) if extent is None else extent, 3)
+            texts["points"] = format_tuples(pos, 3)
+            texts["velocities"] = format_tuples(vel, 3)
+            for attr in prim.attributes:
+                yield prim.key(attr), texts[attr.name]
         points = self._prims[0] if self._prims and self._prims[0].conn is None else None
         if points is None:
             return
@@ -489,7 +585,12 @@ class UsdaSink:
             yield points.key(attr), texts[attr.name]
 
     def _assemble(self, out: IO[str], meta: dict[str, Any]) -> None:
-        codes, rate, even = time_codes(self._times, self.uneven_rate)
+        uneven = self.uneven_rate
+        if uneven is None:
+            fps = meta.get("fps")
+            ok = isinstance(fps, int | float) and math.isfinite(fps) and fps > 0
+            uneven = float(fps) if ok else USD_DEFAULT_TIME_CODES_PER_SECOND  # type: ignore[arg-type]
+        codes, rate, even = time_codes(self._times, uneven)
         codes_text = [format_time_code(c) for c in codes]
         root = prim_name(self._scene)
         info = {k: v for k, v in meta.items() if str(k) not in RESERVED_META_KEYS}
@@ -531,6 +632,13 @@ class UsdaSink:
             self._bodies.write(w, codes_text, bool(self._prims))
         w("}\n")
 
+    def _strand_radius(self, c: Connectivity) -> float:
+        """A strand's thickness / 2: its particles' radius when the scene gives one, else a hair's."""
+        r = self._look.radius
+        if r is not None and c.first < len(r) and r[c.first] > 0:
+            return float(r[c.first])
+        return STRAND_RADIUS
+
     def _write_topology(self, w: Callable[[str], Any], prim: _Prim) -> None:
         c = prim.conn
         assert c is not None
@@ -539,13 +647,15 @@ class UsdaSink:
         w(f"{pad}custom uniform string[] animsim:ids = [{ids}]\n")
         if prim.usd_type == "Mesh":
             w(f"{pad}uniform bool doubleSided = true\n")
-            w(f"{pad}int[] faceVertexCounts = {format_ints(c.vertex_counts)}\n")
-            w(f"{pad}int[] faceVertexIndices = {format_ints(c.vertex_indices)}\n")
+            if not prim.tears:
+                w(f"{pad}int[] faceVertexCounts = {format_ints(c.vertex_counts)}\n")
+                w(f"{pad}int[] faceVertexIndices = {format_ints(c.vertex_indices)}\n")
             w(f'{pad}uniform token subdivisionScheme = "none"\n')
         else:
-            w(f"{pad}int[] curveVertexCounts = {format_ints(c.vertex_counts)}\n")
+            if not prim.tears:
+                w(f"{pad}int[] curveVertexCounts = {format_ints(c.vertex_counts)}\n")
             w(f'{pad}uniform token type = "linear"\n')
-            w(f"{pad}float[] widths = [{2.0 * DEFAULT_SIZE!r}] (\n")
+            w(f"{pad}float[] widths = [{2.0 * self._strand_radius(c)!r}] (\n")
             w(f'{pad}{INDENT}interpolation = "constant"\n{pad})\n')
 
     def _copy_samples(

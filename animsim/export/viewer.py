@@ -534,14 +534,140 @@ def pinned_for(compiled: Any, ids: Sequence[str]) -> np.ndarray:
     return np.array([pid in pinned for pid in ids], dtype=bool)
 
 
-def scene_shapes(compiled: Any) -> list[Shape]:
-    """The geometry of a compiled scene the viewer draws around the particles.
+#: colliders and rigid bodies without a colour of their own (RGB in [0, 1]): the pictures' grey
+COLLIDER_RGB = (0.62, 0.62, 0.66)
+BODY_RGB = (0.85, 0.6, 0.25)
 
-    Today: its planes (ground and walls, impulse and penalty alike). The one
-    place to add colliders and rigid bodies (with per-frame poses) as they
-    come.
-    """
-    return planes_as_shapes(compiled.header.extra.get("planes", []))
+
+def _matrix_quaternion(r: np.ndarray) -> np.ndarray:
+    """Unit quaternion [w, x, y, z] of a rotation matrix (scipy's conversion, reordered)."""
+    from scipy.spatial.transform import Rotation
+
+    x, y, z, w = Rotation.from_matrix(np.asarray(r, dtype=np.float64)).as_quat()
+    return np.array([w, x, y, z])
+
+
+def _y_to(direction: np.ndarray) -> np.ndarray:
+    """Unit quaternion [w, x, y, z] turning the local y axis onto ``direction`` (a capsule's axis)."""
+    d = np.asarray(direction, dtype=np.float64)
+    n = np.linalg.norm(d)
+    if n == 0:
+        return np.array([1.0, 0.0, 0.0, 0.0])
+    d = d / n
+    y = np.array([0.0, 1.0, 0.0])
+    c = float(np.dot(y, d))
+    if c < -1 + 1e-12:  # opposite: half a turn about x
+        return np.array([0.0, 1.0, 0.0, 0.0])
+    axis = np.cross(y, d)
+    q = np.array([1.0 + c, *axis])  # half-way quaternion (Shoemake), normalised below
+    return q / np.linalg.norm(q)
+
+
+def collider_shapes(compiled: Any, times: np.ndarray | None = None) -> list[Shape]:
+    """The scene's solid colliders (spheres, boxes, capsules) as shapes; keyframed ones with a
+    position per frame of ``times``."""
+    surface = compiled.header.extra.get("collider_surface")
+    # the header carries the colliders' drawing function; the colliders are its owner
+    colliders = getattr(surface, "__self__", None)
+    if colliders is None:
+        return []
+    from animsim.colliders import KIND_NAMES
+
+    moving = bool((np.asarray(colliders.moving) >= 0).any()) and times is not None and len(times) > 0
+    offsets = np.stack([colliders.offsets(float(t)) for t in times]) if moving else None  # (F, C, 3)
+    out = []
+    for c, sh in enumerate(colliders.shapes):
+        kind = KIND_NAMES[sh.kind]
+        centre = np.asarray(sh.center, dtype=np.float64)
+        position = centre if offsets is None else centre + offsets[:, c]
+        common = {"position": position, "color": COLLIDER_RGB}
+        if kind == "sphere":
+            out.append(Shape("sphere", radius=float(sh.radius), **common))
+        elif kind == "box":
+            out.append(
+                Shape(
+                    "box",
+                    half_extents=tuple(map(float, sh.half)),
+                    orientation=_matrix_quaternion(sh.rotation),
+                    **common,
+                )
+            )
+        else:
+            seg = np.asarray(sh.segment, dtype=np.float64)
+            out.append(
+                Shape(
+                    "capsule",
+                    radius=float(sh.radius),
+                    half_length=float(np.linalg.norm(seg)),
+                    orientation=_y_to(seg),
+                    **common,
+                )
+            )
+    return out
+
+
+def body_shapes(compiled: Any, traj: Any, info: dict[str, Any] | None = None) -> list[Shape]:
+    """The scene's rigid bodies (or those ``info`` describes) as shapes, placed and turned per
+    frame from the trajectory's body rows (position and orientation quaternion)."""
+    info = compiled.header.extra.get("bodies") if info is None else info
+    orientation = getattr(traj, "orientation", None)
+    if info is None or orientation is None:
+        return []
+    first = int(info["first"])
+    f = traj.frame_count
+    frame_of = np.repeat(np.arange(f), np.diff(traj.frame_start))
+    out = []
+    for b, shape in enumerate(info["shapes"]):
+        row = traj.ids.index(info["ids"][b]) if info["ids"][b] in traj.ids else first + b
+        rows = np.flatnonzero(np.asarray(traj.particle) == row)
+        if len(rows) != f:
+            continue  # a body missing from some frames cannot be placed in all of them
+        pos = np.empty((f, 3))
+        q = np.empty((f, 4))
+        pos[frame_of[rows]] = np.asarray(traj.position)[rows]
+        q[frame_of[rows]] = np.asarray(orientation)[rows]
+        q /= np.linalg.norm(q, axis=1, keepdims=True)
+        common = {"position": pos, "orientation": q, "color": BODY_RGB}
+        if shape.kind == "box":
+            out.append(Shape("box", half_extents=tuple(0.5 * float(v) for v in shape.size), **common))
+        elif shape.kind == "sphere":
+            out.append(Shape("sphere", radius=float(shape.radius), **common))
+        else:
+            out.append(
+                Shape("capsule", radius=float(shape.radius), half_length=0.5 * float(shape.length), **common)
+            )
+    return out
+
+
+def scene_shapes(compiled: Any, times: np.ndarray | None = None) -> list[Shape]:
+    """The geometry of a compiled scene the viewer draws around the particles: its planes
+    (ground and walls, impulse and penalty alike) and its solid colliders (keyframed ones
+    moving with ``times``). Rigid bodies need the run's poses: :func:`body_shapes`."""
+    return planes_as_shapes(compiled.header.extra.get("planes", [])) + collider_shapes(compiled, times)
+
+
+def scene_look(compiled: Any, ids: Sequence[str], frames: int, dense: dict[str, Any]) -> tuple[Any, Any]:
+    """(colors (F, N, 4), sizes (F, N)) for the viewer: the scene's own colour and radius of
+    each particle (animsim.export.look) where the run's frames give none. Sizes are the dots'
+    diameters, as the viewer draws them."""
+    from animsim.export.look import SceneLook
+
+    look = SceneLook(compiled.header.extra)
+    colors, sizes = dense.get("color"), dense.get("size")
+    if look.empty:
+        return colors, sizes
+    row_of = {pid: k for k, pid in enumerate(compiled.system.ids)}
+    rows = np.array([row_of.get(pid, -1) for pid in ids], dtype=np.int64)
+    radius, rgba = look.row_look(rows, None, None)
+    if colors is None:
+        colors = np.broadcast_to(rgba, (frames, len(ids), 4))
+    else:
+        colors = np.where(np.isfinite(colors), colors, rgba[None])
+    if sizes is None:
+        sizes = np.broadcast_to(2.0 * radius, (frames, len(ids)))
+    else:
+        sizes = np.where(np.isfinite(sizes), sizes, 2.0 * radius[None])
+    return colors, sizes
 
 
 def panel_label(compiled: Any) -> str:
@@ -562,10 +688,32 @@ def panel_from_trajectory(
     springs = pinned = None
     shapes: list[Shape] = []
     drawn = None
+    colors, sizes = dense["color"], dense["size"]
+    if compiled is None and getattr(traj, "drawables", None):
+        # an NPZ says what to draw itself (animsim.export.npz)
+        from animsim.export.look import SceneLook
+        from animsim.export.npz import header_extra
+
+        spec = traj.drawables
+        extra = header_extra(spec)
+        springs = np.array(spec.get("springs", []), dtype=np.int64).reshape(-1, 2)
+        pinned = np.zeros(len(traj.ids), dtype=bool)
+        pinned[: len(extra["particle_pinned"])] = extra["particle_pinned"][: len(traj.ids)]
+        shapes = planes_as_shapes(extra["planes"])
+        if "bodies" in extra:
+            shapes += body_shapes(None, traj, extra["bodies"])
+        look = SceneLook(extra)
+        if not look.empty:
+            radius, rgba = look.row_look(np.arange(len(traj.ids)), None, None)
+            f = traj.frame_count
+            colors = np.broadcast_to(rgba, (f, len(traj.ids), 4)) if colors is None else colors
+            sizes = np.broadcast_to(2.0 * radius, (f, len(traj.ids))) if sizes is None else sizes
     if compiled is not None:
         springs, drawn = _springs_over_time(compiled, traj)
         pinned = pinned_for(compiled, traj.ids)
-        shapes = scene_shapes(compiled)
+        times = np.asarray(traj.times, dtype=np.float64)
+        shapes = scene_shapes(compiled, times) + body_shapes(compiled, traj)
+        colors, sizes = scene_look(compiled, traj.ids, traj.frame_count, dense)
     return ViewerPanel(
         times=traj.times,
         positions=dense["position"],
@@ -573,8 +721,8 @@ def panel_from_trajectory(
         springs=springs,
         spring_drawn=drawn,
         pinned=pinned,
-        colors=dense["color"],
-        sizes=dense["size"],
+        colors=colors,
+        sizes=sizes,
         energies=energies,
         shapes=shapes,
         status=status,
@@ -614,7 +762,7 @@ def trajectory_html(traj: Any, *, shapes: Sequence[Shape] = (), height: int = 76
             positions=traj.positions,
             springs=_springs_for(compiled, traj.ids) if compiled is not None else None,
             pinned=pinned_for(compiled, traj.ids) if compiled is not None else None,
-            shapes=scene_shapes(compiled) if compiled is not None else (),
+            shapes=scene_shapes(compiled, traj.times) if compiled is not None else (),
             status=status,
             failure_time=failure_time,
         )
@@ -631,6 +779,8 @@ __all__ = [
     "SHAPE_KINDS",
     "Shape",
     "ViewerPanel",
+    "body_shapes",
+    "collider_shapes",
     "dense_frames",
     "iframe_html",
     "panel_from_trajectory",

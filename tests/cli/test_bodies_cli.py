@@ -116,7 +116,7 @@ def test_ply_frames_hold_each_body_as_a_closed_mesh(scene_file, tmp_path) -> Non
     faces = np.stack(data["face"]["vertex_indices"])
     traj = animsim.simulate(animsim.load(scene_file))
     for b, bid in enumerate(traj.body_ids):
-        own = np.flatnonzero(vid == ids.index(bid))[1:]  # the body's centre row, then its mesh
+        own = np.flatnonzero(vid == ids.index(bid))  # the body's mesh (its centre is no vertex)
         sub = faces[np.isin(faces, own).all(axis=1)]
         remap = {v: k for k, v in enumerate(own)}
         verts = np.stack([data["vertex"][c] for c in "xyz"], axis=1)[own]

@@ -294,9 +294,11 @@ def test_blender_imports_the_usd_with_faces_and_rate(cli, tmp_path: Path) -> Non
     """Optional: runs only where Blender's ``bpy`` module is installed (``pip install bpy``)."""
     bpy = pytest.importorskip("bpy")
     out = run_scene(cli, tmp_path, "soft_ball.yaml", "ball.usda", "--duration", "0.2")
+    from animsim.export.blender_import import import_run
+
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    bpy.ops.wm.usd_import(filepath=str(out), set_frame_range=True)
-    scene = bpy.context.scene
+    # Blender's importer sets the range, not the rate (4.5, 5.0): animsim's helper sets both
+    scene = import_run(out)
     assert scene.render.fps / scene.render.fps_base == 50
     assert (scene.frame_start, scene.frame_end) == (0, 10)
     meshes = [o for o in scene.objects if o.type == "MESH"]

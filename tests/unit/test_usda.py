@@ -28,6 +28,7 @@ TIME_SAMPLED = {
     "points": "point3f[]",
     "primvars:displayColor": "color3f[]",
     "primvars:displayOpacity": "float[]",
+    "primvars:id": "int[]",
     "velocities": "vector3f[]",
     "widths": "float[]",
 }
@@ -199,6 +200,7 @@ def test_structure_and_metadata(tmp_path: Path) -> None:
     assert parsed.interpolation == {
         "primvars:displayColor": "vertex",
         "primvars:displayOpacity": "vertex",
+        "primvars:id": "vertex",
         "widths": "vertex",
     }
     assert parsed.strings["animsim:idTable"] == ["p0", "p1", "p2"]
@@ -247,9 +249,10 @@ def test_uneven_frames_use_time_times_rate(tmp_path: Path) -> None:
     times = [0.0, 0.1, 0.2, 0.25]  # every=n with a shortened last interval
     frames = [Frame(f.step, t, f.index, f.position, f.velocity) for f, t in zip(frames, times, strict=True)]
     parsed = run(tmp_path / "u.usda", header, frames, uneven_rate=30.0)
-    assert parsed.samples["points"].codes == [t * 30.0 for t in times]
+    # the whole frame nearest t * 30 (7.5 rounds to 8): players step through whole frames
+    assert parsed.samples["points"].codes == [0.0, 3.0, 6.0, 8.0]
     assert parsed.metadata["timeCodesPerSecond"] == "30"
-    assert float(parsed.metadata["endTimeCode"]) == 0.25 * 30.0
+    assert parsed.metadata["endTimeCode"] == "8"
     assert "frame index" not in (tmp_path / "u.usda").read_text()
 
 
@@ -325,6 +328,13 @@ def test_time_code_rule() -> None:
     assert (codes, rate, even) == ([0.0, 1.0, 2.0, 3.0], 10.0, True)
     codes, rate, even = usda.time_codes([0.0, 0.25, 1.0], 4.0)
     assert not even and rate == 4.0 and codes == [0.0, 1.0, 4.0]
+    # fps recording on a grid that does not divide the period: steps nearest k / 25
+    times = [round(k / 25 / 0.0007) * 0.0007 for k in range(76)]
+    codes, rate, even = usda.time_codes(times, 25.0)
+    assert not even and rate == 25.0 and codes == [float(k) for k in range(76)]
+    # two frames in one whole frame: the exact fractions keep them apart
+    codes, rate, even = usda.time_codes([0.0, 0.1, 0.12], 10.0)
+    assert not even and codes == [0.0, 1.0, 1.2]
     assert usda.format_time_code(3.0) == "3" and usda.format_time_code(0.5) == "0.5"
 
 
