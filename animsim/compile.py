@@ -29,6 +29,7 @@ from animsim.record import Clock, TrajectoryHeader, landing_steps, recording_rul
 from animsim.scene import models as m
 from animsim.scene.loader import method_from_option
 from animsim.scene.structures import connectivity, expand
+from animsim.scene.validate import method_problems
 from animsim.system import State, System
 
 
@@ -355,7 +356,6 @@ def compile_scene(
         emitters.attach(dynamics, [st for st in post_step if st.collides_newborns])
         post_step.append(emitters)  # births run after the step and its collisions
     name_ = scene.integrator_name
-    from animsim.scene.validate import method_problems
 
     refused = method_problems(scene)  # the file's own are refused with their line when loaded
     if refused:

@@ -97,9 +97,6 @@ def _point_rows(system: Any) -> np.ndarray:
 
 def collider_shape(c: Any) -> Any:
     """The :class:`animsim.colliders.Shape` of one scene collider, at its written position."""
-    from animsim.colliders import (
-        Shape,
-    )
 
     if isinstance(c, m.SphereCollider):
         shape = Shape(SPHERE, np.array(c.center), radius=c.radius)

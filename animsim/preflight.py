@@ -36,6 +36,7 @@ from animsim.errors import Diagnostic, SceneError, UsageError
 from animsim.export.meta import meta_path
 from animsim.export.ply import PLY_SUFFIX
 from animsim.export.sinks import get_format
+from animsim.particle_contacts import SKIN
 from animsim.record import Clock, recording_rule
 from animsim.scene.loader import (
     DEFAULT_MAX_DEPTH,
@@ -45,8 +46,8 @@ from animsim.scene.loader import (
     Limits,
     LoadedScene,
 )
-from animsim.scene.models import Scene
-from animsim.scene.structures import particle_count, structure_spring_count
+from animsim.scene.models import Particle, Scene
+from animsim.scene.structures import initial_positions, particle_count, structure_spring_count
 
 KIB = 1024
 MIB = 1024 * KIB
@@ -367,7 +368,6 @@ MAX_CONTACT_RADIUS = 1e150
 
 def _contact_radius_problem(loaded: LoadedScene, scene: Scene) -> None:
     """Refuse, at its key, a contact radius the neighbour search cannot square."""
-    from animsim.scene.models import Particle
 
     keys: list[tuple[tuple[str | int, ...], float | None]] = []
     if scene.particle_collisions is not None:
@@ -399,9 +399,6 @@ def contact_pairs(scene: Scene) -> int:
     """
     import numpy as np
     from scipy.spatial import cKDTree
-
-    from animsim.particle_contacts import SKIN
-    from animsim.scene.structures import initial_positions
 
     if scene.particle_collisions is None:
         return 0

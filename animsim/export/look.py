@@ -19,6 +19,8 @@ from typing import Any
 
 import numpy as np
 
+from animsim.emitters import parse_color
+
 DEFAULT_SIZE = 0.02  # m, the radius of a particle nothing gives a size
 DEFAULT_RGBA = (1.0, 1.0, 1.0, 1.0)  # opaque white, for a particle nothing gives a colour
 
@@ -27,7 +29,6 @@ class SceneLook:
     """Per id-table row radius and RGBA from a trajectory header's extras (NaN: none given)."""
 
     def __init__(self, extra: dict[str, Any] | None) -> None:
-        from animsim.emitters import parse_color
 
         extra = extra or {}
         radius = extra.get("particle_radius")

@@ -44,6 +44,7 @@ import numpy as np
 
 from animsim.atomic import AtomicFile, writing
 from animsim.bodies.export import body_info, row_columns
+from animsim.bodies.shapes import Box, Capsule, Sphere
 from animsim.export.meta import commit_with_meta
 from animsim.export.trajectory import TornSprings
 from animsim.record import Frame, TrajectoryHeader
@@ -194,7 +195,6 @@ def drawables(header: TrajectoryHeader) -> dict[str, Any]:
 
 def header_extra(drawn: dict[str, Any]) -> dict[str, Any]:
     """A trajectory header's ``extra`` (and springs) from an NPZ's drawables, for the drawers."""
-    from animsim.bodies.shapes import Box, Capsule, Sphere
 
     extra: dict[str, Any] = {
         "planes": [(np.array(p, dtype=float), np.array(q, dtype=float)) for p, q in drawn.get("planes", [])],

@@ -37,6 +37,9 @@ from typing import Any
 
 import numpy as np
 
+from animsim.colliders import KIND_NAMES
+from animsim.export.look import SceneLook
+from animsim.export.npz import header_extra
 from animsim.export.raster import ORTHO_VIEWS, up_axis
 from animsim.measures.energy_parts import energies_from_trajectory
 
@@ -571,7 +574,6 @@ def collider_shapes(compiled: Any, times: np.ndarray | None = None) -> list[Shap
     colliders = getattr(surface, "__self__", None)
     if colliders is None:
         return []
-    from animsim.colliders import KIND_NAMES
 
     moving = bool((np.asarray(colliders.moving) >= 0).any()) and times is not None and len(times) > 0
     offsets = np.stack([colliders.offsets(float(t)) for t in times]) if moving else None  # (F, C, 3)
@@ -650,7 +652,6 @@ def scene_look(compiled: Any, ids: Sequence[str], frames: int, dense: dict[str, 
     """(colors (F, N, 4), sizes (F, N)) for the viewer: the scene's own colour and radius of
     each particle (animsim.export.look) where the run's frames give none. Sizes are the dots'
     diameters, as the viewer draws them."""
-    from animsim.export.look import SceneLook
 
     look = SceneLook(compiled.header.extra)
     colors, sizes = dense.get("color"), dense.get("size")
@@ -692,7 +693,6 @@ def panel_from_trajectory(
     if compiled is None and getattr(traj, "drawables", None):
         # an NPZ says what to draw itself (animsim.export.npz)
         from animsim.export.look import SceneLook
-        from animsim.export.npz import header_extra
 
         spec = traj.drawables
         extra = header_extra(spec)

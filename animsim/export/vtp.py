@@ -53,6 +53,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from animsim.atomic import AtomicFile
+from animsim.bodies.export import body_mesh_rows
 from animsim.errors import SimulationError
 from animsim.export.look import SceneLook
 from animsim.export.meta import meta_file
@@ -236,8 +237,6 @@ class VtpSink:
         faces, lines, used = self.cells(frame, n)
         keep = np.ones(n, dtype=bool)
         if self._bodies is not None and frame.orientation is not None:
-            from animsim.bodies.export import body_mesh_rows
-
             first, count = int(self._bodies["first"]), len(self._bodies["ids"])
             keep = ~((index >= first) & (index < first + count))  # a body is its mesh, not a point
             bpos, bvel, bidx, tris = body_mesh_rows(frame, self._bodies, n)

@@ -81,6 +81,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from animsim.dynamics import Dynamics
+from animsim.forces.springs import Springs
 from animsim.integrators.base import Integrator
 from animsim.methods.xpbd import DEFAULT_SUBSTEPS  # the one place it is set
 from animsim.system import State
@@ -207,7 +208,6 @@ def spring_energy_term(system: Any, label: str, dt: float, substeps: int | None)
     """The force term that stands for the springs in an xpbd run of steps ``dt``: it is never
     summed into a step (the constraints move the particles), but the energy watch, ``explain``
     and the stability report read it; its stiffness is :func:`realised_stiffness`."""
-    from animsim.forces.springs import Springs
 
     h = dt / (DEFAULT_SUBSTEPS if substeps is None else substeps)
 
@@ -352,7 +352,6 @@ class XPBD(Integrator):
 
     def __init__(self, dynamics: Dynamics, substeps: int = DEFAULT_SUBSTEPS):
         super().__init__(dynamics)
-        from animsim.forces.springs import Springs
 
         self._counted = dynamics  # evaluations are counted on the run's own dynamics
         system = dynamics.system

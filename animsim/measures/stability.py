@@ -42,6 +42,8 @@ from typing import Any
 import numpy as np
 
 from animsim import methods
+from animsim.errors import Diagnostic, SceneError
+from animsim.scene.structures import parse_structure_id
 
 #: the suggested dt is this fraction of the limit, then rounded down to two significant digits
 SAFETY_FACTOR = 0.9
@@ -397,7 +399,6 @@ def _refuse_overflow(compiled: Any, k_rows: np.ndarray, c_rows: np.ndarray) -> N
     rows = np.flatnonzero(bad)
     if not rows.size:
         return
-    from animsim.errors import Diagnostic, SceneError
 
     i = int(rows[0])
     name = particle_name(compiled, i)
@@ -419,7 +420,6 @@ def _refuse_overflow(compiled: Any, k_rows: np.ndarray, c_rows: np.ndarray) -> N
 
 def _scene_path_of(scene: Any, pid: str) -> tuple[str | int, ...]:
     """Where particle ``pid`` is made in the scene: its entry, structure or emitter."""
-    from animsim.scene.structures import parse_structure_id
 
     for j, p in enumerate(scene.particles):
         if p.id == pid:

@@ -74,7 +74,7 @@ from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from animsim.scene.models import MeshStructure, PinInside, Scene
+from animsim.scene.models import MeshStructure, PinBox, PinInside, Scene
 
 if TYPE_CHECKING:
     import numpy as np
@@ -360,6 +360,7 @@ def _parse_ply(path: Path) -> tuple[np.ndarray, list[tuple[int, list[int]]]]:
 
 def _check_ply_header(name: str, elements: dict[str, Any]) -> None:
     """Refuse from the header alone what cannot be a mesh within the limits, before any row is read."""
+    # lazy as numpy is here: loading a scene without a mesh does not pay for it
     from animsim.ply_reader import PLY_SCALAR_TYPES
 
     if "vertex" not in elements:
@@ -664,12 +665,18 @@ def _check_mode(s: MeshStructure, geom: MeshGeometry) -> None:
         )
 
 
+def inside_box(x: np.ndarray, box: PinBox) -> np.ndarray:
+    """(n,) True where a point of ``x`` (n, 3) lies in ``box``, faces included
+    (``pin: {inside: {min, max}}`` of every structure and mesh)."""
+    import numpy as np
+
+    return np.all((x >= np.asarray(box.min)) & (x <= np.asarray(box.max)), axis=1)
+
+
 def _check_pins(s: MeshStructure, geom: MeshGeometry) -> list[Problem]:
 
     n = geom.vertex_count
     if isinstance(s.pin, PinInside):
-        from animsim.scene.structures import inside_box
-
         if not inside_box(place(s, geom.vertices), s.pin.inside).any():
             return [
                 (("pin", "inside"), "no vertex of the mesh is inside this box (world coordinates)", False)
@@ -851,8 +858,6 @@ def mesh_parts(s: MeshStructure, scene_dir: Path | None = None) -> MeshParts:
     n = len(x)
     pinned = np.zeros(n, dtype=bool)
     if isinstance(s.pin, PinInside):
-        from animsim.scene.structures import inside_box
-
         pinned = inside_box(x, s.pin.inside)
     else:
         pinned[[v for v in s.pin if v < n]] = True

@@ -1112,8 +1112,6 @@ class Scene(Model, metaclass=_SceneType):
         try:
             data = json.loads(json_data)
         except ValueError as exc:
-            from animsim.errors import Diagnostic, SceneError
-
             raise SceneError([Diagnostic(PYTHON_SOURCE, 0, 0, "", f"not JSON: {exc}")]) from None
         return cls.model_validate(data, **kw)
 
@@ -1147,7 +1145,10 @@ class Scene(Model, metaclass=_SceneType):
         return None if isinstance(self.integrator, str) else self.integrator.substeps
 
 
-def _python_scene_error(exc: ValidationError, data: Any) -> Exception:
-    from animsim.scene.loader import scene_error
+#: how a ValidationError of a scene built in Python becomes the loader's diagnostics
+#: (``animsim.scene.loader.scene_error``); handed here by the package, as CROSS_CHECKS are
+SCENE_ERRORS: list[Callable[[ValidationError, Any, Any, str], Exception]] = []
 
-    return scene_error(exc, data, None, PYTHON_SOURCE)
+
+def _python_scene_error(exc: ValidationError, data: Any) -> Exception:
+    return SCENE_ERRORS[0](exc, data, None, PYTHON_SOURCE)

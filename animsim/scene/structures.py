@@ -30,11 +30,10 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:  # numpy is imported where arrays are built, so validating a scene
     import numpy as np  # (and refusing a bad one) does not pay for importing it
 
-from animsim.scene.meshes import mesh_parts, mesh_spring_count
+from animsim.scene.meshes import geometry_of, inside_box, mesh_parts, mesh_spring_count, place
 from animsim.scene.models import (
     Cloth,
     MeshStructure,
-    PinBox,
     PinInside,
     SoftBox,
     SpringFamily,
@@ -258,8 +257,6 @@ def initial_positions(s: Structure, scene_dir: Path | None = None) -> np.ndarray
     """The (n, 3) starting positions of ``s``'s particles, without its springs (the pre-flight's
     contact count needs only these)."""
     if isinstance(s, MeshStructure):
-        from animsim.scene.meshes import geometry_of, place
-
         return place(s, geometry_of(s, scene_dir).vertices)
     return grid_positions(s)
 
@@ -285,14 +282,6 @@ def grid_positions(s: Structure) -> np.ndarray:
         grid = np.stack(np.meshgrid(*frac, indexing="ij"), axis=-1).reshape(-1, 3)
         pos = np.asarray(s.center) + grid * np.asarray(s.size)
     return np.ascontiguousarray(pos, dtype=np.float64)
-
-
-def inside_box(x: np.ndarray, box: PinBox) -> np.ndarray:
-    """(n,) True where a point of ``x`` (n, 3) lies in ``box``, faces included
-    (``pin: {inside: {min, max}}`` of every structure and mesh)."""
-    import numpy as np
-
-    return np.all((x >= np.asarray(box.min)) & (x <= np.asarray(box.max)), axis=1)
 
 
 def pinned_rows(s: Structure) -> np.ndarray:
