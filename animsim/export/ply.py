@@ -728,44 +728,91 @@ def _column(values: list[Any], prop: PlyProperty) -> np.ndarray:
     return col
 
 
+_SPACE = re.compile(rb"\s")
+
+
+class _Tokens:
+    """The whitespace-separated tokens of an ASCII PLY body, split a block at a time.
+
+    ``bytes.split`` on a whole 200 MB body makes one object per token (several
+    GB for a file of one-character tokens); here at most a block's tokens
+    exist at once, beyond those a caller asked for.
+    """
+
+    BLOCK = 1 << 22  # bytes split at once
+
+    def __init__(self, data: bytes) -> None:
+        self.data = data
+        self.pos = 0  # bytes of data split so far
+        self.buf: list[bytes] = []
+        self.i = 0  # tokens of buf handed out
+
+    def _more(self) -> bool:
+        if self.pos >= len(self.data):
+            return False
+        end = min(self.pos + self.BLOCK, len(self.data))
+        space = _SPACE.search(self.data, end)  # never split a token between two blocks
+        end = space.start() if space else len(self.data)
+        self.buf = self.buf[self.i :] + self.data[self.pos : end].split()
+        self.i = 0
+        self.pos = end
+        return True
+
+    def take(self, k: int) -> list[bytes]:
+        """The next ``k`` tokens (fewer at the end of the data)."""
+        while len(self.buf) - self.i < k and self._more():
+            pass
+        out = self.buf[self.i : self.i + k]
+        self.i += len(out)
+        return out
+
+    def remaining(self) -> int:
+        """How many tokens are left (counted a block at a time, none kept)."""
+        count = len(self.buf) - self.i
+        self.buf, self.i = [], 0
+        while self._more():
+            count += len(self.buf)
+            self.buf = []
+        return count
+
+
 def _read_ascii(data: bytes, elements: list[PlyElement], wanted: str) -> tuple[dict[str, np.ndarray], int]:
-    tokens = data.split()
-    pos = 0
+    tokens = _Tokens(data)
     result: dict[str, np.ndarray] = {}
     for el in elements:
         props = el.properties
         if all(p.list_count_type is None for p in props):
             need = el.count * len(props)
-            if pos + need > len(tokens):
+            chunk = tokens.take(need)
+            if len(chunk) < need:
                 raise PlyFormatError(f"file ends inside element {el.name!r}")
-            table = np.array(tokens[pos : pos + need], dtype=bytes).reshape(el.count, len(props))
-            pos += need
+            table = np.array(chunk, dtype=bytes).reshape(el.count, len(props))
+            del chunk
             cols = {p.name: _parse_tokens(table[:, j], p.type) for j, p in enumerate(props)}
         else:
             acc: dict[str, list[Any]] = {p.name: [] for p in props}
             for _ in range(el.count):
                 for p in props:
-                    if pos >= len(tokens):
+                    head = tokens.take(1)
+                    if not head:
                         raise PlyFormatError(f"file ends inside element {el.name!r}")
                     if p.list_count_type is None:
-                        acc[p.name].append(_parse_tokens(np.array(tokens[pos : pos + 1]), p.type)[0])
-                        pos += 1
+                        acc[p.name].append(_parse_tokens(np.array(head), p.type)[0])
                     else:
-                        if not tokens[pos].isdigit():  # "abc", "3.0", "nan", "-1": not a count
-                            shown = tokens[pos][:20].decode("ascii", "replace")
+                        if not head[0].isdigit():  # "abc", "3.0", "nan", "-1": not a count
+                            shown = head[0][:20].decode("ascii", "replace")
                             raise PlyFormatError(
                                 f"element {el.name!r}: list count {shown!r} is not a whole number >= 0"
                             )
-                        length = int(tokens[pos])
-                        chunk = np.array(tokens[pos + 1 : pos + 1 + length], dtype=bytes)
+                        length = int(head[0])
+                        chunk = np.array(tokens.take(length), dtype=bytes)
                         if len(chunk) != length:
                             raise PlyFormatError(f"file ends inside element {el.name!r}")
                         acc[p.name].append(_parse_tokens(chunk, p.type))
-                        pos += 1 + length
             cols = {p.name: _column(acc[p.name], p) for p in props}
         if el.name == wanted:
             result = cols
-    return result, len(tokens) - pos
+    return result, tokens.remaining()
 
 
 def _parse_tokens(tokens: np.ndarray, type_name: str) -> np.ndarray:
