@@ -152,3 +152,23 @@ def test_a_huge_obj_is_refused_without_reading_it_whole(tmp_path):
     r = run_capped("check", scene, cap=MESH_CAP_BYTES)
     assert "stopped reading at line 200001" in r.stderr, r.stderr
     assert "MemoryError" not in r.stderr and "internal error" not in r.stderr
+
+
+def test_an_ascii_ply_with_a_huge_body_is_read_in_bounded_memory(tmp_path):
+    mesh = tmp_path / "big.ply"
+    with open(mesh, "w") as fh:
+        fh.write(
+            "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+            "element face 4\nproperty list uchar int vertex_indices\nend_header\n"
+            "0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n"
+        )
+        for _ in range(25):  # 25 million two-letter tokens after the faces, 75 MB (one-letter
+            fh.write("ab " * 1_000_000)  # bytes are shared objects in CPython; two-letter ones are not)
+    scene = tmp_path / "s.yaml"
+    scene.write_text(
+        "duration: 0.01\ndt: 0.001\nstructures:\n"
+        "  - {type: mesh, id: m, file: big.ply, mode: cloth, mass: 1.0, stretch: {ks: 10}}\n"
+    )
+    r = run_capped("check", scene, cap=MESH_CAP_BYTES)
+    assert "MemoryError" not in r.stderr and "internal error" not in r.stderr, r.stderr
+    assert r.returncode == 0, r.stderr  # the trailing tokens are not part of any element
