@@ -30,6 +30,8 @@ from animsim.errors import UsageError
 DEFAULT_DRIFT_WARN_PERCENT = 10.0
 #: below this starting energy (J) a relative drift means nothing
 ENERGY_SCALE_FLOOR_J = 1e-12
+#: the methods a drift warning suggests (less the run's own)
+ADVISED_METHODS = ("rk4", "verlet", "symplectic_euler")
 #: the metadata key through which a caller passes its threshold to the run's metadata
 META_THRESHOLD_KEY = "drift_warn_percent"
 
@@ -42,6 +44,7 @@ class Drift:
     warn_percent: float  # the threshold it was judged against
     why_none: str | None = None  # why no drift is reported
     negative_start: bool = False  # E_start < 0: the drift is relative to |E_start|
+    method: str | None = None  # the run's integrator (the advice never names it as the cure)
 
     @property
     def warning(self) -> bool:
@@ -55,11 +58,12 @@ class Drift:
         return f"energy drift {_percent(self.relative)}{basis}"
 
     def warning_text(self) -> str:
+        others = [name for name in ADVISED_METHODS if name != self.method]
         return (
             f"energy drift {_percent(abs(self.relative or 0.0), signed=False)} exceeds "
             f"{self.warn_percent:g} % (--drift-warn): in this conservative scene that is the "
             "integrator's error, not physics; use a smaller dt or a higher-order or symplectic "
-            "method (rk4, verlet, symplectic_euler)"
+            f"method ({', '.join(others)})"
         )
 
     def meta(self) -> dict[str, Any]:
@@ -113,7 +117,8 @@ def drift(compiled: Any, e0: float, e1: float, warn_percent: float = DEFAULT_DRI
             None, warn_percent, why_none="the starting energy is 0, so a relative drift means nothing"
         )
     rel = (e1 - e0) / abs(e0) if math.isfinite(e1) else math.inf
-    return Drift(rel, warn_percent, negative_start=e0 < 0)
+    method = getattr(compiled, "integrator_name", None)
+    return Drift(rel, warn_percent, negative_start=e0 < 0, method=method)
 
 
 def annotate(meta: dict[str, Any], compiled: Any) -> Drift:
