@@ -10,6 +10,7 @@ both, and imports nothing of animsim.
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import dataclass
 from typing import Any
 

@@ -217,8 +217,8 @@ largest stable step, 0.06 ms.
 
 | need | choose | on the stiff cloth |
 | --- | --- | --- |
-| the motion of the springs as written | an explicit method at its stable step (`check` prints each one's largest dt) | the reference itself: symplectic Euler on numba at 0.06 ms steps |
-| any step, springs as forces | `implicit_euler` | one step per frame: 1.76 simulated s per CPU s on NumPy, but its damping nearly stops the swing: sag 1251 % off; still 141 % off at 1 ms steps and 21 % at 0.13 ms (0.014 simulated s per CPU s) |
+| the motion of the springs as written | an explicit method at its stable step (`check` prints each one's largest dt) | the reference itself: symplectic Euler on numba at 0.06 ms steps, 0.74 simulated s per CPU s |
+| any step, springs as forces | `implicit_euler` | one step per frame: 1.76 simulated s per CPU s on NumPy, but its damping nearly stops the swing: sag 1251 % off; still 141 % off at 1 ms steps and 13 % at 0.065 ms (0.008 simulated s per CPU s) |
 | any step and any stiffness, inextensible springs, a look that never blows up | `xpbd` | one step per frame, 10 substeps: 13.1 simulated s per CPU s on numba (7.4x implicit Euler), 1.32 on NumPy (0.75x), sag 211 % off (the cloth is softer than ks); within 2 % at 2560 substeps (1.37 %, 0.087 simulated s per CPU s) |
 
 So `xpbd` is the better choice where the look matters more than the numbers:
