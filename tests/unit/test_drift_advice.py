@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import pytest
-
 from animsim.analysis.drift import ADVISED_METHODS, Drift
 
 
