@@ -55,11 +55,14 @@ def prepare(
     limits: Any = None,
     fmt: str = "csv",
     loaded: Any = None,
+    consumer: str | None = None,
 ) -> tuple[Scene, Any]:
     """The scene with overrides (checked by the file's rules) and its pre-flight estimate.
 
     Refuses (UsageError, exit 2) a run that would exceed the step or memory
-    limits before anything is allocated.
+    limits before anything is allocated, and (SceneError, exit 2) a scene in a
+    refused cell of the support table for ``consumer`` (:mod:`animsim.support`;
+    None: what the simulation itself cannot do).
     """
     from animsim.preflight import RunLimits, check_limits
 
@@ -69,13 +72,11 @@ def prepare(
         from animsim.compile import with_overrides
 
         sc = with_overrides(sc, integrator=integrator, dt=dt, duration=duration, seed=seed)
-    est = check_limits(
-        loaded if loaded is not None else _Loaded(scene),
-        sc,
-        limits,
-        fmt=fmt,
-        overridden=dt is not None or duration is not None,
-    )
+    from animsim import support
+
+    source = loaded if loaded is not None else _Loaded(scene)
+    est = check_limits(source, sc, limits, fmt=fmt, overridden=dt is not None or duration is not None)
+    support.check(source, sc, consumer)
     return sc, est
 
 
@@ -88,6 +89,7 @@ def prepare_file(
     dt: float | None = None,
     duration: float | None = None,
     seed: int | None = None,
+    consumer: str | None = None,
 ) -> tuple[Any, Scene, Any]:
     """Load a scene file, apply overrides and check the step and memory limits.
 
@@ -109,6 +111,7 @@ def prepare_file(
         limits=limits,
         fmt=fmt,
         loaded=loaded,
+        consumer=consumer,
     )
     return loaded, sc, est
 
@@ -349,7 +352,7 @@ def compare(
 
     source = scene  # what the outputs must not overwrite (a file), see _check_output
     if not isinstance(scene, Scene):
-        loaded, _, _ = prepare_file(Path(scene), limits)  # the file's step and memory limits
+        loaded, _, _ = prepare_file(Path(scene), limits, consumer="compare")  # the file's limits
         scene, name = loaded.scene, name or loaded.name
     for path in (output, plot):
         if path is not None:
@@ -469,7 +472,7 @@ def run(
     if to_stdout and fmt != "csv":
         raise UsageError(f"--format {fmt} cannot go to stdout; give a file with -o")
     sc, name, est, loaded = _prepared(
-        source, limits, fmt=fmt, integrator=integrator, dt=dt, duration=duration, seed=seed
+        source, limits, fmt=fmt, integrator=integrator, dt=dt, duration=duration, seed=seed, consumer=fmt
     )
     scene_path = Path(source) if isinstance(source, str | Path) else Path(f"{name}.yaml")
     if fmt == "ply":
@@ -514,7 +517,7 @@ def explain(
     stages each step runs, and what was left out because the scene does not need it."""
     from animsim.analysis.effective import fallback_note
 
-    sc, name, _, _ = _prepared(source, limits, integrator=integrator)
+    sc, name, _, _ = _prepared(source, limits, integrator=integrator, consumer="explain")
     c = compile(sc, backend, name=name)
     s = c.system
     lines = [
@@ -620,7 +623,13 @@ def render(
         from animsim.export.side_by_side import compile_each, render_side_by_side
 
         names = _integrator_names(integrators)
-        sc, name, _, _ = _prepared(source, limits, dt=dt, duration=duration)  # type: ignore[arg-type]
+        sc, name, _, _ = _prepared(
+            source,  # type: ignore[arg-type]
+            limits,
+            dt=dt,
+            duration=duration,
+            consumer="render",
+        )
         sc = sc.model_copy(update={"record": m.Record(fps=fps)})
         result = render_side_by_side(
             compile_each(sc, name, names, backend), gif_path, mp4_path, opts, stop=stop
@@ -632,7 +641,14 @@ def render(
     compiled = None
     scene_source = (Path(scene) if scene is not None else None) if from_file else source
     if scene_source is not None:
-        sc, name, _, _ = _prepared(scene_source, limits, integrator=integrator, dt=dt, duration=duration)
+        sc, name, _, _ = _prepared(
+            scene_source,
+            limits,
+            integrator=integrator,
+            dt=dt,
+            duration=duration,
+            consumer="render_trajectory" if from_file else "render",
+        )
         if not from_file:
             sc = sc.model_copy(update={"record": m.Record(fps=fps)})  # exactly the frames shown
         from animsim.compile import compile_scene
@@ -687,7 +703,7 @@ def view(
     return write_view(
         Path(source),
         out,
-        prepare=lambda path, **kw: prepare_file(path, limits, **kw),
+        prepare=lambda path, **kw: prepare_file(path, limits, consumer="view", **kw),
         integrators=None if integrators is None else ",".join(_integrator_names(integrators)),
         fps=fps,
         view=view,
@@ -733,7 +749,7 @@ def plot(
     from_file = is_trajectory(src)
     if kind != "phase" and (integrators is not None or particles is not None):
         raise UsageError("--integrators and --particles go with --kind phase")
-    prepare_path = lambda path, **kw: prepare_file(path, limits, **kw)  # noqa: E731
+    prepare_path = lambda path, **kw: prepare_file(path, limits, consumer="plot", **kw)  # noqa: E731
     if kind == "phase":
         from animsim.export.phase import phase_command
 
@@ -815,6 +831,9 @@ def sweep(
     # The file limits apply here; each case's step and memory pre-flight would need
     # the sweep's own variants (see docs/limits.md).
     loaded = load_scene(src, (limits or RunLimits()).loader)
+    from animsim import support
+
+    support.check(loaded, loaded.scene, "sweep")  # each case is the file with other values
     axes = [sw.parse_set(text) for text in sets]
     if integrators is not None:
         axes.append(

@@ -75,7 +75,7 @@ def check_scenes(
     tally: dict[str, int] = {}
     for path in paths:
         try:
-            loaded, scene, _ = prepare_scene(path, limits)
+            loaded, scene, _ = prepare_scene(path, limits, consumer="check")
             compiled = compile_scene(scene, loaded.name, backend=backend)
         except AnimsimError as exc:
             echo_err(str(exc))
