@@ -169,7 +169,7 @@ THINGS: tuple[Thing, ...] = (
     Thing(
         "plane_impulse",
         "an impulse plane",
-        "`planes:` entry (`response: impulse`)",
+        "`planes:` entry, `response: impulse` (the default)",
         _planes("impulse"),
         False,
     ),
