@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from animsim import methods
-from animsim.errors import Diagnostic, SceneError
+from animsim.errors import Diagnostic, SceneError, UsageError
 from animsim.scene.models import Scene
 
 SUPPORTED, REFUSED = "supported", "refused"
@@ -474,16 +474,27 @@ def problems(scene: Scene, consumer: str | None = None) -> list[tuple[Path_, str
                     f"{THING[a].label} and {THING[b].label} {_dotted(_element(pb))} can meet, but {c.what}; {c.instead}",
                 )
             )
-    if consumer is not None:
-        wanted = {c.key: c for c in consumers()}.get(consumer)
+    asked = [] if consumer is None else [consumer]
+    # the scene's own integration method is a consumer of every scene
+    asked.append(f"integrator:{scene.integrator_name}")
+    by_key = {c.key: c for c in consumers()}
+    for key in dict.fromkeys(asked):
+        wanted = by_key.get(key)
         if wanted is None:
-            raise KeyError(consumer)
+            raise KeyError(key)
         for t in things_of(wanted):
             c = cell(t.key, wanted)
             if c.status == REFUSED and t.key in have:
                 pa = have[t.key][0]
-                out.append((pa, f"{wanted.label} cannot show {t.label}: {c.what}; {c.instead}"))
+                if key.startswith("integrator:"):
+                    out.append((pa, f"{t.label} cannot run under {wanted.label}: {c.what}; {c.instead}"))
+                else:
+                    out.append((pa, f"{wanted.label} cannot show {t.label}: {c.what}; {c.instead}"))
     return out
+
+
+class Refused(SceneError, UsageError):
+    """A scene in a refused cell: located like every scene error, and a usage error (exit 2)."""
 
 
 def check(loaded: Any, scene: Scene, consumer: str | None = None) -> None:
@@ -496,4 +507,4 @@ def check(loaded: Any, scene: Scene, consumer: str | None = None) -> None:
     for path, message in found_problems:
         line, column = loaded.marks.at(path, prefer_key=True)
         diagnostics.append(Diagnostic(loaded.file, line, column, _key_path(path), message))
-    raise SceneError(diagnostics)
+    raise Refused(diagnostics)
