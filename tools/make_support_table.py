@@ -44,6 +44,9 @@ Each cell is one of two answers:
   collide with colliders yet; use a plane, or a pinned body for the obstacle
   ```
 
+(`animsim check` reports such a scene as INVALID, with the same lines, and
+exits 1 as it does for every scene it finds wrong.)
+
 Nothing in between: animsim never runs a combination and quietly leaves
 something out. A contact that is refused is refused by every command (the
 simulation cannot make it); an output that cannot show something is refused
