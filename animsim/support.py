@@ -276,8 +276,6 @@ class Consumer:
     moving_only: bool = False
     #: things it refuses, with why and what to use instead
     refuses: tuple[tuple[tuple[str, ...], Cell], ...] = ()
-    #: it simulates the scene (contact refusals apply)
-    simulates: bool = True
 
 
 _DOTS = _no("the viewer draws a body as a dot at its centre", "use `animsim render SCENE --view 3d`")
@@ -303,7 +301,7 @@ CONSUMERS: tuple[Consumer, ...] = (
     Consumer("numpy", "`--backend numpy`", "runs; the element is in the result"),
     Consumer("numba", "`--backend numba`", "runs; agrees with NumPy"),
     Consumer("check", "`animsim check`", "analysed and run; reported valid"),
-    Consumer("explain", "`animsim explain`", "listed among what each step runs", simulates=True),
+    Consumer("explain", "`animsim explain`", "listed among what each step runs"),
     Consumer("csv", "`run --format csv`", "its rows are in the file", moving_only=True),
     Consumer("npz", "`run --format npz`", "its rows are in the file", moving_only=True),
     Consumer(
@@ -410,9 +408,8 @@ def _element(path: Path_) -> Path_:
 def _tethered(scene: Scene) -> set[Path_]:
     """Elements joined to a body by a chain of springs (a rope holding a body, a hook).
 
-    They are the body's rigging, not obstacles for it, and are not refused for meeting it:
-    a spring ties them to the body, and one that reached the body would be pulled
-    through it by design (see docs/support.md).
+    They are the body's rigging, not obstacles for it, and are not refused for sharing the
+    scene with it; they still pass through bodies (docs/support.md says so).
     """
     parent: dict[Any, Any] = {}
 
