@@ -411,6 +411,16 @@ def _prepared(source: str | Path | Scene, limits: Any, **overrides: Any) -> tupl
     return sc, loaded.name, est, loaded
 
 
+def _refuse_bodies_in_file(traj: Any, path: Path, what: str, instead: str) -> None:
+    """A trajectory file with rigid bodies, drawn without its scene, would show them as dots:
+    refused before anything is drawn (the support table's cell, for a file without a scene)."""
+    q = getattr(traj, "orientation", None)
+    if q is not None and np.isfinite(q).any():
+        raise UsageError(
+            f"{path}: the file holds rigid bodies, which {what} draws as dots at their centres; {instead}"
+        )
+
+
 def _check_output(output: Path, source: Any) -> None:
     from animsim.preflight import check_output_path
 
@@ -639,6 +649,11 @@ def render(
     if isinstance(source, Trajectory):
         return render_trajectory(source.frames_long, gif_path, mp4_path, opts, compiled=source.compiled)
     compiled = None
+    traj_path = Path(source) if from_file and isinstance(source, str | Path) else None
+    from_traj = None if traj_path is None else read_trajectory(traj_path)
+    if traj_path is not None and scene is None:
+        what = "a render of a trajectory file"
+        _refuse_bodies_in_file(from_traj, traj_path, what, "render the scene: animsim render SCENE")
     scene_source = (Path(scene) if scene is not None else None) if from_file else source
     if scene_source is not None:
         sc, name, _, _ = _prepared(
@@ -655,8 +670,8 @@ def render(
 
         # a trajectory's scene is only drawn (springs, planes), never stepped: NumPy compiles it
         compiled = compile_scene(sc, name, backend="numpy" if from_file else backend)
-    if from_file:
-        return render_trajectory(read_trajectory(Path(source)), gif_path, mp4_path, opts, compiled=compiled)
+    if from_traj is not None:
+        return render_trajectory(from_traj, gif_path, mp4_path, opts, compiled=compiled)
     total = compiled.record_steps.size
     tick = None if progress is None else (lambda done: progress(done, total))
     return render_scene(compiled, gif_path, mp4_path, opts, progress=tick, stop=stop)
@@ -700,6 +715,12 @@ def view(
     if out.suffix.lower() not in (".html", ".htm"):
         raise UsageError(f"-o {out}: the file name must end in .html")
     _check_output(out, source)
+    from animsim.export.trajectory import is_trajectory, read_trajectory
+
+    if scene is None and is_trajectory(Path(source)):
+        _refuse_bodies_in_file(
+            read_trajectory(Path(source)), Path(source), "the viewer", "use animsim render SCENE --view 3d"
+        )
     return write_view(
         Path(source),
         out,

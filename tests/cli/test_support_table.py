@@ -27,7 +27,7 @@ import pytest
 import yaml
 
 from animsim import api, support
-from animsim.errors import SceneError
+from animsim.errors import SceneError, UsageError
 from tests.conftest import ROOT, run_cli
 
 #: the deepest a supported contact may leave a mover inside its obstacle, m. A penalty plane
@@ -574,3 +574,18 @@ def test_docs_support_md_is_current() -> None:
     page = (ROOT / "docs" / "support.md").read_text(encoding="utf-8")
     assert page == make_support_table.render_page(), "run python tools/make_support_table.py"
     assert math.isfinite(PENETRATION)
+
+
+@pytest.mark.parametrize("command", ["render", "view"])
+def test_a_trajectory_file_with_bodies_without_its_scene_is_refused(command: str, tmp_path: Path) -> None:
+    """Without --scene a file's bodies would be drawn as dots: refused, nothing written."""
+    path = _thing_scene(tmp_path, "body_box")
+    npz = tmp_path / "run.npz"
+    api.simulate(api.load(path), backend="numpy").save(npz)
+    out = tmp_path / ("anim.gif" if command == "render" else "page.html")
+    with pytest.raises(UsageError, match="holds rigid bodies"):
+        if command == "render":
+            api.render(npz, gif=out, size="80x60")
+        else:
+            api.view(npz, out)
+    assert not out.exists()
