@@ -248,6 +248,9 @@ def _pair_cells() -> dict[tuple[str, str], Cell]:
         for b in BODY_THINGS:
             cells[(p, b)] = _NO_PARTICLE_BODY
     for b in BODY_THINGS:
+        # a keyframed particle follows its keys and pushes what it meets; a body is not met
+        cells[("keyframed_particle", b)] = _NO_PARTICLE_BODY
+    for b in BODY_THINGS:
         for plane in PLANE_THINGS:
             cells[(b, plane)] = _ok("the body's shape stays on the plane's side")
         for c in COLLIDER_THINGS:

@@ -59,8 +59,8 @@ PAIRS_TEXT = """\
 Rows are the things that move into others; columns what they meet.
 "yes" means no step ends with the two overlapping (particles keep their
 radius from surfaces; bodies keep their shape out); "-" means the two do not
-touch in the scene language (keyframed particles follow their keys exactly,
-and nothing pushes them).
+touch in the scene language (keyframed particles follow their keys exactly:
+nothing pushes them, and planes and colliders do not stop them).
 
 Particles joined to a body by springs (a rope holding a body, the hook it
 hangs from) are the body's rigging: they are not refused for sharing the
@@ -87,7 +87,11 @@ def _mark(c: support.Cell | None) -> str:
 
 
 def _pairs() -> list[str]:
-    movers = [t for t in support.THINGS if t.key in support.PARTICLE_THINGS + support.BODY_THINGS]
+    movers = [
+        t
+        for t in support.THINGS
+        if t.key in (*support.PARTICLE_THINGS, "keyframed_particle", *support.BODY_THINGS)
+    ]
     targets = [
         t
         for t in support.THINGS

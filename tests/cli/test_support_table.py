@@ -123,6 +123,17 @@ MOVERS: dict[str, dict[str, Any]] = {
         ]
     },
 }
+# pinned to keys that carry it down through the obstacle
+MOVERS["keyframed_particle"] = {
+    "particles": [
+        {
+            "id": "k",
+            "pinned": True,
+            "position": [0, 0.5, 0],
+            "keyframes": [[0, [0, 0.5, 0]], [0.4, [0, -0.5, 0]]],
+        }
+    ]
+}
 BODY_SHAPES = {
     "body_sphere": {"type": "sphere", "radius": 0.05},
     "body_box": {"type": "box", "size": [0.1, 0.1, 0.1]},
