@@ -68,11 +68,14 @@ def prepare(
     limits: Any = None,
     fmt: str = "csv",
     loaded: Any = None,
+    consumer: str | None = None,
 ) -> tuple[Scene, Any]:
     """The scene with overrides (checked by the file's rules) and its pre-flight estimate.
 
     Refuses (UsageError, exit 2) a run that would exceed the step or memory
-    limits before anything is allocated.
+    limits before anything is allocated, and (SceneError, exit 2) a scene in a
+    refused cell of the support table for ``consumer`` (:mod:`animsim.support`;
+    None: what the simulation itself cannot do).
     """
     from animsim.preflight import RunLimits, check_limits
 
@@ -83,13 +86,11 @@ def prepare(
         from animsim.compile import with_overrides
 
         sc = with_overrides(sc, integrator=integrator, dt=dt, duration=duration, seed=seed)
-    est = check_limits(
-        loaded if loaded is not None else _Loaded(scene),
-        sc,
-        limits,
-        fmt=fmt,
-        overridden=dt is not None or duration is not None,
-    )
+    from animsim import support
+
+    source = loaded if loaded is not None else _Loaded(scene)
+    est = check_limits(source, sc, limits, fmt=fmt, overridden=dt is not None or duration is not None)
+    support.check(source, sc, consumer)
     return sc, est
 
 
@@ -102,6 +103,7 @@ def prepare_file(
     dt: float | None = None,
     duration: float | None = None,
     seed: int | None = None,
+    consumer: str | None = None,
 ) -> tuple[Any, Scene, Any]:
     """Load a scene file, apply overrides and check the step and memory limits.
 
@@ -123,6 +125,7 @@ def prepare_file(
         limits=limits,
         fmt=fmt,
         loaded=loaded,
+        consumer=consumer,
     )
     return loaded, sc, est
 
@@ -401,7 +404,7 @@ def compare(
 
     source = scene  # what the outputs must not overwrite (a file), see _check_output
     if not isinstance(scene, Scene):
-        loaded, _, _ = prepare_file(Path(scene), limits)  # the file's step and memory limits
+        loaded, _, _ = prepare_file(Path(scene), limits, consumer="compare")  # the file's limits
         scene, name = loaded.scene, name or loaded.name
     for path in (output, plot):
         if path is not None:
@@ -458,6 +461,16 @@ def _prepared(source: str | Path | Scene, limits: Any, **overrides: Any) -> tupl
         return sc, source.name or "scene", est, None
     loaded, sc, est = prepare_file(Path(source), limits, **overrides)
     return sc, loaded.name, est, loaded
+
+
+def _refuse_bodies_in_file(traj: Any, path: Path, what: str, instead: str) -> None:
+    """A trajectory file with rigid bodies, drawn without its scene, would show them as dots:
+    refused before anything is drawn (the support table's cell, for a file without a scene)."""
+    q = getattr(traj, "orientation", None)
+    if q is not None and np.isfinite(q).any():
+        raise UsageError(
+            f"{path}: the file holds rigid bodies, which {what} draws as dots at their centres; {instead}"
+        )
 
 
 def _check_output(output: Path, source: Any) -> None:
@@ -523,7 +536,7 @@ def run(
     if to_stdout and fmt != "csv":
         raise UsageError(f"--format {fmt} cannot go to stdout; give a file with -o")
     sc, name, est, loaded = _prepared(
-        source, limits, fmt=fmt, integrator=integrator, dt=dt, duration=duration, seed=seed
+        source, limits, fmt=fmt, integrator=integrator, dt=dt, duration=duration, seed=seed, consumer=fmt
     )
     scene_path = Path(source) if isinstance(source, str | Path) else Path(f"{name}.yaml")
     if fmt == "ply":
@@ -577,7 +590,7 @@ def explain(
     from animsim.console import count_text, point_particles
     from animsim.measures.effective import fallback_note
 
-    sc, name, _, _ = _prepared(source, limits, integrator=integrator)
+    sc, name, _, _ = _prepared(source, limits, integrator=integrator, consumer="explain")
     c = compile(sc, backend, name=name)
     s = c.system
     points, pinned = point_particles(s)
@@ -686,7 +699,13 @@ def render(
         from animsim.panel_runs import compile_each
 
         names = _integrator_names(integrators)
-        sc, name, _, _ = _prepared(source, limits, dt=dt, duration=duration)  # type: ignore[arg-type]
+        sc, name, _, _ = _prepared(
+            source,  # type: ignore[arg-type]
+            limits,
+            dt=dt,
+            duration=duration,
+            consumer="render",
+        )
         sc = sc.model_copy(update={"record": m.Record(fps=fps)})
         result = render_side_by_side(
             compile_each(sc, name, names, backend), gif_path, mp4_path, opts, stop=stop
@@ -696,17 +715,29 @@ def render(
     if isinstance(source, Trajectory):
         return render_trajectory(source.frames_long, gif_path, mp4_path, opts, compiled=source.compiled)
     compiled = None
+    traj_path = Path(source) if from_file and isinstance(source, str | Path) else None
+    from_traj = None if traj_path is None else read_trajectory(traj_path)
+    if traj_path is not None and scene is None:
+        what = "a render of a trajectory file"
+        _refuse_bodies_in_file(from_traj, traj_path, what, "render the scene: animsim render SCENE")
     scene_source = (Path(scene) if scene is not None else None) if from_file else source
     if scene_source is not None:
-        sc, name, _, _ = _prepared(scene_source, limits, integrator=integrator, dt=dt, duration=duration)
+        sc, name, _, _ = _prepared(
+            scene_source,
+            limits,
+            integrator=integrator,
+            dt=dt,
+            duration=duration,
+            consumer="render_trajectory" if from_file else "render",
+        )
         if not from_file:
             sc = sc.model_copy(update={"record": m.Record(fps=fps)})  # exactly the frames shown
         from animsim.compile import compile_scene
 
         # a trajectory's scene is only drawn (springs, planes), never stepped: NumPy compiles it
         compiled = compile_scene(sc, name, backend="numpy" if from_file else backend)
-    if from_file:
-        return render_trajectory(read_trajectory(Path(source)), gif_path, mp4_path, opts, compiled=compiled)
+    if from_traj is not None:
+        return render_trajectory(from_traj, gif_path, mp4_path, opts, compiled=compiled)
     total = compiled.record_steps.size
     tick = None if progress is None else (lambda done: progress(done, total))
     return render_scene(compiled, gif_path, mp4_path, opts, progress=tick, stop=stop)
@@ -750,10 +781,16 @@ def view(
     if out.suffix.lower() not in (".html", ".htm"):
         raise UsageError(f"-o {out}: the file name must end in .html")
     _check_output(out, source)
+    from animsim.export.trajectory import is_trajectory, read_trajectory
+
+    if scene is None and is_trajectory(Path(source)):
+        _refuse_bodies_in_file(
+            read_trajectory(Path(source)), Path(source), "the viewer", "use animsim render SCENE --view 3d"
+        )
     return write_view(
         Path(source),
         out,
-        prepare=lambda path, **kw: prepare_file(path, limits, **kw),
+        prepare=lambda path, **kw: prepare_file(path, limits, consumer="view", **kw),
         integrators=None if integrators is None else ",".join(_integrator_names(integrators)),
         fps=fps,
         view=view,
@@ -799,7 +836,7 @@ def plot(
     from_file = is_trajectory(src)
     if kind != "phase" and (integrators is not None or particles is not None):
         raise UsageError("--integrators and --particles go with --kind phase")
-    prepare_path = lambda path, **kw: prepare_file(path, limits, **kw)  # noqa: E731
+    prepare_path = lambda path, **kw: prepare_file(path, limits, consumer="plot", **kw)  # noqa: E731
     if kind == "phase":
         from animsim.commands.phase import phase_command
 
@@ -883,6 +920,9 @@ def sweep(
     # The file limits apply here; each case's step and memory pre-flight would need
     # the sweep's own variants (see docs/limits.md).
     loaded = load_scene(src, (limits or RunLimits()).loader)
+    from animsim import support
+
+    support.check(loaded, loaded.scene, "sweep")  # each case is the file with other values
     axes = [sw.parse_set(text) for text in sets]
     if integrators is not None:
         axes.append(

@@ -79,7 +79,7 @@ def check_scenes(
     tally: dict[str, int] = {}
     for path in paths:
         try:
-            loaded, scene, _ = prepare(path, limits)
+            loaded, scene, _ = prepare(path, limits, consumer="check")
             compiled = compile_scene(scene, loaded.name, backend=backend)
         except AnimsimError as exc:
             echo_err(str(exc))

@@ -215,11 +215,14 @@ bodies:
 
 
 def _pile(integrator: str) -> str:
-    shapes = (
-        "{type: box, size: [0.12, 0.08, 0.1]}",
-        "{type: sphere, radius: 0.06}",
-        "{type: capsule, radius: 0.04, length: 0.08}",
+    # A box body and a capsule body are refused together (a box falls through a capsule's side,
+    # docs/support.md): one pile has boxes, the other capsules, both spheres.
+    other = (
+        "{type: box, size: [0.12, 0.08, 0.1]}"
+        if integrator == "symplectic_euler"
+        else "{type: capsule, radius: 0.04, length: 0.08}"
     )
+    shapes = (other, "{type: sphere, radius: 0.06}", other)
     lines = []
     for k in range(24):
         x, y, z = 0.11 * (k % 4), 0.1 + 0.13 * (k // 4), 0.07 * (k % 3)
@@ -233,7 +236,7 @@ def _pile(integrator: str) -> str:
 
 @pytest.mark.parametrize("integrator", ["symplectic_euler", "rk4"])
 def test_a_pile_of_touching_bodies_runs_the_same_on_both_backends_to_the_bit(integrator: str) -> None:
-    # Boxes, spheres and capsules dropped into a corner onto each other: plane contacts, body-body
+    # Boxes or capsules, and spheres, dropped into a corner onto each other: plane contacts, body-body
     # contacts, bounces and friction every step. The NumPy solver (batched) and the numba one (one
     # contact after the other) do the same operations in the same order.
     pytest.importorskip("numba")
