@@ -464,10 +464,11 @@ def _prepared(source: str | Path | Scene, limits: Any, **overrides: Any) -> tupl
 
 
 def _refuse_bodies_in_file(traj: Any, path: Path, what: str, instead: str) -> None:
-    """A trajectory file with rigid bodies, drawn without its scene, would show them as dots:
-    refused before anything is drawn (the support table's cell, for a file without a scene)."""
-    q = getattr(traj, "orientation", None)
-    if q is not None and np.isfinite(q).any():
+    """A trajectory file with rigid bodies and not their shapes (a CSV; an NPZ carries them),
+    drawn without its scene, would show them as dots: refused before anything is drawn (the
+    support table's cell, for a file without a scene)."""
+    q = traj.orientation
+    if q is not None and np.isfinite(q).any() and not (traj.drawables or {}).get("bodies"):
         raise UsageError(
             f"{path}: the file holds rigid bodies, which {what} draws as dots at their centres; {instead}"
         )

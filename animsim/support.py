@@ -281,25 +281,6 @@ class Consumer:
     refuses: tuple[tuple[tuple[str, ...], Cell], ...] = ()
 
 
-_DOTS = _no("the viewer draws a body as a dot at its centre", "use `animsim render SCENE --view 3d`")
-_VIEW_COLLIDERS = _no("the viewer does not draw colliders", "use `animsim render SCENE --view 3d`")
-_VIEW_LOOK = _no(
-    "the viewer draws every particle in the default colour and size",
-    "use `animsim render SCENE --view 3d`",
-)
-_EXPORT_LOOK = _no(
-    "this format is written with the default colour and size for listed particles",
-    "use `animsim render` for pictures, or NPZ/CSV with the scene for the values",
-)
-_EXPORT_TEARS = _no(
-    "this format keeps the faces and curves of torn springs",
-    "use NPZ or CSV, which list the torn springs, or `animsim render`",
-)
-_TRAJ_BODIES = _no(
-    "a render of a trajectory file draws a body as a dot at its centre",
-    "render the scene itself: `animsim render SCENE`",
-)
-
 CONSUMERS: tuple[Consumer, ...] = (
     Consumer("numpy", "`--backend numpy`", "runs; the element is in the result"),
     Consumer("numba", "`--backend numba`", "runs; agrees with NumPy"),
@@ -312,32 +293,16 @@ CONSUMERS: tuple[Consumer, ...] = (
         "`run --format ply`",
         "read back by plyfile: points, faces, edges, body meshes",
         moving_only=True,
-        refuses=((("particle_color", "particle_radius"), _EXPORT_LOOK), (("tearing",), _EXPORT_TEARS)),
     ),
     Consumer(
         "usda",
         "`run --format usda` (USD)",
         "read back by usd-core: points, meshes, curves, body shapes",
         moving_only=True,
-        refuses=((("particle_color", "particle_radius"), _EXPORT_LOOK), (("tearing",), _EXPORT_TEARS)),
     ),
     Consumer("render", "`animsim render SCENE`", "drawn in the GIF"),
-    Consumer(
-        "render_trajectory",
-        "`animsim render FILE --scene SCENE`",
-        "drawn in the GIF",
-        refuses=((BODY_THINGS, _TRAJ_BODIES),),
-    ),
-    Consumer(
-        "view",
-        "`animsim view`",
-        "its data is in the HTML page",
-        refuses=(
-            (BODY_THINGS, _DOTS),
-            (COLLIDER_THINGS, _VIEW_COLLIDERS),
-            (("particle_color", "particle_radius"), _VIEW_LOOK),
-        ),
-    ),
+    Consumer("render_trajectory", "`animsim render FILE --scene SCENE`", "drawn in the GIF"),
+    Consumer("view", "`animsim view`", "its data is in the HTML page"),
     Consumer("plot", "`animsim plot`", "its path is drawn", moving_only=True),
     Consumer("compare", "`animsim compare`", "every method runs it"),
     Consumer("sweep", "`animsim sweep`", "every case runs it"),
