@@ -131,14 +131,18 @@ def _matching(names: Any, incomplete: str) -> list[str]:
 
 
 def _complete_integrator(incomplete: str) -> list[str]:
-    from animsim.scene.models import INTEGRATOR_NAMES
+    from animsim.methods import names
+
+    INTEGRATOR_NAMES = names()
 
     return _matching(INTEGRATOR_NAMES, incomplete)
 
 
 def _complete_integrators(incomplete: str) -> list[str]:
     """A comma-separated list: complete its last name, offer none twice."""
-    from animsim.scene.models import INTEGRATOR_NAMES
+    from animsim.methods import names
+
+    INTEGRATOR_NAMES = names()
 
     head, _, last = incomplete.rpartition(",")
     given = set(head.split(",")) if head else set()

@@ -73,7 +73,7 @@ def _run(n: int, integrator: str, dt: float, backend: str, cpu: bool) -> tuple[f
 
 
 def reference_dt(n: int) -> float:
-    from animsim.analysis import stability
+    from animsim.measures import stability
 
     limit = stability.analyse(_compiled(n, "symplectic_euler", 1e-4, "numpy")).limits["symplectic_euler"]
     steps = int(np.ceil(DURATION / (REFERENCE_SHARE * limit)))

@@ -317,7 +317,7 @@ def _same_every_frame(arr: np.ndarray) -> bool:
     return len(arr) > 0 and bool(np.all((arr == arr[:1]) | (np.isnan(arr) & np.isnan(arr[:1]))))
 
 
-def _panel_json(panel: ViewerPanel) -> dict[str, Any]:
+def panel_json(panel: ViewerPanel) -> dict[str, Any]:
     f, n = panel.positions.shape[:2]
     codes, lo, hi = quantise_positions(panel.positions)
     out: dict[str, Any] = {
@@ -401,7 +401,7 @@ def panels_html(
         "up": up,
         "view": view,
         "duration": float(duration) if duration is not None else end,
-        "panels": [_panel_json(p) for p in panels],
+        "panels": [panel_json(p) for p in panels],
     }
     blob = _script_safe(json.dumps(data, separators=(",", ":"), allow_nan=False))
     page = _asset("viewer.html")

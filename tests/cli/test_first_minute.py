@@ -70,7 +70,9 @@ def test_completion_offers_option_values():
     from animsim.backends import BACKENDS
     from animsim.export.raster import ORTHO_VIEWS, VIEWS
     from animsim.export.viewer import VIEWS as VIEWER_VIEWS
-    from animsim.scene.models import INTEGRATOR_NAMES
+    from animsim.methods import names
+
+    INTEGRATOR_NAMES = names()
     from animsim.templates import TEMPLATES
 
     assert _complete("run x.yaml --backend ") == list(BACKENDS)

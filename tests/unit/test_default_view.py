@@ -59,16 +59,16 @@ def test_view_up_follows_gravity(forces, up) -> None:
 def test_scenes_with_surfaces_or_bodies_open_in_the_three_quarter_view() -> None:
     from animsim.api import compile as compile_scene
     from animsim.api import load
-    from animsim.render import RenderOptions, _with_view, has_surfaces
+    from animsim.render import RenderOptions, has_surfaces, with_view
     from tests.conftest import SCENES
 
     for scene, surfaces in (("sheet_tear", True), ("die_throw", True), ("hair", False), ("fountain", False)):
         compiled = compile_scene(load(SCENES / f"{scene}.yaml"), backend="numpy")
         assert has_surfaces(compiled.header) is surfaces, scene
     lo, hi = np.zeros(3), np.array([1.0, 1.3, 2.0])  # a hanging sheet swinging forward
-    assert _with_view(RenderOptions(), lo, hi, "y", surfaces=True).view == "3d"
-    assert _with_view(RenderOptions(), lo, hi, "y").view == "zy"  # edge-on without the rule
-    assert _with_view(RenderOptions(view="xy"), lo, hi, "y", surfaces=True).view == "xy"  # asked wins
+    assert with_view(RenderOptions(), lo, hi, "y", surfaces=True).view == "3d"
+    assert with_view(RenderOptions(), lo, hi, "y").view == "zy"  # edge-on without the rule
+    assert with_view(RenderOptions(view="xy"), lo, hi, "y", surfaces=True).view == "xy"  # asked wins
 
 
 def test_a_format_whose_package_is_missing_is_refused_before_the_run(monkeypatch) -> None:

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import pytest
-from animsim.analysis.drift import ADVISED_METHODS, Drift
+
+from animsim.measures.drift import ADVISED_METHODS, Drift
 
 
 @pytest.mark.parametrize("method", [*ADVISED_METHODS, "euler", None])

@@ -7,7 +7,8 @@ import numpy as np
 
 from animsim.api import compile as compile_scene
 from animsim.api import load
-from animsim.export.viewer import _panel_json, simulate_panel
+from animsim.export.viewer import panel_json
+from animsim.panel_runs import simulate_panel
 from tests.conftest import SCENES
 
 
@@ -40,7 +41,7 @@ def test_a_collider_sphere_and_the_clothes_look_reach_the_page() -> None:
     spheres = [s for s in run.panel.shapes if s.kind == "sphere"]
     assert len(spheres) == 1
     assert spheres[0].radius == 0.45 and np.allclose(spheres[0].position, [0, 0.5, 0])
-    data = _panel_json(run.panel)
+    data = panel_json(run.panel)
     assert any(s["kind"] == "sphere" for s in data["shapes"])
 
 
