@@ -329,7 +329,10 @@ def check_limits(
     inside = particles_inside_colliders(scene)
     if inside:
         raise SceneError(
-            [Diagnostic(loaded.file, *_where(loaded, p), ".".join(map(str, p)), msg) for p, msg, _ in inside]
+            [
+                Diagnostic(loaded.file, *loaded.marks.at(p, prefer_key=key), ".".join(map(str, p)), msg)
+                for p, msg, key in inside
+            ]
         )
     _contact_radius_problem(loaded, scene)
     # Contacts are counted once the rest is known to fit: counting them places the
