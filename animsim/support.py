@@ -300,6 +300,18 @@ CONSUMERS: tuple[Consumer, ...] = (
         "read back by usd-core: points, meshes, curves, body shapes",
         moving_only=True,
     ),
+    Consumer(
+        "usdc",
+        "`run --format usdc` (binary USD)",
+        "read back by usd-core: points, meshes, curves, body shapes",
+        moving_only=True,
+    ),
+    Consumer(
+        "vtp",
+        "`run --format vtp` (ParaView)",
+        "read back by VTK: points, polygons, lines",
+        moving_only=True,
+    ),
     Consumer("render", "`animsim render SCENE`", "drawn in the GIF"),
     Consumer("render_trajectory", "`animsim render FILE --scene SCENE`", "drawn in the GIF"),
     Consumer("view", "`animsim view`", "its data is in the HTML page"),

@@ -227,7 +227,7 @@ def _obj_lines(path: Path, digest: Any) -> Any:
 def _read_obj(path: Path) -> MeshGeometry:
     digest = hashlib.sha256()
     vertices, polygons = _parse_obj(_obj_lines(path, digest), path.name)
-    return check_geometry(vertices, polygons, digest.hexdigest())
+    return check_geometry(vertices, polygons, digest.hexdigest(), path.name)
 
 
 def _shown(word: str) -> str:

@@ -77,7 +77,7 @@ def test_completion_offers_option_values():
 
     assert _complete("run x.yaml --backend ") == list(BACKENDS)
     assert _complete("run x.yaml --integrator ") == list(INTEGRATOR_NAMES)
-    assert _complete("explain x.yaml --integrator r") == ["rk4"]
+    assert _complete("explain x.yaml --integrator r") == ["ralston3", "rk4"]
     assert _complete("init x.yaml --template ") == list(TEMPLATES)
     assert _complete("render x.yaml --view ") == list(VIEWS)
     assert _complete("view x.yaml -o v.html --view ") == list(VIEWER_VIEWS)
@@ -85,7 +85,7 @@ def test_completion_offers_option_values():
     # a comma-separated list: the last name, never one already given
     offered = _complete("compare x.yaml --integrators euler,")
     assert offered == [f"euler,{n}" for n in INTEGRATOR_NAMES if n != "euler"]
-    assert _complete("compare x.yaml --integrators euler,r") == ["euler,rk4"]
+    assert _complete("compare x.yaml --integrators euler,r") == ["euler,ralston3", "euler,rk4"]
 
 
 @pytest.mark.parametrize("words", ["run x.yaml --backend nu", "sweep x.yaml --integrators mid"])

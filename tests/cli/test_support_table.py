@@ -343,7 +343,7 @@ def _thing_scene(tmp: Path, key: str) -> Path:
 
 def _refused_call(consumer: str, path: Path, tmp: Path) -> tuple[Any, list[Path]]:
     """The API call that is ``consumer``, and the files it would write."""
-    if consumer in ("csv", "npz", "usda"):
+    if consumer in ("csv", "npz", "usda", "usdc"):
         out = tmp / f"out.{consumer}"
         return (lambda: api.run(path, out, fmt=consumer, backend="numpy")), [out]
     if consumer == "ply":
@@ -422,10 +422,10 @@ def _show(consumer: str, thing: str, path: Path, tmp: Path) -> None:
             assert "face" in names and data["face"].count > 0
         if thing == "strand":
             assert "edge" in names and data["edge"].count == 2
-    elif consumer == "usda":
+    elif consumer in ("usda", "usdc"):
         usd = pytest.importorskip("pxr.Usd")
-        out = tmp / "out.usda"
-        api.run(path, out, fmt="usda", backend="numpy")
+        out = tmp / f"out.{consumer}"
+        api.run(path, out, fmt=consumer, backend="numpy")
         stage = usd.Stage.Open(str(out))
         kinds = {p.GetTypeName() for p in stage.Traverse()}
         expect = {
@@ -446,6 +446,21 @@ def _show(consumer: str, thing: str, path: Path, tmp: Path) -> None:
             counts = mesh.GetFaceVertexCountsAttr()
             times = counts.GetTimeSamples()
             assert times and len(counts.Get(times[-1])) < len(counts.Get(times[0])), times
+    elif consumer == "vtp":
+        vtk = pytest.importorskip("vtk")
+        out = tmp / "out.pvd"
+        api.run(path, out, fmt="vtp", backend="numpy")
+        frames = sorted(tmp.rglob("*.vtp"))
+        assert frames, "no frame written"
+        reader = vtk.vtkXMLPolyDataReader()
+        reader.SetFileName(str(frames[-1]))
+        reader.Update()
+        data = reader.GetOutput()
+        assert data.GetNumberOfPoints() > 0
+        if thing in ("cloth", "soft_box", "mesh") or thing in support.BODY_THINGS:
+            assert data.GetNumberOfPolys() > 0
+        if thing == "strand":
+            assert data.GetNumberOfLines() > 0
     elif consumer == "numba":
         pytest.importorskip("numba")
         a = api.simulate(scene, backend="numba")
