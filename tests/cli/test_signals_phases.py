@@ -87,10 +87,11 @@ def test_ctrl_c_stops_a_sweep_on_worker_processes(tmp_path, group):
         "springs:\n- {between: [anchor, bob], ks: 100, rest: 1}\n"
     )
     out = tmp_path / "table.csv"
+    # NumPy: each case is still running when the signal comes (numba would have finished them)
     proc = start(
         "sweep", scene, "--set", "springs.0.ks=100,200,300,400", "--jobs", "2",
         "-o", out, "-q", "--backend", "numpy", cwd=tmp_path,
-    )  # fmt: skip  (NumPy: each case still runs when the signal comes; numba would be done)
+    )  # fmt: skip
     status, took, err = interrupt(proc, after=6.0, group=group)
     assert status == 130, err
     assert took < STOP_SECONDS, f"{took:.1f} s"
