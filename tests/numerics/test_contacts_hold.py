@@ -112,3 +112,45 @@ bodies:
     size = np.linalg.norm(momentum, axis=1)
     assert np.abs(size / size[0] - 1).max() < 1e-3
     assert np.abs(momentum - momentum[0]).max() < 1e-3 * size[0]
+
+
+# --- bodies against solid colliders ----------------------------------------------------
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_bodies_rest_on_static_colliders_and_friction_holds_on_a_tilted_box(backend: str) -> None:
+    th = math.radians(30.0)
+    n = np.array([-math.sin(th), math.cos(th), 0.0])
+    # the tilted box collider's top face passes through its centre + R (0, 0.5, 0) = centre + n / 2
+    centre = np.array([0.0, -0.5, 0.0])
+    top = centre + 0.5 * n
+    box_at = [float(c) for c in top + 0.05 * n]  # a 0.1-high box lying on it
+    traj = _run(
+        f"""
+duration: 3.0
+dt: 0.01
+record: {{fps: 10}}
+forces: [{{type: gravity}}]
+colliders:
+  - {{type: box, center: [0, -0.5, 0], size: [2, 1, 2], orientation: {{axis: [0, 0, 1], angle: 30}},
+      restitution: 0, friction: 0.7}}
+  - {{type: sphere, center: [3, 0, 0], radius: 0.5, restitution: 0, friction: 0.5}}
+  - {{type: capsule, a: [-3, 0, -1], b: [-3, 0, 1], radius: 0.2, restitution: 0.5, friction: 0.5}}
+bodies:
+  - {{id: box, shape: {{type: box, size: [0.2, 0.1, 0.2]}}, mass: 1,
+      position: [{box_at[0]!r}, {box_at[1]!r}, 0], orientation: {{axis: [0, 0, 1], angle: 30}}}}
+  - {{id: ball, shape: {{type: sphere, radius: 0.1}}, mass: 1, position: [3, 1.0, 0]}}
+  - {{id: pill, shape: {{type: sphere, radius: 0.1}}, mass: 1, position: [-3, 1.0, 0]}}
+""",
+        backend,
+    )
+    x = traj.body_positions
+    # static friction 0.7 > tan(30 deg) holds the box on the tilted box collider
+    assert np.linalg.norm(x[:, 0] - x[0, 0], axis=1).max() < 1e-5
+    # the ball lands on top of the sphere collider and stays there, touching it
+    assert abs(x[-1, 1, 1] - 0.6) < 1e-9
+    assert np.abs(traj.velocities[-10:, 1]).max() < 1e-9
+    # the other ball bounces on the capsule's side and never passes into it
+    gap = np.hypot(x[:, 2, 0] + 3.0, x[:, 2, 1]) - 0.3
+    assert gap.min() > -1e-9
+    assert x[:, 2, 1].max() > 0.35  # it did bounce back up (restitution 0.5)
