@@ -532,12 +532,12 @@ def _stderr_console():
 
 def _summary(compiled: Any, result: Any, wrote: str | None) -> None:
     """Print the run summary; ``wrote`` names the files written (None: the trajectory went to stdout)."""
-    from animsim.console import scene_counts, steps_text
+    from animsim.bodies.build import counts_text
+    from animsim.console import steps_text
 
     stream_err = wrote is None  # trajectory went to stdout: keep stdout clean
     lines = [
-        f"{compiled.name}: {scene_counts(compiled.system)}, "
-        f"{steps_text(compiled, result)} with {compiled.integrator_name}",
+        f"{compiled.name}: {counts_text(compiled)}, {steps_text(compiled, result)} with {compiled.integrator_name}",
         f"  wall time {result.wall_time:.3f} s, {result.frames} frames, {result.force_evals} force evaluations",
         f"  energy {result.energy_start:.6g} J -> {result.energy_end:.6g} J, status {result.status}, "
         + _drift_of(compiled, result).text(),

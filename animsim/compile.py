@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from animsim import contact_stages, methods
+from animsim import contact_stages
 from animsim.backends import BACKEND_REFERENCE, backend_line, choose_backend
 from animsim.bodies.build import body_rows, build_body_elements, check_integrator, particle_springs
 from animsim.bodies.export import header_springs
@@ -97,11 +97,6 @@ def with_overrides(
     update: dict[str, Any] = {}
     if integrator is not None:
         method_from_option(integrator, "--integrator")
-        if scene.bodies and not methods.get(integrator).integrates_bodies:
-            raise UsageError(
-                f"--integrator {integrator}: does not integrate rigid bodies (its linearisation covers "
-                f"particle positions only); use one of {', '.join(methods.body_methods())}"
-            )
         adaptive = scene.adaptive
         if adaptive is not None and integrator == "xpbd":
             raise UsageError(

@@ -99,14 +99,3 @@ def point_particles(system: Any) -> tuple[int, int]:
     pinned = np.asarray(system.particle_pinned, dtype=bool).copy()
     pinned[system.body_first : system.body_first + system.body_count] = False
     return n, int(pinned.sum())
-
-
-def scene_counts(system: Any) -> str:
-    """``2 particles, 1 springs`` (as the run summary has always said it), with the rigid
-    bodies counted on their own: ``1 rigid body, 0 springs`` for a bodies-only scene."""
-    n, _ = point_particles(system)
-    parts = [] if n == 0 and system.body_count else [f"{n} particles"]
-    if system.body_count:
-        parts.append(count_text(system.body_count, "rigid body", "rigid bodies"))
-    parts.append(f"{system.spring_count} springs")
-    return ", ".join(parts)

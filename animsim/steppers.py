@@ -484,6 +484,12 @@ class StepDoubling(_Base):
         self.replayable = not any(st.random for st in compiled.post_step)
         self.grow_below = self.tolerance / DOUBLING_BASE ** (compiled.integrator.order + 1)
         self._movable = compiled.system.particle_inv_mass > 0
+        #: per body, its bounding radius (m): how far a turn moves its farthest point
+        self._body_reach = (
+            np.array([shape.bounding_radius for shape in compiled.system.body_shape])
+            if compiled.system.body_count
+            else None
+        )
         self._big: State | None = None
         self._small: State | None = None
         self.h = min(max(compiled.clock.dt, self.dt_min), self.dt_max)
@@ -523,6 +529,18 @@ class StepDoubling(_Base):
         dx = np.abs(big.particle_position - small.particle_position).max(axis=1)
         dv = np.abs(big.particle_velocity - small.particle_velocity).max(axis=1)
         e = np.where(self._movable, np.maximum(dx, h * dv), 0.0)
+        if self._body_reach is not None:
+            # a body's turn counts as the distance its farthest point moves: the angle between the
+            # two orientations (2 atan2(|vector part|, |scalar part|) of q_big q_small^-1) and h
+            # times the difference of angular velocities, times the body's bounding radius
+            from animsim.bodies import quaternion as quat
+
+            d = quat.multiply(big.body_orientation, quat.conjugate(small.body_orientation))
+            angle = 2.0 * np.arctan2(np.linalg.norm(d[:, 1:], axis=1), np.abs(d[:, 0]))
+            dw = np.abs(big.body_angular_velocity - small.body_angular_velocity).max(axis=1)
+            turn = self._body_reach * np.maximum(angle, h * dw)
+            rows = self.compiled.system.body_rows
+            e[rows] = np.where(self._movable[rows], np.maximum(e[rows], turn), e[rows])
         i = int(np.argmax(np.where(np.isfinite(e), e, np.inf)))
         return float(e[i]) if np.isfinite(e[i]) else np.inf, i
 

@@ -223,8 +223,9 @@ def _no(why: str, instead: str) -> Cell:
     return Cell(REFUSED, why, instead)
 
 
-_NO_BODY_COLLIDER = _no(
-    "bodies do not collide with colliders yet", "use a plane, or a pinned body for the obstacle"
+_NO_BODY_MOVING_COLLIDER = _no(
+    "a moving collider does not meet rigid bodies (they would pass through it)",
+    "give the collider no motion, or move a pinned body instead",
 )
 _NO_PARTICLE_BODY = _no(
     "particles do not collide with bodies yet (they pass through)",
@@ -254,7 +255,10 @@ def _pair_cells() -> dict[tuple[str, str], Cell]:
         for plane in PLANE_THINGS:
             cells[(b, plane)] = _ok("the body's shape stays on the plane's side")
         for c in COLLIDER_THINGS:
-            cells[(b, c)] = _NO_BODY_COLLIDER
+            moving = c == "collider_keyframed"
+            cells[(b, c)] = (
+                _NO_BODY_MOVING_COLLIDER if moving else _ok("the body's shape stays out of the collider")
+            )
     for i, a in enumerate(BODY_THINGS):
         for b in BODY_THINGS[i:]:
             refused = {a, b} == {"body_box", "body_capsule"}
@@ -322,18 +326,30 @@ CONSUMERS: tuple[Consumer, ...] = (
 CONSUMER = {c.key: c for c in CONSUMERS}
 
 
+#: the scene sections a method may refuse (animsim.methods.Method.refuses), as things
+_SECTION_THINGS: dict[str, tuple[str, ...]] = {
+    "bodies": BODY_THINGS,
+    "colliders": COLLIDER_THINGS,
+    "particle_collisions": ("particle_contacts",),
+    "planes.penalty": ("plane_penalty",),
+}
+
+
 def _method_consumers() -> tuple[Consumer, ...]:
     """One consumer per integration method, from what each method declares."""
     out = []
     for m in methods.all_methods():
-        refuses: tuple[tuple[tuple[str, ...], Cell], ...] = ()
-        if not m.integrates_bodies:
-            refuses = (
+        refuses: tuple[tuple[tuple[str, ...], Cell], ...] = tuple(
+            (_SECTION_THINGS[key], _no(f"integrator {m.name} does not handle {what} yet", instead))
+            for key, what, instead in m.refuses
+        )
+        if not m.integrates_bodies and "bodies" not in {key for key, _, _ in m.refuses}:
+            refuses += (
                 (
                     BODY_THINGS,
                     _no(
                         f"{m.name} does not integrate rigid bodies",
-                        "choose another integrator (symplectic_euler, verlet, rk4, ...)",
+                        "use one of " + ", ".join(methods.body_methods()),
                     ),
                 ),
             )

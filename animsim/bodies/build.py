@@ -114,7 +114,8 @@ def build_body_elements(
     )
     stages: list[Any] = []
     planes = list(scene.planes)
-    if planes or system.body_count > 1:
+    solids = static_colliders(scene)
+    if planes or solids or system.body_count > 1:
         table = PlaneTable(
             np.array([p.point for p in planes], dtype=np.float64).reshape(-1, 3),
             np.array(
@@ -132,6 +133,7 @@ def build_body_elements(
             np.array([b.restitution for b in scene.bodies]),
             np.array([b.friction for b in scene.bodies]),
             backend=backend,
+            colliders=tuple((shape.signed_distance, shape.restitution, shape.friction) for shape in solids),
         )
         stages.append(contact)
         left_out.extend(contact.left_out)
@@ -139,6 +141,57 @@ def build_body_elements(
         left_out.append("body contacts: no planes and a single body")
     left_out.append("bodies against particles: particles pass through bodies")
     return dyn, stages, labels, left_out
+
+
+def counts_text(compiled: Any) -> str:
+    """ "N particles, M bodies, K springs" for a run's summary: body centres are rows of the particle
+    arrays but not particles, and springs to bodies are springs; a part the scene lacks is left out
+    unless it is the particles of a scene without bodies."""
+    system = compiled.system
+    bodies = system.body_count
+    particles = system.particle_count - bodies
+    to_bodies = 0
+    if bodies and compiled.dynamics.bodies is not None:
+        terms = compiled.dynamics.bodies.terms
+        to_bodies = sum(int(t.rows_a.size) for t in terms if isinstance(t, BodySprings))
+    springs = system.spring_count + to_bodies
+    parts = []
+    if particles or not bodies:
+        parts.append(f"{particles} particle{'' if particles == 1 else 's'}")
+    if bodies:
+        parts.append(f"{bodies} bod{'y' if bodies == 1 else 'ies'}")
+    parts.append(f"{springs} spring{'' if springs == 1 else 's'}")
+    return ", ".join(parts)
+
+
+def static_colliders(scene: m.Scene) -> list[Any]:
+    """The scene's colliders as shapes (animsim.colliders.Shape), for body contacts. Moving ones are
+    refused with their line before this (animsim.scene.validate)."""
+    if not scene.colliders:
+        return []
+    from animsim.colliders import BOX, CAPSULE, SPHERE, Shape, axis_angle_quaternion, quaternion_matrix
+
+    out = []
+    for c in scene.colliders:
+        kw = {"restitution": c.restitution, "friction": c.friction}
+        if isinstance(c, m.SphereCollider):
+            out.append(Shape(SPHERE, np.array(c.center, dtype=np.float64), radius=c.radius, **kw))
+        elif isinstance(c, m.BoxCollider):
+            o = c.orientation
+            q = (
+                axis_angle_quaternion(np.array(o.axis), o.angle)
+                if isinstance(o, m.AxisAngle)
+                else np.array(o)
+            )
+            out.append(
+                Shape(BOX, np.array(c.center, dtype=np.float64), half=0.5 * np.array(c.size),
+                      rotation=quaternion_matrix(q), **kw)
+            )  # fmt: skip
+        else:
+            a, b = np.array(c.a, dtype=np.float64), np.array(c.b, dtype=np.float64)
+            mid = 0.5 * (a + b)
+            out.append(Shape(CAPSULE, mid, radius=c.radius, segment=b - mid, **kw))
+    return out
 
 
 def _body_springs(

@@ -647,8 +647,9 @@ def solve(
     iterations: int = ITERATIONS,
     dv: np.ndarray | None = None,
     dx: np.ndarray | None = None,
-) -> np.ndarray:
-    """Sequential impulses on v (B,3), w (B,3) in place; returns the restitution applied per contact.
+) -> tuple[np.ndarray, np.ndarray]:
+    """Sequential impulses on v (B,3), w (B,3) in place; returns the restitution applied per contact
+    and which contacts were impacts (approaching faster than resting; they bounce with it).
 
     The contacts are solved one after the other in list order, ``iterations`` times
     (Catto 2005). Contacts that share no body commute, so the list is cut into
@@ -661,7 +662,7 @@ def solve(
     count = c.count
     e_out = np.zeros(count)
     if count == 0:
-        return e_out
+        return e_out, np.zeros(0, dtype=bool)
     coupled = bool((c.b >= 0).any())
     batch = batches(c.a, c.b) if coupled else _slot_batches(c.a, c.b)
     order = np.argsort(batch, kind="stable")
@@ -770,7 +771,9 @@ def solve(
     v[:] = vT.T
     w[:] = wT.T
     e_out[order] = e_used
-    return e_out
+    hit_out = np.zeros(count, dtype=bool)
+    hit_out[order] = bounce
+    return e_out, hit_out
 
 
 def _impact_target(
@@ -808,7 +811,7 @@ def _impact_target(
 
 def follow_impulses(
     contacts: Contacts,
-    e_used: np.ndarray,
+    impact: np.ndarray,
     x: np.ndarray,
     q: np.ndarray,
     dvel: np.ndarray,
@@ -828,14 +831,15 @@ def follow_impulses(
     is left alone: its impulse is an impact at one instant, placed by the time of impact
     (``_impact_target`` and the (1 + e) projection). What the move took out of each
     contact's penetration (the contact point's move along n, linear in the move) is taken
-    off its depth, never below zero.
+    off its depth; a depth that turns negative (the body started the step short of the
+    surface and is moved back there) lets the projection bring it down onto the surface,
+    so a body never hovers where its last step started.
     """
     c = contacts
     nb = x.shape[0]
     bounced = np.zeros(nb, dtype=bool)
-    hit = e_used > 0.0
-    bounced[c.a[hit]] = True
-    hb = c.b[hit]
+    bounced[c.a[impact]] = True
+    hb = c.b[impact]
     bounced[hb[hb >= 0]] = True
     sx = np.where(bounced[:, None], 0.0, h * dvel)
     sw = np.where(bounced[:, None], 0.0, h * domega)
@@ -845,7 +849,7 @@ def follow_impulses(
     move = _point_move(sx[a], sw[a], ra, n)
     if has_b.any():
         move = np.where(has_b, move - _point_move(sx[bb], sw[bb], rb, n), move)
-    depth = np.maximum(c.depth - move, 0.0)
+    depth = c.depth - move
     x += sx
     turn = np.flatnonzero(~bounced & (sw != 0.0).any(axis=1))
     if turn.size:
@@ -873,11 +877,11 @@ def project_planes(
         return
     a, p = contacts.a[on], contacts.plane[on]
     push = contacts.depth[on] * (1.0 + e_used[on])
-    deepest = np.zeros((x.shape[0], planes.count))
+    deepest = np.full((x.shape[0], planes.count), -np.inf)
     np.maximum.at(deepest, (a, p), push)
     movable = inv_mass > 0.0
     for k in range(planes.count):
-        sel = np.flatnonzero((deepest[:, k] > 0.0) & movable)
+        sel = np.flatnonzero((deepest[:, k] != 0.0) & (deepest[:, k] > -np.inf) & movable)
         if sel.size:
             x[sel] += deepest[sel, k, None] * planes.normal[k]
 
@@ -900,7 +904,7 @@ def project(contacts: Contacts, e_used: np.ndarray, x: np.ndarray, inv_mass: np.
         key = np.concatenate([a[:, None].astype(np.float64), np.round(n, 12)], axis=1)
         uniq, inv = np.unique(key, axis=0, return_inverse=True)
         inv = inv.reshape(-1)
-        deepest = np.zeros(uniq.shape[0])
+        deepest = np.full(uniq.shape[0], -np.inf)
         np.maximum.at(deepest, inv, d)
         bodies = uniq[:, 0].astype(np.int64)
         movable = inv_mass[bodies] > 0
@@ -1001,6 +1005,7 @@ def _solve_list_loop(
     iterations: int,
     plane_normal: np.ndarray,
     e_used: np.ndarray,
+    impact: np.ndarray,
     h: float,
     depth_out: np.ndarray,
 ) -> None:
@@ -1121,6 +1126,7 @@ def _solve_list_loop(
         if vn0 < -(rest + RESTING_FLOOR):
             e = restitution[i]
             e_used[i] = e
+            impact[i] = True
             # time of impact inside the step (as _impact_target)
             dvn = (dvx * nx + dvy * ny) + dvz * nz
             dxn = (dxx * nx + dxy * ny) + dxz * nz
@@ -1132,6 +1138,7 @@ def _solve_list_loop(
             tgt[i] = max(-e * vn_imp + (1.0 - s) * dvn, 0.0)
         else:
             e_used[i] = 0.0
+            impact[i] = False
             tgt[i] = 0.0
     for sweep in range(max(iterations, MAX_SWEEPS)):
         change = 0.0
@@ -1218,7 +1225,7 @@ def _solve_list_loop(
         nb = x.shape[0]
         bounced = np.zeros(nb, dtype=np.bool_)
         for i in range(count):
-            if e_used[i] > 0.0:
+            if impact[i]:
                 bounced[a[i]] = True
                 if b[i] >= 0:
                     bounced[b[i]] = True
@@ -1241,8 +1248,7 @@ def _solve_list_loop(
                 py = sx[bi, 1] + (sw[bi, 2] * rb[i, 0] - sw[bi, 0] * rb[i, 2])
                 pz = sx[bi, 2] + (sw[bi, 0] * rb[i, 1] - sw[bi, 1] * rb[i, 0])
                 mv = mv - ((px * n[i, 0] + py * n[i, 1]) + pz * n[i, 2])
-            d = depth[i] - mv
-            depth_out[i] = d if d > 0.0 else 0.0
+            depth_out[i] = depth[i] - mv
         for bi in range(nb):
             for k in range(3):
                 x[bi, k] += sx[bi, k]
@@ -1259,7 +1265,7 @@ def _solve_list_loop(
     nplanes = plane_normal.shape[0]
     if nplanes == 0:
         return
-    deepest = np.zeros((x.shape[0], nplanes))
+    deepest = np.full((x.shape[0], nplanes), -np.inf)
     for i in range(count):
         p = plane[i]
         if p >= 0:
@@ -1269,7 +1275,7 @@ def _solve_list_loop(
     for p in range(nplanes):
         for bi in range(x.shape[0]):
             d = deepest[bi, p]
-            if d > 0.0 and inv_mass[bi] > 0.0:
+            if d != 0.0 and d > -np.inf and inv_mass[bi] > 0.0:
                 x[bi, 0] += d * plane_normal[p, 0]
                 x[bi, 1] += d * plane_normal[p, 1]
                 x[bi, 2] += d * plane_normal[p, 2]
@@ -1374,12 +1380,12 @@ class BodyContacts(StepStage):
             if contacts.count == 0:
                 return False
             v_pre, w_pre = v.copy(), w.copy()
-            e_used = solve(
+            e_used, impact = solve(
                 contacts, v, w, q, self.inv_mass, self.inv_inertia, resting, self.iterations, dv, dx
             )
             h = self.follow_weight * dt
             if h > 0.0:
-                depth = follow_impulses(contacts, e_used, x, q, v - v_pre, w - w_pre, h)
+                depth = follow_impulses(contacts, impact, x, q, v - v_pre, w - w_pre, h)
                 contacts = replace(contacts, depth=depth)
             project_planes(contacts, e_used, x, self.inv_mass, self.planes)
             project(contacts, e_used, x, self.inv_mass)
@@ -1422,6 +1428,7 @@ class BodyContacts(StepStage):
             arrays = [a, self._no_body, ra, self._zero3, n, depth, e, mu, plane]
         count = found + pairs.count
         e_used = np.empty(count)
+        impact = np.empty(count, dtype=np.bool_)
         depth_left = np.empty(count)
         solver(
             count,
@@ -1438,6 +1445,7 @@ class BodyContacts(StepStage):
             self.iterations,
             self.planes.normal,
             e_used,
+            impact,
             self.follow_weight * dt,
             depth_left,
         )

@@ -113,6 +113,9 @@ class Method:
     work_vectors: int | None = None
     #: bytes its stepper holds per spring beyond the spring's own arrays (pre-flight)
     spring_work_bytes: int = 0
+    #: what of a scene it does not take yet: (scene key, what it is, what to use instead);
+    #: ``planes.penalty`` names the planes with ``response: penalty``
+    refuses: tuple[tuple[str, str, str], ...] = ()
     #: whether it advances rigid bodies' orientations and angular velocities
     integrates_bodies: bool = True
     #: in the set ``compare`` and the parity tests run by default

@@ -46,6 +46,23 @@ register(
         work_vectors=5,
         # bodies are refused with the scene's line (animsim.scene.validate)
         integrates_bodies=False,
+        refuses=(
+            (
+                "colliders",
+                "solid colliders",
+                "use a plane (response: impulse), or a force-based method such as verlet",
+            ),
+            (
+                "particle_collisions",
+                "particle contacts",
+                "use a force-based method such as symplectic_euler for particle contacts",
+            ),
+            (
+                "planes.penalty",
+                "penalty planes (it projects planes as constraints)",
+                "use response: impulse, or a force-based method for penalty contact",
+            ),
+        ),
         # its cost is per substep: compare runs it when it is named
         listed=False,
         aliases=("pbd", "position_based"),

@@ -253,6 +253,17 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
                     False,
                 )
             )
+    if bodies:
+        for i, c in enumerate(scene.colliders or []):
+            if c is not None and getattr(c, "motion", None) is not None:
+                out.append(
+                    (
+                        ("colliders", i, "motion"),
+                        "a moving collider does not meet rigid bodies (they would pass through it): "
+                        "give the collider no motion, or move a pinned body instead",
+                        False,
+                    )
+                )
     known = list(first_seen)
     # A renamed particle breaks every spring that names it: report each
     # missing id once, at its first use, and list the other places there,
@@ -316,22 +327,6 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
     return out
 
 
-#: what xpbd does not take yet, and what to use instead
-_XPBD_REFUSES = (
-    ("bodies", "rigid bodies", "use symplectic_euler, verlet or rk4 for a scene with bodies"),
-    (
-        "colliders",
-        "solid colliders",
-        "use a plane (response: impulse), or a force-based method such as verlet",
-    ),
-    (
-        "particle_collisions",
-        "particle contacts",
-        "use a force-based method such as symplectic_euler for particle contacts",
-    ),
-)
-
-
 def method_problems(scene: Scene) -> list[Problem]:
     """What the scene's integrator cannot step: xpbd's refused elements, and inextensible
     springs (ks: inf) under a force-based method. Also run at compile time, so a method
@@ -354,22 +349,19 @@ def method_problems(scene: Scene) -> list[Problem]:
                 True,
             )
         )
+    declared = methods.get(method).refuses if method in methods.names() else ()
+    for key, what, instead in declared:
+        message = f"integrator {method} does not handle {what} yet; {instead}"
+        if key == "planes.penalty":
+            for i, pl in enumerate(scene.planes or []):
+                if pl is not None and pl.response == "penalty":
+                    out.append((("planes", i, "response"), message, True))
+            continue
+        value = getattr(scene, key, None)
+        if value:
+            where: tuple[str | int, ...] = (key, 0) if isinstance(value, list) else (key,)
+            out.append((where, message, True))
     if method == "xpbd":
-        for key, what, instead in _XPBD_REFUSES:
-            value = getattr(scene, key, None)
-            if value:
-                where: tuple[str | int, ...] = (key, 0) if isinstance(value, list) else (key,)
-                out.append((where, f"integrator xpbd does not handle {what} yet; {instead}", True))
-        for i, pl in enumerate(scene.planes or []):
-            if pl is not None and pl.response == "penalty":
-                out.append(
-                    (
-                        ("planes", i, "response"),
-                        "integrator xpbd projects planes as constraints and does not take penalty "
-                        "planes; use response: impulse (or a force-based method for penalty contact)",
-                        True,
-                    )
-                )
         return out
     why = "ks: inf (an inextensible spring) needs integrator: xpbd; give a finite ks for " + method
     for i, sp in enumerate(scene.springs or []):

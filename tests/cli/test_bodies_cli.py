@@ -198,3 +198,32 @@ def test_implicit_euler_with_bodies_is_refused_before_the_first_step(tmp_path) -
     assert "does not integrate rigid bodies" in proc.stderr
     assert not out.exists()
     assert "Traceback" not in proc.stderr
+
+
+def test_the_summary_counts_bodies_and_springs_to_bodies(tmp_path) -> None:
+    scene = tmp_path / "hung.yaml"
+    scene.write_text(
+        """
+duration: 0.1
+dt: 0.01
+particles: [{id: hook, mass: 1, pinned: true, position: [0, 2, 0]}]
+bodies:
+  - {id: crate, shape: {type: box, size: [0.2, 0.2, 0.2]}, mass: 1, position: [0, 1, 0]}
+  - {id: die, shape: {type: sphere, radius: 0.1}, mass: 1, position: [3, 1, 0]}
+springs:
+  - {between: [hook, {body: crate, at: [0.1, 0.1, 0.1]}], ks: 50}
+""",
+        encoding="utf-8",
+    )
+    r = run_cli("run", scene, "-o", tmp_path / "out.csv")
+    assert r.returncode == 0, r.stderr
+    assert "hung: 1 particle, 2 bodies, 1 spring, " in r.stdout + r.stderr
+    only = tmp_path / "only.yaml"
+    only.write_text(
+        "duration: 0.1\ndt: 0.01\nbodies:\n"
+        "  - {id: die, shape: {type: sphere, radius: 0.1}, mass: 1, position: [0, 1, 0]}\n",
+        encoding="utf-8",
+    )
+    r = run_cli("run", only, "-o", tmp_path / "only.csv")
+    assert r.returncode == 0, r.stderr
+    assert "only: 1 body, 0 springs, " in r.stdout + r.stderr

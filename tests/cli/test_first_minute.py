@@ -132,7 +132,7 @@ def test_a_bodies_only_scene_reports_its_body_not_one_particle(tmp_path):
     scene = ROOT / "tests" / "bad_scenes" / "good_bodies_only.yaml"
     r = run_cli("run", scene, "-o", tmp_path / "b.csv", "--backend", "numpy")
     assert r.returncode == 0, r.stderr
-    assert r.stdout.startswith("good_bodies_only: 1 rigid body, 0 springs, 20 steps")
+    assert r.stdout.startswith("good_bodies_only: 1 body, 0 springs, 20 steps")
     r = run_cli("explain", scene, "--backend", "numpy")
     assert "  0 particles (0 pinned), 0 springs, 1 planes, 0 emitters, 1 rigid body" in r.stdout
 

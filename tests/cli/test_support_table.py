@@ -562,7 +562,7 @@ def test_thing_in_consumer(thing: str, consumer: str, cell: support.Cell, tmp_pa
 @pytest.mark.parametrize(
     ("a", "b", "command"),
     [
-        ("body_box", "collider_sphere", ["run"]),
+        ("body_box", "collider_keyframed", ["run"]),
         ("cloth", "body_sphere", ["check"]),  # check's verdict: INVALID, exit 1 (docs/cli.md)
         ("body_box", "body_capsule", ["explain"]),
     ],

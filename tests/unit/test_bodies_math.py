@@ -94,6 +94,33 @@ def test_numba_angular_acceleration_agrees_with_numpy() -> None:
     )
 
 
+def test_free_rotation_keeps_energy_and_momentum_and_numba_agrees_to_the_bit() -> None:
+    pytest.importorskip("numba")
+    q, omega = _random_unit(64), RNG.normal(size=(64, 3))
+    inertia = RNG.uniform(0.5, 3.0, size=(64, 3))
+    inv = 1 / inertia
+    inv[:4] = 0.0  # pinned bodies keep omega and turn with it
+    q1, w1 = q.copy(), omega.copy()
+    quat.advance_rotation(q1, w1, np.zeros((64, 3)), inertia, inv, 0.05)
+    q2, w2 = q.copy(), omega.copy()
+    quat.numba_advance_rotation()(q2, w2, np.zeros((64, 3)), inertia, inv, 0.05)
+    np.testing.assert_array_equal(q1, q2)
+    np.testing.assert_array_equal(w1, w2)
+    free = slice(4, None)
+    # torque-free: the world angular momentum and the kinetic energy are those of the start
+    np.testing.assert_allclose(
+        quat.angular_momentum(q1, w1, inertia)[free],
+        quat.angular_momentum(q, omega, inertia)[free],
+        rtol=1e-12,
+    )
+    np.testing.assert_allclose(
+        quat.rotational_energy(q1, w1, inertia)[free],
+        quat.rotational_energy(q, omega, inertia)[free],
+        rtol=1e-12,
+    )
+    np.testing.assert_array_equal(w1[:4], omega[:4])
+
+
 def test_momentum_and_energy_helpers() -> None:
     q, omega = _random_unit(5), RNG.normal(size=(5, 3))
     inertia = RNG.uniform(0.5, 3.0, size=(5, 3))
