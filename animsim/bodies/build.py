@@ -17,6 +17,7 @@ from animsim.bodies import shapes as sh
 from animsim.bodies.contacts import BodyContacts, PlaneTable
 from animsim.bodies.dynamics import BodyDynamics
 from animsim.bodies.springs import BodySprings
+from animsim.colliders import BOX, CAPSULE, SPHERE, Shape, axis_angle_quaternion, quaternion_matrix
 from animsim.errors import UsageError
 from animsim.scene import models as m
 
@@ -169,7 +170,6 @@ def static_colliders(scene: m.Scene) -> list[Any]:
     refused with their line before this (animsim.scene.validate)."""
     if not scene.colliders:
         return []
-    from animsim.colliders import BOX, CAPSULE, SPHERE, Shape, axis_angle_quaternion, quaternion_matrix
 
     out = []
     for c in scene.colliders:

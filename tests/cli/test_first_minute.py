@@ -150,7 +150,9 @@ def test_implicit_euler_with_bodies_is_refused_at_its_line(tmp_path):
         "run", ROOT / "tests" / "bad_scenes" / "good_bodies_only.yaml", "--integrator", "implicit_euler"
     )
     assert r.returncode == 2
-    assert r.stderr.startswith("--integrator implicit_euler: does not integrate rigid bodies")
+    # named on the command line, it is refused at the body it cannot step, as in the file
+    assert "good_bodies_only.yaml:7:5: bodies.0:" in r.stderr
+    assert "implicit_euler does not integrate rigid bodies" in r.stderr
 
 
 # --- sweep --duration ------------------------------------------------------------------------------
