@@ -400,11 +400,11 @@ def contact_pairs(scene: Scene) -> int:
     the largest radius in the scene as the neighbour search does. Particles
     emitted later are not counted. Zero when particles do not collide.
     """
-    import numpy as np
-    from scipy.spatial import cKDTree
-
     if scene.particle_collisions is None:
         return 0
+    import numpy as np
+    from scipy.spatial import cKDTree  # SciPy loads only for scenes with contacts (start-up)
+
     radii = [scene.particle_collisions.radius]
     radii += [p.radius for p in scene.particles if getattr(p, "radius", None) is not None]
     radii += [st.radius for st in scene.structures if getattr(st, "radius", None) is not None]
