@@ -37,7 +37,7 @@ def test_run_writes_csv_and_meta(tmp_path):
 
     assert meta["scene_sha256"] == hashlib.sha256(PROJECTILE.read_bytes()).hexdigest()
     assert "wall_time" in meta and meta["version"]
-    assert "particles" in r.stdout and "status ok" in r.stdout
+    assert "1 particle," in r.stdout and "status ok" in r.stdout
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temp files left
 
 
