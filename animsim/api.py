@@ -30,17 +30,20 @@ def _type_name(value: Any) -> str:
 
 def load(path: str | Path, *, limits: Any = None) -> Scene:
     """Read, parse and validate a scene file (every problem as a SceneError)."""
+    from animsim.preflight import check_starts
     from animsim.scene.loader import Limits, load_scene
 
     if not isinstance(path, str | os.PathLike):
         raise TypeError(f"load() takes the path of a scene file (str or Path), not {_type_name(path)}")
 
     loaded = load_scene(path, limits or Limits())
+    check_starts(loaded, loaded.scene)
     return _named(loaded)
 
 
 def loads(text: str, name: str = "scene", *, limits: Any = None) -> Scene:
     """The same from YAML text; diagnostics name the file ``<name>``."""
+    from animsim.preflight import check_starts
     from animsim.scene.loader import Limits, load_scene_text
 
     if not isinstance(text, str):
@@ -48,6 +51,7 @@ def loads(text: str, name: str = "scene", *, limits: Any = None) -> Scene:
         raise TypeError(f"loads() takes the scene's YAML text as a str, not {_type_name(text)}{hint}")
 
     loaded = load_scene_text(text, f"<{name}>", limits or Limits())
+    check_starts(loaded, loaded.scene)
     scene = _named(loaded)
     return scene if scene.name else scene.model_copy(update={"name": name})
 

@@ -285,6 +285,19 @@ def _where(loaded: LoadedScene, path: tuple[str | int, ...]) -> tuple[int, int]:
     return loaded.marks.at(path, prefer_key=True)
 
 
+def check_starts(loaded: LoadedScene, scene: Scene) -> None:
+    """Refuse, at its line, a particle that starts inside a solid collider: the first step would
+    throw it out to the surface (the geometry is the colliders', so this runs after the language)."""
+    inside = particles_inside_colliders(scene)
+    if inside:
+        raise SceneError(
+            [
+                Diagnostic(loaded.file, *loaded.marks.at(p, prefer_key=key), ".".join(map(str, p)), msg)
+                for p, msg, key in inside
+            ]
+        )
+
+
 def check_limits(
     loaded: LoadedScene, scene: Scene, limits: RunLimits, *, fmt: str = "csv", overridden: bool = False
 ) -> Estimate:
@@ -326,14 +339,7 @@ def check_limits(
         )
         dotted = ".".join(str(p) for p in path)
         raise SceneError([Diagnostic(loaded.file, *_where(loaded, path), dotted, msg)])
-    inside = particles_inside_colliders(scene)
-    if inside:
-        raise SceneError(
-            [
-                Diagnostic(loaded.file, *loaded.marks.at(p, prefer_key=key), ".".join(map(str, p)), msg)
-                for p, msg, key in inside
-            ]
-        )
+    check_starts(loaded, scene)
     _contact_radius_problem(loaded, scene)
     # Contacts are counted once the rest is known to fit: counting them places the
     # structures' particles, which the estimate above has just bounded.

@@ -34,8 +34,11 @@ def term_part(term: Any) -> str:
 
 def rotational_energy(system: Any, state: Any) -> float | None:
     """1/2 sum_b w_b . I_b w_b over rigid bodies, or None when there are none."""
-    q, w, inertia = state.body_orientation, state.body_angular_velocity, system.body_inertia
-    if q is None or w is None or len(q) == 0:
+    # any state-like object: a run's State, or a trajectory's frame read back without bodies
+    q = getattr(state, "body_orientation", None)
+    w = getattr(state, "body_angular_velocity", None)
+    inertia = getattr(system, "body_inertia", None)
+    if q is None or w is None or inertia is None or len(q) == 0:
         return None
     q = np.asarray(q, dtype=np.float64)
     w = np.asarray(w, dtype=np.float64)
