@@ -1166,6 +1166,19 @@ class BuildChooser:
                 self.parallel = on * SWITCH_MARGIN < off
 
 
+def check_room(pieces: int, tables: tuple[Any, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Room for :func:`_quick_check_pieces`: each piece's flag, movable count and sums (the
+    kinetic energy, then a column per energy kernel the check calls). ``tables``: the
+    elastic then the releasing :func:`_energy_table`. The columns are counted from the
+    tables, not from the element lists: a table holds a kernel that adds nothing where its
+    list is empty, and the check writes that kernel's column too."""
+    return (
+        np.ones(pieces, dtype=np.bool_),
+        np.zeros(pieces, dtype=np.int64),
+        np.zeros((pieces, 1 + len(tables[0]) + len(tables[3]))),
+    )
+
+
 def _energy_table(terms: list[Any]) -> tuple[Any, ...]:
     """(kernels, float parameters, integer parameters) of the elements' compiled energy sums,
     as the compiled checks take them (a kernel that adds nothing when there is none)."""
@@ -1397,11 +1410,7 @@ class FusedStepper:
         n = self.compiled.system.particle_count
         pieces = self.blocked and n >= 2 * CHECK_PIECE and all(t.pointwise for t in (*elastic, *releasing))
         npieces = -(-n // CHECK_PIECE)
-        room = (
-            np.ones(npieces, dtype=np.bool_),
-            np.zeros(npieces, dtype=np.int64),
-            np.zeros((npieces, 1 + len(elastic) + len(releasing))),
-        )
+        room = check_room(npieces, tables)
 
         def quick(state: Any) -> bool:
             watch.book_births(state)  # as EnergyWatch.budget does first (a no-op when booked)

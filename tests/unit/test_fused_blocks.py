@@ -614,7 +614,8 @@ def test_the_quick_check_in_pieces_sums_and_decides_as_the_one_pass_check():
     n = len(state.particle_mass)
     pieces = -(-n // fused_module.CHECK_PIECE)
     assert pieces == 3
-    room = (np.ones(pieces, dtype=bool), np.zeros(pieces, dtype=np.int64), np.zeros((pieces, 4)))
+    room = fused_module.check_room(pieces, tables)
+    assert room[2].shape == (pieces, 4)  # kinetic, the spring, gravity, the attractor
     x, v, m = state.particle_position, state.particle_velocity, state.particle_mass.copy()
 
     def both(limit: float, x: np.ndarray, m: np.ndarray = m) -> tuple[bool, bool, float, float]:
@@ -649,6 +650,28 @@ def test_the_quick_check_in_pieces_sums_and_decides_as_the_one_pass_check():
         bad = x.copy()
         bad[row, row % 3] = np.inf if row % 2 else np.nan
         assert both(1e30, bad)[:2] == (False, False), row
+
+
+def test_the_quick_check_in_pieces_has_a_column_for_the_kernel_standing_in_for_no_elements():
+    """A scene with nothing elastic and nothing releasing energy (a free emitter): the
+    compiled check still calls one kernel for each empty list (one that adds nothing),
+    so its room has a column for each. Sized from the lists instead, the check wrote past
+    its room's end (a heap corruption that aborted a hypothesis run)."""
+    empty = (*fused_module._energy_table([]), *fused_module._energy_table([]))
+    assert len(empty[0]) == len(empty[3]) == 1
+    pieces = 3
+    ok, movable, sums = fused_module.check_room(pieces, empty)
+    assert sums.shape == (pieces, 3)
+    n = pieces * fused_module.CHECK_PIECE - 7
+    rng = np.random.default_rng(3)
+    x, v, m = rng.normal(size=(n, 3)), rng.normal(size=(n, 3)), rng.uniform(0.5, 1.0, n)
+    books = np.array([1.0, 0.0, 0.0, 0.0, 0.0, 1e30])
+    passed = fused_module._quick_check_pieces(
+        x, v, 0.0, m, *empty, (np.zeros(0),), x.copy(), np.zeros(0), books, True, ok, movable, sums
+    )
+    assert passed and books[3] == n
+    np.testing.assert_allclose(sums[:, 0].sum(), np.dot(m, np.einsum("ij,ij->i", v, v)), rtol=1e-12)
+    assert not sums[:, 1:].any()  # the stand-in kernels add nothing
 
 
 @pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="one thread")
