@@ -30,6 +30,8 @@ the first failure is raised after every case has finished or failed.
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import multiprocessing
 import os
 from collections.abc import Callable, Sequence
@@ -178,6 +180,56 @@ def _stop_workers(pool: ProcessPoolExecutor) -> None:
             p.join(1.0)
 
 
+def _dask_worker_pids(cluster: Any) -> list[int]:
+    """The process ids of a LocalCluster's worker processes (each nanny's child), each
+    nanny told first not to start its worker again once it is gone (Dask's own
+    shutdown does the same): otherwise closing the cluster waits for new workers."""
+    pids = []
+    for nanny in getattr(cluster, "workers", {}).values():
+        pid = getattr(nanny, "pid", None)
+        if isinstance(pid, int):
+            nanny.close_gracefully(reason="animsim-interrupted")
+            pids.append(pid)
+    return pids
+
+
+def _stop_processes(pids: list[int]) -> None:
+    """SIGTERM to each process, then SIGKILL to any still alive after WORKER_STOP_SECONDS.
+
+    Dask's worker processes end on SIGTERM (their case's temporary files are removed as
+    the interpreter unwinds); one busy in compiled code past the deadline is killed.
+    """
+    import signal
+    import time
+
+    for pid in pids:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGTERM)
+    deadline = time.monotonic() + WORKER_STOP_SECONDS
+    alive = list(pids)
+    while alive and time.monotonic() < deadline:
+        time.sleep(0.02)
+        alive = [pid for pid in alive if _alive(pid)]
+    for pid in alive:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    # a child that has exited but is not yet reaped still answers: ask its state
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().split(") ", 1)[1][:1] != "Z"
+    except (OSError, IndexError):
+        return True
+
+
 def _init_worker(share: str) -> None:
     """In a worker, before numba loads: its thread count, unless NUMBA_NUM_THREADS says one.
 
@@ -229,17 +281,26 @@ def _map_dask(
             if "NUMBA_NUM_THREADS" in os.environ
             else {"NUMBA_NUM_THREADS": str(max(1, CPU_COUNT // workers))}
         )
-        # dashboard_address=None: no web server, no port to collide with.
+        # dashboard_address=None: no web server, no port to collide with. silence_logs:
+        # a case's failure reaches the user through its future, so Dask's own log lines
+        # (a stopped worker's cancelled tasks, a nanny killing it) are noise here.
         with (
             distributed.LocalCluster(
                 n_workers=workers,
                 threads_per_worker=THREADS_PER_WORKER,
                 dashboard_address=None,
                 env=env,
+                silence_logs=logging.CRITICAL,
             ) as cluster,
             distributed.Client(cluster) as client,
         ):
-            return _gather(distributed, client, fn, cases, on_error, tick)
+            try:
+                return _gather(distributed, client, fn, cases, on_error, tick)
+            except BaseException:
+                # Ctrl-C (or SIGTERM): closing the cluster would ask each worker to stop
+                # and wait four seconds before its nanny kills it, still running its case
+                _stop_processes(_dask_worker_pids(cluster))
+                raise
     try:
         client = distributed.Client(scheduler, timeout=CONNECT_TIMEOUT)
     except (OSError, TimeoutError, ValueError) as exc:
@@ -258,8 +319,15 @@ def _gather(
 ) -> list[R]:
     # pure=False: two equal cases are still two runs (their wall times differ).
     futures = client.map(fn, cases, pure=False)
-    for _ in distributed.as_completed(futures):
-        tick()
+    try:
+        for _ in distributed.as_completed(futures):
+            tick()
+    except BaseException:
+        # Ctrl-C: the scheduler drops the cases not started (a remote cluster's workers
+        # finish the ones running; a LocalCluster's are stopped by the caller)
+        with contextlib.suppress(Exception):
+            client.cancel(futures, force=True)
+        raise
     outcomes: list[tuple[bool, Any]] = []
     for f in futures:
         try:

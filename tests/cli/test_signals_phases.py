@@ -78,7 +78,8 @@ def test_ctrl_c_while_loading_stops_at_once_and_writes_nothing(tmp_path):
 
 
 @pytest.mark.parametrize("group", [False, True], ids=["main-process", "process-group"])
-def test_ctrl_c_stops_a_sweep_on_worker_processes(tmp_path, group):
+@pytest.mark.parametrize("pool", [[], ["--scheduler", "local"]], ids=["processes", "dask-local"])
+def test_ctrl_c_stops_a_sweep_on_worker_processes(tmp_path, group, pool):
     scene = tmp_path / "spring.yaml"
     scene.write_text(
         "duration: 200\ndt: 0.0001\nparticles:\n"
@@ -90,10 +91,11 @@ def test_ctrl_c_stops_a_sweep_on_worker_processes(tmp_path, group):
     # NumPy: each case is still running when the signal comes (numba would have finished them)
     proc = start(
         "sweep", scene, "--set", "springs.0.ks=100,200,300,400", "--jobs", "2",
-        "-o", out, "-q", "--backend", "numpy", cwd=tmp_path,
+        "-o", out, "-q", "--backend", "numpy", *pool, cwd=tmp_path,
     )  # fmt: skip
     status, took, err = interrupt(proc, after=6.0, group=group)
     assert status == 130, err
     assert took < STOP_SECONDS, f"{took:.1f} s"
+    assert "Traceback" not in err, err
     assert not out.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["spring.yaml"]
