@@ -924,7 +924,8 @@ def sweep(
     src = Path(source)
     # The file limits apply here; each case's step and memory pre-flight would need
     # the sweep's own variants (see docs/limits.md).
-    loaded = load_scene(src, (limits or RunLimits()).loader)
+    limits = limits or RunLimits()
+    loaded = load_scene(src, limits.loader)
     from animsim import support
 
     support.check(loaded, loaded.scene, "sweep")  # each case is the file with other values
@@ -965,6 +966,7 @@ def sweep(
         scheduler=scheduler,
         progress=progress,
         backend=backend,
+        mesh_dirs=limits.mesh_dirs,  # every case reads the meshes the file was allowed
     )
     if output is not None:
         sw.write_csv(table, Path(output))

@@ -225,8 +225,11 @@ def set_path(data: dict[str, Any], key: str, value: Any) -> None:
             raise KeyPathError(f"--set {key}: {where} is {node!r}, which has no key {seg!r}")
 
 
-def validate_case_data(data: dict[str, Any], file: str) -> Any:
-    """The Scene for ``data`` by the file's rules; raises :class:`CaseInvalid`."""
+def validate_case_data(data: dict[str, Any], file: str, mesh_dirs: tuple[str, ...] = ()) -> Any:
+    """The Scene for ``data`` by the file's rules; raises :class:`CaseInvalid`.
+
+    ``mesh_dirs``: the folders besides the scene's own that its mesh files may lie under
+    (``--mesh-dir``), as the loader was given them."""
     from pydantic import ValidationError
 
     try:
@@ -236,7 +239,7 @@ def validate_case_data(data: dict[str, Any], file: str) -> Any:
         # here since the values came from the command line.
         diags = diagnostics(exc, data, Marks(), file)
         raise CaseInvalid([(d.path, d.message) for d in diags]) from None
-    problems = mesh_problems(scene, file) + check_scene(scene)  # mesh files read like the loader's
+    problems = mesh_problems(scene, file, mesh_dirs) + check_scene(scene)  # meshes read as the loader does
     if problems:
         raise CaseInvalid([(".".join(map(str, p)), msg) for p, msg, _ in problems])
     return scene
@@ -250,13 +253,15 @@ class CaseInvalid(Exception):
         super().__init__("; ".join(f"{p}: {m}" if p else m for p, m in problems))
 
 
-def check_keys_exist(data: dict[str, Any], axes: Sequence[Axis], file: str) -> None:
+def check_keys_exist(
+    data: dict[str, Any], axes: Sequence[Axis], file: str, mesh_dirs: tuple[str, ...] = ()
+) -> None:
     """Refuse, before any run, keys that exist in no case (see the module docstring)."""
     trial = copy.deepcopy(data)
     for a in axes:
         set_path(trial, a.key, a.values[0])
     try:
-        validate_case_data(trial, file)
+        validate_case_data(trial, file, mesh_dirs)
     except CaseInvalid as exc:
         # An unknown name anywhere on a swept key's path (springs.0.kss, or
         # structures.0.structual.ks, whose section set_path created) is wrong in every case.
@@ -294,6 +299,8 @@ class Case:
     reference: str | None = None
     #: the backend the case runs on (its reference too); see animsim.backends
     backend: str = "auto"
+    #: folders besides the scene's own that its mesh files may lie under (--mesh-dir)
+    mesh_dirs: tuple[str, ...] = ()
 
 
 def build_cases(
@@ -303,6 +310,7 @@ def build_cases(
     axes: Sequence[Axis],
     reference: str | None = None,
     backend: str = "auto",
+    mesh_dirs: tuple[str, ...] = (),
 ) -> list[Case]:
     """The Cartesian product of ``axes`` (first outermost), each with its seed."""
     scene_seed = data.get(SEED_KEY, 0)
@@ -313,7 +321,7 @@ def build_cases(
         overrides = tuple(zip(keys, values, strict=True))
         swept_seed = dict(overrides).get(SEED_KEY)
         seed = swept_seed if swept_seed is not None else case_seed(scene_seed, index)
-        cases.append(Case(index, data, name, file, overrides, seed, reference, backend))
+        cases.append(Case(index, data, name, file, overrides, seed, reference, backend, mesh_dirs))
     return cases
 
 
@@ -324,7 +332,7 @@ def case_scene(case: Case) -> Any:
         set_path(data, key, value)
     if SEED_KEY not in dict(case.overrides):
         data[SEED_KEY] = case.seed
-    return validate_case_data(data, case.file)
+    return validate_case_data(data, case.file, case.mesh_dirs)
 
 
 # --- references ------------------------------------------------------------------------
@@ -557,13 +565,14 @@ def sweep(
     scheduler: Any = None,
     progress: Callable[[int, int], None] | None = None,
     backend: str = "auto",
+    mesh_dirs: tuple[str, ...] = (),
 ) -> SweepTable:
     """Check the keys, build the cases and run them on ``backend`` (serially, on processes or on Dask)."""
     check_axes(axes)
-    check_keys_exist(data, axes, file)
+    check_keys_exist(data, axes, file, mesh_dirs)
     if reference is not None:
         reference_function(reference)  # an unknown or unavailable reference: exit 2 now
-    cases = build_cases(data, name, file, axes, reference, backend)
+    cases = build_cases(data, name, file, axes, reference, backend, mesh_dirs)
     rows = map_cases(run_case, cases, jobs=jobs, scheduler=scheduler, on_error=error_row, progress=progress)
     return SweepTable(list(axes), rows, reference)
 

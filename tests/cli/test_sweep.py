@@ -302,3 +302,27 @@ def test_analytic_on_a_scene_without_closed_form_is_a_row_message() -> None:
     assert row.error is None and "no closed form" in row.message
     (row,) = sw.sweep(data, "osc", "<t>", [sw.parse_set("dt=0.01")], reference="auto").rows
     assert row.error is not None and row.error > 0  # auto fell back to fine
+
+
+TETRA = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
+
+
+@pytest.mark.parametrize("jobs", ["1", "2"])
+def test_every_case_reads_the_meshes_mesh_dir_allows(cli, tmp_path: Path, jobs: str) -> None:
+    """A mesh outside the scene's folder, allowed by --mesh-dir: the file loads, and so
+    does every case (each re-validates the scene, in this process or in a worker)."""
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "t.obj").write_text(TETRA)
+    (tmp_path / "scene").mkdir()
+    scene = tmp_path / "scene" / "mesh.yaml"
+    scene.write_text(
+        "duration: 0.01\ndt: 0.001\nstructures:\n"
+        "  - {type: mesh, id: m, file: ../meshes/t.obj, mode: cloth, mass: 1.0, stretch: {ks: 10}}\n"
+    )
+    out = tmp_path / "sweep.csv"
+    args = ("sweep", scene, "--set", "structures.0.stretch.ks=10,20", "--jobs", jobs, "-o", out, "-q")
+    refused = cli(*args)
+    assert refused.returncode == 2 and "--mesh-dir" in refused.stderr, refused.stderr
+    done = cli(*args, "--mesh-dir", tmp_path / "meshes", "--backend", "numpy")
+    assert done.returncode == 0, done.stderr
+    assert [r["status"] for r in read_table(out)] == ["ok", "ok"], read_table(out)
