@@ -353,7 +353,9 @@ class _StopFlag:
 
     The loop's first poll marks it as stepping. Before that (loading,
     compiling, which can take a minute with numba) nothing would read the
-    flag, so a signal then stops at once instead (see _graceful_stop).
+    flag, so a signal then stops at once instead (see _graceful_stop). So
+    does a signal once the loop has said it is writing its files (``writing``):
+    no step is left to finish, and the files are not made whole.
     """
 
     def __init__(self) -> None:
@@ -363,6 +365,9 @@ class _StopFlag:
     def __call__(self) -> bool:
         self.stepping = True
         return self.signal is not None
+
+    def writing(self) -> None:
+        self.stepping = False
 
 
 @contextmanager

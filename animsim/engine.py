@@ -282,6 +282,7 @@ def _run(
             report = stage.run_summary()
             if report is not None:
                 meta.update(report)
+        _writing(stop)
         return finish(sinks, state, dyn, status, wall, energy_start, energy_end, frames, failure, meta)
     except BaseException:
         for sink in sinks:
@@ -409,6 +410,16 @@ def _emit_arrays(
         for sink in sinks:
             sink.write(frame)
     return 1
+
+
+def _writing(stop: Callable[[], bool] | None) -> None:
+    """Tell ``stop`` that the steps are over and the sinks are about to write their files,
+    when it listens (a ``writing`` method, as the CLI's flag has): a signal from here on
+    cannot stop a step, so the CLI unwinds at once instead, the sinks remove their
+    temporary files and nothing is written (docs/limits.md, Signals)."""
+    hear = getattr(stop, "writing", None)
+    if callable(hear):
+        hear()
 
 
 def finish(

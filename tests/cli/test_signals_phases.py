@@ -99,3 +99,29 @@ def test_ctrl_c_stops_a_sweep_on_worker_processes(tmp_path, group, pool):
     assert "Traceback" not in err, err
     assert not out.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["spring.yaml"]
+
+
+@pytest.mark.parametrize("fmt", ["csv", "npz"])
+def test_ctrl_c_while_the_files_are_written_unwinds_and_writes_nothing(tmp_path, monkeypatch, fmt):
+    """The signal comes as the sink starts to write its file (after the last step): no step
+    is left to finish, so the command stops at once, exit 130, with no file and no
+    temporary file (it used to finish writing and exit 0)."""
+    import importlib
+
+    from animsim.cli import main
+
+    module = importlib.import_module(f"animsim.export.{fmt}")
+    sink = next(c for name, c in vars(module).items() if name.lower() == f"{fmt}sink")
+    close = sink.close
+
+    def interrupted_close(self, meta):
+        signal.raise_signal(signal.SIGINT)  # Ctrl-C, delivered before the next bytecode
+        close(self, meta)
+
+    monkeypatch.setattr(sink, "close", interrupted_close)
+    scene = tmp_path / "fall.yaml"
+    scene.write_text("duration: 0.1\ndt: 0.01\nparticles:\n- {id: p, mass: 1, position: [0, 1, 0]}\n")
+    with pytest.raises(SystemExit) as stopped:
+        main(["run", str(scene), "-o", str(tmp_path / f"out.{fmt}"), "-q", "--backend", "numpy"])
+    assert stopped.value.code == 130
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fall.yaml"]
