@@ -62,6 +62,16 @@ def _named(loaded: Any) -> Scene:
     return scene
 
 
+def _bound_growth(compiled: Any, est: Any, limits: Any) -> None:
+    """What grows during the run (particle contacts' candidate list) stays within the memory
+    limit left after the rest of the pre-flight's estimate (StepStage.bound_memory)."""
+    from animsim.preflight import RunLimits
+
+    budget = est.growth_budget(limits or RunLimits())
+    for stage in compiled.post_step:
+        stage.bound_memory(budget)
+
+
 def prepare(
     scene: Scene,
     *,
@@ -276,9 +286,10 @@ def simulate(
             f"simulate() takes a Scene (from load or loads) or a compiled scene, not {_type_name(scene)}{hint}"
         )
     if isinstance(scene, Scene):
-        sc, _ = prepare(scene, integrator=integrator, dt=dt, duration=duration, seed=seed, limits=limits)
+        sc, est = prepare(scene, integrator=integrator, dt=dt, duration=duration, seed=seed, limits=limits)
         numba = _uses_numba(backend)
     else:
+        est = None
         if any(v is not None for v in (integrator, dt, duration, seed)):
             raise UsageError("overrides go with a Scene, not with an already compiled scene")
         sc = scene.scene
@@ -286,6 +297,8 @@ def simulate(
     # one announcement per kernel numba compiles, whether for the scene or in the run
     with compile_notices(notice, numba=numba):
         compiled = compile(sc, backend) if isinstance(scene, Scene) else scene
+        if est is not None:
+            _bound_growth(compiled, est, limits)
         targets = list(sinks)
         collector = None
         if output is not None:
@@ -554,6 +567,7 @@ def run(
     # every kernel numba compiles (scene compile, first steps, births) is announced as it starts
     with compile_notices(notice, numba=_uses_numba(backend)):
         compiled = compile(sc, backend, name=name)
+        _bound_growth(compiled, est, limits)
         report = stability.analyse(compiled)
         if report.dt_exceeds_limit and warn is not None:  # before the first step; the watchdog judges
             warn(f"warning: {report.verdict()}")
@@ -727,7 +741,7 @@ def render(
         _refuse_bodies_in_file(from_traj, traj_path, what, "render the scene: animsim render SCENE")
     scene_source = (Path(scene) if scene is not None else None) if from_file else source
     if scene_source is not None:
-        sc, name, _, _ = _prepared(
+        sc, name, est, _ = _prepared(
             scene_source,
             limits,
             integrator=integrator,
@@ -741,6 +755,7 @@ def render(
 
         # a trajectory's scene is only drawn (springs, planes), never stepped: NumPy compiles it
         compiled = compile_scene(sc, name, backend="numpy" if from_file else backend)
+        _bound_growth(compiled, est, limits)
     if from_traj is not None:
         return render_trajectory(from_traj, gif_path, mp4_path, opts, compiled=compiled)
     total = compiled.record_steps.size

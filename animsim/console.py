@@ -99,3 +99,11 @@ def point_particles(system: Any) -> tuple[int, int]:
     pinned = np.asarray(system.particle_pinned, dtype=bool).copy()
     pinned[system.body_first : system.body_first + system.body_count] = False
     return n, int(pinned.sum())
+
+
+def format_bytes(n: float) -> str:
+    """A size in bytes as people read it: 3 significant digits of GiB, MiB or KiB."""
+    for unit, size in (("GiB", 1024**3), ("MiB", 1024**2), ("KiB", 1024)):
+        if n >= size:
+            return f"{n / size:.3g} {unit}"
+    return f"{int(n)} bytes"

@@ -231,6 +231,11 @@ class StepStage:
         """Numbers for the run's metadata (tearing: how many springs broke, and when)."""
         return None
 
+    def bound_memory(self, budget: int) -> None:
+        """What this stage holds may grow during the run (particle contacts' candidate
+        list): ``budget`` is the bytes it may reach, the memory limit less the rest of the
+        pre-flight's estimate. A stage that would need more stops the run saying so."""
+
     def snapshot(self) -> Any:
         """What a replay restores besides the state (``replays`` stages)."""
         return None

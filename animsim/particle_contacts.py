@@ -62,7 +62,9 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from animsim.console import format_bytes
 from animsim.elements import StepStage, compile_helpers, numba_helper
+from animsim.errors import SimulationError
 from animsim.vec import dot3
 
 #: velocity and position passes per step
@@ -72,6 +74,12 @@ RESTING_STEPS = 2.0
 RELAX = 1.5
 #: the Verlet list's skin, as a fraction of the largest contact distance ``2 * max radius``
 SKIN = 0.3
+# One candidate pair of the contact list: its (i, j) index pair as built (16), the k-d
+# tree's or the grid's output before sorting (16), and the per-step arrays of a pair that
+# overlaps (gathered differences and normals, distances, normal speeds, impulses and the
+# Jacobi work arrays: about 20 float64), so a list where everything touches costs this much
+# (the pre-flight counts the list at the start with it; bound_memory bounds it later).
+CONTACT_PAIR_BYTES = 16 + 16 + 20 * 8
 #: the list is rebuilt once two particles may have closed by this fraction of the skin
 #: (the rest is margin for rounding in the distances)
 SKIN_USE = 0.9
@@ -115,6 +123,19 @@ def candidates_numpy(
     if exclude.size:
         keys = keys[~np.isin(keys, exclude, assume_unique=False)]
     return keys // n, keys % n
+
+
+def count_pairs_numpy(x: np.ndarray, active: np.ndarray, reach: float) -> int:
+    """How many pairs of ``active`` rows lie within about ``reach`` (spring-joined ones too),
+    counted by a k-d tree without storing them: the list's size before it is built."""
+    from scipy.spatial import cKDTree
+
+    rows = np.flatnonzero(active)
+    if rows.size < 2 or not reach > 0:
+        return 0
+    tree = cKDTree(x[rows], balanced_tree=False, compact_nodes=False)
+    # count_neighbors counts ordered pairs, each row with itself too
+    return int((tree.count_neighbors(tree, reach) - rows.size) // 2)
 
 
 def find_pairs_numpy(
@@ -351,6 +372,9 @@ class ParticleContacts(StepStage):
         self.dissipative = restitution < 1 or friction > 0
         self._kernels = numba_kernels() if backend == "numba" else None
         self.pairs_last = 0
+        #: the most candidate pairs the list may hold (bound_memory: the memory budget's
+        #: share after the rest of the run; -1 when nothing bounds it)
+        self.max_pairs = -1
         #: how often the candidate list was built (a run's statistics, for tests and benchmarks)
         self.rebuilds = 0
         #: colliders (animsim.colliders.Colliders) and impulse planes (animsim.collisions) to push
@@ -430,14 +454,33 @@ class ParticleContacts(StepStage):
         # their box), so any two particles have closed by at most |d_i - c| + |d_j - c| <= 2 spread
         return not (2.0 * spread <= SKIN_USE * self._skin)
 
-    def _rebuild(self, x: np.ndarray, active: np.ndarray) -> None:
+    def bound_memory(self, budget: int) -> None:
+        """The candidate list may hold ``budget`` bytes (CONTACT_PAIR_BYTES a pair)."""
+        self.max_pairs = max(int(budget) // CONTACT_PAIR_BYTES, 0)
+
+    def _too_many(self, found: int, t: float) -> SimulationError:
+        more = "at least " if self._kernels is not None else ""
+        return SimulationError(
+            f"particle contacts at t = {t:.6g} s: {more}{found} pairs of particles lie within "
+            f"2 x radius + skin of each other (births or a pile squeezed together since the "
+            f"start), more than the memory budget leaves room for ({self.max_pairs} pairs, "
+            f"{format_bytes(self.max_pairs * CONTACT_PAIR_BYTES)}); lower the radius or the "
+            "number of particles, or raise the budget with --max-memory"
+        )
+
+    def _rebuild(self, x: np.ndarray, active: np.ndarray, t: float = 0.0) -> None:
         rmax = float(self.radius[active].max()) if active.any() else 0.0
         self._skin = SKIN * 2.0 * rmax
         reach = 2.0 * rmax + self._skin
         if self._kernels is not None:
-            ci, cj = self._kernels.candidates(x, active, self.exclude, reach)
+            ci, cj = self._kernels.candidates(x, active, self.exclude, reach, self.max_pairs)
+            found = ci.size
         else:
-            ci, cj = candidates_numpy(x, active, self.exclude, reach)
+            found = count_pairs_numpy(x, active, reach) if self.max_pairs >= 0 else 0
+            if found <= self.max_pairs or self.max_pairs < 0:
+                ci, cj = candidates_numpy(x, active, self.exclude, reach)
+        if 0 <= self.max_pairs < found:
+            raise self._too_many(found, t)
         self._ci, self._cj = ci, cj
         r = self.radius[ci] + self.radius[cj]
         self._reach2 = r * r
@@ -461,7 +504,7 @@ class ParticleContacts(StepStage):
             inv_mass = self._inv_copy
         active = self.active if state.particle_alive is None else self.active & state.particle_alive
         if self._list_is_stale(x, active):
-            self._rebuild(x, active)
+            self._rebuild(x, active, t0)
         ci, cj = self._ci, self._cj
         if ci.size == 0:
             self.pairs_last = 0
@@ -564,8 +607,12 @@ def excluded(keys, key):  # pragma: no cover - compiled
 
 
 @numba_helper
-def candidates(x, active, exclude, reach):  # pragma: no cover - compiled
+def candidates(x, active, exclude, reach, limit):  # pragma: no cover - compiled
     """Pairs (i, j), i < j, of active rows with |x_j - x_i|^2 <= reach^2, sorted by (i, j).
+
+    ``limit`` >= 0: more than ``limit`` pairs is too many (the memory budget's share):
+    the search stops at the first ``limit + 1`` and returns them unsorted, so the
+    caller sees the excess without the list growing past it (-1: no limit).
 
     Cells ``reach`` wide: a dense grid over the particles' box when it has not
     many more cells than particles (grains in a box), else a spatial hash.
@@ -669,6 +716,8 @@ def candidates(x, active, exclude, reach):  # pragma: no cover - compiled
                 j = max(order[ka], order[kb])
                 if exclude.shape[0] and excluded(exclude, i * n + j):
                     continue
+                if npairs == limit + 1 and limit >= 0:
+                    return raw_i[:npairs].copy(), raw_j[:npairs].copy()
                 if npairs == raw_i.shape[0]:
                     gi = np.empty(2 * npairs, dtype=np.int64)
                     gj = np.empty(2 * npairs, dtype=np.int64)
@@ -715,7 +764,7 @@ def numba_kernels() -> NumbaKernels:
     @numba.njit(cache=True)
     def find_pairs(x, radius, active, exclude, cell):  # pragma: no cover - compiled
         """Overlapping pairs (P, 2) sorted by (i, j): candidates within ``cell`` (>= 2 max radius)."""
-        ci, cj = candidates(x, active, exclude, cell)
+        ci, cj = candidates(x, active, exclude, cell, -1)
         out = np.empty((ci.shape[0], 2), dtype=np.int64)
         p = 0
         for k in range(ci.shape[0]):

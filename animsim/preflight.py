@@ -31,12 +31,13 @@ from pathlib import Path
 from typing import Any
 
 from animsim import methods
+from animsim.console import format_bytes
 from animsim.contact_stages import particles_inside_colliders
 from animsim.errors import Diagnostic, SceneError, UsageError
 from animsim.export.meta import meta_path
 from animsim.export.ply import PLY_SUFFIX
 from animsim.export.sinks import get_format
-from animsim.particle_contacts import SKIN
+from animsim.particle_contacts import CONTACT_PAIR_BYTES, SKIN
 from animsim.record import Clock, recording_rule
 from animsim.scene.loader import (
     DEFAULT_MAX_DEPTH,
@@ -116,13 +117,6 @@ def parse_count(text: str, option: str) -> int:
     return int(value)
 
 
-def format_bytes(n: float) -> str:
-    for unit, size in (("GiB", GIB), ("MiB", MIB), ("KiB", KIB)):
-        if n >= size:
-            return f"{n / size:.3g} {unit}"
-    return f"{int(n)} bytes"
-
-
 @dataclass(frozen=True)
 class RunLimits:
     """Every limit of the spec, as set on the command line."""
@@ -160,6 +154,13 @@ class Estimate:
     memory: int  # bytes of live state
     # (path into the scene, bytes, what) for each part, largest blame first
     parts: list[tuple[tuple[str | int, ...], int, str]] = field(default_factory=list)
+    #: of ``memory``, the particle contacts' candidate list at the start (it may grow)
+    contact_bytes: int = 0
+
+    def growth_budget(self, limits: RunLimits) -> int:
+        """Bytes the parts that grow during the run (the contact list) may hold: the budget
+        less everything else the estimate counts."""
+        return limits.max_memory - (self.memory - self.contact_bytes)
 
     @property
     def rows_per_frame(self) -> int:
@@ -349,6 +350,7 @@ def check_limits(
         est.parts.append((("particle_collisions", "radius"), cost, f"{pairs} candidate contact pairs"))
         est.parts.sort(key=lambda p: -p[1])
         est.memory += cost
+        est.contact_bytes = cost
         if est.memory > limits.max_memory:
             path = ("particle_collisions", "radius")
             msg = (
@@ -365,11 +367,6 @@ def check_limits(
 
 # --- particle contacts ------------------------------------------------------------------
 
-# One candidate pair of the contact list: its (i, j) index pair as built (16), the k-d
-# tree's or the grid's output before sorting (16), and the per-step arrays of a pair that
-# overlaps (gathered differences and normals, distances, normal speeds, impulses and the
-# Jacobi work arrays: about 20 float64), so a list where everything touches costs this much.
-CONTACT_PAIR_BYTES = 16 + 16 + 20 * 8
 # Contact distances beyond this cannot be squared in float64 (the neighbour search squares
 # them); no scene needs particles of 1e150 m.
 MAX_CONTACT_RADIUS = 1e150

@@ -172,3 +172,55 @@ def test_an_ascii_ply_with_a_huge_body_is_read_in_bounded_memory(tmp_path):
     r = run_capped("check", scene, cap=MESH_CAP_BYTES)
     assert "MemoryError" not in r.stderr and "internal error" not in r.stderr, r.stderr
     assert r.returncode == 0, r.stderr  # the trailing tokens are not part of any element
+
+
+def converging_shell(path, count: int) -> None:
+    """``count`` particles on the unit sphere, each moving to the centre at 1 m/s: far apart
+    at the start (the pre-flight counts no contact pair), crowded together by t = 1 s."""
+    rng = np.random.default_rng(1)
+    u = rng.normal(size=(count, 3))
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    lines = ["duration: 1.2", "dt: 0.05", "particle_collisions: {radius: 0.005}", "particles:"]
+    for k, p in enumerate(u):
+        pos, vel = ", ".join(f"{c:.6f}" for c in p), ", ".join(f"{-c:.6f}" for c in p)
+        lines.append(f"- {{id: p{k}, mass: 1, position: [{pos}], velocity: [{vel}]}}")
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_contact_pairs_that_grow_during_the_run_stop_it_at_the_memory_budget(tmp_path):
+    """The pre-flight counts the pairs at the start; a pile squeezed together later grows
+    the candidate list, which stops the run at the budget's share (exit 1, nothing
+    written) instead of running past --max-memory. With room, the same run finishes."""
+    from animsim.preflight import contact_pairs
+    from animsim.scene.loader import load_scene
+
+    scene = tmp_path / "shell.yaml"
+    converging_shell(scene, 5000)
+    assert contact_pairs(load_scene(scene).scene) == 553  # of the 2,906,996 the list reaches
+    out = tmp_path / "o.csv"
+    r = run_capped("run", scene, "-o", out, "--backend", "numpy", "--max-memory", "128MiB")
+    assert r.returncode == 1, r.stderr
+    assert "particle contacts at t = 0.95 s:" in r.stderr and "--max-memory" in r.stderr, r.stderr
+    assert "more than the memory budget leaves room for (687955 pairs, 126 MiB)" in r.stderr
+    assert not out.exists()
+    r = run_capped("run", scene, "-o", out, "--backend", "numpy", "--max-memory", "1GiB", "-q")
+    assert r.returncode == 0, r.stderr
+
+
+def test_the_neighbour_searches_stop_past_their_limit():
+    """Both backends' searches see a list past its limit without building it whole: the
+    grid stops at limit + 1 pairs, the k-d tree counts before it lists."""
+    from animsim.particle_contacts import candidates_numpy, count_pairs_numpy, numba_kernels
+
+    rng = np.random.default_rng(5)
+    x = rng.uniform(0, 1, (60, 3))
+    active = np.ones(60, dtype=bool)
+    active[7] = False
+    none = np.zeros(0, dtype=np.int64)
+    ci, cj = candidates_numpy(x, active, none, 0.5)
+    assert count_pairs_numpy(x, active, 0.5) == ci.size > 300
+    grid = numba_kernels().candidates
+    gi, gj = grid(x, active, none, 0.5, -1)
+    assert gi.tolist() == ci.tolist() and gj.tolist() == cj.tolist()
+    assert grid(x, active, none, 0.5, ci.size)[0].size == ci.size  # at the limit: all, sorted
+    assert grid(x, active, none, 0.5, 100)[0].size == 101  # past it: one more than the limit
