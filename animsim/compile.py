@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from animsim import contact_stages
+from animsim import contact_stages, methods
 from animsim.backends import BACKEND_REFERENCE, backend_line, choose_backend
 from animsim.bodies.build import body_rows, build_body_elements, check_integrator, particle_springs
 from animsim.bodies.export import header_springs
@@ -23,7 +23,7 @@ from animsim.emitters import build_emitters
 from animsim.errors import UsageError
 from animsim.forces.grid_springs import build_spring_term
 from animsim.forces.penalty import PenaltyPlane
-from animsim.integrators import integrator_class
+from animsim.integrators import integrator_class, spring_constraints
 from animsim.integrators.base import Integrator
 from animsim.record import Clock, TrajectoryHeader, landing_steps, recording_rule, scene_record_steps
 from animsim.scene import models as m
@@ -96,15 +96,15 @@ def with_overrides(
     """The scene with command-line overrides, checked by the same rules as the file."""
     update: dict[str, Any] = {}
     if integrator is not None:
-        method_from_option(integrator, "--integrator")
+        desc = methods.get(method_from_option(integrator, "--integrator"))
         adaptive = scene.adaptive
-        if adaptive is not None and integrator == "xpbd":
+        if adaptive is not None and not desc.takes_adaptive:
             raise UsageError(
-                "--integrator xpbd: the scene asks for adaptive steps, which xpbd does not take "
-                "(it takes fixed steps with substeps inside each); remove adaptive from the scene"
+                f"--integrator {integrator}: the scene asks for adaptive steps, which {desc.name} does "
+                "not take (it takes fixed steps with substeps inside each); remove adaptive from the scene"
             )
-        # substeps belong to xpbd: kept when the override is xpbd, dropped for another method
-        substeps = scene.substeps if integrator == "xpbd" else None
+        # substeps belong to the methods that take them: kept for one, dropped for another
+        substeps = scene.substeps if desc.takes_substeps else None
         update["integrator"] = (
             integrator
             if adaptive is None and substeps is None
@@ -311,11 +311,10 @@ def compile_scene(
     if system.spring_count:
         label = f"springs: {system.spring_count} in {len(families)} famil{'y' if len(families) == 1 else 'ies'} ({', '.join(f'{name} {b - a}' for name, a, b in families)})"
         # tearing switches single springs off: the generic kernel, not grid slices
-        if scene.integrator_name == "xpbd":
-            # the springs are xpbd's constraints; the term keeps their energy for the watchdog
-            from animsim.integrators.xpbd import spring_energy_term
-
-            springs_term = spring_energy_term(system, label, scene.dt, scene.substeps)
+        constraints = spring_constraints(scene.integrator_name)
+        if constraints is not None:
+            # the springs are the method's constraints; the term keeps their energy for the watchdog
+            springs_term = constraints(system, label, scene.dt, scene.substeps)
         else:
             springs_term = build_spring_term(
                 system, label, grid=backend != BACKEND_REFERENCE and not can_tear

@@ -11,7 +11,8 @@ command's start).
 from __future__ import annotations
 
 import importlib
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from typing import Any
 
 from animsim import methods
 from animsim.integrators.base import Integrator
@@ -27,6 +28,18 @@ def _stepper(method: methods.Method) -> type[Integrator]:
     if not (isinstance(cls, type) and issubclass(cls, Integrator)) or cls.method != method:
         raise TypeError(f"{method.stepper} does not step the method {method.name!r}")
     return cls
+
+
+def spring_constraints(name: str) -> Callable[..., Any] | None:
+    """The builder of the watchdog's energy term for the springs a method holds as
+    constraints (Method.spring_constraints: (system, label, dt, substeps) -> term), or None
+    when its springs are forces."""
+    path = methods.get(name).spring_constraints
+    if path is None:
+        return None
+    module, _, fn = path.partition(":")
+    built: Callable[..., Any] = getattr(importlib.import_module(module), fn)
+    return built
 
 
 class _Methods(Mapping[str, type[Integrator]]):

@@ -129,6 +129,14 @@ class Method:
     #: c in x1 = x0 + dt (v0 + c dv) for a constant acceleration (dv = dt a): how its position
     #: update follows the step's velocity change; None: derived from the tableau (b . c)
     follow_weight: float | None = None
+    #: takes ``integrator: {substeps: N}`` (steps inside each step); others refuse the key
+    takes_substeps: bool = False
+    #: takes ``integrator: {adaptive: ...}`` (step doubling); others refuse the key
+    takes_adaptive: bool = True
+    #: holds the springs as constraints, inextensible ones (ks: inf) included; "module:function"
+    #: of the energy term the watchdog reads for them, (system, label, dt, substeps) -> term.
+    #: None: the springs are forces, and an inextensible one is refused.
+    spring_constraints: str | None = None
 
     def __post_init__(self) -> None:
         if (self.tableau is None) == (self.one_step is None):

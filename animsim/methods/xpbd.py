@@ -65,6 +65,9 @@ register(
         ),
         # its cost is per substep: compare runs it when it is named
         listed=False,
+        takes_substeps=True,
+        takes_adaptive=False,
+        spring_constraints="animsim.integrators.xpbd:spring_energy_term",
         aliases=("pbd", "position_based"),
     )
 )

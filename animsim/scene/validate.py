@@ -336,20 +336,24 @@ def method_problems(scene: Scene) -> list[Problem]:
     if method is None:
         return out
     spec = scene.integrator if not isinstance(scene.integrator, str) else None
-    if spec is not None and spec.substeps is not None and method != "xpbd":
+    desc = methods.get(method) if method in methods.names() else None
+    if desc is None:
+        return out
+    if spec is not None and spec.substeps is not None and not desc.takes_substeps:
+        takers = ", ".join(d.name for d in methods.all_methods() if d.takes_substeps)
         out.append(
-            (("integrator", "substeps"), f"substeps applies only to method: xpbd, not to {method}", True)
+            (("integrator", "substeps"), f"substeps applies only to method: {takers}, not to {method}", True)
         )
-    if spec is not None and spec.adaptive is not None and method == "xpbd":
+    if spec is not None and spec.adaptive is not None and not desc.takes_adaptive:
         out.append(
             (
                 ("integrator", "adaptive"),
-                "xpbd takes fixed steps (with substeps inside each), not adaptive ones: remove "
+                f"{method} takes fixed steps (with substeps inside each), not adaptive ones: remove "
                 "adaptive, or use adaptive with a force-based method such as rk4",
                 True,
             )
         )
-    declared = methods.get(method).refuses if method in methods.names() else ()
+    declared = desc.refuses
     for key, what, instead in declared:
         message = f"integrator {method} does not handle {what} yet; {instead}"
         if key == "planes.penalty":
@@ -361,9 +365,10 @@ def method_problems(scene: Scene) -> list[Problem]:
         if value:
             where: tuple[str | int, ...] = (key, 0) if isinstance(value, list) else (key,)
             out.append((where, message, True))
-    if method == "xpbd":
+    if desc.spring_constraints is not None:  # inextensible springs are its constraints
         return out
-    why = "ks: inf (an inextensible spring) needs integrator: xpbd; give a finite ks for " + method
+    holders = ", ".join(d.name for d in methods.all_methods() if d.spring_constraints is not None)
+    why = f"ks: inf (an inextensible spring) needs integrator: {holders}; give a finite ks for {method}"
     for i, sp in enumerate(scene.springs or []):
         if sp is not None and math.isinf(sp.ks):
             out.append((("springs", i, "ks"), why, True))
