@@ -15,7 +15,7 @@ import numpy as np
 
 from animsim import contact_stages, methods
 from animsim.backends import BACKEND_REFERENCE, backend_line, choose_backend
-from animsim.bodies.build import body_rows, build_body_elements, check_integrator, particle_springs
+from animsim.bodies.build import body_rows, build_body_elements, particle_springs
 from animsim.bodies.export import header_springs
 from animsim.dynamics import Dynamics
 from animsim.elements import BuildContext, ForceElement, StepStage, build_elements
@@ -197,7 +197,6 @@ def compile_scene(
     # --- rigid bodies: each centre of mass is a particle row, after the structures ------
     bodies = None
     if scene.bodies:
-        check_integrator(scene)
         bodies = body_rows(scene)
         body_first = len(ids)
         for k, bid in enumerate(bodies.ids):

@@ -11,14 +11,12 @@ from typing import Any
 
 import numpy as np
 
-from animsim import methods
 from animsim.bodies import quaternion as quat
 from animsim.bodies import shapes as sh
 from animsim.bodies.contacts import BodyContacts, PlaneTable
 from animsim.bodies.dynamics import BodyDynamics
 from animsim.bodies.springs import BodySprings
 from animsim.colliders import BOX, CAPSULE, SPHERE, Shape, axis_angle_quaternion, quaternion_matrix
-from animsim.errors import UsageError
 from animsim.scene import models as m
 
 
@@ -83,15 +81,6 @@ def body_rows(scene: m.Scene) -> BodyRows:
         inv_inertia=inv_inertia,
         shapes=shapes,
     )
-
-
-def check_integrator(scene: m.Scene) -> None:
-    """implicit_euler is linearised over particle positions only: refuse bodies with it, clearly."""
-    if scene.bodies and not methods.get(scene.integrator_name).integrates_bodies:
-        raise UsageError(
-            f"integrator {scene.integrator_name!r} does not integrate rigid bodies (its linearisation "
-            f"covers particle positions only); use one of {', '.join(methods.body_methods())}"
-        )
 
 
 def build_body_elements(

@@ -241,18 +241,6 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
     for i, c in enumerate(scene.colliders or []):
         if c is not None and hasattr(c, "orientation"):
             _check_orientation(("colliders", i, "orientation"), c.orientation, out)
-    integrator = getattr(scene, "integrator", None)
-    if bodies and integrator is not None:
-        method = integrator if isinstance(integrator, str) else integrator.method
-        if method in methods.names() and not methods.get(method).integrates_bodies:
-            out.append(
-                (
-                    ("integrator",) if isinstance(integrator, str) else ("integrator", "method"),
-                    f"{method} does not integrate rigid bodies (its linearisation covers particle "
-                    f"positions only), and this scene has {len(bodies)}; use one of {', '.join(methods.body_methods())}",
-                    False,
-                )
-            )
     if bodies:
         for i, c in enumerate(scene.colliders or []):
             if c is not None and getattr(c, "motion", None) is not None:
@@ -351,6 +339,16 @@ def method_problems(scene: Scene) -> list[Problem]:
                 f"{method} takes fixed steps (with substeps inside each), not adaptive ones: remove "
                 "adaptive, or use adaptive with a force-based method such as rk4",
                 True,
+            )
+        )
+    bodies = getattr(scene, "bodies", None) or []
+    if bodies and not desc.integrates_bodies:
+        out.append(
+            (
+                ("integrator",) if spec is None else ("integrator", "method"),
+                f"{method} does not integrate rigid bodies, and this scene has {len(bodies)}; "
+                f"use one of {', '.join(methods.body_methods())}",
+                False,
             )
         )
     declared = desc.refuses
