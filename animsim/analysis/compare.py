@@ -612,6 +612,9 @@ class Probe:
     reference_kind: str  # "analytic", "DOP853" or "RK4"
     dop853: tuple[float, float] | None = None  # (simulated s reached, wall s) of its first solve
     grows: bool = False  # births: each step costs more than the one before
+    #: what one run() costs beyond its loop (the watchdog's stability limits, the stepper's
+    #: start, the metadata), s: a few ms that add up over the 60-odd runs of a tiny scene
+    overhead: float = 0.0
 
     def loop(self, window: float) -> float:
         """Wall time of ``method`` at ``dt`` to simulate ``window`` seconds.
@@ -637,7 +640,7 @@ class Probe:
         """One run of ``method`` at ``dt`` over ``window``: steps scale as 1/dt, each
         method's step costs what it cost in the probe relative to ``method``'s."""
         ratio = self.per_step[method] / max(self.per_step[self.method], 1e-300)
-        return self.loop(window) * (self.dt / dt) * ratio + self.setup
+        return self.loop(window) * (self.dt / dt) * ratio + self.setup + self.overhead
 
     def reference_seconds(self, dts: Sequence[float], window: float, min_steps: int | None = None) -> float:
         if self.reference_kind == "analytic":
@@ -777,6 +780,7 @@ def probe(
     per_step: dict[str, float] = {}
     chosen = "numpy"
     setups = []
+    overheads: list[float] = []
     for integ in methods:
         probe_scene = with_overrides(scene, integrator=integ, dt=dt, duration=short)
         t0 = time.perf_counter()
@@ -795,7 +799,9 @@ def probe(
             runs: list[tuple[float, int]] = []
             while len(runs) < 2 or time.perf_counter() < until:
                 deadline = time.perf_counter() + PROBE_METHOD_SECONDS
+                t0 = time.perf_counter()
                 result = run(compiled, [], stop=lambda d=deadline: time.perf_counter() > d)
+                overheads.append(max(0.0, time.perf_counter() - t0 - result.wall_time))
                 runs.append((result.wall_time, max(result.steps_taken, 1)))
         per_step[integ] = min(wall / steps for wall, steps in runs)
         wall, steps = runs[0]
@@ -843,6 +849,8 @@ def probe(
         reference_kind=kind,
         dop853=dop,
         grows=full.emitters is not None,
+        # the median: the first runs of a method may still load what later ones find ready
+        overhead=statistics.median(overheads) if overheads else 0.0,
     )
 
 

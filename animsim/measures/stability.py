@@ -132,11 +132,30 @@ def largest_stable_dt(method: str, omega: np.ndarray, zeta: np.ndarray) -> np.nd
         return out
     w, z = omega[stiff], zeta[stiff]
     closed_form = methods.get(method).closed_form_limit
-    res = closed_form(w, z) if closed_form is not None else _bisect_limit(method, w, z)
+    res = closed_form(w, z) if closed_form is not None else _bisected(method, w, z)
     if weakly_unstable(method):
         res = np.where(z == 0.0, 0.0, res)
     out[stiff] = res
     return out
+
+
+#: limits bisected lately, by (method, omega, zeta): every run of one scene asks again for its
+#: own modes (compare runs a scene 60 times or more, and each bisection costs tens of ms)
+_BISECTED: dict[tuple[methods.Method, bytes, bytes], np.ndarray] = {}
+BISECTED_KEPT = 32
+
+
+def _bisected(method: str, omega: np.ndarray, zeta: np.ndarray) -> np.ndarray:
+    """:func:`_bisect_limit`, remembered for the last BISECTED_KEPT questions (keyed by the
+    method's descriptor, so a method registered again under its name is asked afresh)."""
+    key = (methods.get(method), omega.tobytes(), np.ascontiguousarray(zeta).tobytes())
+    hit = _BISECTED.get(key)
+    if hit is None:
+        hit = _bisect_limit(method, omega, zeta)
+        if len(_BISECTED) >= BISECTED_KEPT:
+            _BISECTED.pop(next(iter(_BISECTED)))
+        _BISECTED[key] = hit
+    return hit.copy()
 
 
 def _bisect_limit(method: str, omega: np.ndarray, zeta: np.ndarray) -> np.ndarray:
