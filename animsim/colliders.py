@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from animsim.collisions import RESTING_STEPS, apply_friction
+from animsim.collisions import RESTING_STEPS, apply_friction, hold_by_static_friction, static_friction_holds
 from animsim.elements import StepStage, jit_kernel, numba_helper
 from animsim.vec import dot3
 
@@ -518,6 +518,8 @@ def resolve_numpy(
             vt = vc - vn[:, None] * n
             vt = apply_friction(vt, np.abs(vn_new - vn), shape.friction)
             vr = vt + vn_new[:, None] * n
+            if shape.friction != 0.0:  # held still on the surface: no flight after the impact
+                hold_by_static_friction(vr, vn_new, mean_acc, n, shape.friction)
             rest = (1.0 - sh) * dt
             x[rows_hit] = xc + rest * vr + 0.5 * rest * rest * mean_acc
             v[rows_hit] = vr + u + rest * mean_acc
@@ -789,6 +791,12 @@ def _collide(
                 vrx = vt[0] + vn_new * n[0]
                 vry = vt[1] + vn_new * n[1]
                 vrz = vt[2] + vn_new * n[2]
+                if static_friction_holds(
+                    vrx, vry, vrz, vn_new, acc[0], acc[1], acc[2], n[0], n[1], n[2], mu, mu != 0.0
+                ):
+                    acc[0] = 0.0
+                    acc[1] = 0.0
+                    acc[2] = 0.0
                 x[i, 0] = xcx + rest * vrx + 0.5 * rest * rest * acc[0]
                 x[i, 1] = xcy + rest * vry + 0.5 * rest * rest * acc[1]
                 x[i, 2] = xcz + rest * vrz + 0.5 * rest * rest * acc[2]

@@ -271,6 +271,8 @@ class _Blocks:
         for j in range(3):  # vr = vt + vn_new n
             add_scaled(vt[:, j], vn_new, n[j], vt[:, j], tmp)
         vr = vt
+        if pl.friction != 0.0:
+            hold_by_static_friction(vr, vn_new, acc, n, pl.friction)
         # Fly on for the rest of the step: r = (1 - s) dt.
         r = np.subtract(1.0, s, out=self.w1[:k])
         r *= dt_row
@@ -288,6 +290,26 @@ class _Blocks:
         put_rows(x, hit, xh)
         put_rows(v, hit, vr)
         return hit
+
+
+def hold_by_static_friction(
+    vr: np.ndarray, vn_new: np.ndarray, acc: np.ndarray, n: np.ndarray, mu: float
+) -> None:
+    """Zero ``acc`` (k, 3) on the rows that static friction holds for the rest of the step
+    (the NumPy form of :func:`static_friction_holds`, with the same operations); ``n`` is
+    one normal (3,) or a normal per row (k, 3)."""
+    still = (vn_new == 0.0) & ((vr[:, 0] * vr[:, 0] + vr[:, 1] * vr[:, 1]) + vr[:, 2] * vr[:, 2] == 0.0)
+    if not still.any():
+        return
+    nr = n.reshape(-1, 3)
+    an = (acc[:, 0] * nr[:, 0] + acc[:, 1] * nr[:, 1]) + acc[:, 2] * nr[:, 2]
+    at = acc - an[:, None] * nr
+    held = (
+        still
+        & (an < 0.0)
+        & ((at[:, 0] * at[:, 0] + at[:, 1] * at[:, 1]) + at[:, 2] * at[:, 2] <= (mu * an) * (mu * an))
+    )
+    acc[held] = 0.0
 
 
 #: rows per block when the plane meets the rows inside the integrator's step: a block's x, v,
@@ -631,6 +653,22 @@ def _friction_scale(t0, t1, t2, mu, dvn, friction):
 
 
 @numba_inline_helper
+def static_friction_holds(vr0, vr1, vr2, vn_new, a0, a1, a2, n0, n1, n2, mu, friction):
+    """Static friction holds the row for the rest of the step: it stopped on the plane (no
+    normal nor tangential speed left), the step's acceleration a presses it on (a.n < 0),
+    and Coulomb's cone holds a's tangential part, |a_t| <= mu |a.n|. The plane's normal
+    force and friction then cancel a, so the flight after the impact is no flight: without
+    this the row slid (1/2) a_t r^2 a step and crept down any slope."""
+    if not friction or vn_new != 0.0 or vr0 * vr0 + vr1 * vr1 + vr2 * vr2 != 0.0:
+        return False
+    an = a0 * n0 + a1 * n1 + a2 * n2
+    at0 = a0 - an * n0
+    at1 = a1 - an * n1
+    at2 = a2 - an * n2
+    return an < 0.0 and at0 * at0 + at1 * at1 + at2 * at2 <= (mu * an) * (mu * an)
+
+
+@numba_inline_helper
 def _hit_row(x0, x1, x2, v0, v1, v2, xo0, xo1, xo2, vo0, vo1, vo2, n0, n1, n2, off, e0, mu, dt, friction):
     """One row's impulse on one plane: (hit, x, v) with x, v unchanged where it did not hit."""
     d1 = x0 * n0 + x1 * n1 + x2 * n2 - off
@@ -663,6 +701,10 @@ def _hit_row(x0, x1, x2, v0, v1, v2, xo0, xo1, xo2, vo0, vo1, vo2, n0, n1, n2, o
     vr1 = t1 * f + vn_new * n1
     vr2 = t2 * f + vn_new * n2
     r = (1.0 - s) * dt
+    if static_friction_holds(vr0, vr1, vr2, vn_new, a0, a1, a2, n0, n1, n2, mu, friction):
+        a0 = 0.0
+        a1 = 0.0
+        a2 = 0.0
     return (
         hit,
         xc0 + r * vr0 + 0.5 * r * r * a0 if hit else x0,

@@ -2,6 +2,7 @@
 
 * A box on a slope of angle theta with friction mu >= tan(theta) stays where it is (Coulomb's
   static friction holds); below tan(theta) it slides with a = g (sin(theta) - mu cos(theta)).
+  So does a particle, on an impulse plane and on a tilted box collider.
 * A torque-free rigid body keeps its kinetic energy 1/2 L . I^-1 L and its angular momentum L
   (Euler's equations; Goldstein, Classical Mechanics, ch. 5) under the default integrator.
 """
@@ -78,6 +79,49 @@ def test_a_box_below_the_friction_angle_slides_at_g_sin_minus_mu_cos(backend: st
     # and it stays on the slope: the distance from the plane is its half height
     n = np.array([-math.sin(th), math.cos(th), 0.0])
     assert np.abs(x @ n - 0.05).max() < 1e-6
+
+
+def _slope_particle(mu: float, surface: str, duration: float, dt: float = 1 / 60) -> str:
+    """A particle at rest on a surface tilted by 30 degrees about z, through the origin: an
+    impulse plane, or the top face of a rotated box collider."""
+    th = math.radians(30.0)
+    n = [-math.sin(th), math.cos(th), 0.0]
+    if surface == "plane":
+        where = f"planes:\n  - {{point: [0, 0, 0], normal: {n}, restitution: 0.0, friction: {mu}}}\n"
+    else:  # a 10 x 1 x 10 box whose top face is that plane (its centre half a unit below)
+        q = [math.cos(th / 2), 0.0, 0.0, math.sin(th / 2)]
+        c = [-0.5 * n[0], -0.5 * n[1], 0.0]
+        where = (
+            f"colliders:\n  - {{type: box, center: {c}, size: [10, 1, 10], orientation: {q}, "
+            f"restitution: 0.0, friction: {mu}}}\n"
+        )
+    return (
+        f"duration: {duration}\ndt: {dt!r}\nforces: [{{type: gravity}}]\n{where}"
+        "particles:\n  - {id: p, mass: 1, position: [0, 0, 0]}\n"
+    )
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("surface", ["plane", "box collider"])
+def test_static_friction_holds_a_particle_on_a_slope(backend: str, surface: str) -> None:
+    """mu 0.7 > tan(30 deg): the particle stays put. The step's gravity used to move it on
+    by (1/2) g_t dt^2 after friction had stopped it: 0.41 m down the slope in 10 s."""
+    traj = _run(_slope_particle(0.7, surface, 10.0), backend)
+    moved = np.abs(traj.positions[:, 0] - traj.positions[0, 0]).max()
+    assert moved < 1e-12, moved
+    assert np.abs(traj.velocities[:, 0]).max() < 1e-12
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("surface", ["plane", "box collider"])
+def test_a_particle_below_the_friction_angle_slides_at_g_sin_minus_mu_cos(backend: str, surface: str) -> None:
+    mu, th = 0.3, math.radians(30.0)
+    traj = _run(_slope_particle(mu, surface, 2.0), backend)
+    s = np.linalg.norm(traj.positions[:, 0] - traj.positions[0, 0], axis=1)
+    a = G * (math.sin(th) - mu * math.cos(th))
+    # from rest, s = a t^2 / 2 (friction slows the velocity at the step's end, the position
+    # a step later: about a step's worth of travel, 1 % at 2 s and dt 1/60)
+    np.testing.assert_allclose(s[-1], 0.5 * a * traj.times[-1] ** 2, rtol=0.015)
 
 
 # --- spinning bodies -------------------------------------------------------------------
