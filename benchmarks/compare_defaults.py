@@ -104,7 +104,7 @@ def time_scene(tree: Path, scene: Path, timeout: float) -> Timing:
 
 def table(timings: list[Timing], tree: Path) -> str:
     lines = [
-        f"`animsim compare SCENE` with default options, tree {tree}, "
+        "`animsim compare SCENE` with default options (`python benchmarks/compare_defaults.py`), "
         f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {os.cpu_count()} cores (shared)",
         "",
         "| scene | wall s | CPU s | status | estimate | runs: actual (estimate), probe | cut to fit the budget |",
