@@ -480,7 +480,9 @@ def dense_frames(traj: Any) -> dict[str, np.ndarray | None]:
     """A long-form :class:`~animsim.export.trajectory.Trajectory` as (F, N, ...) arrays.
 
     Particles are the trajectory's id table; a particle not alive in a frame
-    has a NaN row. Vectorised: one scatter per array.
+    has a NaN row; ``size`` is the emitted particles' radius, m, as the files
+    write it (the viewer draws diameters: :func:`dot_diameters`). Vectorised:
+    one scatter per array.
     """
     f, n = traj.frame_count, len(traj.ids)
     frame_of = np.repeat(np.arange(f), np.diff(traj.frame_start))
@@ -648,13 +650,19 @@ def scene_shapes(compiled: Any, times: np.ndarray | None = None) -> list[Shape]:
     return planes_as_shapes(compiled.header.extra.get("planes", [])) + collider_shapes(compiled, times)
 
 
+def dot_diameters(radius: np.ndarray | None) -> np.ndarray | None:
+    """The viewer's dot sizes (diameters, m) from particle radii (m, NaN: none): every file
+    and the scene mean a particle's radius by its size (animsim.export.look)."""
+    return None if radius is None else 2.0 * np.asarray(radius, dtype=np.float64)
+
+
 def scene_look(compiled: Any, ids: Sequence[str], frames: int, dense: dict[str, Any]) -> tuple[Any, Any]:
     """(colors (F, N, 4), sizes (F, N)) for the viewer: the scene's own colour and radius of
     each particle (animsim.export.look) where the run's frames give none. Sizes are the dots'
     diameters, as the viewer draws them."""
 
     look = SceneLook(compiled.header.extra)
-    colors, sizes = dense.get("color"), dense.get("size")
+    colors, sizes = dense.get("color"), dot_diameters(dense.get("size"))
     if look.empty:
         return colors, sizes
     row_of = {pid: k for k, pid in enumerate(compiled.system.ids)}
@@ -689,7 +697,7 @@ def panel_from_trajectory(
     springs = pinned = None
     shapes: list[Shape] = []
     drawn = None
-    colors, sizes = dense["color"], dense["size"]
+    colors, sizes = dense["color"], dot_diameters(dense["size"])
     if compiled is None and getattr(traj, "drawables", None):
         # an NPZ says what to draw itself (animsim.export.npz)
         from animsim.export.look import SceneLook

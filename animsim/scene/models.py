@@ -575,10 +575,10 @@ class LifetimeDistribution(Model):
 
 
 class SizeOverLife(Model):
-    """Particle size for rendering, linear from birth to death."""
+    """Particle size for rendering: its radius, linear from birth to death."""
 
-    start: NonNegative = Doc(0.02, "size at birth", unit="m")
-    end: NonNegative = Doc(0.02, "size at death", unit="m", example=0.1)
+    start: NonNegative = Doc(0.02, "radius at birth", unit="m")
+    end: NonNegative = Doc(0.02, "radius at death", unit="m", example=0.1)
 
 
 class ColorOverLife(Model):
@@ -624,7 +624,7 @@ class Emitter(Model):
     )
     mass: Positive = Doc(0.01, "mass of each particle", unit="kg")
     size: SizeOverLife = Doc(
-        SizeOverLife(), "size for rendering, start and end of life", example={"start": 0.02, "end": 0.1}
+        SizeOverLife(), "radius for rendering, start and end of life", example={"start": 0.02, "end": 0.1}
     )
     color: ColorOverLife = Doc(
         ColorOverLife(),
