@@ -88,7 +88,9 @@ recorded at the step nearest ``k / fps`` is time code ``k``, so players and
 Blender step through whole frames. Only when two frames would share a whole
 number is the code ``t * rate`` itself. The exact frame times and steps are
 always in ``customLayerData`` (``animsim`` dictionary, ``frameTimes`` and
-``frameSteps``), together with the run's ``close`` metadata (status and so on).
+``frameSteps``), together with the run's ``close`` metadata (status and so on)
+but for its timings (``wall_time``, ``compile_time``), which only the
+``.meta.json`` sidecar holds, so the same scene and seed give the same bytes.
 
 Binary crate
 ------------
@@ -136,7 +138,7 @@ import numpy as np
 from animsim.atomic import AtomicFile
 from animsim.errors import SimulationError
 from animsim.export.look import DEFAULT_RGBA, DEFAULT_SIZE, SceneLook
-from animsim.export.meta import meta_file
+from animsim.export.meta import meta_file, reproducible
 from animsim.export.ply import validate_frame
 from animsim.export.topology import TornShapes
 from animsim.record import Connectivity, Frame, TrajectoryHeader
@@ -593,7 +595,8 @@ class UsdaSink:
         codes, rate, even = time_codes(self._times, uneven)
         codes_text = [format_time_code(c) for c in codes]
         root = prim_name(self._scene)
-        info = {k: v for k, v in meta.items() if str(k) not in RESERVED_META_KEYS}
+        # Timings stay in the sidecar: the same run writes the same bytes (animsim.export.meta).
+        info = {k: v for k, v in reproducible(meta).items() if str(k) not in RESERVED_META_KEYS}
         info["timeCodes"] = "frame index" if even else f"time * {rate!r}"
         w = out.write
         w(f"{USDA_MAGIC}\n(\n")
