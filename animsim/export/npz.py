@@ -189,7 +189,12 @@ def drawables(header: TrajectoryHeader) -> dict[str, Any]:
                     value = getattr(sh, key)
                     d[key] = [float(v) for v in value] if key == "size" else float(value)
             shapes.append(d)
-        out["bodies"] = {"first": int(bodies["first"]), "ids": list(bodies["ids"]), "shapes": shapes}
+        out["bodies"] = {
+            "first": int(bodies["first"]),
+            "ids": list(bodies["ids"]),
+            "shapes": shapes,
+            "colors": list(bodies.get("colors") or [None] * len(shapes)),
+        }
     return out
 
 
@@ -213,6 +218,7 @@ def header_extra(drawn: dict[str, Any]) -> dict[str, Any]:
             "first": bodies["first"],
             "ids": bodies["ids"],
             "shapes": [make[d["kind"]](d) for d in bodies["shapes"]],
+            "colors": list(bodies.get("colors") or [None] * len(bodies["shapes"])),
             "springs": None,
         }
     return extra

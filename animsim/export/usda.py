@@ -137,7 +137,7 @@ import numpy as np
 
 from animsim.atomic import AtomicFile
 from animsim.errors import SimulationError
-from animsim.export.look import DEFAULT_RGBA, DEFAULT_SIZE, SceneLook
+from animsim.export.look import DEFAULT_RGBA, DEFAULT_SIZE, SceneLook, body_colors
 from animsim.export.meta import meta_file, reproducible
 from animsim.export.ply import validate_frame
 from animsim.export.topology import TornShapes
@@ -716,6 +716,7 @@ class _BodyPrims:
         self.first = int(info["first"])
         self.ids = list(info["ids"])
         self.shapes = tuple(info["shapes"])
+        self.colors = body_colors(info)
         self.translate: list[np.ndarray] = []
         self.orient: list[np.ndarray] = []
 
@@ -753,7 +754,7 @@ class _BodyPrims:
             for code, q in zip(codes, self.orient, strict=True):
                 w(f"{pad}{INDENT}{code}: {format_tuples(q[b : b + 1], 4)[1:-1]},\n")
             w(f'{pad}}}\n{pad}uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:orient"]\n\n')
-            _write_body_shape(w, shape, pad)
+            _write_body_shape(w, shape, pad, self.colors[b])
             w(f"{INDENT}}}\n")
 
 
@@ -762,8 +763,9 @@ def _body_plan(header: TrajectoryHeader) -> _BodyPrims | None:
     return None if info is None else _BodyPrims(info)
 
 
-def _write_body_shape(w: Callable[[str], Any], shape: Any, pad: str) -> None:
-    """The body's shape as a UsdGeom gprim named "shape", in the body frame."""
+def _write_body_shape(w: Callable[[str], Any], shape: Any, pad: str, rgba: np.ndarray | None = None) -> None:
+    """The body's shape as a UsdGeom gprim named "shape", in the body frame; with the scene's
+    colour (sRGB ``rgba``) as its constant ``displayColor``, decoded to linear like the points'."""
     inner = pad + INDENT
     kind = shape.kind
     if kind == "box":
@@ -788,4 +790,6 @@ def _write_body_shape(w: Callable[[str], Any], shape: Any, pad: str) -> None:
         w(f"{inner}float3[] extent = [({-r!r}, {-top!r}, {-r!r}), ({r!r}, {top!r}, {r!r})]\n")
         w(f"{inner}double height = {h!r}\n")
         w(f"{inner}double radius = {r!r}\n")
+    if rgba is not None:
+        w(f"{inner}color3f[] primvars:displayColor = {format_tuples(srgb_to_linear(rgba[None, :3]), 3)}\n")
     w(f"{pad}}}\n")

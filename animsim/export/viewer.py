@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from animsim.colliders import KIND_NAMES
-from animsim.export.look import SceneLook
+from animsim.export.look import SceneLook, body_colors
 from animsim.export.npz import header_extra
 from animsim.export.raster import ORTHO_VIEWS, up_axis
 from animsim.measures.energy_parts import energies_from_trajectory
@@ -620,6 +620,7 @@ def body_shapes(compiled: Any, traj: Any, info: dict[str, Any] | None = None) ->
     first = int(info["first"])
     f = traj.frame_count
     frame_of = np.repeat(np.arange(f), np.diff(traj.frame_start))
+    own = body_colors(info)
     out = []
     for b, shape in enumerate(info["shapes"]):
         row = traj.ids.index(info["ids"][b]) if info["ids"][b] in traj.ids else first + b
@@ -631,7 +632,8 @@ def body_shapes(compiled: Any, traj: Any, info: dict[str, Any] | None = None) ->
         pos[frame_of[rows]] = np.asarray(traj.position)[rows]
         q[frame_of[rows]] = np.asarray(orientation)[rows]
         q /= np.linalg.norm(q, axis=1, keepdims=True)
-        common = {"position": pos, "orientation": q, "color": BODY_RGB}
+        color = BODY_RGB if own[b] is None else tuple(float(c) for c in own[b][:3])
+        common = {"position": pos, "orientation": q, "color": color}
         if shape.kind == "box":
             out.append(Shape("box", half_extents=tuple(0.5 * float(v) for v in shape.size), **common))
         elif shape.kind == "sphere":

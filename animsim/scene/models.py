@@ -114,6 +114,8 @@ Id = Annotated[
     Field(description="a unique string or integer; integers become strings"),
 ]
 HEX_COLOR_PATTERN = r"^#([0-9a-fA-F]{6}|[0-9a-fA-F]{8})$"
+#: a rigid body is drawn opaque (its faces hide what is behind them): no alpha
+OPAQUE_COLOR_PATTERN = r"^#[0-9a-fA-F]{6}$"
 HexColor = Annotated[
     str,
     Field(
@@ -912,6 +914,9 @@ class Body(Model):
     )
     friction: NonNegative = Field(
         0.5, description="Coulomb coefficient against other bodies (geometric mean of the two)"
+    )
+    color: Annotated[str, Field(pattern=OPAQUE_COLOR_PATTERN)] | None = Field(
+        None, examples=["#3070d0"], description="for rendering, #rrggbb (a body is opaque)"
     )
 
     @field_validator("inertia")
