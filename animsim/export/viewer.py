@@ -571,7 +571,12 @@ def _y_to(direction: np.ndarray) -> np.ndarray:
 def collider_shapes(compiled: Any, times: np.ndarray | None = None) -> list[Shape]:
     """The scene's solid colliders (spheres, boxes, capsules) as shapes; keyframed ones with a
     position per frame of ``times``."""
-    surface = compiled.header.extra.get("collider_surface")
+    return colliders_as_shapes(compiled.header.extra.get("collider_surface"), times)
+
+
+def colliders_as_shapes(surface: Any, times: np.ndarray | None = None) -> list[Shape]:
+    """Solid colliders as shapes, from a header's ``collider_surface`` (a scene's, or an NPZ's
+    rebuilt by animsim.export.npz.header_extra); keyframed ones with a position per frame."""
     # the header carries the colliders' drawing function; the colliders are its owner
     colliders = getattr(surface, "__self__", None)
     if colliders is None:
@@ -705,11 +710,12 @@ def panel_from_trajectory(
         from animsim.export.look import SceneLook
 
         spec = traj.drawables
-        extra = header_extra(spec)
+        extra = header_extra(spec, traj.times)
         springs = np.array(spec.get("springs", []), dtype=np.int64).reshape(-1, 2)
         pinned = np.zeros(len(traj.ids), dtype=bool)
         pinned[: len(extra["particle_pinned"])] = extra["particle_pinned"][: len(traj.ids)]
         shapes = planes_as_shapes(extra["planes"])
+        shapes += colliders_as_shapes(extra.get("collider_surface"), np.asarray(traj.times, dtype=np.float64))
         if "bodies" in extra:
             shapes += body_shapes(None, traj, extra["bodies"])
         look = SceneLook(extra)
