@@ -67,3 +67,19 @@ def test_the_npz_alone_draws_the_body_in_its_colour(tmp_path: Path, cli) -> None
     assert done.returncode == 0, done.stderr
     assert cli("render", bare, "--gif", plain, "-q").returncode == 0
     assert blue_pixels(iio.imread(plain, index=5)) == 0
+
+
+def test_the_npz_alone_views_the_body_in_its_colour(tmp_path: Path, cli) -> None:
+    import json
+
+    scene = coloured_die(tmp_path, BLUE)
+    npz, page = tmp_path / "die.npz", tmp_path / "die.html"
+    done = cli("run", scene, "-o", npz, "--duration", "0.3", "--backend", "numpy", "-q")
+    assert done.returncode == 0, done.stderr
+    done = cli("view", npz, "-o", page, "-q")
+    assert done.returncode == 0, done.stderr
+    m = re.search(r'<script type="application/json" id="animsim-data">(.*?)</script>', page.read_text(), re.S)
+    assert m is not None
+    (panel,) = json.loads(m.group(1))["panels"]
+    (box,) = [s for s in panel["shapes"] if s["kind"] == "box"]
+    assert box["color"] == pytest.approx([0x30 / 255, 0x70 / 255, 0xD0 / 255])
