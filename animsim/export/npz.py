@@ -247,6 +247,63 @@ class RecordedMotion:
         return self.centers[k], None
 
 
+_BODY_KEYS = {"box": ("size",), "sphere": ("radius",), "capsule": ("radius", "length")}
+
+
+def check_drawables(drawn: dict[str, Any], frames: int) -> None:
+    """Raise ValueError naming the first part of an NPZ's ``drawables`` (its bodies and
+    colliders) that no run writes, so a damaged or hand-made file is refused when it is read
+    rather than failing while it is drawn."""
+    import re
+
+    from animsim.colliders import KIND_NAMES, PARAMS
+
+    def numbers(value: Any, shape: tuple[int, ...], what: str) -> np.ndarray:
+        try:
+            arr = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"drawables: {what} are not numbers") from None
+        if arr.shape != shape or not np.isfinite(arr).all():
+            raise ValueError(f"drawables: {what} must be {' x '.join(map(str, shape))} finite numbers")
+        return arr
+
+    bodies = drawn.get("bodies")
+    if bodies is not None:
+        if not isinstance(bodies, dict) or not isinstance(bodies.get("shapes"), list):
+            raise ValueError("drawables: bodies must say their shapes")
+        for b, d in enumerate(bodies["shapes"]):
+            keys = _BODY_KEYS.get(d.get("kind")) if isinstance(d, dict) else None
+            if keys is None:
+                raise ValueError(f"drawables: body {b} has no box, sphere or capsule shape")
+            for key in keys:
+                size = numbers(d.get(key), (3,) if key == "size" else (), f"body {b}'s {key}")
+                if (size < 0).any():
+                    raise ValueError(f"drawables: body {b}'s {key} is negative")
+        colors = bodies.get("colors") or []
+        for b, c in enumerate(colors):
+            if c is not None and not (isinstance(c, str) and re.fullmatch(r"#[0-9a-fA-F]{6}", c)):
+                raise ValueError(f"drawables: body {b}'s colour {c!r} is not #rrggbb")
+    spec = drawn.get("colliders")
+    if spec is not None:
+        if not isinstance(spec, dict) or not isinstance(spec.get("params"), list):
+            raise ValueError("drawables: colliders must list their params")
+        count = len(spec["params"])
+        params = numbers(spec["params"], (count, PARAMS), "collider params")
+        if count and not np.isin(params[:, 0], list(KIND_NAMES)).all():
+            raise ValueError("drawables: a collider is no sphere, box or capsule")
+        moving = spec.get("moving", [False] * count)
+        if not (
+            isinstance(moving, list) and len(moving) == count and all(isinstance(m, bool) for m in moving)
+        ):
+            raise ValueError("drawables: colliders must say which of them move")
+        if any(moving):
+            numbers(
+                spec.get("centers"),
+                (frames, sum(moving), 3),
+                "moving colliders' centres (frames x colliders x 3)",
+            )
+
+
 def drawn_colliders(drawn: dict[str, Any], times: np.ndarray) -> Any:
     """The colliders an NPZ's drawables describe (animsim.colliders.Colliders, moving as
     recorded at ``times``, the file's frame times), or None."""

@@ -132,3 +132,33 @@ def test_a_keyframed_collider_under_cloth_renders_the_same_from_the_npz(tmp_path
     done = cli("render", scene, "--gif", direct, "--size", "160x160", *short, "--backend", "numpy", "-q")
     assert done.returncode == 0, done.stderr
     assert alone.read_bytes() == direct.read_bytes()
+
+
+@pytest.mark.parametrize(
+    ("damage", "message"),
+    [
+        (lambda d: d["colliders"].update(params=[[1, 2]]), "collider params must be 1 x 21"),
+        (lambda d: d["colliders"]["params"][0].__setitem__(0, 7), "no sphere, box or capsule"),
+        (lambda d: d["colliders"].update(centers=[[[0, 0, 0]]]), "moving colliders' centres"),
+        (lambda d: d["colliders"].update(moving=[True]), "which of them move"),
+        (lambda d: d.update(bodies={"first": 0, "ids": ["x"], "shapes": [{"kind": "blob"}]}), "body 0 has no"),
+        (
+            lambda d: d.update(bodies={"first": 0, "ids": ["x"], "shapes": [{"kind": "sphere", "radius": 1}],
+                                       "colors": ["#3070d080"]}),
+            "is not #rrggbb",
+        ),
+    ],
+)  # fmt: skip
+def test_damaged_drawables_are_refused_when_read(
+    obstacles: Path, tmp_path: Path, cli, damage, message
+) -> None:
+    npz = np.load(obstacles / "run.npz")
+    drawn = json.loads(str(npz["drawables"]))
+    damage(drawn)
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, **{k: npz[k] for k in npz.files if k != "drawables"}, drawables=np.array(json.dumps(drawn)))
+    for command in (["render", bad, "--gif", tmp_path / "a.gif"], ["view", bad, "-o", tmp_path / "a.html"]):
+        done = cli(*command)
+        assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+        assert "bad.npz: not an animsim trajectory (drawables: " in done.stderr and message in done.stderr
+    assert not (tmp_path / "a.gif").exists() and not (tmp_path / "a.html").exists()
