@@ -127,12 +127,14 @@ def with_overrides(
     return new
 
 
-def _body_header(system: System, dynamics: Dynamics) -> dict[str, Any]:
-    """What sinks and renderers learn about bodies: rows, ids, shapes, springs to bodies."""
+def _body_header(scene: m.Scene, system: System, dynamics: Dynamics) -> dict[str, Any]:
+    """What sinks and renderers learn about bodies: rows, ids, shapes, colours (``#rrggbb`` or
+    None, per body), springs to bodies."""
     return {
         "first": system.body_first,
         "ids": system.body_ids,
         "shapes": system.body_shape,
+        "colors": [b.color for b in scene.bodies],
         "springs": header_springs(dynamics.bodies),
     }
 
@@ -409,7 +411,7 @@ def compile_scene(
             "collider_surface": solids.collider_surface,
             # trajectory files then say which springs tore when (animsim.export.trajectory)
             "springs_can_tear": can_tear,
-            **({} if bodies is None else {"bodies": _body_header(system, dynamics)}),
+            **({} if bodies is None else {"bodies": _body_header(scene, system, dynamics)}),
         },
         connectivity=connectivity([(s.id, e, base) for s, e, base in expanded]),
     )

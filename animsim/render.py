@@ -285,6 +285,7 @@ def render_trajectory(
     planes: list[tuple[np.ndarray, np.ndarray]] = []
     up = "y"
     extra: dict[str, Any] = {}
+    surfaces = has_surfaces(None if compiled is None else compiled.header)
     if compiled is not None:
         planes = compiled.header.extra.get("planes", [])
         up = up_axis(compiled.scene)
@@ -298,22 +299,30 @@ def render_trajectory(
         spring_index = np.array([p for p in keep if None not in p], dtype=np.int64).reshape(-1, 2)
         extra = _extras_for(compiled, traj.ids)
     elif getattr(traj, "drawables", None):
-        # an NPZ says what to draw itself: planes, springs (rows of its ids), looks, bodies
+        # an NPZ says what to draw itself: planes, springs (rows of its ids), looks, bodies,
+        # colliders as they moved, and whether it has surfaces to see from an angle
         from animsim.export.npz import header_extra
 
-        extra = header_extra(traj.drawables)
+        extra = header_extra(traj.drawables, traj.times)
+        surfaces = bool(traj.drawables.get("surfaces"))
         planes = extra.pop("planes")
         spring_index = np.array(traj.drawables.get("springs", []), dtype=np.int64).reshape(-1, 2)
         spring_count = len(spring_index)
         kept = np.ones(spring_count, dtype=bool)
     lo, hi = traj.bounds()
+    surface = extra.get("collider_surface")
+    if surface is not None:
+        # solid colliders stay in view too, where they are at each frame (as _BoundsSink does)
+        for t in np.asarray(traj.times, dtype=np.float64).tolist():
+            pts = surface(t)
+            lo, hi = np.minimum(lo, pts.min(axis=0)), np.maximum(hi, pts.max(axis=0))
     bounds = picture_bounds(lo, hi, planes)
     opts = with_view(
         opts,
         lo,
         hi,
         None if compiled is None else view_up(compiled.scene),
-        has_surfaces(None if compiled is None else compiled.header) or "bodies" in extra,
+        surfaces or "bodies" in extra,
     )
     sinks = _sinks(gif, mp4, opts, bounds, planes, up, progress)
     header = TrajectoryHeader(

@@ -48,6 +48,9 @@ class Thing:
     find: Callable[[Scene], Iterator[Path_]]
     #: it moves with the simulation (written to trajectory files); else scene geometry
     moves: bool = True
+    #: a property of another thing (a body's colour): it goes wherever that thing goes, so
+    #: its cells are that thing's and a refusal names that thing only
+    part_of: str | None = None
 
 
 def _particles(keyframed: bool) -> Callable[[Scene], Iterator[Path_]]:
@@ -103,6 +106,12 @@ def _colors(scene: Scene) -> Iterator[Path_]:
     for i, p in enumerate(scene.particles):
         if p.color is not None:
             yield ("particles", i, "color")
+
+
+def _body_colors(scene: Scene) -> Iterator[Path_]:
+    for i, b in enumerate(scene.bodies):
+        if b.color is not None:
+            yield ("bodies", i, "color")
 
 
 def _radii(scene: Scene) -> Iterator[Path_]:
@@ -167,6 +176,7 @@ THINGS: tuple[Thing, ...] = (
     Thing("body_sphere", "a sphere body", "`bodies:` with `shape: {type: sphere}`", _bodies("sphere")),
     Thing("body_box", "a box body", "`bodies:` with `shape: {type: box}`", _bodies("box")),
     Thing("body_capsule", "a capsule body", "`bodies:` with `shape: {type: capsule}`", _bodies("capsule")),
+    Thing("body_color", "a body's colour", "`color` of a body", _body_colors, part_of="body_box"),
     Thing(
         "plane_impulse",
         "an impulse plane",
@@ -370,6 +380,8 @@ def things_of(consumer: Consumer) -> tuple[Thing, ...]:
 
 
 def cell(thing: str, consumer: Consumer) -> Cell:
+    whole = THING[thing].part_of if thing in THING else None
+    thing = whole or thing
     for keys, refused in consumer.refuses:
         if thing in keys:
             return refused
@@ -479,6 +491,8 @@ def problems(scene: Scene, consumer: str | None = None) -> list[tuple[Path_, str
                 continue
             raise KeyError(key)
         for t in things_of(wanted):
+            if t.part_of is not None:
+                continue  # refused with the thing it belongs to, at that thing's key
             c = cell(t.key, wanted)
             if c.status == REFUSED and t.key in have:
                 pa = have[t.key][0]

@@ -110,7 +110,8 @@ def type_text(p: dict[str, Any]) -> str:
         return "true or false"
     if t == "string":
         if "pattern" in p and "#" in p["pattern"]:
-            return "colour `#rrggbb` or `#rrggbbaa`"
+            # an alternative with 8 digits takes an alpha; a body's colour does not
+            return "colour `#rrggbb` or `#rrggbbaa`" if "{8}" in p["pattern"] else "colour `#rrggbb`"
         return "text" + (" (not empty)" if p.get("minLength") else "")
     if t == "array":
         items = p.get("items", {})

@@ -15,8 +15,9 @@ import numpy as np
 from animsim.bodies import quaternion as quat
 from animsim.bodies.export import world_outline_segments
 from animsim.bodies.shapes import Box, Sphere, mesh
+from animsim.export.look import body_colors
 
-#: body colours, linear RGB, cycled by body number
+#: colours of bodies the scene gives none, RGB as drawn, cycled by body number
 COLOURS = np.array(
     [
         [0.80, 0.22, 0.16],
@@ -74,11 +75,13 @@ def draw_bodies(
 ) -> None:
     """Draw bodies ``body`` (B',) (numbers into info's shapes) at x (B',3), q (B',4)."""
     shapes = info["shapes"]
+    own = body_colors(info)
     items: list[tuple[float, int, Any]] = []  # (depth, order, draw thunk)
     order = 0
     for b, xb, qb in zip(body.tolist(), x, q, strict=True):
         shape = shapes[b]
-        base = COLOURS[b % len(COLOURS)]
+        # the scene's colour, else one of the palette's
+        base = COLOURS[b % len(COLOURS)] if own[b] is None else own[b][:3].astype(np.float32)
         if isinstance(shape, Sphere):
             proj = camera.project(xb[None])
             if not proj.visible[0]:

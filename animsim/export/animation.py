@@ -244,8 +244,9 @@ class FrameRenderer:
         """Draw one frame and return the canvas (valid until the next call).
 
         ``position`` (n, 3) m; ``index`` (n,) strictly increasing indices into
-        the id table (None: row i is id i); ``size`` (n,) m, the dot's
-        diameter (NaN or None: the renderer's ``dot_radius`` in pixels); ``color`` (n, 4) RGBA
+        the id table (None: row i is id i); ``size`` (n,) m, the particle's
+        radius, as every file writes it (animsim.export.look; NaN or None: the
+        particle's own radius, else the renderer's ``dot_radius`` in pixels); ``color`` (n, 4) RGBA
         in [0, 1] (rows with NaN, or None: DEFAULT_PARTICLE_RGBA).
         """
         canvas = self.canvas
@@ -268,12 +269,12 @@ class FrameRenderer:
         radius = np.full(n, self.dot_radius)
         if self.row_radius is not None:
             # a particle's own radius (m) draws its dot, where no emitter size says otherwise
-            own = 2.0 * self._rows_of(self.row_radius, index, n, 0.0)
+            own = self._rows_of(self.row_radius, index, n, 0.0)
             size = own if size is None else np.where(np.isfinite(size), size, np.where(own > 0, own, np.nan))
         if size is not None:
-            diameter = np.asarray(size, dtype=np.float64)
-            has = np.isfinite(diameter) & (diameter > 0)
-            radius[has] = diameter[has] / 2 * proj.px_per_m[has]
+            metres = np.asarray(size, dtype=np.float64)
+            has = np.isfinite(metres) & (metres > 0)
+            radius[has] = metres[has] * proj.px_per_m[has]
         rgba = np.empty((n, 4), dtype=np.float32)
         rgba[:] = DEFAULT_PARTICLE_RGBA
         if self.row_rgba is not None:

@@ -5,7 +5,8 @@ row: emitted particles do, from their size and colour over life. The other
 particles (listed ones and structures) keep the look the scene gives them,
 which the trajectory header carries once (``extra["particle_radius"]``: per
 id-table row, m, 0 for none; ``extra["particle_color"]``: ``#rrggbb`` or
-``#rrggbbaa`` or None per listed particle). A row's look is, in this order:
+``#rrggbbaa`` or None per listed particle; ``extra["bodies"]["colors"]``:
+``#rrggbb`` or None per rigid body, the colour of its row and so of its mesh). A row's look is, in this order:
 the frame's own value (when finite), the header's (when given), then the
 exporters' default (:data:`DEFAULT_SIZE`, opaque white).
 
@@ -25,6 +26,15 @@ DEFAULT_SIZE = 0.02  # m, the radius of a particle nothing gives a size
 DEFAULT_RGBA = (1.0, 1.0, 1.0, 1.0)  # opaque white, for a particle nothing gives a colour
 
 
+def body_colors(info: dict[str, Any] | None) -> list[np.ndarray | None]:
+    """Each rigid body's RGBA in [0, 1] (sRGB, opaque) from the header's ``bodies`` entry, or
+    None where the scene gives it no ``color``."""
+    if info is None:
+        return []
+    given = info.get("colors") or [None] * len(info["ids"])
+    return [None if c is None else np.asarray(parse_color(c), dtype=np.float64) for c in given]
+
+
 class SceneLook:
     """Per id-table row radius and RGBA from a trajectory header's extras (NaN: none given)."""
 
@@ -33,11 +43,18 @@ class SceneLook:
         extra = extra or {}
         radius = extra.get("particle_radius")
         self.radius = None if radius is None else np.asarray(radius, dtype=np.float64).reshape(-1)
-        colors = extra.get("particle_color") or []
+        colors = list(extra.get("particle_color") or [])
+        bodies = extra.get("bodies") or {}
+        body_colors = bodies.get("colors") or []
+        if any(c is not None for c in body_colors):
+            # a body's row is its centre's: its mesh vertices (PLY, VTK) carry that row's id
+            first = int(bodies["first"])
+            colors += [None] * (first + len(body_colors) - len(colors))
+            colors[first : first + len(body_colors)] = body_colors
         self.rgba: np.ndarray | None = None
         if any(c is not None for c in colors):
             rgba = np.full((len(colors), 4), np.nan)
-            for i, c in enumerate(colors):  # listed particles only: a short list
+            for i, c in enumerate(colors):  # listed particles and bodies only: a short list
                 if c is not None:
                     rgba[i] = parse_color(c)
             self.rgba = rgba

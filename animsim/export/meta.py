@@ -40,6 +40,16 @@ def commit_with_meta(data: AtomicFile, output: str | Path, meta: dict[str, Any] 
     commit_together(data, staged)
 
 
+#: metadata that differs between two runs of the same scene and seed (timings): only the
+#: ``.meta.json`` sidecar holds it, so a file that embeds the metadata (USD) is byte-identical
+RUN_DEPENDENT_KEYS = frozenset({"wall_time", "compile_time"})
+
+
+def reproducible(meta: dict[str, Any]) -> dict[str, Any]:
+    """``meta`` without :data:`RUN_DEPENDENT_KEYS`: what a data file may embed."""
+    return {k: v for k, v in meta.items() if str(k) not in RUN_DEPENDENT_KEYS}
+
+
 UNITS = "SI: m, kg, s"
 _AXES = "xyz"
 

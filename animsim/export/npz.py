@@ -20,7 +20,12 @@ run.npz`` draw the run without its scene: ``planes`` (``[point, normal]``
 pairs), ``springs`` (pairs of rows of ``ids``), per row of the header's ids
 ``radius`` (m, 0: none), ``color`` (``#rrggbb`` or null) and ``pinned``, and
 with rigid bodies ``bodies`` (``first`` row, ``ids``, each ``shape``:
-``kind`` with ``size``, ``radius`` or ``radius`` and ``length``).
+``kind`` with ``size``, ``radius`` or ``radius`` and ``length``, and each
+``color``, ``#rrggbb`` or null), with solid colliders ``colliders``
+(``params``: each one's packed geometry as animsim.colliders.Shape.packed
+lays it out; ``moving``: keyframed or not; ``centers``: the keyframed ones'
+centres at every frame), and ``surfaces`` when the scene has cloth or
+meshes (pictures then default to a three-quarter 3D view).
 
 Unlike the CSV, the NPZ keeps frames in which no particle is alive (a
 particle system before its first birth), so it round-trips a run exactly.
@@ -86,6 +91,13 @@ class NpzSink:
         self._ids = list(header.ids)
         self._torn = TornSprings() if header.extra.get("springs_can_tear") else None
         self._drawables = drawables(header)
+        # keyframed colliders: where each is at every frame, so a picture of the file alone
+        # moves them as the run did
+        self._colliders = scene_colliders(header)
+        self._moving = (
+            [] if self._colliders is None else np.flatnonzero(np.asarray(self._colliders.moving) >= 0)
+        )
+        self._collider_at: list[list[list[float]]] = []
 
     def write(self, frame: Frame) -> None:
         self._ids.extend(frame.new_ids)
@@ -105,6 +117,10 @@ class NpzSink:
                 self._write_bodies(frame)
         if self._torn is not None:
             self._torn.update(frame)
+        if len(self._moving):
+            assert self._colliders is not None
+            at = self._colliders.params[self._moving, 1:4] + self._colliders.offsets(frame.time)[self._moving]
+            self._collider_at.append(at.tolist())
         self._rows += n
         self._frame_time.append(frame.time)
         self._frame_start.append(self._rows)
@@ -129,6 +145,8 @@ class NpzSink:
                     _write_array(zf, "ids", np.array(self._ids, dtype=str))
                     _write_array(zf, "frame_time", np.array(self._frame_time, dtype=np.float64))
                     _write_array(zf, "frame_start", np.array(self._frame_start, dtype=np.int64))
+                    if len(self._moving):
+                        self._drawables["colliders"]["centers"] = self._collider_at
                     _write_array(zf, "drawables", np.array(json.dumps(self._drawables, sort_keys=True)))
                     if self._torn is not None:
                         spring, time = self._torn.arrays()
@@ -189,12 +207,125 @@ def drawables(header: TrajectoryHeader) -> dict[str, Any]:
                     value = getattr(sh, key)
                     d[key] = [float(v) for v in value] if key == "size" else float(value)
             shapes.append(d)
-        out["bodies"] = {"first": int(bodies["first"]), "ids": list(bodies["ids"]), "shapes": shapes}
+        out["bodies"] = {
+            "first": int(bodies["first"]),
+            "ids": list(bodies["ids"]),
+            "shapes": shapes,
+            "colors": list(bodies.get("colors") or [None] * len(shapes)),
+        }
+    colliders = scene_colliders(header)
+    if colliders is not None:
+        out["colliders"] = {
+            "params": [[float(v) for v in p] for p in colliders.params],
+            "moving": [bool(m >= 0) for m in np.asarray(colliders.moving).tolist()],
+        }
+    if any(c.kind == "mesh" for c in header.connectivity):
+        out["surfaces"] = True  # cloth and meshes: the picture is a three-quarter 3D view
     return out
 
 
-def header_extra(drawn: dict[str, Any]) -> dict[str, Any]:
-    """A trajectory header's ``extra`` (and springs) from an NPZ's drawables, for the drawers."""
+def scene_colliders(header: TrajectoryHeader) -> Any:
+    """The scene's solid colliders (animsim.colliders.Colliders), or None: the header carries
+    their drawing function, whose owner they are."""
+    surface = (header.extra or {}).get("collider_surface")
+    return getattr(surface, "__self__", None)
+
+
+class RecordedMotion:
+    """Where the keyframed colliders were at each recorded frame, as the colliders' motion:
+    ``motion(t)`` gives the centres (M, 3) at the frame nearest ``t`` (pictures ask at the
+    frames' own times)."""
+
+    def __init__(self, times: np.ndarray, centers: np.ndarray) -> None:
+        self.times = np.asarray(times, dtype=np.float64)
+        self.centers = np.asarray(centers, dtype=np.float64).reshape(len(self.times), -1, 3)
+
+    def __call__(self, t: float) -> tuple[np.ndarray, None]:
+        k = int(np.clip(np.searchsorted(self.times, t), 0, len(self.times) - 1))
+        if k > 0 and abs(self.times[k - 1] - t) <= abs(self.times[k] - t):
+            k -= 1
+        return self.centers[k], None
+
+
+_BODY_KEYS = {"box": ("size",), "sphere": ("radius",), "capsule": ("radius", "length")}
+
+
+def check_drawables(drawn: dict[str, Any], frames: int) -> None:
+    """Raise ValueError naming the first part of an NPZ's ``drawables`` (its bodies and
+    colliders) that no run writes, so a damaged or hand-made file is refused when it is read
+    rather than failing while it is drawn."""
+    import re
+
+    from animsim.colliders import KIND_NAMES, PARAMS
+
+    def numbers(value: Any, shape: tuple[int, ...], what: str) -> np.ndarray:
+        try:
+            arr = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"drawables: {what} are not numbers") from None
+        if arr.shape != shape or not np.isfinite(arr).all():
+            raise ValueError(f"drawables: {what} must be {' x '.join(map(str, shape))} finite numbers")
+        return arr
+
+    bodies = drawn.get("bodies")
+    if bodies is not None:
+        if not isinstance(bodies, dict) or not isinstance(bodies.get("shapes"), list):
+            raise ValueError("drawables: bodies must say their shapes")
+        for b, d in enumerate(bodies["shapes"]):
+            keys = _BODY_KEYS.get(d.get("kind")) if isinstance(d, dict) else None
+            if keys is None:
+                raise ValueError(f"drawables: body {b} has no box, sphere or capsule shape")
+            for key in keys:
+                size = numbers(d.get(key), (3,) if key == "size" else (), f"body {b}'s {key}")
+                if (size < 0).any():
+                    raise ValueError(f"drawables: body {b}'s {key} is negative")
+        colors = bodies.get("colors") or []
+        for b, c in enumerate(colors):
+            if c is not None and not (isinstance(c, str) and re.fullmatch(r"#[0-9a-fA-F]{6}", c)):
+                raise ValueError(f"drawables: body {b}'s colour {c!r} is not #rrggbb")
+    spec = drawn.get("colliders")
+    if spec is not None:
+        if not isinstance(spec, dict) or not isinstance(spec.get("params"), list):
+            raise ValueError("drawables: colliders must list their params")
+        count = len(spec["params"])
+        params = numbers(spec["params"], (count, PARAMS), "collider params")
+        if count and not np.isin(params[:, 0], list(KIND_NAMES)).all():
+            raise ValueError("drawables: a collider is no sphere, box or capsule")
+        moving = spec.get("moving", [False] * count)
+        if not (
+            isinstance(moving, list) and len(moving) == count and all(isinstance(m, bool) for m in moving)
+        ):
+            raise ValueError("drawables: colliders must say which of them move")
+        if any(moving):
+            numbers(
+                spec.get("centers"),
+                (frames, sum(moving), 3),
+                "moving colliders' centres (frames x colliders x 3)",
+            )
+
+
+def drawn_colliders(drawn: dict[str, Any], times: np.ndarray) -> Any:
+    """The colliders an NPZ's drawables describe (animsim.colliders.Colliders, moving as
+    recorded at ``times``, the file's frame times), or None."""
+    spec = drawn.get("colliders")
+    if not spec or not spec.get("params"):
+        return None
+    from animsim.colliders import Colliders, _shape_of
+
+    shapes = [_shape_of(np.asarray(p, dtype=np.float64), 0.0) for p in spec["params"]]
+    moving = np.full(len(shapes), -1, dtype=np.int64)
+    motion = None
+    which = np.flatnonzero(spec.get("moving", [False] * len(shapes)))
+    centers = spec.get("centers")
+    if len(which) and centers is not None and len(centers) == len(times):
+        moving[which] = np.arange(len(which))
+        motion = RecordedMotion(times, np.asarray(centers, dtype=np.float64))
+    return Colliders(shapes, np.zeros(0), motion=motion, moving=moving)
+
+
+def header_extra(drawn: dict[str, Any], times: Any = None) -> dict[str, Any]:
+    """A trajectory header's ``extra`` (and springs) from an NPZ's drawables, for the drawers;
+    ``times``: the file's frame times, at which its keyframed colliders were recorded."""
 
     extra: dict[str, Any] = {
         "planes": [(np.array(p, dtype=float), np.array(q, dtype=float)) for p, q in drawn.get("planes", [])],
@@ -213,8 +344,12 @@ def header_extra(drawn: dict[str, Any]) -> dict[str, Any]:
             "first": bodies["first"],
             "ids": bodies["ids"],
             "shapes": [make[d["kind"]](d) for d in bodies["shapes"]],
+            "colors": list(bodies.get("colors") or [None] * len(bodies["shapes"])),
             "springs": None,
         }
+    colliders = drawn_colliders(drawn, np.zeros(0) if times is None else np.asarray(times, dtype=np.float64))
+    if colliders is not None:
+        extra["collider_surface"] = colliders.surface_points
     return extra
 
 

@@ -196,6 +196,10 @@ def _read_npz(p: Path) -> Trajectory:
         if "drawables" in z.files:
             drawn = json.loads(str(z["drawables"]))
             traj.drawables = drawn if isinstance(drawn, dict) else None
+            if traj.drawables is not None:
+                from animsim.export.npz import check_drawables
+
+                check_drawables(traj.drawables, len(traj.frame_time))
         return traj
 
 

@@ -88,7 +88,9 @@ recorded at the step nearest ``k / fps`` is time code ``k``, so players and
 Blender step through whole frames. Only when two frames would share a whole
 number is the code ``t * rate`` itself. The exact frame times and steps are
 always in ``customLayerData`` (``animsim`` dictionary, ``frameTimes`` and
-``frameSteps``), together with the run's ``close`` metadata (status and so on).
+``frameSteps``), together with the run's ``close`` metadata (status and so on)
+but for its timings (``wall_time``, ``compile_time``), which only the
+``.meta.json`` sidecar holds, so the same scene and seed give the same bytes.
 
 Binary crate
 ------------
@@ -135,8 +137,8 @@ import numpy as np
 
 from animsim.atomic import AtomicFile
 from animsim.errors import SimulationError
-from animsim.export.look import DEFAULT_RGBA, DEFAULT_SIZE, SceneLook
-from animsim.export.meta import meta_file
+from animsim.export.look import DEFAULT_RGBA, DEFAULT_SIZE, SceneLook, body_colors
+from animsim.export.meta import meta_file, reproducible
 from animsim.export.ply import validate_frame
 from animsim.export.topology import TornShapes
 from animsim.record import Connectivity, Frame, TrajectoryHeader
@@ -593,7 +595,8 @@ class UsdaSink:
         codes, rate, even = time_codes(self._times, uneven)
         codes_text = [format_time_code(c) for c in codes]
         root = prim_name(self._scene)
-        info = {k: v for k, v in meta.items() if str(k) not in RESERVED_META_KEYS}
+        # Timings stay in the sidecar: the same run writes the same bytes (animsim.export.meta).
+        info = {k: v for k, v in reproducible(meta).items() if str(k) not in RESERVED_META_KEYS}
         info["timeCodes"] = "frame index" if even else f"time * {rate!r}"
         w = out.write
         w(f"{USDA_MAGIC}\n(\n")
@@ -713,6 +716,7 @@ class _BodyPrims:
         self.first = int(info["first"])
         self.ids = list(info["ids"])
         self.shapes = tuple(info["shapes"])
+        self.colors = body_colors(info)
         self.translate: list[np.ndarray] = []
         self.orient: list[np.ndarray] = []
 
@@ -750,7 +754,7 @@ class _BodyPrims:
             for code, q in zip(codes, self.orient, strict=True):
                 w(f"{pad}{INDENT}{code}: {format_tuples(q[b : b + 1], 4)[1:-1]},\n")
             w(f'{pad}}}\n{pad}uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:orient"]\n\n')
-            _write_body_shape(w, shape, pad)
+            _write_body_shape(w, shape, pad, self.colors[b])
             w(f"{INDENT}}}\n")
 
 
@@ -759,8 +763,9 @@ def _body_plan(header: TrajectoryHeader) -> _BodyPrims | None:
     return None if info is None else _BodyPrims(info)
 
 
-def _write_body_shape(w: Callable[[str], Any], shape: Any, pad: str) -> None:
-    """The body's shape as a UsdGeom gprim named "shape", in the body frame."""
+def _write_body_shape(w: Callable[[str], Any], shape: Any, pad: str, rgba: np.ndarray | None = None) -> None:
+    """The body's shape as a UsdGeom gprim named "shape", in the body frame; with the scene's
+    colour (sRGB ``rgba``) as its constant ``displayColor``, decoded to linear like the points'."""
     inner = pad + INDENT
     kind = shape.kind
     if kind == "box":
@@ -785,4 +790,6 @@ def _write_body_shape(w: Callable[[str], Any], shape: Any, pad: str) -> None:
         w(f"{inner}float3[] extent = [({-r!r}, {-top!r}, {-r!r}), ({r!r}, {top!r}, {r!r})]\n")
         w(f"{inner}double height = {h!r}\n")
         w(f"{inner}double radius = {r!r}\n")
+    if rgba is not None:
+        w(f"{inner}color3f[] primvars:displayColor = {format_tuples(srgb_to_linear(rgba[None, :3]), 3)}\n")
     w(f"{pad}}}\n")

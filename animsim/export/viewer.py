@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from animsim.colliders import KIND_NAMES
-from animsim.export.look import SceneLook
+from animsim.export.look import SceneLook, body_colors
 from animsim.export.npz import header_extra
 from animsim.export.raster import ORTHO_VIEWS, up_axis
 from animsim.measures.energy_parts import energies_from_trajectory
@@ -480,7 +480,9 @@ def dense_frames(traj: Any) -> dict[str, np.ndarray | None]:
     """A long-form :class:`~animsim.export.trajectory.Trajectory` as (F, N, ...) arrays.
 
     Particles are the trajectory's id table; a particle not alive in a frame
-    has a NaN row. Vectorised: one scatter per array.
+    has a NaN row; ``size`` is the emitted particles' radius, m, as the files
+    write it (the viewer draws diameters: :func:`dot_diameters`). Vectorised:
+    one scatter per array.
     """
     f, n = traj.frame_count, len(traj.ids)
     frame_of = np.repeat(np.arange(f), np.diff(traj.frame_start))
@@ -569,7 +571,12 @@ def _y_to(direction: np.ndarray) -> np.ndarray:
 def collider_shapes(compiled: Any, times: np.ndarray | None = None) -> list[Shape]:
     """The scene's solid colliders (spheres, boxes, capsules) as shapes; keyframed ones with a
     position per frame of ``times``."""
-    surface = compiled.header.extra.get("collider_surface")
+    return colliders_as_shapes(compiled.header.extra.get("collider_surface"), times)
+
+
+def colliders_as_shapes(surface: Any, times: np.ndarray | None = None) -> list[Shape]:
+    """Solid colliders as shapes, from a header's ``collider_surface`` (a scene's, or an NPZ's
+    rebuilt by animsim.export.npz.header_extra); keyframed ones with a position per frame."""
     # the header carries the colliders' drawing function; the colliders are its owner
     colliders = getattr(surface, "__self__", None)
     if colliders is None:
@@ -618,6 +625,7 @@ def body_shapes(compiled: Any, traj: Any, info: dict[str, Any] | None = None) ->
     first = int(info["first"])
     f = traj.frame_count
     frame_of = np.repeat(np.arange(f), np.diff(traj.frame_start))
+    own = body_colors(info)
     out = []
     for b, shape in enumerate(info["shapes"]):
         row = traj.ids.index(info["ids"][b]) if info["ids"][b] in traj.ids else first + b
@@ -629,7 +637,8 @@ def body_shapes(compiled: Any, traj: Any, info: dict[str, Any] | None = None) ->
         pos[frame_of[rows]] = np.asarray(traj.position)[rows]
         q[frame_of[rows]] = np.asarray(orientation)[rows]
         q /= np.linalg.norm(q, axis=1, keepdims=True)
-        common = {"position": pos, "orientation": q, "color": BODY_RGB}
+        color = BODY_RGB if own[b] is None else tuple(float(c) for c in own[b][:3])
+        common = {"position": pos, "orientation": q, "color": color}
         if shape.kind == "box":
             out.append(Shape("box", half_extents=tuple(0.5 * float(v) for v in shape.size), **common))
         elif shape.kind == "sphere":
@@ -648,13 +657,19 @@ def scene_shapes(compiled: Any, times: np.ndarray | None = None) -> list[Shape]:
     return planes_as_shapes(compiled.header.extra.get("planes", [])) + collider_shapes(compiled, times)
 
 
+def dot_diameters(radius: np.ndarray | None) -> np.ndarray | None:
+    """The viewer's dot sizes (diameters, m) from particle radii (m, NaN: none): every file
+    and the scene mean a particle's radius by its size (animsim.export.look)."""
+    return None if radius is None else 2.0 * np.asarray(radius, dtype=np.float64)
+
+
 def scene_look(compiled: Any, ids: Sequence[str], frames: int, dense: dict[str, Any]) -> tuple[Any, Any]:
     """(colors (F, N, 4), sizes (F, N)) for the viewer: the scene's own colour and radius of
     each particle (animsim.export.look) where the run's frames give none. Sizes are the dots'
     diameters, as the viewer draws them."""
 
     look = SceneLook(compiled.header.extra)
-    colors, sizes = dense.get("color"), dense.get("size")
+    colors, sizes = dense.get("color"), dot_diameters(dense.get("size"))
     if look.empty:
         return colors, sizes
     row_of = {pid: k for k, pid in enumerate(compiled.system.ids)}
@@ -689,17 +704,18 @@ def panel_from_trajectory(
     springs = pinned = None
     shapes: list[Shape] = []
     drawn = None
-    colors, sizes = dense["color"], dense["size"]
+    colors, sizes = dense["color"], dot_diameters(dense["size"])
     if compiled is None and getattr(traj, "drawables", None):
         # an NPZ says what to draw itself (animsim.export.npz)
         from animsim.export.look import SceneLook
 
         spec = traj.drawables
-        extra = header_extra(spec)
+        extra = header_extra(spec, traj.times)
         springs = np.array(spec.get("springs", []), dtype=np.int64).reshape(-1, 2)
         pinned = np.zeros(len(traj.ids), dtype=bool)
         pinned[: len(extra["particle_pinned"])] = extra["particle_pinned"][: len(traj.ids)]
         shapes = planes_as_shapes(extra["planes"])
+        shapes += colliders_as_shapes(extra.get("collider_surface"), np.asarray(traj.times, dtype=np.float64))
         if "bodies" in extra:
             shapes += body_shapes(None, traj, extra["bodies"])
         look = SceneLook(extra)

@@ -33,7 +33,7 @@ from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 from animsim import methods
 from animsim.errors import Diagnostic, SceneError, UsageError
 from animsim.scene.meshes import check_meshes
-from animsim.scene.models import HEX_COLOR_PATTERN, Scene
+from animsim.scene.models import HEX_COLOR_PATTERN, OPAQUE_COLOR_PATTERN, Scene
 from animsim.scene.validate import check_scene, partial_scene
 
 Path_ = tuple[str | int, ...]
@@ -912,6 +912,7 @@ def _mapping_hint(err: dict[str, Any]) -> str:
 # Patterns of the scene language, said in words (pydantic would show the regex).
 _PATTERN_WORDS = {
     HEX_COLOR_PATTERN: "a colour written #rrggbb or #rrggbbaa in hexadecimal (e.g. #ff8000)",
+    OPAQUE_COLOR_PATTERN: "a colour written #rrggbb in hexadecimal (e.g. #3070d0); a body is opaque",
 }
 
 

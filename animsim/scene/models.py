@@ -114,6 +114,8 @@ Id = Annotated[
     Field(description="a unique string or integer; integers become strings"),
 ]
 HEX_COLOR_PATTERN = r"^#([0-9a-fA-F]{6}|[0-9a-fA-F]{8})$"
+#: a rigid body is drawn opaque (its faces hide what is behind them): no alpha
+OPAQUE_COLOR_PATTERN = r"^#[0-9a-fA-F]{6}$"
 HexColor = Annotated[
     str,
     Field(
@@ -575,10 +577,10 @@ class LifetimeDistribution(Model):
 
 
 class SizeOverLife(Model):
-    """Particle size for rendering, linear from birth to death."""
+    """Particle size for rendering: its radius, linear from birth to death."""
 
-    start: NonNegative = Doc(0.02, "size at birth", unit="m")
-    end: NonNegative = Doc(0.02, "size at death", unit="m", example=0.1)
+    start: NonNegative = Doc(0.02, "radius at birth", unit="m")
+    end: NonNegative = Doc(0.02, "radius at death", unit="m", example=0.1)
 
 
 class ColorOverLife(Model):
@@ -624,7 +626,7 @@ class Emitter(Model):
     )
     mass: Positive = Doc(0.01, "mass of each particle", unit="kg")
     size: SizeOverLife = Doc(
-        SizeOverLife(), "size for rendering, start and end of life", example={"start": 0.02, "end": 0.1}
+        SizeOverLife(), "radius for rendering, start and end of life", example={"start": 0.02, "end": 0.1}
     )
     color: ColorOverLife = Doc(
         ColorOverLife(),
@@ -912,6 +914,9 @@ class Body(Model):
     )
     friction: NonNegative = Field(
         0.5, description="Coulomb coefficient against other bodies (geometric mean of the two)"
+    )
+    color: Annotated[str, Field(pattern=OPAQUE_COLOR_PATTERN)] | None = Field(
+        None, examples=["#3070d0"], description="for rendering, #rrggbb (a body is opaque)"
     )
 
     @field_validator("inertia")

@@ -331,6 +331,13 @@ THING_SCENES: dict[str, dict[str, Any]] = {
 }
 
 
+# a blue box body: the palette would draw it red, white in PLY and VTK, uncoloured in USD
+BODY_BLUE = "#3070d0"
+THING_SCENES["body_color"] = {
+    "bodies": [{**THING_SCENES["body_box"]["bodies"][0], "color": BODY_BLUE}],
+    "planes": THING_SCENES["body_box"]["planes"],
+}
+
 # the mesh of the contact cases has a radius (for particle contacts); a radius is its own row
 THING_SCENES["mesh"] = {
     "structures": [{k: v for k, v in MOVERS["mesh"]["structures"][0].items() if k != "radius"}]
@@ -422,6 +429,10 @@ def _show(consumer: str, thing: str, path: Path, tmp: Path) -> None:
             assert "face" in names and data["face"].count > 0
         if thing == "strand":
             assert "edge" in names and data["edge"].count == 2
+        if thing == "body_color":  # every vertex of the box's mesh has the body's colour
+            v = data["vertex"]
+            got = {tuple(int(v[c][k]) for c in ("red", "green", "blue")) for k in range(v.count)}
+            assert got == {_rgb8(BODY_BLUE)}, got
     elif consumer in ("usda", "usdc"):
         usd = pytest.importorskip("pxr.Usd")
         out = tmp / f"out.{consumer}"
@@ -435,10 +446,19 @@ def _show(consumer: str, thing: str, path: Path, tmp: Path) -> None:
             "strand": "BasisCurves",
             "body_sphere": "Sphere",
             "body_box": "Cube",
+            "body_color": "Cube",
             "body_capsule": "Capsule",
             "tearing": "Mesh",
         }.get(thing, "Points")
         assert expect in kinds, kinds
+        if thing == "body_color":  # the shape's displayColor: the sRGB colour decoded to linear
+            from pxr import UsdGeom
+
+            cube = next(UsdGeom.Cube(p) for p in stage.Traverse() if p.GetTypeName() == "Cube")
+            (rgb,) = cube.GetDisplayColorAttr().Get()
+            srgb = np.array(_rgb8(BODY_BLUE)) / 255
+            linear = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+            assert tuple(rgb) == pytest.approx(tuple(linear), abs=1e-6)
         if thing == "tearing":  # the torn springs' faces leave the mesh as they tear
             from pxr import UsdGeom
 
@@ -461,6 +481,11 @@ def _show(consumer: str, thing: str, path: Path, tmp: Path) -> None:
             assert data.GetNumberOfPolys() > 0
         if thing == "strand":
             assert data.GetNumberOfLines() > 0
+        if thing == "body_color":
+            from vtk.util.numpy_support import vtk_to_numpy
+
+            rgba = vtk_to_numpy(data.GetPointData().GetArray("color"))
+            assert {tuple(c[:3]) for c in rgba.tolist()} == {_rgb8(BODY_BLUE)}
     elif consumer == "numba":
         pytest.importorskip("numba")
         a = api.simulate(scene, backend="numba")
@@ -503,13 +528,22 @@ def _show(consumer: str, thing: str, path: Path, tmp: Path) -> None:
             assert [sh for sh in panel["shapes"] if sh["kind"] == "plane"], panel["shapes"]
         if thing in ("cloth", "strand", "soft_box", "mesh", "tearing"):
             assert panel["springs"] is not None
+        if thing == "body_color":
+            (box,) = [sh for sh in panel["shapes"] if sh["kind"] == "box"]
+            assert box["color"][:3] == pytest.approx([c / 255 for c in _rgb8(BODY_BLUE)]), box
     else:
         raise AssertionError(f"no reader for {consumer}")
+
+
+def _rgb8(hex_color: str) -> tuple[int, int, int]:
+    return tuple(int(hex_color[i : i + 2], 16) for i in (1, 3, 5))  # type: ignore[return-value]
 
 
 def _without(thing: str) -> dict[str, Any]:
     """The thing's scene with only the thing taken out, so that a picture that differs shows it."""
     scene = THING_SCENES[thing]
+    if thing == "body_color":
+        return {**scene, "bodies": [{k: v for k, v in b.items() if k != "color"} for b in scene["bodies"]]}
     if thing in ("particle_color", "particle_radius", "keyframed_particle"):
         key = {"particle_color": "color", "particle_radius": "radius", "keyframed_particle": "keyframes"}[
             thing

@@ -180,7 +180,7 @@ def test_missing_colour_rows_and_sizes_use_the_defaults():
     renderer = FrameRenderer(camera, time_stamp=False)
     pos = np.array([[1.0, 2.0, 2.0], [3.0, 2.0, 2.0]])
     colour = np.array([[np.nan] * 4, [1.0, 0.0, 0.0, 1.0]])
-    size = np.array([np.nan, 1.0])  # 1 m diameter: radius 5 px
+    size = np.array([np.nan, 0.5])  # 0.5 m radius: 5 px
     canvas = renderer.render(pos, size=size, color=colour)
     lit = (np.abs(canvas.rgb - np.float32(BACKGROUND_RGB)) > 1e-3).any(axis=2)
     left, right = lit[:, :20].sum(), lit[:, 20:].sum()
