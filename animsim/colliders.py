@@ -332,7 +332,7 @@ class Colliders(StepStage):
         return self.apply(state, x, v, t0, t1, t1 - t0, project_only=True)
 
 
-def _shape_of(params: np.ndarray, friction: float) -> Shape:
+def shape_of(params: np.ndarray, friction: float) -> Shape:
     return Shape(
         kind=int(params[0]),
         center=params[1:4],
@@ -447,7 +447,7 @@ def resolve_numpy(
     lo_p, hi_p, longest = _boxes(x_old, x, radius, mov, project_only)
     changed = False
     for c in range(params.shape[0]):  # colliders, not particles
-        shape = _shape_of(params[c], float(friction[c]))
+        shape = shape_of(params[c], float(friction[c]))
         center = shape.center + off1[c]
         u = (off1[c] - off0[c]) / dt  # the collider's velocity over the step
         near = _overlap(lo_p, hi_p, *_grown_box(bounds[c], off0[c], off1[c], longest))

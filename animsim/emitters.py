@@ -109,6 +109,7 @@ from typing import Any
 
 import numpy as np
 
+from animsim.colors import parse_color
 from animsim.elements import StepStage, compile_helpers, numba_helper
 from animsim.record import Frame
 from animsim.scene import models as m
@@ -482,14 +483,6 @@ def _numba_kernels() -> dict[str, Any]:
 def _name_words(name: str) -> list[int]:
     digest = hashlib.sha256(name.encode("utf-8")).digest()
     return [int.from_bytes(digest[4 * i : 4 * i + 4], "little") for i in range(NAME_HASH_WORDS)]
-
-
-def parse_color(text: str) -> np.ndarray:
-    """``#rrggbb`` or ``#rrggbbaa`` -> RGBA floats in [0, 1] (alpha 1 when omitted)."""
-    digits = text[1:]
-    if len(digits) == 6:
-        digits += "ff"
-    return np.array([int(digits[i : i + 2], 16) / 255.0 for i in range(0, 8, 2)])
 
 
 @dataclass(frozen=True)

@@ -301,7 +301,7 @@ def render_trajectory(
     elif getattr(traj, "drawables", None):
         # an NPZ says what to draw itself: planes, springs (rows of its ids), looks, bodies,
         # colliders as they moved, and whether it has surfaces to see from an angle
-        from animsim.export.npz import header_extra
+        from animsim.export.drawables import header_extra
 
         extra = header_extra(traj.drawables, traj.times)
         surfaces = bool(traj.drawables.get("surfaces"))

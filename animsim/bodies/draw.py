@@ -13,9 +13,8 @@ from typing import Any
 import numpy as np
 
 from animsim.bodies import quaternion as quat
-from animsim.bodies.export import world_outline_segments
+from animsim.bodies.export import body_colors, world_outline_segments
 from animsim.bodies.shapes import Box, Sphere, mesh
-from animsim.export.look import body_colors
 
 #: colours of bodies the scene gives none, RGB as drawn, cycled by body number
 COLOURS = np.array(

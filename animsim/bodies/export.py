@@ -15,6 +15,7 @@ import numpy as np
 from animsim.bodies import quaternion as quat
 from animsim.bodies.shapes import mesh, outline
 from animsim.bodies.springs import BodySprings
+from animsim.colors import parse_color
 
 if TYPE_CHECKING:  # the shapes' module loads when a shape is drawn: a writer only asks body_info
     from animsim.bodies.shapes import BodyShape
@@ -129,3 +130,12 @@ def body_mesh_rows(
         tris.append(faces + base)
         base += len(verts)
     return np.concatenate(pos), np.concatenate(vel), np.concatenate(ids), np.concatenate(tris)
+
+
+def body_colors(info: dict[str, Any] | None) -> list[np.ndarray | None]:
+    """Each rigid body's RGBA in [0, 1] (sRGB, opaque) from the header's ``bodies`` entry, or
+    None where the scene gives it no ``color``."""
+    if info is None:
+        return []
+    given = info.get("colors") or [None] * len(info["ids"])
+    return [None if c is None else np.asarray(parse_color(c), dtype=np.float64) for c in given]

@@ -35,7 +35,7 @@ import numpy as np
 from animsim.atomic import AtomicFile
 from animsim.bodies.draw import draw_bodies, draw_body_springs
 from animsim.bodies.export import body_info
-from animsim.emitters import parse_color
+from animsim.colors import parse_color
 from animsim.errors import EXIT_USAGE, AnimsimError, SimulationError
 from animsim.export.raster import (
     BACKGROUND_RGB,

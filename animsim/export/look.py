@@ -20,19 +20,10 @@ from typing import Any
 
 import numpy as np
 
-from animsim.emitters import parse_color
+from animsim.colors import parse_color
 
 DEFAULT_SIZE = 0.02  # m, the radius of a particle nothing gives a size
 DEFAULT_RGBA = (1.0, 1.0, 1.0, 1.0)  # opaque white, for a particle nothing gives a colour
-
-
-def body_colors(info: dict[str, Any] | None) -> list[np.ndarray | None]:
-    """Each rigid body's RGBA in [0, 1] (sRGB, opaque) from the header's ``bodies`` entry, or
-    None where the scene gives it no ``color``."""
-    if info is None:
-        return []
-    given = info.get("colors") or [None] * len(info["ids"])
-    return [None if c is None else np.asarray(parse_color(c), dtype=np.float64) for c in given]
 
 
 class SceneLook:

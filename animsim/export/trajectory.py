@@ -197,7 +197,8 @@ def _read_npz(p: Path) -> Trajectory:
             drawn = json.loads(str(z["drawables"]))
             traj.drawables = drawn if isinstance(drawn, dict) else None
             if traj.drawables is not None:
-                from animsim.export.npz import check_drawables
+                # the colliders' and bodies' shapes load only for a file that carries drawables
+                from animsim.export.drawables import check_drawables
 
                 check_drawables(traj.drawables, len(traj.frame_time))
         return traj

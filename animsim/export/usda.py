@@ -136,8 +136,9 @@ from typing import IO, Any
 import numpy as np
 
 from animsim.atomic import AtomicFile
+from animsim.bodies.export import body_colors
 from animsim.errors import SimulationError
-from animsim.export.look import DEFAULT_RGBA, DEFAULT_SIZE, SceneLook, body_colors
+from animsim.export.look import DEFAULT_RGBA, DEFAULT_SIZE, SceneLook
 from animsim.export.meta import meta_file, reproducible
 from animsim.export.ply import validate_frame
 from animsim.export.topology import TornShapes

@@ -37,9 +37,10 @@ from typing import Any
 
 import numpy as np
 
+from animsim.bodies.export import body_colors
 from animsim.colliders import KIND_NAMES
-from animsim.export.look import SceneLook, body_colors
-from animsim.export.npz import header_extra
+from animsim.export.drawables import header_extra
+from animsim.export.look import SceneLook
 from animsim.export.raster import ORTHO_VIEWS, up_axis
 from animsim.measures.energy_parts import energies_from_trajectory
 
