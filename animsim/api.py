@@ -11,6 +11,7 @@ Bad scenes raise :class:`animsim.SceneError`, whose ``diagnostics`` are the
 
 from __future__ import annotations
 
+import json
 import math
 import os
 from collections.abc import Callable, Sequence
@@ -482,12 +483,27 @@ def _prepared(source: str | Path | Scene, limits: Any, **overrides: Any) -> tupl
 
 def _refuse_bodies_in_file(traj: Any, path: Path, what: str, instead: str) -> None:
     """A trajectory file with rigid bodies and not their shapes (a CSV; an NPZ carries them),
-    drawn without its scene, would show them as dots: refused before anything is drawn (the
-    support table's cell, for a file without a scene)."""
+    drawn without its scene, would show them as dots; a run with solid colliders (its
+    sidecar says how many) from a file that does not carry them would leave them out.
+    Both refused before anything is drawn (the support table's cells, for a file without
+    a scene)."""
     q = traj.orientation
-    if q is not None and np.isfinite(q).any() and not (traj.drawables or {}).get("bodies"):
+    drawn = traj.drawables or {}
+    if q is not None and np.isfinite(q).any() and not drawn.get("bodies"):
         raise UsageError(
             f"{path}: the file holds rigid bodies, which {what} draws as dots at their centres; {instead}"
+        )
+    from animsim.export.meta import meta_path
+
+    try:
+        count = json.loads(meta_path(path).read_text(encoding="utf-8")).get("solid_colliders", 0)
+    except (OSError, ValueError, AttributeError):  # no sidecar, or not one of ours: nothing to say
+        count = 0
+    if isinstance(count, int) and count > 0 and not drawn.get("colliders"):
+        raise UsageError(
+            f"{path}: the run had {count} solid collider(s), which this file does not carry, so "
+            f"{what} would leave them out; {instead}, or give the scene with --scene, or write the "
+            "run as NPZ (-o run.npz), which carries them"
         )
 
 

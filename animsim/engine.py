@@ -530,6 +530,9 @@ def _meta(
         "wall_time": wall,
         "status": status,
     }
+    colliders = len(compiled.scene.colliders or [])
+    if colliders:  # a CSV does not carry them: its drawers refuse to leave them out unsaid
+        meta["solid_colliders"] = colliders
     if failure is not None:
         meta["failure"] = failure.as_dict()
     meta.update(run_facts(compiled, state))

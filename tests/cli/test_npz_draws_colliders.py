@@ -162,3 +162,21 @@ def test_damaged_drawables_are_refused_when_read(
         assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
         assert "bad.npz: not an animsim trajectory (drawables: " in done.stderr and message in done.stderr
     assert not (tmp_path / "a.gif").exists() and not (tmp_path / "a.html").exists()
+
+
+def test_a_csv_of_a_run_with_colliders_is_refused_without_its_scene(obstacles: Path, cli) -> None:
+    """A CSV holds points only: drawn alone it would leave the colliders out without a word.
+    Its sidecar says the run had them, so render and view refuse it and say what works;
+    with --scene both draw it."""
+    csv = obstacles / "run.csv"
+    done = cli("run", obstacles / "obstacles.yaml", "-o", csv, "--backend", "numpy", "-q")
+    assert done.returncode == 0, done.stderr
+    assert json.loads((obstacles / "run.csv.meta.json").read_text())["solid_colliders"] == 3
+    for args in (("render", csv, "--gif", obstacles / "c.gif"), ("view", csv, "-o", obstacles / "c.html")):
+        refused = cli(*args)
+        assert refused.returncode == 2, refused.stderr
+        assert "the run had 3 solid collider(s), which this file does not carry" in refused.stderr
+        assert "--scene" in refused.stderr and "-o run.npz" in refused.stderr
+        assert not Path(args[-1]).exists()
+        drawn = cli(*args, "--scene", obstacles / "obstacles.yaml")
+        assert drawn.returncode == 0, drawn.stderr
