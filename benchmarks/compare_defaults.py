@@ -131,7 +131,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--timeout", type=float, default=600.0, help="give up on one scene after this, s")
     ap.add_argument("--only", nargs="*", help="scene names (default every scenes/*.yaml)")
     ap.add_argument("-o", "--output", type=Path, help="also write the table here")
+    ap.add_argument(
+        "--file", action="store_true", help="file the table into RESULTS.md (compare_defaults.md)"
+    )
+    ap.add_argument("--from-table", type=Path, help="file this table (written by -o) and stop")
     args = ap.parse_args(argv)
+    if args.from_table:
+        file_section(args.from_table.read_text(encoding="utf-8"))
+        return 0
     tree = args.tree.resolve()
     scenes = sorted((tree / "scenes").glob("*.yaml"))
     if args.only:
@@ -148,7 +155,36 @@ def main(argv: list[str] | None = None) -> int:
     print(text)
     if args.output is not None:
         args.output.write_text(text)
+    if args.file:
+        file_section(text)
     return 0
+
+
+HERE = Path(__file__).resolve().parent
+SECTION_FILE = HERE / "compare_defaults.md"
+RESULTS = HERE / "RESULTS.md"
+TITLE = "## `compare` with default options: its estimate against what the runs took (`benchmarks/compare_defaults.py`)"
+EXPLAIN = (
+    "Each row is a fresh `animsim compare scenes/NAME.yaml`, as a user types it. *estimate* is what the "
+    "command promised before its runs (after its probe); *runs* what they took beside it. The probe's "
+    "time and numba's compiling are shown apart and are not in the estimate."
+)
+
+
+def file_section(table: str) -> None:
+    """Write the section to compare_defaults.md and put it into RESULTS.md (replacing an older one)."""
+    text = f"{TITLE}\n\n{EXPLAIN}\n\n{table.strip()}\n"
+    SECTION_FILE.write_text(text, encoding="utf-8")
+    results = RESULTS.read_text(encoding="utf-8")
+    if TITLE in results:
+        start = results.index(TITLE)
+        end = results.find("\n## ", start + len(TITLE))
+        results = results[:start] + text + ("\n" + results[end + 1 :] if end >= 0 else "")
+    else:
+        anchor = "\n## Cold start: "
+        at = results.find("\n## ", results.find(anchor) + len(anchor)) if anchor in results else -1
+        results = results[: at + 1] + text + "\n" + results[at + 1 :] if at >= 0 else results + "\n" + text
+    RESULTS.write_text(results, encoding="utf-8")
 
 
 if __name__ == "__main__":

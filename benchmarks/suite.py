@@ -855,9 +855,10 @@ def render_markdown(tables: list[Table], header: list[str], start_lines: list[st
     if start_lines:
         out += ["## Start-up (fresh process, numba kernels from the on-disk cache)", ""]
         out += ["| command | wall time | status |", "| --- | ---: | --- |", *start_lines, ""]
-    cold = HERE / "cold_start.md"  # written by benchmarks/cold_start.py, kept here
-    if cold.exists():
-        out += [cold.read_text().rstrip(), ""]
+    # written by benchmarks/cold_start.py and benchmarks/compare_defaults.py, kept here
+    for kept in (HERE / "cold_start.md", HERE / "compare_defaults.md"):
+        if kept.exists():
+            out += [kept.read_text().rstrip(), ""]
     if LOG.exists():
         out += [LOG.read_text().rstrip(), ""]
     return "\n".join(out)
