@@ -111,6 +111,11 @@ PROBE_METHOD_SECONDS = 0.08
 PROBE_SECONDS = 0.75
 #: and the DOP853 reference's first solve for at most this long, s
 PROBE_REFERENCE_SECONDS = 0.5
+#: a DOP853 reference predicted to take longer than this (s) is probed again, for
+#: LONG_REFERENCE_SHARE of its predicted time, at most LONG_REFERENCE_PROBE s
+LONG_REFERENCE = 20.0
+LONG_REFERENCE_SHARE = 0.03
+LONG_REFERENCE_PROBE = 5.0
 #: with default options, compare plans its runs to take about this long (s):
 #: with the probe, start-up and numba's compiling it finishes within 30 s
 DEFAULT_BUDGET = 20.0
@@ -834,6 +839,12 @@ def probe(
     dop = None
     if kind == "DOP853":
         dop = dop853_rate(base, PROBE_REFERENCE_SECONDS)
+        # a reference of minutes is timed longer: DOP853's pace settles over seconds as its
+        # step shrinks to the scene's stiffness (a few per cent of what it predicts, at most
+        # LONG_REFERENCE_PROBE s)
+        whole = scene.duration * dop[1] / max(dop[0], 1e-300)
+        if whole > LONG_REFERENCE:
+            dop = dop853_rate(base, min(LONG_REFERENCE_PROBE, LONG_REFERENCE_SHARE * whole))
     return Probe(
         backend=chosen,
         method=method,
