@@ -30,6 +30,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from benchmarks.sections import file_section
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -81,9 +83,7 @@ def _run(scene: Path, out: Path, cache: Path) -> tuple[float, float, dict, str]:
     return wall, cpu, meta, str(meta.get("status", "?"))
 
 
-HERE = Path(__file__).resolve().parent
-SECTION_FILE = HERE / "cold_start.md"
-RESULTS = HERE / "RESULTS.md"
+SECTION_FILE = Path(__file__).resolve().parent / "cold_start.md"
 TITLE = "## Cold start: the first run with an empty numba cache (`benchmarks/cold_start.py`)"
 EXPLAIN = (
     "Each row is a fresh `animsim run SCENE -q --backend numba` with `NUMBA_CACHE_DIR` set to a new, "
@@ -93,23 +93,15 @@ EXPLAIN = (
 )
 
 
-def file_section(table: str) -> None:
-    """Write the section to cold_start.md and put it into RESULTS.md (replacing an older one)."""
+def file_table(table: str) -> None:
+    """File the table (rows printed one by one get their header rule) into RESULTS.md."""
     lines = table.strip().splitlines()
     if len(lines) > 1 and not lines[1].startswith("| ---"):  # a table printed row by row
         lines.insert(1, "| --- | ---: | ---: | ---: | ---: | --- |")
-    text = f"{TITLE}\n\n{EXPLAIN}\n\n" + "\n".join(lines) + "\n"
-    SECTION_FILE.write_text(text, encoding="utf-8")
-    results = RESULTS.read_text(encoding="utf-8")
-    if TITLE in results:
-        start = results.index(TITLE)
-        end = results.find("\n## ", start + len(TITLE))
-        results = results[:start] + text + ("\n" + results[end + 1 :] if end >= 0 else "")
-    else:
-        anchor = "\n## Start-up (fresh process, numba kernels from the on-disk cache)"
-        at = results.find("\n## ", results.find(anchor) + len(anchor)) if anchor in results else -1
-        results = results[: at + 1] + text + "\n" + results[at + 1 :] if at >= 0 else results + "\n" + text
-    RESULTS.write_text(results, encoding="utf-8")
+    body = f"{EXPLAIN}\n\n" + "\n".join(lines)
+    file_section(
+        SECTION_FILE, TITLE, body, after="## Start-up (fresh process, numba kernels from the on-disk cache)"
+    )
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -119,7 +111,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--from-table", type=Path, help="file this table (written by --markdown) and stop")
     args = ap.parse_args(argv)
     if args.from_table:
-        file_section(args.from_table.read_text(encoding="utf-8"))
+        file_table(args.from_table.read_text(encoding="utf-8"))
         return
     rows = [
         "| first run of | cold: wall s | cold: CPU s | cold: compile_time s | warm: wall s | status |",
@@ -147,7 +139,7 @@ def main(argv: list[str] | None = None) -> None:
     print(note)
     if args.markdown:
         args.markdown.write_text("\n".join(rows) + "\n" + note, encoding="utf-8")
-    file_section("\n".join(rows) + "\n" + note)
+    file_table("\n".join(rows) + "\n" + note)
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """How long ``animsim compare SCENE`` takes with default options, for every example scene.
 
-    python benchmarks/compare_defaults.py [--tree DIR] [--timeout S] [--only NAME ...] [-o TABLE.md]
+    python -m benchmarks.compare_defaults [--tree DIR] [--timeout S] [--only NAME ...] [-o TABLE.md]
 
 Each scene runs in a fresh process (``python -m animsim compare scenes/NAME.yaml``,
 nothing else on the command line), as a user would type it, so start-up, scene
@@ -25,6 +25,8 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
+
+from benchmarks.sections import file_section
 
 ROOT = Path(__file__).resolve().parent.parent
 #: the promise being measured: default options finish within this, s
@@ -104,7 +106,7 @@ def time_scene(tree: Path, scene: Path, timeout: float) -> Timing:
 
 def table(timings: list[Timing], tree: Path) -> str:
     lines = [
-        "`animsim compare SCENE` with default options (`python benchmarks/compare_defaults.py`), "
+        "`animsim compare SCENE` with default options (`python -m benchmarks.compare_defaults`), "
         f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {os.cpu_count()} cores (shared)",
         "",
         "| scene | wall s | CPU s | status | estimate | runs: actual (estimate), probe | cut to fit the budget |",
@@ -137,7 +139,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--from-table", type=Path, help="file this table (written by -o) and stop")
     args = ap.parse_args(argv)
     if args.from_table:
-        file_section(args.from_table.read_text(encoding="utf-8"))
+        file_table(args.from_table.read_text(encoding="utf-8"))
         return 0
     tree = args.tree.resolve()
     scenes = sorted((tree / "scenes").glob("*.yaml"))
@@ -156,13 +158,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.output is not None:
         args.output.write_text(text)
     if args.file:
-        file_section(text)
+        file_table(text)
     return 0
 
 
-HERE = Path(__file__).resolve().parent
-SECTION_FILE = HERE / "compare_defaults.md"
-RESULTS = HERE / "RESULTS.md"
+SECTION_FILE = Path(__file__).resolve().parent / "compare_defaults.md"
 TITLE = "## `compare` with default options: its estimate against what the runs took (`benchmarks/compare_defaults.py`)"
 EXPLAIN = (
     "Each row is a fresh `animsim compare scenes/NAME.yaml`, as a user types it. *estimate* is what the "
@@ -171,20 +171,9 @@ EXPLAIN = (
 )
 
 
-def file_section(table: str) -> None:
-    """Write the section to compare_defaults.md and put it into RESULTS.md (replacing an older one)."""
-    text = f"{TITLE}\n\n{EXPLAIN}\n\n{table.strip()}\n"
-    SECTION_FILE.write_text(text, encoding="utf-8")
-    results = RESULTS.read_text(encoding="utf-8")
-    if TITLE in results:
-        start = results.index(TITLE)
-        end = results.find("\n## ", start + len(TITLE))
-        results = results[:start] + text + ("\n" + results[end + 1 :] if end >= 0 else "")
-    else:
-        anchor = "\n## Cold start: "
-        at = results.find("\n## ", results.find(anchor) + len(anchor)) if anchor in results else -1
-        results = results[: at + 1] + text + "\n" + results[at + 1 :] if at >= 0 else results + "\n" + text
-    RESULTS.write_text(results, encoding="utf-8")
+def file_table(table: str) -> None:
+    """File the table into RESULTS.md, after the cold-start section."""
+    file_section(SECTION_FILE, TITLE, f"{EXPLAIN}\n\n{table.strip()}", after="## Cold start: ")
 
 
 if __name__ == "__main__":
