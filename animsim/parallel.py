@@ -165,19 +165,11 @@ def _stop_workers(pool: ProcessPoolExecutor) -> None:
     a case that is writing removes its temporary file as on Ctrl-C; a worker
     still alive after WORKER_STOP_SECONDS is killed.
     """
-    import time
-
     processes = list((getattr(pool, "_processes", None) or {}).values())
     pool.shutdown(wait=False, cancel_futures=True)
+    _stop_processes([p.pid for p in processes if p.is_alive() and p.pid is not None])
     for p in processes:
-        if p.is_alive():
-            p.terminate()
-    deadline = time.monotonic() + WORKER_STOP_SECONDS
-    for p in processes:
-        p.join(max(0.0, deadline - time.monotonic()))
-        if p.is_alive():
-            p.kill()
-            p.join(1.0)
+        p.join(1.0)  # reaped: each has ended or been killed
 
 
 def _dask_worker_pids(cluster: Any) -> list[int]:
@@ -196,8 +188,9 @@ def _dask_worker_pids(cluster: Any) -> list[int]:
 def _stop_processes(pids: list[int]) -> None:
     """SIGTERM to each process, then SIGKILL to any still alive after WORKER_STOP_SECONDS.
 
-    Dask's worker processes end on SIGTERM (their case's temporary files are removed as
-    the interpreter unwinds); one busy in compiled code past the deadline is killed.
+    Worker processes (the pool's, which take SIGTERM as an interrupt, and Dask's) end on
+    SIGTERM, their case's temporary files removed as the interpreter unwinds; one busy in
+    compiled code past the deadline is killed.
     """
     import signal
     import time

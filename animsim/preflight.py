@@ -37,7 +37,7 @@ from animsim.errors import Diagnostic, SceneError, UsageError
 from animsim.export.meta import meta_path
 from animsim.export.ply import PLY_SUFFIX
 from animsim.export.sinks import get_format
-from animsim.particle_contacts import CONTACT_PAIR_BYTES, SKIN
+from animsim.particle_contacts import CONTACT_PAIR_BYTES, SKIN, count_pairs_numpy
 from animsim.record import Clock, recording_rule
 from animsim.scene.loader import (
     DEFAULT_MAX_DEPTH,
@@ -406,7 +406,6 @@ def contact_pairs(scene: Scene) -> int:
     if scene.particle_collisions is None:
         return 0
     import numpy as np
-    from scipy.spatial import cKDTree  # SciPy loads only for scenes with contacts (start-up)
 
     radii = [scene.particle_collisions.radius]
     radii += [p.radius for p in scene.particles if getattr(p, "radius", None) is not None]
@@ -415,11 +414,7 @@ def contact_pairs(scene: Scene) -> int:
     points = [np.asarray([p.position for p in scene.particles], dtype=np.float64).reshape(-1, 3)]
     points += [initial_positions(st) for st in scene.structures]
     x = np.concatenate(points)
-    if len(x) < 2 or reach <= 0:
-        return 0
-    tree = cKDTree(x)
-    # count_neighbors counts ordered pairs including each point with itself
-    return int((tree.count_neighbors(tree, reach) - len(x)) // 2)
+    return count_pairs_numpy(x, np.ones(len(x), dtype=bool), reach)
 
 
 # --- output --------------------------------------------------------------------------

@@ -23,8 +23,7 @@ def _stepper(method: methods.Method) -> type[Integrator]:
     if method.tableau is not None:
         return runge_kutta_class(method)
     assert method.stepper is not None  # a Method without a tableau names its stepper
-    module, _, name = method.stepper.partition(":")
-    cls = getattr(importlib.import_module(module), name)
+    cls = _load(method.stepper)
     if not (isinstance(cls, type) and issubclass(cls, Integrator)) or cls.method != method:
         raise TypeError(f"{method.stepper} does not step the method {method.name!r}")
     return cls
@@ -37,9 +36,14 @@ def spring_constraints(name: str) -> Callable[..., Any] | None:
     path = methods.get(name).spring_constraints
     if path is None:
         return None
-    module, _, fn = path.partition(":")
-    built: Callable[..., Any] = getattr(importlib.import_module(module), fn)
+    built: Callable[..., Any] = _load(path)
     return built
+
+
+def _load(path: str) -> Any:
+    """The object a descriptor names as "module:name", imported when first asked for."""
+    module, _, name = path.partition(":")
+    return getattr(importlib.import_module(module), name)
 
 
 class _Methods(Mapping[str, type[Integrator]]):
