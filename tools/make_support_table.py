@@ -18,6 +18,8 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from generated_page import write_or_check  # noqa: E402
+
 from animsim import support  # noqa: E402
 
 PAGE = ROOT / "docs" / "support.md"
@@ -161,19 +163,10 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--check", action="store_true", help="exit 1 if docs/support.md is stale")
     args = parser.parse_args(argv)
-    new = render_page()
     current = PAGE.read_text(encoding="utf-8") if PAGE.exists() else ""
-    if args.check:
-        if new != current:
-            print(
-                f"{PAGE.relative_to(ROOT)} is stale: run python tools/make_support_table.py", file=sys.stderr
-            )
-            return 1
-        return 0
-    if new != current:
-        PAGE.write_text(new, encoding="utf-8")
-        print(f"wrote {PAGE.relative_to(ROOT)}")
-    return 0
+    return write_or_check(
+        PAGE, render_page(), current, check=args.check, script="tools/make_support_table.py"
+    )
 
 
 if __name__ == "__main__":
