@@ -529,6 +529,18 @@ def _notice(quiet: bool):
     return None if quiet else terminal_notice()
 
 
+@contextmanager
+def _compiling(quiet: bool, backend: str):
+    """While a command runs, tell the person at the terminal when numba compiles a kernel
+    family and about how long it takes (the notice of ``run``, for every other command)."""
+    from animsim.backends import choose_backend
+    from animsim.compile_notice import compile_notices
+
+    numba = choose_backend(backend)[0] == "numba"
+    with compile_notices(_notice(quiet) if numba else None, numba=numba):
+        yield
+
+
 def _stderr_console():
     from rich.console import Console
 
@@ -668,15 +680,16 @@ def check(
     """
     from animsim import api
 
-    ok = api.check(
-        scenes,
-        quiet=quiet,
-        echo=typer.echo,
-        echo_err=_err,
-        limits=limits,
-        drift_warn=drift_warn,
-        backend=_backend(backend),
-    )
+    with _compiling(quiet, _backend(backend)):
+        ok = api.check(
+            scenes,
+            quiet=quiet,
+            echo=typer.echo,
+            echo_err=_err,
+            limits=limits,
+            drift_warn=drift_warn,
+            backend=_backend(backend),
+        )
     if not ok:
         raise typer.Exit(EXIT_FAILED)
 
@@ -750,7 +763,11 @@ def render(
     """Render an animation: particles as dots (size and colour over life), springs as lines, planes as the ground."""
     from animsim import api
 
-    with _graceful_stop() as stop, _progress(quiet, "rendering", at_least=50) as progress:
+    with (
+        _graceful_stop() as stop,
+        _progress(quiet, "rendering", at_least=50) as progress,
+        _compiling(quiet, _backend(backend)),
+    ):
         result = api.render(
             source,
             gif,
@@ -851,7 +868,7 @@ def view(
     """
     from animsim import api
 
-    with _graceful_stop() as stop:
+    with _graceful_stop() as stop, _compiling(quiet, _backend(backend)):
         summary = api.view(
             source,
             output,
@@ -948,7 +965,7 @@ def sweep(
     from animsim import api
     from animsim.analysis import sweep as sw
 
-    with _cases_progress(quiet) as progress:
+    with _cases_progress(quiet) as progress, _compiling(quiet, _backend(backend)):
         table = api.sweep(
             scene,
             set_,
@@ -1253,20 +1270,21 @@ def plot(
     """Draw particle paths, the energy of a run split into its parts (and its drift), or phase portraits."""
     from animsim import api
 
-    api.plot(
-        source,
-        output,
-        kind=kind.value,
-        scene=scene,
-        view=view,
-        integrator=integrator,
-        dt=dt,
-        duration=duration,
-        integrators=integrators,
-        particles=particles,
-        limits=limits,
-        backend=_backend(backend),
-    )
+    with _compiling(False, _backend(backend)):
+        api.plot(
+            source,
+            output,
+            kind=kind.value,
+            scene=scene,
+            view=view,
+            integrator=integrator,
+            dt=dt,
+            duration=duration,
+            integrators=integrators,
+            particles=particles,
+            limits=limits,
+            backend=_backend(backend),
+        )
     typer.echo(f"wrote {output}")
 
 
@@ -1300,8 +1318,37 @@ def main(argv: list[str] | None = None) -> None:
             signal.signal(signal.SIGTERM, old_term)
 
 
+def _refuse_repeated_options(args: list[str]) -> None:
+    """An option that takes one value, given twice (``run X -o a.npz -o b.usda``): click keeps
+    the last and drops the first without a word, so the user would miss a file they asked for."""
+    from typer.core import TyperOption  # typer carries its own click: its classes, not click's
+
+    commands = getattr(typer.main.get_command(app), "commands", {})
+    if not args or args[0] not in commands:
+        return
+    command = commands[args[0]]
+    seen: dict[str, list[str]] = {}
+    tokens = args[1:]
+    for i, token in enumerate(tokens):
+        if token == "--":
+            break
+        for param in command.params:
+            if not isinstance(param, TyperOption) or param.multiple or param.is_flag or param.count:
+                continue
+            name = token.split("=", 1)[0] if token.startswith("--") else token
+            if name in param.opts or name in param.secondary_opts:
+                value = (
+                    token.split("=", 1)[1] if "=" in token else (tokens[i + 1] if i + 1 < len(tokens) else "")
+                )
+                seen.setdefault("/".join(param.opts), []).append(value)
+    for opts, values in seen.items():
+        if len(values) > 1:
+            raise UsageError(f"{opts} given {len(values)} times ({', '.join(values)}): give it once")
+
+
 def _main(argv: list[str] | None) -> None:
     try:
+        _refuse_repeated_options(sys.argv[1:] if argv is None else list(argv))
         # Without standalone mode, click *returns* the code of a typer.Exit
         # raised in a command (interrupted 130, unstable 1) instead of raising.
         status = typer.Typer.__call__(app, args=argv, prog_name="animsim", standalone_mode=False)

@@ -190,3 +190,41 @@ def test_sweep_duration_is_checked(extra, message):
     r = run_cli("sweep", SCENES / "spring_pendulum.yaml", "--set", "dt=0.01,0.02", *extra)
     assert r.returncode == 2
     assert message in r.stderr
+
+
+# --- an option given twice ------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "args, named",
+    [
+        (["run", "SCENE", "-o", "a.npz", "-o", "b.csv"], "-o/--output given 2 times (a.npz, b.csv)"),
+        (["run", "SCENE", "--dt=0.01", "--dt", "0.02"], "--dt given 2 times (0.01, 0.02)"),
+        (["render", "SCENE", "--gif", "a.gif", "--gif=b.gif"], "--gif given 2 times"),
+    ],
+)
+def test_an_option_given_twice_is_refused_before_anything_is_written(tmp_path, args, named):
+    """click keeps the last of a repeated one-value option and drops the first without a word:
+    ``-o a.npz -o b.csv`` would write one file of the two asked for."""
+    args = [str(SCENES / "oscillator.yaml") if a == "SCENE" else a for a in args]
+    r = run_cli(*args, "--backend", "numpy", cwd=tmp_path)
+    assert r.returncode == 2, r.stderr
+    assert named in r.stderr and "give it once" in r.stderr
+    assert "Traceback" not in r.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_options_that_take_many_values_still_repeat(tmp_path):
+    r = run_cli(
+        "sweep",
+        SCENES / "oscillator.yaml",
+        "--set",
+        "dt=0.01",
+        "--set",
+        "integrator=rk4",
+        "-q",
+        "--backend",
+        "numpy",
+        cwd=tmp_path,
+    )
+    assert r.returncode == 0, r.stderr
