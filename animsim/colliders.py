@@ -35,7 +35,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from animsim.collisions import RESTING_STEPS, apply_friction, hold_by_static_friction, static_friction_holds
+from animsim.collisions import (
+    RESTING_STEPS,
+    apply_friction,
+    energy_shift,
+    hold_by_static_friction,
+    kept_bounce_speed,
+    static_friction_holds,
+)
 from animsim.elements import StepStage, jit_kernel, numba_helper
 from animsim.vec import dot3
 
@@ -180,6 +187,9 @@ class Colliders(StepStage):
     #: not pointwise: its fused stage's parameters hold every row's radius and active flag,
     #: indexed by the row's place in the whole scene (a block of rows would read the wrong ones)
     pointwise = False
+    #: the method's c, set at compile time: a bounce keeps e^2 of the energy the method
+    #: conserves (animsim.collisions.kept_bounce_speed)
+    follow_weight: float | None = 1.0
 
     def __init__(
         self,
@@ -301,6 +311,7 @@ class Colliders(StepStage):
                     movable,
                     inv_mass,
                     project_only,
+                    energy_shift(self.follow_weight),
                 )
             )
         return resolve_numpy(
@@ -317,12 +328,20 @@ class Colliders(StepStage):
             movable,
             project_only,
             self.bounds,
+            energy_shift(self.follow_weight),
         )
 
     def numba_stage_params(self) -> tuple[np.ndarray, np.ndarray]:
         """The fused stage's numbers (static colliders only): see :func:`_stage_kernel`."""
         fp = np.concatenate(
-            [[len(self.shapes)], self.params.ravel(), self.friction, self.bounds.ravel(), self.radius]
+            [
+                [len(self.shapes)],
+                self.params.ravel(),
+                self.friction,
+                self.bounds.ravel(),
+                [energy_shift(self.follow_weight)],
+                self.radius,
+            ]
         )
         return np.ascontiguousarray(fp, dtype=np.float64), self.active.astype(np.int64)
 
@@ -432,12 +451,14 @@ def resolve_numpy(
     movable: np.ndarray,
     project_only: bool = False,
     bounds: np.ndarray | None = None,
+    kappa: float = 0.5,
 ) -> bool:
     """Resolve the step x_old -> x against every collider, in place (NumPy kernel).
 
     ``project_only``: no time of impact, only push out whatever is inside
     (after particle contacts moved particles). ``bounds``: :func:`shape_bounds`
-    of ``params`` (computed when not given).
+    of ``params`` (computed when not given). ``kappa``: the method's energy shift
+    (:func:`animsim.collisions.kept_bounce_speed`).
     """
     if bounds is None:
         bounds = shape_bounds(params)
@@ -480,7 +501,8 @@ def resolve_numpy(
         s = np.zeros(len(cand))
         hit = np.zeros(len(cand), dtype=bool)
         alive = np.ones(len(cand), dtype=bool)
-        for _ in range(MARCH_STEPS):  # sphere tracing, vectorised over candidates
+        d_start = np.zeros(len(cand))  # each row's distance at the step's start (the first march)
+        for it in range(MARCH_STEPS):  # sphere tracing, vectorised over candidates
             idx = np.flatnonzero(alive)
             if idx.size == 0:
                 break
@@ -493,6 +515,8 @@ def resolve_numpy(
                 shape.segment,
             )
             d = d - r[idx]
+            if it == 0:
+                d_start[idx] = d
             touched = d <= tol[idx]
             hit[idx[touched]] = True
             step = np.divide(d, length[idx], out=np.full(idx.size, 2.0), where=length[idx] > 0)
@@ -515,12 +539,17 @@ def resolve_numpy(
             resting = approaching & (-vn <= RESTING_STEPS * pressing * dt)
             e = np.where(resting, 0.0, shape.restitution)
             vn_new = np.where(approaching, -e * vn, vn)
+            rest = (1.0 - sh) * dt
+            if kappa != 0.0 and shape.restitution > 0.0:
+                bounce = approaching & ~resting
+                u0 = dot3(vo - u, n)
+                w = kept_bounce_speed(u0, np.maximum(d_start[h], 0.0), an, rest[:, 0], e, kappa * dt)
+                vn_new = np.where(bounce & (w > 0.0), w, vn_new)
             vt = vc - vn[:, None] * n
             vt = apply_friction(vt, np.abs(vn_new - vn), shape.friction)
             vr = vt + vn_new[:, None] * n
             if shape.friction != 0.0:  # held still on the surface: no flight after the impact
                 hold_by_static_friction(vr, vn_new, mean_acc, n, shape.friction)
-            rest = (1.0 - sh) * dt
             x[rows_hit] = xc + rest * vr + 0.5 * rest * rest * mean_acc
             v[rows_hit] = vr + u + rest * mean_acc
         if _project(shape, center, u, x, v, cand, radius):
@@ -667,7 +696,21 @@ def _friction1(vt, dvn, mu):  # pragma: no cover - compiled
 
 @numba_helper
 def _collide(
-    params, friction, bounds, off0, off1, x_old, v_old, x, v, dt, radius, movable, inv_mass, project_only
+    params,
+    friction,
+    bounds,
+    off0,
+    off1,
+    x_old,
+    v_old,
+    x,
+    v,
+    dt,
+    radius,
+    movable,
+    inv_mass,
+    project_only,
+    kappa,
 ):  # pragma: no cover - compiled
     """The numba kernel: :func:`resolve_numpy`'s algorithm, one particle at a time.
 
@@ -755,8 +798,11 @@ def _collide(
             tol = 1e-9 * (1.0 + length)
             s = 0.0
             hit = False
-            for _ in range(0 if project_only else MARCH_STEPS):
+            d_start = 0.0
+            for it in range(0 if project_only else MARCH_STEPS):
                 d = _sdf1(pr, p0x + s * sgx - cx, p0y + s * sgy - cy, p0z + s * sgz - cz, n) - r
+                if it == 0:
+                    d_start = d
                 if d <= tol:
                     hit = True
                     break
@@ -783,6 +829,11 @@ def _collide(
                     if -vn <= RESTING_STEPS * pressing * dt:
                         e = 0.0
                     vn_new = -e * vn
+                    if kappa != 0.0 and e > 0.0:
+                        u0 = (v_old[i, 0] - ux) * n[0] + (v_old[i, 1] - uy) * n[1] + (v_old[i, 2] - uz) * n[2]
+                        w = kept_bounce_speed(u0, max(d_start, 0.0), an, (1.0 - s) * dt, e, kappa * dt)
+                        if w > 0.0:
+                            vn_new = w
                 vt[0] = vcx - vn * n[0]
                 vt[1] = vcy - vn * n[1]
                 vt[2] = vcz - vn * n[2]
@@ -833,7 +884,7 @@ def _collide(
 
 
 def _stage_kernel(x_old, v_old, x, v, dt, inv_mass, fp, ip):  # pragma: no cover - compiled
-    """Static colliders as a fused stage (stage_signature): fp = [C, params, friction, bounds, radius],
+    """Static colliders as a fused stage (stage_signature): fp = [C, params, friction, bounds, kappa, radius],
     ip = the rows colliders act on (1) or not (0)."""
     n_col = int(fp[0])
     o = 1
@@ -843,10 +894,11 @@ def _stage_kernel(x_old, v_old, x, v, dt, inv_mass, fp, ip):  # pragma: no cover
     o += n_col
     bounds = np.ascontiguousarray(fp[o : o + 6 * n_col]).reshape((n_col, 6))
     o += 6 * n_col
-    radius = fp[o : o + x.shape[0]]
+    kappa = fp[o]
+    radius = fp[o + 1 : o + 1 + x.shape[0]]
     still = np.zeros((n_col, 3))
     return _collide(
-        params, friction, bounds, still, still, x_old, v_old, x, v, dt, radius, ip, inv_mass, False
+        params, friction, bounds, still, still, x_old, v_old, x, v, dt, radius, ip, inv_mass, False, kappa
     )
 
 

@@ -46,6 +46,7 @@ import numpy as np
 from animsim.bodies import quaternion as quat
 from animsim.bodies.quaternion import rotate_scalar
 from animsim.bodies.shapes import BodyShape, Box, Capsule, Sphere, contact_table
+from animsim.collisions import energy_shift, kept_end_speed
 from animsim.elements import StepStage, compile_helpers
 
 #: sequential-impulse sweeps over the contacts per step: at least this many ...
@@ -647,9 +648,12 @@ def solve(
     iterations: int = ITERATIONS,
     dv: np.ndarray | None = None,
     dx: np.ndarray | None = None,
+    kh: float = 0.0,
+    dt: float = 1.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Sequential impulses on v (B,3), w (B,3) in place; returns the restitution applied per contact
     and which contacts were impacts (approaching faster than resting; they bounce with it).
+    ``kh``: the method's energy shift times the step ``dt`` (:func:`_impact_target`).
 
     The contacts are solved one after the other in list order, ``iterations`` times
     (Catto 2005). Contacts that share no body commute, so the list is cut into
@@ -708,7 +712,9 @@ def solve(
     e_used = np.where(bounce, restitution, 0.0)
     target = np.where(bounce, -restitution * vn0, 0.0)
     if dv is not None and dx is not None and bounce.any():
-        target = np.where(bounce, _impact_target(a, bb, has_b, n, depth, restitution, vn0, dv, dx), target)
+        target = np.where(
+            bounce, _impact_target(a, bb, has_b, n, depth, restitution, vn0, dv, dx, kh, dt), target
+        )
     jn = np.zeros(count)
     jt = np.zeros((3, count))
     groups = []
@@ -786,6 +792,8 @@ def _impact_target(
     vn0: np.ndarray,
     dv: np.ndarray,
     dx: np.ndarray,
+    kh: float = 0.0,
+    dt: float = 1.0,
 ) -> np.ndarray:
     """Bounce targets corrected for the time of impact inside the step.
 
@@ -797,6 +805,12 @@ def _impact_target(
     step, the normal speed ends at -e vn_imp + (1 - s) dv_n. (Without this the
     forces of the part of the step after the impact would be reflected too: a
     ball would gain height at every bounce.)
+
+    A method not exact under a constant acceleration (``kh`` = kappa dt != 0, symplectic
+    Euler's 1/2 dt) conserves a shifted energy; there the target is the speed that keeps e^2
+    of it at the place the projection leaves the contact, e depth out of the surface
+    (:func:`animsim.collisions.kept_end_speed`), so the apexes reach e^(2n) of the drop as
+    with the exact methods.
     """
     rel_dv = dv[a].T - np.where(has_b, dv[bb].T, 0.0)
     rel_dx = dx[a].T - np.where(has_b, dx[bb].T, 0.0)
@@ -806,7 +820,11 @@ def _impact_target(
     span = d0 + depth
     s = np.clip(np.divide(d0, span, out=np.zeros_like(d0), where=span > 0), 0.0, 1.0)
     vn_imp = vn0 - (1.0 - s) * dvn
-    return np.maximum(-restitution * vn_imp + (1.0 - s) * dvn, 0.0)
+    target = np.maximum(-restitution * vn_imp + (1.0 - s) * dvn, 0.0)
+    if kh == 0.0:
+        return target
+    kept = kept_end_speed(vn0 - dvn, np.maximum(d0, 0.0), dvn / dt, restitution * depth, restitution, kh)
+    return np.where((restitution > 0.0) & (kept > 0.0), kept, target)
 
 
 def follow_impulses(
@@ -1008,6 +1026,8 @@ def _solve_list_loop(
     impact: np.ndarray,
     h: float,
     depth_out: np.ndarray,
+    kh: float,
+    dt: float,
 ) -> None:
     """Twin of :func:`solve`, :func:`follow_impulses` (when h > 0) then :func:`project_planes`:
     the first ``count`` contacts one after the other, ``iterations`` times; then the bodies
@@ -1136,6 +1156,10 @@ def _solve_list_loop(
             s = min(max(s, 0.0), 1.0)
             vn_imp = vn0 - (1.0 - s) * dvn
             tgt[i] = max(-e * vn_imp + (1.0 - s) * dvn, 0.0)
+            if kh != 0.0 and e > 0.0:
+                kept = kept_end_speed(vn0 - dvn, max(d0, 0.0), dvn / dt, e * depth[i], e, kh)
+                if kept > 0.0:
+                    tgt[i] = kept
         else:
             e_used[i] = 0.0
             impact[i] = False
@@ -1381,7 +1405,18 @@ class BodyContacts(StepStage):
                 return False
             v_pre, w_pre = v.copy(), w.copy()
             e_used, impact = solve(
-                contacts, v, w, q, self.inv_mass, self.inv_inertia, resting, self.iterations, dv, dx
+                contacts,
+                v,
+                w,
+                q,
+                self.inv_mass,
+                self.inv_inertia,
+                resting,
+                self.iterations,
+                dv,
+                dx,
+                energy_shift(self.follow_weight) * dt,
+                dt,
             )
             h = self.follow_weight * dt
             if h > 0.0:
@@ -1448,6 +1483,8 @@ class BodyContacts(StepStage):
             impact,
             self.follow_weight * dt,
             depth_left,
+            energy_shift(self.follow_weight) * dt,
+            dt,
         )
         if contacts is not None:
             project(replace(contacts, depth=depth_left), e_used, x, self.inv_mass)

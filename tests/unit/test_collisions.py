@@ -67,13 +67,14 @@ def test_never_behind_the_plane(rng):
 
 @pytest.mark.parametrize(
     ("method", "dt", "bounces", "rel"),
-    [("verlet", 1e-3, 6, 1e-4), ("rk4", 1e-3, 6, 1e-4), ("symplectic_euler", 2.5e-4, 4, 0.01)],
+    [("verlet", 1e-3, 6, 1e-4), ("rk4", 1e-3, 6, 1e-4), ("symplectic_euler", 1e-3, 6, 1e-3)],
 )
 def test_bounce_apex_heights_follow_restitution(method, dt, bounces, rel):
     # Each bounce keeps e of the speed, so e^2 of the height: apex n = e^(2n) h0.
     # Verlet and RK4 are exact in free flight and the time of impact is exact,
     # so they match up to sampling the apex between steps (g dt^2/8, 5e-6 m
-    # here); symplectic Euler loses O(dt) per flight.
+    # here); symplectic Euler's bounce keeps e^2 of the energy it conserves
+    # (tests/numerics/test_bounce_heights.py has the default step).
     h0, e = 1.0, 0.8
     text = (
         f"duration: 3.0\ndt: {dt}\nintegrator: {method}\nrecord: {{every: 1}}\nforces: [{{type: gravity}}]\n"
