@@ -5,6 +5,8 @@ with an empty numba cache, as a new user meets it.
     python -m benchmarks.cold_start --only fountain      # some of them
     python -m benchmarks.cold_start --markdown out.md    # also write the table
     python -m benchmarks.cold_start --from-table out.md  # file a table into RESULTS.md
+    python -m benchmarks.cold_start --families           # the compile notice's estimates
+    python -m benchmarks.cold_start --families-from-log  # ... again from the kept log
 
 The section goes to ``benchmarks/cold_start.md``, which ``python -m benchmarks``
 keeps in ``RESULTS.md`` (after its start-up table), and into ``RESULTS.md`` now.
@@ -23,7 +25,11 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import platform
+import pty
+import re
 import resource
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -83,6 +89,91 @@ def _run(scene: Path, out: Path, cache: Path) -> tuple[float, float, dict, str]:
     return wall, cpu, meta, str(meta.get("status", "?"))
 
 
+SUMMARY = re.compile(r"compiled \d+ numba kernel\(s\) in [\d.]+ s \((.*?)\); the next runs load them")
+ESTIMATES = ROOT / "animsim" / "compile_estimates.py"
+
+
+def _family_seconds(scene: Path, out: Path, cache: Path) -> dict[str, float]:
+    """Seconds per kernel family of a first run, read from the compile summary the run prints
+    to a terminal (stderr is a pseudo-terminal here, as a user's would be)."""
+    master, slave = pty.openpty()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "animsim", "run", str(scene), "-o", str(out), "--backend", "numba"],
+        cwd=scene.parent,
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL,
+        stderr=slave,
+        env=_env(cache),
+    )
+    os.close(slave)
+    chunks: list[bytes] = []
+    while True:
+        try:
+            data = os.read(master, 65536)
+        except OSError:  # the child closed its end
+            break
+        if not data:
+            break
+        chunks.append(data)
+    proc.wait()
+    os.close(master)
+    found = SUMMARY.search(b"".join(chunks).decode("utf-8", "replace"))
+    if found is None:
+        return {}
+    parts = (part.rsplit(" ", 2) for part in found.group(1).split(", "))
+    return {name: float(sec) for name, sec, _ in parts}
+
+
+def write_estimates(seen: dict[str, list[float]], machine: str) -> None:
+    """Write :mod:`animsim.compile_estimates`: each family's median and longest time."""
+    rows = "".join(
+        f'    "{fam}": ({statistics.median(secs):.1f}, {max(secs):.1f}),\n'
+        for fam, secs in sorted(seen.items())
+    )
+    head, _, _ = ESTIMATES.read_text(encoding="utf-8").partition("MACHINE = ")
+    ESTIMATES.write_text(
+        f'{head}MACHINE = "{machine}"\n\n'
+        "#: family -> (median, longest) seconds compiling it in one first run\n"
+        f"SECONDS: dict[str, tuple[float, float]] = {{\n{rows}}}\n",
+        encoding="utf-8",
+    )
+
+
+LOG = Path(__file__).resolve().parent / "compile_families.log"
+LOG_LINE = re.compile(r"^(.+?): (.*)$")
+
+
+def estimates_from_log(log: Path, machine: str) -> None:
+    """Write the estimates again from a log of :func:`families` (its printed lines)."""
+    seen: dict[str, list[float]] = {}
+    for line in log.read_text(encoding="utf-8").splitlines():
+        found = LOG_LINE.match(line)
+        if found is None or line.startswith("wrote "):
+            continue
+        for part in filter(None, found.group(2).split(", ")):
+            fam, sec, _ = part.rsplit(" ", 2)
+            seen.setdefault(fam, []).append(float(sec))
+    write_estimates(seen, machine)
+
+
+def families(only: list[str] | None) -> None:
+    """Measure each kernel family's compile time over the first runs of the templates and
+    example scenes, keep the lines in ``compile_families.log``, and write the estimates where
+    the compile notice reads them."""
+    lines: list[str] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        for label, scene in _cases(only, work):
+            cache = work / f"cache_{abs(hash(label))}"
+            cache.mkdir()
+            got = _family_seconds(scene, work / "out.csv", cache)
+            lines.append(f"{label}: " + ", ".join(f"{k} {v:.1f} s" for k, v in got.items()))
+            print(lines[-1], flush=True)
+    LOG.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    estimates_from_log(LOG, f"a {os.cpu_count()}-core {platform.machine()} machine")
+    print(f"wrote {ESTIMATES.relative_to(ROOT)}")
+
+
 SECTION_FILE = Path(__file__).resolve().parent / "cold_start.md"
 TITLE = "## Cold start: the first run with an empty numba cache (`benchmarks/cold_start.py`)"
 EXPLAIN = (
@@ -109,7 +200,17 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--only", nargs="*", help="cases whose name contains one of these")
     ap.add_argument("--markdown", type=Path, help="write the table here too")
     ap.add_argument("--from-table", type=Path, help="file this table (written by --markdown) and stop")
+    ap.add_argument("--families", action="store_true", help="measure the compile notice's estimates")
+    ap.add_argument(
+        "--families-from-log", action="store_true", help="write the estimates again from compile_families.log"
+    )
     args = ap.parse_args(argv)
+    if args.families:
+        families(args.only)
+        return
+    if args.families_from_log:
+        estimates_from_log(LOG, f"a {os.cpu_count()}-core {platform.machine()} machine")
+        return
     if args.from_table:
         file_table(args.from_table.read_text(encoding="utf-8"))
         return

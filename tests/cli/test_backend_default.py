@@ -103,3 +103,35 @@ def test_every_simulating_command_defaults_to_auto():
         assert inspect.signature(function).parameters["backend"].default == "auto"
     assert inspect.signature(animsim.api.compare).parameters["backend"].default == "auto"
     assert inspect.signature(animsim.api.sweep).parameters["backend"].default == "auto"
+
+
+@pytest.mark.skipif(not HAS_NUMBA, reason="numba is not installed: nothing compiles")
+@pytest.mark.parametrize("command", [c for c in SIMULATING if c not in ("compare",)])
+def test_every_simulating_command_says_when_it_compiles(command, tmp_path, monkeypatch):
+    """With an empty numba cache each command names the kernel families it compiles, with
+    the measured time for the families that have one, and sums them up at the end (compare
+    and run pass their notice to the library themselves; their tests are elsewhere)."""
+    import numba
+    from typer.testing import CliRunner
+
+    from animsim import console, elements
+    from animsim.compile_estimates import SECONDS
+    from animsim.compile_notice import how_long
+
+    scene = tmp_path / "tiny.yaml"
+    scene.write_text(TINY)
+    heard: list[str] = []
+    monkeypatch.setattr(console, "terminal_notice", lambda stream=None: heard.append)
+    monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(elements, "_JITTED", {})  # element kernels look in the empty cache again
+    args = [str(a) for a in SIMULATING[command](scene, tmp_path) if a != "-q"]
+    result = CliRunner().invoke(cli.app, args)
+    assert result.exit_code == 0, result.output
+    starts = [h for h in heard if h.startswith("compiling numba kernels: ")]
+    families = {h.split(": ", 1)[1].split(" (")[0] for h in starts}
+    assert {"gravity", "springs"} <= families, heard
+    for line in starts:
+        family = line.split(": ", 1)[1].split(" (")[0]
+        assert (family in SECONDS) == bool(how_long(family)), family
+        assert (f"; {how_long(family)})" in line) == (family in SECONDS), line
+    assert [h for h in heard if h.startswith("compiled ")] == heard[-1:], heard

@@ -82,3 +82,18 @@ def test_a_run_with_an_empty_cache_announces_its_kernels(tmp_path, monkeypatch):
     families = {h.split(": ")[1].split(" (")[0] for h in heard if h.startswith("compiling ")}
     assert {"gravity", "springs"} <= families, heard
     assert heard[-1].startswith("compiled ") and len([h for h in heard if h.startswith("compiled ")]) == 1
+
+
+def test_the_estimate_quotes_the_measured_times():
+    """The notice's figure is the table's (median, longest), rounded, never made up."""
+    from animsim import compile_notice
+
+    table = {"a": (4.3, 82.4), "b": (19.2, 25.0), "c": (0.4, 0.9), "d": (0.6, 1.8)}
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(compile_notice, "SECONDS", table)
+        mp.setattr(compile_notice, "MACHINE", "a 2-core test machine")
+        assert compile_notice.how_long("a") == "about 4 s, at most 82 s, on a 2-core test machine"
+        assert compile_notice.how_long("b") == "about 19 s on a 2-core test machine"
+        assert compile_notice.how_long("c") == "under 1 s on a 2-core test machine"
+        assert compile_notice.how_long("d") == "under 1 s, at most 2 s, on a 2-core test machine"
+        assert compile_notice.how_long("never measured") == ""
