@@ -31,7 +31,10 @@ Particles are points here unless they have a radius (``radius``, or
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -51,8 +54,13 @@ KIND_NAMES = {SPHERE: "sphere", BOX: "box", CAPSULE: "capsule"}
 #: parameters of one collider in the packed array handed to kernels
 #: [kind, c(3), radius, half(3), R (9, row major), s (3): capsule half segment, restitution, friction]
 PARAMS = 21
-#: sphere-tracing iterations; a grazing segment that needs more ends in the projection
+#: sphere-tracing iterations; a grazing path that needs more is searched (_first_touch)
 MARCH_STEPS = 48
+#: after the march: golden-section steps towards a grazing path's closest approach, then
+#: bisection steps to its first touch (brackets shrink by 0.618^80 and 0.5^60 of the step)
+GOLDEN_STEPS = 80
+BISECT_STEPS = 60
+INV_PHI = (math.sqrt(5.0) - 1.0) / 2.0
 
 
 @dataclass(frozen=True)
@@ -69,6 +77,11 @@ class Shape:
     )  # capsule: b - center (a = center - segment)
     restitution: float = 0.5
     friction: float = 0.0
+
+    @property
+    def thickness(self) -> float:
+        """Its thinnest extent: what a body must cross to pass through it."""
+        return float(2.0 * self.radius if self.kind != BOX else 2.0 * (np.min(self.half) + self.radius))
 
     def packed(self) -> np.ndarray:
         p = np.zeros(PARAMS)
@@ -166,6 +179,96 @@ def sdf(
     return d, n
 
 
+def _edge_face(shape: Shape, p: np.ndarray, w: np.ndarray, tol: np.ndarray, n: np.ndarray) -> None:
+    """At a box's edge or corner, the face the particle runs into: in place on the normals n.
+
+    A contact point on an edge is on two faces' planes at once (within ``tol``), and which one
+    the distance function names was left to rounding: a grain on the floor lies on the plane
+    of the bottom face of a box sliding flush with the floor, and half the time the box's
+    front face, which pushes it, lost to the bottom one, which does not, and the box slid over
+    the grain. Where two or more faces are within tol (and the point is not further outside),
+    the face is the one whose outward normal the particle's velocity relative to the box at
+    the step's end, ``w`` (k, 3), runs into most; the first of equals (x, y, z) otherwise."""
+    r, half = shape.rotation, shape.half
+    q0 = p[:, 0] * r[0, 0] + p[:, 1] * r[1, 0] + p[:, 2] * r[2, 0]  # q = R^T p, as sdf
+    q1 = p[:, 0] * r[0, 1] + p[:, 1] * r[1, 1] + p[:, 2] * r[2, 1]
+    q2 = p[:, 0] * r[0, 2] + p[:, 1] * r[1, 2] + p[:, 2] * r[2, 2]
+    e = np.stack([np.abs(q0) - half[0], np.abs(q1) - half[1], np.abs(q2) - half[2]], axis=1)
+    sign = np.where(np.stack([q0, q1, q2], axis=1) < 0, -1.0, 1.0)
+    near = e >= -tol[:, None]
+    edge = np.flatnonzero((near.sum(axis=1) >= 2) & (e.max(axis=1) <= tol))
+    if edge.size == 0:
+        return
+    score = np.full((edge.size, 3), np.inf)
+    for j in range(3):  # the world normal of face j: sign_j R[:, j]
+        into = sign[edge, j] * ((r[0, j] * w[edge, 0] + r[1, j] * w[edge, 1]) + r[2, j] * w[edge, 2])
+        score[:, j] = np.where(near[edge, j], into, np.inf)
+    face = np.argmin(score, axis=1)
+    n[edge] = sign[edge, face][:, None] * r[:, face].T
+
+
+def _path_distance(
+    shape: Shape, center: np.ndarray, p0: np.ndarray, sg: np.ndarray, r: np.ndarray, rows: np.ndarray
+) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """f(s, sel) of :func:`_first_touch`: the distance from ``shape`` (at ``center``) of the
+    paths p0 + s sg of ``rows[sel]``, minus their radii."""
+
+    def dist(sv: np.ndarray, sel: np.ndarray) -> np.ndarray:
+        at = rows[sel]
+        d, _ = sdf(
+            shape.kind,
+            p0[at] + sv[:, None] * sg[at] - center,
+            shape.radius,
+            shape.half,
+            shape.rotation,
+            shape.segment,
+        )
+        return d - r[at]
+
+    return dist
+
+
+def _first_touch(
+    dist: Callable[[np.ndarray, np.ndarray], np.ndarray], s0: np.ndarray, tol: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Where paths the march gave up on first touch the shape: (hit (k,), s (k,)).
+
+    Sphere tracing steps by the distance to the shape; along a path that skims a surface at a
+    small angle theta each step closes only sin(theta) of the gap, so a particle at 1,000 m/s
+    passing a 1 cm box at 2 degrees ran out of steps and went through. The distance to a convex
+    shape along a line, f(s) = dist(s) (``dist(s, sel)``: the rows ``sel`` at fractions ``s``,
+    minus their radius), is a convex function, so from s0 (where f > tol) a golden-section
+    search (Kiefer 1953) closes in on its minimum over [s0, 1]; the first point found with
+    f <= tol brackets the first touch, which bisection then finds. A path whose minimum stays
+    above tol misses the shape. The numba twin (:func:`_first_touch1`) does the same steps."""
+    k = s0.size
+    every = np.arange(k)
+    touch = np.where(dist(np.ones(k), every) <= tol, 1.0, np.nan)  # ends on or inside
+    a, b = s0.copy(), np.ones(k)
+    for _ in range(GOLDEN_STEPS):
+        sel = np.flatnonzero(np.isnan(touch))
+        if sel.size == 0:
+            break
+        c = b[sel] - INV_PHI * (b[sel] - a[sel])
+        d = a[sel] + INV_PHI * (b[sel] - a[sel])
+        fc, fd = dist(c, sel), dist(d, sel)
+        touch[sel] = np.where(fc <= tol[sel], c, np.where(fd <= tol[sel], d, np.nan))
+        left = fc <= fd  # convex: the minimum is in [a, d], else in [c, b]
+        b[sel] = np.where(left, d, b[sel])
+        a[sel] = np.where(left, a[sel], c)
+    hit = ~np.isnan(touch)
+    sel = np.flatnonzero(hit)
+    lo, hi = s0[sel], touch[sel]
+    for _ in range(BISECT_STEPS if sel.size else 0):
+        mid = 0.5 * (lo + hi)
+        inside = dist(mid, sel) <= tol[sel]
+        hi = np.where(inside, mid, hi)
+        lo = np.where(inside, lo, mid)
+    s = s0.copy()
+    s[sel] = hi
+    return hit, s
+
+
 @dataclass
 class StepMotion:
     """Where every collider is over one step: displacement from the reference at t0 and t1."""
@@ -190,6 +293,9 @@ class Colliders(StepStage):
     #: the method's c, set at compile time: a bounce keeps e^2 of the energy the method
     #: conserves (animsim.collisions.kept_bounce_speed)
     follow_weight: float | None = 1.0
+    #: the scene's impulse planes (compile sets it): a moving collider meets the particles
+    #: where the planes keep them, not where the step left them behind a plane
+    planes_first: Any = None
 
     def __init__(
         self,
@@ -235,7 +341,8 @@ class Colliders(StepStage):
 
     def stability_note(self, dt: float) -> str:
         return (
-            "colliders: impulses at the time of impact inside each step, no stiffness and no limit on dt"
+            "particles against colliders: impulses at the time of impact inside each step, found at "
+            "any speed and angle, no stiffness and no limit on dt"
             + ("; moving ones put energy in (the watchdog's energy test is off)" if self.injects else "")
         )
 
@@ -287,6 +394,13 @@ class Colliders(StepStage):
         dt = t1 - t0 if dt is None else dt
         if dt <= 0:
             return False
+        planes_moved = False
+        if self.injects and self.planes_first is not None and not project_only:
+            # A particle resting on the floor dips below it in every step (gravity) until the
+            # plane stage puts it back: a keyframed box sliding flush with the floor met it
+            # there, under its bottom face, and swept over it. The planes first (the plane
+            # stage runs again after the colliders, and changes nothing a plane already did).
+            planes_moved = self.planes_first.apply(state, x_old, v_old, t0, t1, dt)
         off0, off1 = self.offsets(t0), self.offsets(t1)
         x, v = state.particle_position, state.particle_velocity
         # the state's live masses: emitter pools switch theirs on at birth
@@ -295,7 +409,7 @@ class Colliders(StepStage):
         if state.particle_alive is not None:
             movable = movable & state.particle_alive
         if self._kernel is not None:
-            return bool(
+            hit = bool(
                 self._kernel(
                     self.params,
                     self.friction,
@@ -314,7 +428,8 @@ class Colliders(StepStage):
                     energy_shift(self.follow_weight),
                 )
             )
-        return resolve_numpy(
+            return hit or planes_moved
+        hit = resolve_numpy(
             self.params,
             self.friction,
             off0,
@@ -330,6 +445,7 @@ class Colliders(StepStage):
             self.bounds,
             energy_shift(self.follow_weight),
         )
+        return hit or planes_moved
 
     def numba_stage_params(self) -> tuple[np.ndarray, np.ndarray]:
         """The fused stage's numbers (static colliders only): see :func:`_stage_kernel`."""
@@ -522,6 +638,12 @@ def resolve_numpy(
             step = np.divide(d, length[idx], out=np.full(idx.size, 2.0), where=length[idx] > 0)
             s[idx] = np.where(touched, s[idx], s[idx] + step)
             alive[idx[touched | (s[idx] > 1.0)]] = False
+        grazing = np.flatnonzero(alive)  # the march gave up: neither touching nor past the end
+        if grazing.size:
+            along = _path_distance(shape, center, p0, sg, r, grazing)
+            touched, s_touch = _first_touch(along, s[grazing], tol[grazing])
+            hit[grazing] = touched
+            s[grazing] = s_touch
         h = np.flatnonzero(hit)
         if h.size:
             changed = True
@@ -532,6 +654,8 @@ def resolve_numpy(
             mean_acc = (vh - vo) / dt
             vc = vo + sh * (vh - vo) - u  # relative velocity at the contact
             _, n = sdf(shape.kind, xc - center, shape.radius, shape.half, shape.rotation, shape.segment)
+            if shape.kind == BOX:
+                _edge_face(shape, xc - center, vh - u, tol[h], n)
             vn = dot3(vc, n)
             approaching = vn < 0
             an = dot3(mean_acc, n)
@@ -545,11 +669,22 @@ def resolve_numpy(
                 u0 = dot3(vo - u, n)
                 w = kept_bounce_speed(u0, np.maximum(d_start[h], 0.0), an, rest[:, 0], e, kappa * dt)
                 vn_new = np.where(bounce & (w > 0.0), w, vn_new)
+            # A contact that the step's acceleration presses back onto the surface before the
+            # step ends rests on it: the surface's reaction takes the normal speed left and
+            # cancels the press for the rest of the step (and friction takes its share of that
+            # reaction, -an rest). Flown on with the press, the particle went into the shape
+            # and relied on the projection, which cannot see a point on the plane of a box's
+            # face (a box sliding flush with the floor then lost the grains it pushed).
+            settled = (an < 0.0) & (vn_new + an * rest[:, 0] <= 0.0)
+            reaction = np.where(settled, -an * rest[:, 0], 0.0)
+            vn_new = np.where(settled, 0.0, vn_new)
             vt = vc - vn[:, None] * n
-            vt = apply_friction(vt, np.abs(vn_new - vn), shape.friction)
+            vt = apply_friction(vt, np.abs(vn_new - vn) + reaction, shape.friction)
             vr = vt + vn_new[:, None] * n
             if shape.friction != 0.0:  # held still on the surface: no flight after the impact
                 hold_by_static_friction(vr, vn_new, mean_acc, n, shape.friction)
+            pressed = dot3(mean_acc, n)
+            mean_acc = mean_acc - np.where(settled & (pressed < 0.0), pressed, 0.0)[:, None] * n
             x[rows_hit] = xc + rest * vr + 0.5 * rest * rest * mean_acc
             v[rows_hit] = vr + u + rest * mean_acc
         if _project(shape, center, u, x, v, cand, radius):
@@ -599,6 +734,69 @@ def _project(
 # --- numba twin ------------------------------------------------------------------------------
 # Module-level helpers (compiled with the kernels that call them, animsim.elements.numba_helper):
 # the step-by-step kernel and the fused stage kernel run the same code.
+
+
+@numba_helper
+def _edge_face1(pr, px, py, pz, wx, wy, wz, tol, n):  # pragma: no cover - compiled
+    """:func:`_edge_face` for one point, into ``n``: the same operations."""
+    q0 = pr[8] * px + pr[11] * py + pr[14] * pz
+    q1 = pr[9] * px + pr[12] * py + pr[15] * pz
+    q2 = pr[10] * px + pr[13] * py + pr[16] * pz
+    count = 0
+    top = -np.inf
+    best = np.inf
+    face = -1
+    sign = 1.0
+    for j in range(3):
+        qj = q0 if j == 0 else (q1 if j == 1 else q2)
+        ej = abs(qj) - pr[5 + j]
+        top = max(top, ej)
+        if ej >= -tol:
+            count += 1
+            sj = -1.0 if qj < 0 else 1.0
+            into = sj * ((pr[8 + j] * wx + pr[11 + j] * wy) + pr[14 + j] * wz)
+            if into < best:
+                best = into
+                face = j
+                sign = sj
+    if count >= 2 and top <= tol and face >= 0:
+        n[0] = sign * pr[8 + face]
+        n[1] = sign * pr[11 + face]
+        n[2] = sign * pr[14 + face]
+
+
+@numba_helper
+def _first_touch1(pr, p0x, p0y, p0z, sgx, sgy, sgz, cx, cy, cz, r, tol, s0, n):  # pragma: no cover
+    """:func:`_first_touch` for one path: (hit, s), the same steps."""
+    touch = np.nan
+    if _sdf1(pr, p0x + sgx - cx, p0y + sgy - cy, p0z + sgz - cz, n) - r <= tol:
+        touch = 1.0
+    a, b = s0, 1.0
+    for _ in range(GOLDEN_STEPS):
+        if not np.isnan(touch):
+            break
+        c = b - INV_PHI * (b - a)
+        d = a + INV_PHI * (b - a)
+        fc = _sdf1(pr, p0x + c * sgx - cx, p0y + c * sgy - cy, p0z + c * sgz - cz, n) - r
+        fd = _sdf1(pr, p0x + d * sgx - cx, p0y + d * sgy - cy, p0z + d * sgz - cz, n) - r
+        if fc <= tol:
+            touch = c
+        elif fd <= tol:
+            touch = d
+        if fc <= fd:
+            b = d
+        else:
+            a = c
+    if np.isnan(touch):
+        return False, s0
+    lo, hi = s0, touch
+    for _ in range(BISECT_STEPS):
+        mid = 0.5 * (lo + hi)
+        if _sdf1(pr, p0x + mid * sgx - cx, p0y + mid * sgy - cy, p0z + mid * sgz - cz, n) - r <= tol:
+            hi = mid
+        else:
+            lo = mid
+    return True, hi
 
 
 @numba_helper
@@ -809,12 +1007,18 @@ def _collide(
                 s += d / length if length > 0 else 2.0
                 if s > 1.0:
                     break
+            if not hit and not project_only and s <= 1.0:  # the march gave up: a grazing path
+                hit, s = _first_touch1(pr, p0x, p0y, p0z, sgx, sgy, sgz, cx, cy, cz, r, tol, s, n)
             if hit:
                 changed = True
                 if s > 1.0:
                     s = 1.0
                 xcx, xcy, xcz = p0x + s * sgx, p0y + s * sgy, p0z + s * sgz
                 _sdf1(pr, xcx - cx, xcy - cy, xcz - cz, n)
+                if int(pr[0]) == BOX:  # at an edge: the face it runs into (_edge_face)
+                    _edge_face1(
+                        pr, xcx - cx, xcy - cy, xcz - cz, v[i, 0] - ux, v[i, 1] - uy, v[i, 2] - uz, tol, n
+                    )
                 for a in range(3):
                     acc[a] = (v[i, a] - v_old[i, a]) / dt
                 vcx = v_old[i, 0] + s * (v[i, 0] - v_old[i, 0]) - ux
@@ -834,11 +1038,16 @@ def _collide(
                         w = kept_bounce_speed(u0, max(d_start, 0.0), an, (1.0 - s) * dt, e, kappa * dt)
                         if w > 0.0:
                             vn_new = w
+                rest = (1.0 - s) * dt
+                settled = an < 0.0 and vn_new + an * rest <= 0.0  # resting (resolve_numpy)
+                reaction = 0.0
+                if settled:
+                    reaction = -an * rest
+                    vn_new = 0.0
                 vt[0] = vcx - vn * n[0]
                 vt[1] = vcy - vn * n[1]
                 vt[2] = vcz - vn * n[2]
-                _friction1(vt, abs(vn_new - vn), mu)
-                rest = (1.0 - s) * dt
+                _friction1(vt, abs(vn_new - vn) + reaction, mu)
                 vrx = vt[0] + vn_new * n[0]
                 vry = vt[1] + vn_new * n[1]
                 vrz = vt[2] + vn_new * n[2]
@@ -848,6 +1057,11 @@ def _collide(
                     acc[0] = 0.0
                     acc[1] = 0.0
                     acc[2] = 0.0
+                ap = acc[0] * n[0] + acc[1] * n[1] + acc[2] * n[2]
+                if settled and ap < 0.0:
+                    acc[0] -= ap * n[0]
+                    acc[1] -= ap * n[1]
+                    acc[2] -= ap * n[2]
                 x[i, 0] = xcx + rest * vrx + 0.5 * rest * rest * acc[0]
                 x[i, 1] = xcy + rest * vry + 0.5 * rest * rest * acc[1]
                 x[i, 2] = xcz + rest * vrz + 0.5 * rest * rest * acc[2]

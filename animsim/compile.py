@@ -333,14 +333,17 @@ def compile_scene(
 
     solids = contact_stages.build(scene, system, chosen, springs_term, particle_position)
     post_step = [*solids.front, *post_step, *solids.back]
+    planes_stage = next((st for st in post_step if st.holds_planes), None)
     if solids.contacts is not None:  # contacts push out of planes too, after the colliders
-        solids.contacts.planes = next((st for st in post_step if st.holds_planes), None)
+        solids.contacts.planes = planes_stage
+    if solids.colliders is not None:  # moving colliders meet particles where the planes keep them
+        solids.colliders.planes_first = planes_stage
     left_out.extend(solids.left_out)
     dynamics = Dynamics(system, terms)
     dynamics.drivers = tuple(solids.drivers)
     if bodies is not None:
         dynamics.bodies, body_stages, body_labels, body_left_out = build_body_elements(
-            scene, system, index_of, particle_position, bodies.orientation, chosen
+            scene, system, index_of, particle_position, bodies.orientation, chosen, solids.colliders
         )
         post_step.extend(body_stages)
         stages.extend(body_labels)

@@ -43,6 +43,7 @@ class Built:
     front: list[Any] = field(default_factory=list)  # before planes: keyframes, colliders
     back: list[Any] = field(default_factory=list)  # after planes: contacts, tearing
     contacts: Any = None
+    colliders: Any = None
     drivers: list[Any] = field(default_factory=list)  # keyframe drives (forces see the path)
     left_out: list[str] = field(default_factory=list)
     tearing: Any = None
@@ -192,6 +193,7 @@ def build(scene: m.Scene, system: Any, backend: str, springs: Any | None, positi
             backend=numba,
         )
         out.front.append(colliders)
+        out.colliders = colliders
         out.collider_surface = colliders.surface_points
     else:
         out.left_out.append("colliders: no spheres, boxes or capsules")

@@ -234,10 +234,6 @@ def _no(why: str, instead: str) -> Cell:
     return Cell(REFUSED, why, instead)
 
 
-_NO_BODY_MOVING_COLLIDER = _no(
-    "a moving collider does not meet rigid bodies (they would pass through it)",
-    "give the collider no motion, or move a pinned body instead",
-)
 _NO_PARTICLE_BODY = _no(
     "particles do not collide with bodies yet (they pass through)",
     "for a fixed obstacle use a collider of the same shape instead of the body",
@@ -266,10 +262,7 @@ def _pair_cells() -> dict[tuple[str, str], Cell]:
         for plane in PLANE_THINGS:
             cells[(b, plane)] = _ok("the body's shape stays on the plane's side")
         for c in COLLIDER_THINGS:
-            moving = c == "collider_keyframed"
-            cells[(b, c)] = (
-                _NO_BODY_MOVING_COLLIDER if moving else _ok("the body's shape stays out of the collider")
-            )
+            cells[(b, c)] = _ok("the body's shape stays out of the collider")
     for i, a in enumerate(BODY_THINGS):
         for b in BODY_THINGS[i:]:
             refused = {a, b} == {"body_box", "body_capsule"}

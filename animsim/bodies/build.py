@@ -16,7 +16,6 @@ from animsim.bodies import shapes as sh
 from animsim.bodies.contacts import BodyContacts, PlaneTable
 from animsim.bodies.dynamics import BodyDynamics
 from animsim.bodies.springs import BodySprings
-from animsim.colliders import BOX, CAPSULE, SPHERE, Shape, axis_angle_quaternion, quaternion_matrix
 from animsim.scene import models as m
 
 
@@ -84,9 +83,18 @@ def body_rows(scene: m.Scene) -> BodyRows:
 
 
 def build_body_elements(
-    scene: m.Scene, system: Any, index_of: dict[str, int], x0: np.ndarray, q0: np.ndarray, backend: str
+    scene: m.Scene,
+    system: Any,
+    index_of: dict[str, int],
+    x0: np.ndarray,
+    q0: np.ndarray,
+    backend: str,
+    solid: Any = None,
 ) -> tuple[BodyDynamics, list[Any], list[str], list[str]]:
-    """(rotational dynamics, post-step stages, labels for explain, left-out notes for explain)."""
+    """(rotational dynamics, post-step stages, labels for explain, left-out notes for explain).
+
+    ``solid``: the scene's colliders stage (animsim.colliders.Colliders), whose shapes and
+    keyframed motion the bodies meet as the particles do."""
     body_index = {bid: b for b, bid in enumerate(system.body_ids)}
     labels: list[str] = []
     left_out: list[str] = []
@@ -104,7 +112,7 @@ def build_body_elements(
     )
     stages: list[Any] = []
     planes = list(scene.planes)
-    solids = static_colliders(scene)
+    solids = list(solid.shapes) if solid is not None else []
     if planes or solids or system.body_count > 1:
         table = PlaneTable(
             np.array([p.point for p in planes], dtype=np.float64).reshape(-1, 3),
@@ -124,6 +132,8 @@ def build_body_elements(
             np.array([b.friction for b in scene.bodies]),
             backend=backend,
             colliders=tuple((shape.signed_distance, shape.restitution, shape.friction) for shape in solids),
+            collider_thickness=min((shape.thickness for shape in solids), default=math.inf),
+            collider_offsets=solid.offsets if solid is not None and solid.injects else None,
         )
         stages.append(contact)
         left_out.extend(contact.left_out)
@@ -152,35 +162,6 @@ def counts_text(compiled: Any) -> str:
         parts.append(f"{bodies} bod{'y' if bodies == 1 else 'ies'}")
     parts.append(f"{springs} spring{'' if springs == 1 else 's'}")
     return ", ".join(parts)
-
-
-def static_colliders(scene: m.Scene) -> list[Any]:
-    """The scene's colliders as shapes (animsim.colliders.Shape), for body contacts. Moving ones are
-    refused with their line before this (animsim.scene.validate)."""
-    if not scene.colliders:
-        return []
-
-    out = []
-    for c in scene.colliders:
-        kw = {"restitution": c.restitution, "friction": c.friction}
-        if isinstance(c, m.SphereCollider):
-            out.append(Shape(SPHERE, np.array(c.center, dtype=np.float64), radius=c.radius, **kw))
-        elif isinstance(c, m.BoxCollider):
-            o = c.orientation
-            q = (
-                axis_angle_quaternion(np.array(o.axis), o.angle)
-                if isinstance(o, m.AxisAngle)
-                else np.array(o)
-            )
-            out.append(
-                Shape(BOX, np.array(c.center, dtype=np.float64), half=0.5 * np.array(c.size),
-                      rotation=quaternion_matrix(q), **kw)
-            )  # fmt: skip
-        else:
-            a, b = np.array(c.a, dtype=np.float64), np.array(c.b, dtype=np.float64)
-            mid = 0.5 * (a + b)
-            out.append(Shape(CAPSULE, mid, radius=c.radius, segment=b - mid, **kw))
-    return out
 
 
 def _body_springs(

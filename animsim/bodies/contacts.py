@@ -650,10 +650,13 @@ def solve(
     dx: np.ndarray | None = None,
     kh: float = 0.0,
     dt: float = 1.0,
+    surface: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Sequential impulses on v (B,3), w (B,3) in place; returns the restitution applied per contact
     and which contacts were impacts (approaching faster than resting; they bounce with it).
     ``kh``: the method's energy shift times the step ``dt`` (:func:`_impact_target`).
+    ``surface``: (C, 3) the velocity of the surface each contact touches (a keyframed collider;
+    None: all still): every speed the contacts work with is relative to it.
 
     The contacts are solved one after the other in list order, ``iterations`` times
     (Catto 2005). Contacts that share no body commute, so the list is cut into
@@ -703,17 +706,25 @@ def solve(
         k_t = np.where(has_b, k_t + k_b, k_t)
         m_t = np.where(has_b, ma + mb, ma)
     vT, wT = v.T.copy(), w.T.copy()
+    sv = None if surface is None else surface[order].T  # (3, C), in the solver's order
     vel = vT[:, a] + _cross3(wT[:, a], ra)
     if coupled:
         vel = np.where(has_b, vel - (vT[:, bb] + _cross3(wT[:, bb], rb)), vel)
+    if sv is not None:
+        vel = vel - sv
     vn0 = _dot3(vel, n)
     rest_b = np.where(has_b, resting_speed[bb], 0.0)
     bounce = vn0 < -(resting_speed[a] + rest_b + RESTING_FLOOR)
     e_used = np.where(bounce, restitution, 0.0)
     target = np.where(bounce, -restitution * vn0, 0.0)
     if dv is not None and dx is not None and bounce.any():
+        # against a moving surface the approach over the step is relative to its move too
         target = np.where(
-            bounce, _impact_target(a, bb, has_b, n, depth, restitution, vn0, dv, dx, kh, dt), target
+            bounce,
+            _impact_target(
+                a, bb, has_b, n, depth, restitution, vn0, dv, dx, kh, dt, None if sv is None else sv * dt
+            ),
+            target,
         )
     jn = np.zeros(count)
     jt = np.zeros((3, count))
@@ -733,6 +744,8 @@ def solve(
             if hb.size:
                 vb, wb = vT[:, bi], wT[:, bi]
                 vn[hb] = vn[hb] - (_dot3(vb, n[:, sb]) + _dot3(wb, rnb[:, sb]))
+            if sv is not None:
+                vn = vn - _dot3(sv[:, s], ns)
             new = np.maximum(jn[s] + (target[s] - vn) * inv_kn[s], 0.0)
             dj = new - jn[s]
             jn[s] = new
@@ -745,6 +758,8 @@ def solve(
             vel = va + _cross3(wa, ras)
             if hb.size:
                 vel[:, hb] = vel[:, hb] - (vb + _cross3(wb, rb[:, sb]))
+            if sv is not None:
+                vel = vel - sv[:, s]
             vt = vel - _dot3(vel, ns) * ns
             # the impulse that stops the sliding: -vt / (m_t + e.K e), e = vt/|vt|, written
             # without the square root as -vt |vt|^2 / (m_t |vt|^2 + vt.K vt)
@@ -794,6 +809,7 @@ def _impact_target(
     dx: np.ndarray,
     kh: float = 0.0,
     dt: float = 1.0,
+    moved: np.ndarray | None = None,
 ) -> np.ndarray:
     """Bounce targets corrected for the time of impact inside the step.
 
@@ -814,6 +830,8 @@ def _impact_target(
     """
     rel_dv = dv[a].T - np.where(has_b, dv[bb].T, 0.0)
     rel_dx = dx[a].T - np.where(has_b, dx[bb].T, 0.0)
+    if moved is not None:  # (3, C) how far the touched surface moved in the step
+        rel_dx = rel_dx - moved
     dvn = _dot3(rel_dv, n)
     dxn = _dot3(rel_dx, n)
     d0 = -dxn - depth
@@ -1329,8 +1347,16 @@ class BodyContacts(StepStage):
             tuple[Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], float, float], ...
         ] = (),
         iterations: int = ITERATIONS,
+        collider_thickness: float = math.inf,
+        collider_offsets: Callable[[float], np.ndarray] | None = None,
     ) -> None:
         self.first = first
+        #: t -> (C, 3) every collider's displacement from where it was given (keyframed ones
+        #: move; None: all static): the bodies meet them where they are, at their velocity
+        self.collider_offsets = collider_offsets
+        #: the thinnest collider's thinnest extent (stability_note)
+        self.collider_thickness = collider_thickness
+        self.thinnest_body = min((s.thickness for s in shapes), default=math.inf)
         self.count = len(shapes)
         self.inv_mass = np.ascontiguousarray(inv_mass, dtype=np.float64)
         self.inv_inertia = np.ascontiguousarray(inv_inertia, dtype=np.float64)
@@ -1371,6 +1397,29 @@ class BodyContacts(StepStage):
             f"{RESTING_FACTOR:g}x the speed forces add per step, positions projected out"
         )
 
+    def stability_note(self, dt: float) -> str | None:
+        """Contacts are found where the bodies are at the end of each step. A contact sphere of
+        radius r (0 for a box's corners) is caught inside a thing of thickness t, and pushed
+        back out on its own side, only if no step carries it more than r + t / 2: faster, it can
+        skip over a collider or another body between two step ends, or be pushed out through
+        the far side. Planes are half-spaces: a body behind one is always found and pushed out."""
+        if not (self.colliders or self.between_bodies) or not self.valid.any():
+            return None
+        r = float(self.radii[self.valid].min())
+        parts = []
+        if self.colliders:
+            parts.append(("a collider", self.collider_thickness))
+        if self.between_bodies:
+            parts.append(("another body", self.thinnest_body))
+        t = min(thick for _, thick in parts)
+        what = " or ".join(name for name, _ in parts)
+        return (
+            f"body contacts: found at step ends, so a body faster than (r + t/2) / dt = "
+            f"{(r + 0.5 * t) / dt:.3g} m/s can pass through {what} (r = {r:.3g} m, the smallest "
+            f"contact sphere of a body, 0 at a box's corners; t = {t:.3g} m, the thinnest one); "
+            "planes stop bodies at any speed"
+        )
+
     @property
     def left_out(self) -> list[str]:
         """What body contacts do not simulate (for explain)."""
@@ -1400,7 +1449,11 @@ class BodyContacts(StepStage):
         resting = RESTING_FACTOR * np.linalg.norm(dv, axis=1)
         pairs = self.find_pairs(x, q)
         if not self.use_numba:
-            contacts = self.find(x, q, pairs)
+            offsets = velocities = None
+            if self.collider_offsets is not None:  # keyframed colliders: where they are now, how fast
+                before, offsets = self.collider_offsets(t0), self.collider_offsets(t1)
+                velocities = (offsets - before) / dt
+            contacts, surface = self.find(x, q, pairs, offsets, velocities)
             if contacts.count == 0:
                 return False
             v_pre, w_pre = v.copy(), w.copy()
@@ -1417,6 +1470,7 @@ class BodyContacts(StepStage):
                 dx,
                 energy_shift(self.follow_weight) * dt,
                 dt,
+                surface,
             )
             h = self.follow_weight * dt
             if h > 0.0:
@@ -1507,15 +1561,38 @@ class BodyContacts(StepStage):
             self._zero3 = np.zeros((cap, 3))
         return self._buffers
 
-    def find(self, x: np.ndarray, q: np.ndarray, pairs: Contacts | None = None) -> Contacts:
-        """Every contact of the bodies at x, q: planes, then colliders, then pairs."""
+    def find(
+        self,
+        x: np.ndarray,
+        q: np.ndarray,
+        pairs: Contacts | None = None,
+        offsets: np.ndarray | None = None,
+        velocities: np.ndarray | None = None,
+    ) -> tuple[Contacts, np.ndarray | None]:
+        """Every contact of the bodies at x, q: planes, then colliders (displaced by ``offsets``
+        (C, 3) where they move), then pairs; and with ``velocities`` (C, 3), the velocity (K, 3)
+        of the surface each contact touches (None: every surface is still)."""
         parts = []
         if self.planes.count:
             parts.append(plane_contacts(x, q, self.points, self.radii, self.valid, self.planes))
-        for sdf, e, mu in self.colliders:
-            parts.append(sdf_contacts(x, q, self.points, self.radii, self.valid, sdf, e, mu))
+        moving: list[tuple[int, int]] = []  # (collider, its contacts) in list order
+        for c, (sdf, e, mu) in enumerate(self.colliders):
+            where = None if offsets is None else offsets[c]
+            found = sdf_contacts(
+                x, q, self.points, self.radii, self.valid, lambda p, o=where, f=sdf: f(p, o), e, mu
+            )
+            parts.append(found)
+            moving.append((c, found.count))
         parts.append(self.find_pairs(x, q) if pairs is None else pairs)
-        return _concat(parts)
+        contacts = _concat(parts)
+        if velocities is None:
+            return contacts, None
+        surface = np.zeros((contacts.count, 3))
+        at = parts[0].count if self.planes.count else 0
+        for c, k in moving:
+            surface[at : at + k] = velocities[c]
+            at += k
+        return contacts, surface
 
     def find_pairs(self, x: np.ndarray, q: np.ndarray) -> Contacts:
         """Contacts between bodies (none when the scene has one body)."""

@@ -45,6 +45,11 @@ class Box:
     def bounding_radius(self) -> float:
         return 0.5 * math.sqrt(sum(s * s for s in self.size))
 
+    @property
+    def thickness(self) -> float:
+        """Its thinnest extent: what another body must cross to pass through it."""
+        return min(self.size)
+
     def contact_spheres(self) -> tuple[np.ndarray, np.ndarray]:
         h = 0.5 * np.array(self.size)
         signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
@@ -71,6 +76,10 @@ class Sphere:
     def bounding_radius(self) -> float:
         return self.radius
 
+    @property
+    def thickness(self) -> float:
+        return 2.0 * self.radius
+
     def contact_spheres(self) -> tuple[np.ndarray, np.ndarray]:
         return np.zeros((1, 3)), np.array([self.radius])
 
@@ -83,6 +92,10 @@ class Capsule:
     radius: float
     length: float  # between the centres of the end spheres, along body y
     kind: str = "capsule"
+
+    @property
+    def thickness(self) -> float:
+        return 2.0 * self.radius
 
     @property
     def volume(self) -> float:

@@ -241,17 +241,6 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
     for i, c in enumerate(scene.colliders or []):
         if c is not None and hasattr(c, "orientation"):
             _check_orientation(("colliders", i, "orientation"), c.orientation, out)
-    if bodies:
-        for i, c in enumerate(scene.colliders or []):
-            if c is not None and getattr(c, "motion", None) is not None:
-                out.append(
-                    (
-                        ("colliders", i, "motion"),
-                        "a moving collider does not meet rigid bodies (they would pass through it): "
-                        "give the collider no motion, or move a pinned body instead",
-                        False,
-                    )
-                )
     known = list(first_seen)
     # A renamed particle breaks every spring that names it: report each
     # missing id once, at its first use, and list the other places there,

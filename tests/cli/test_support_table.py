@@ -596,7 +596,7 @@ def test_thing_in_consumer(thing: str, consumer: str, cell: support.Cell, tmp_pa
 @pytest.mark.parametrize(
     ("a", "b", "command"),
     [
-        ("body_box", "collider_keyframed", ["run"]),
+        ("particle", "body_box", ["run"]),
         ("cloth", "body_sphere", ["check"]),  # check's verdict: INVALID, exit 1 (docs/cli.md)
         ("body_box", "body_capsule", ["explain"]),
     ],
