@@ -9,7 +9,7 @@ import math
 from animsim.errors import UsageError
 from animsim.integrators import listed_methods
 from animsim.scene import models as m
-from animsim.scene.loader import method_from_option
+from animsim.scene.messages import method_from_option
 
 REFERENCE_KINDS = ("auto", "analytic", "fine")
 #: the default step sizes, as multiples of the scene's dt: four points for the
