@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 from animsim.errors import UsageError
 from animsim.integrators import listed_methods
@@ -32,6 +33,12 @@ def parse_integrators(text: str | None) -> list[str]:
     if not names:
         raise UsageError("--integrators: give at least one name")
     return list(dict.fromkeys(method_from_option(name, "--integrators") for name in names))
+
+
+def integrator_names(integrators: str | Sequence[str]) -> list[str]:
+    """The methods named by ``--integrators``: the command line's comma-separated text or a list."""
+    text = integrators if isinstance(integrators, str) else ",".join(integrators)
+    return list(parse_integrators(text))
 
 
 def default_dts(dt: float, duration: float | None = None) -> list[float]:
