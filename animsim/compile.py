@@ -27,7 +27,7 @@ from animsim.integrators import integrator_class, spring_constraints
 from animsim.integrators.base import Integrator
 from animsim.record import Clock, TrajectoryHeader, landing_steps, recording_rule, scene_record_steps
 from animsim.scene import models as m
-from animsim.scene.loader import method_from_option
+from animsim.scene.messages import method_from_option
 from animsim.scene.structures import connectivity, expand
 from animsim.scene.validate import method_problems
 from animsim.system import State, System

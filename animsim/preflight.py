@@ -39,16 +39,16 @@ from animsim.export.ply import PLY_SUFFIX
 from animsim.export.sinks import get_format
 from animsim.particle_contacts import CONTACT_PAIR_BYTES, SKIN, count_pairs_numpy
 from animsim.record import Clock, recording_rule
-from animsim.scene.loader import (
+from animsim.scene.loader import LoadedScene
+from animsim.scene.models import Particle, Scene
+from animsim.scene.structures import initial_positions, particle_count, structure_spring_count
+from animsim.scene.yaml_reader import (
     DEFAULT_MAX_DEPTH,
     DEFAULT_MAX_FILE_BYTES,
     DEFAULT_MAX_MEMORY,
     DEFAULT_MAX_NODES,
     Limits,
-    LoadedScene,
 )
-from animsim.scene.models import Particle, Scene
-from animsim.scene.structures import initial_positions, particle_count, structure_spring_count
 
 KIB = 1024
 MIB = 1024 * KIB

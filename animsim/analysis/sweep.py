@@ -81,9 +81,11 @@ from animsim.engine import STATUS_OK, STATUS_UNSTABLE, run
 from animsim.errors import AnimsimError, UsageError
 from animsim.parallel import map_cases
 from animsim.record import Clock, MemorySink, landing_steps
-from animsim.scene.loader import Marks, diagnostics, mesh_problems, method_from_option, parse_yaml
+from animsim.scene.loader import mesh_problems
+from animsim.scene.messages import diagnostics, method_from_option
 from animsim.scene.models import DEFAULT_INTEGRATOR, Scene
 from animsim.scene.validate import check_scene
+from animsim.scene.yaml_reader import Marks, parse_yaml
 
 # --- names and constants -----------------------------------------------------------
 

@@ -8,13 +8,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from animsim.analysis.compare import parse_integrators
+from animsim.analysis.compare import integrator_names, parse_integrators
 from animsim.atomic import AtomicFile
+from animsim.commands.inputs import check_output, prepare_file, refuse_bodies_in_file
 from animsim.compile import compile_scene
 from animsim.errors import UsageError
 from animsim.export.raster import up_axis
 from animsim.export.trajectory import is_trajectory, read_trajectory
-from animsim.export.viewer import panel_from_trajectory, panels_html
+from animsim.export.viewer import VIEWS, panel_from_trajectory, panels_html
 from animsim.measures.energy_parts import energies_from_trajectory
 from animsim.panel_runs import compile_each, simulate_panel
 from animsim.scene import models as m
@@ -120,3 +121,50 @@ def write_view(
             "a lower --fps or a shorter --duration makes it smaller"
         )
     return summary
+
+
+def view_command(
+    source: str | Path,
+    output: str | Path,
+    *,
+    integrators: str | Sequence[str] | None = None,
+    fps: float = 25.0,
+    view: str = "3d",
+    scene: str | Path | None = None,
+    integrator: str | None = None,
+    dt: float | None = None,
+    duration: float | None = None,
+    limits: Any = None,
+    stop: Callable[[], bool] | None = None,
+    backend: str = "auto",
+) -> Any:
+    """The work of :func:`animsim.api.view`."""
+    import contextlib
+
+    if view not in VIEWS:
+        raise UsageError(f"--view {view!r}: choose one of {', '.join(VIEWS)}")
+    if not (fps > 0 and fps < float("inf")):
+        raise UsageError(f"--fps {fps}: must be a number > 0")
+    out = Path(output)
+    if out.suffix.lower() not in (".html", ".htm"):
+        raise UsageError(f"-o {out}: the file name must end in .html")
+    check_output(out, source)
+
+    if scene is None and is_trajectory(Path(source)):
+        refuse_bodies_in_file(
+            read_trajectory(Path(source)), Path(source), "the viewer", "use animsim render SCENE --view 3d"
+        )
+    return write_view(
+        Path(source),
+        out,
+        prepare=lambda path, **kw: prepare_file(path, limits, consumer="view", **kw),
+        integrators=None if integrators is None else ",".join(integrator_names(integrators)),
+        fps=fps,
+        view=view,
+        scene=None if scene is None else Path(scene),
+        integrator=integrator,
+        dt=dt,
+        duration=duration,
+        stop_context=lambda: contextlib.nullcontext(stop),
+        backend=backend,
+    )

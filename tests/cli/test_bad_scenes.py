@@ -215,7 +215,8 @@ def test_node_count_is_bounded_by_the_memory_budget() -> None:
     """A file within the size limit can still hold millions of tiny nodes
     (~1 KB each once parsed): the memory budget bounds the parse too."""
     from animsim.errors import SceneError
-    from animsim.scene.loader import PARSE_NODE_BYTES, Limits, load_scene_text
+    from animsim.scene.loader import Limits, load_scene_text
+    from animsim.scene.yaml_reader import PARSE_NODE_BYTES
 
     text = "duration: 1\nx-many:\n" + "- 1\n" * 5000
     with pytest.raises(SceneError) as info:

@@ -12,6 +12,8 @@ import pytest
 
 from animsim import methods
 from animsim.analysis import compare as cmp
+from animsim.analysis.compare import planning
+from animsim.errors import UsageError
 from animsim.scene.loader import load_scene
 from tests.conftest import SCENES, run_cli
 
@@ -53,7 +55,7 @@ def fake_probe(
 def pendulum(monkeypatch):
     loaded = load_scene(SCENES / "spring_pendulum.yaml")  # 5 s at dt 2 ms, verlet
     found = fake_probe(loaded.scene)
-    monkeypatch.setattr(cmp, "probe", lambda *a, **k: found)
+    monkeypatch.setattr(planning, "probe", lambda *a, **k: found)
     return loaded
 
 
@@ -136,7 +138,7 @@ def test_one_named_option_stays_and_the_rest_is_cut(pendulum):
     assert plan.estimate.seconds <= 8.0 and plan.cuts
     plan = cmp.make_plan(pendulum.scene, pendulum.name, duration=1.0, budget=8.0)
     assert plan.window == 1.0  # named: never shortened, even when nothing else cut brings it under
-    assert plan.over_budget and plan.integrators == cmp._core_methods(
+    assert plan.over_budget and plan.integrators == planning._core_methods(
         pendulum.scene, cmp.parse_integrators(None)
     )
     assert any("even so it is over the budget" in line for line in plan.lines())
@@ -150,11 +152,11 @@ def test_budget_zero_means_no_budget(pendulum):
 
 
 def test_bad_budget_and_duration_are_refused(pendulum):
-    with pytest.raises(cmp.UsageError, match="--budget"):
+    with pytest.raises(UsageError, match="--budget"):
         cmp.make_plan(pendulum.scene, pendulum.name, budget=-1.0)
-    with pytest.raises(cmp.UsageError, match="--duration"):
+    with pytest.raises(UsageError, match="--duration"):
         cmp.make_plan(pendulum.scene, pendulum.name, duration=6.0)
-    with pytest.raises(cmp.UsageError, match="--dt"):
+    with pytest.raises(UsageError, match="--dt"):
         cmp.make_plan(pendulum.scene, pendulum.name, dts=[0.5], duration=0.25)
 
 
@@ -181,7 +183,7 @@ def test_a_scene_that_gets_dearer_is_extrapolated_at_its_latest_rate():
 def test_an_rk4_reference_is_held_to_its_floor_before_anything_else_is_cut(monkeypatch):
     loaded = load_scene(SCENES / "oscillator.yaml")  # short: the reference's own floor of steps matters
     found = fake_probe(loaded.scene, kind="RK4")
-    monkeypatch.setattr(cmp, "probe", lambda *a, **k: found)
+    monkeypatch.setattr(planning, "probe", lambda *a, **k: found)
     full = cmp.make_plan(loaded.scene, loaded.name, budget=None)
     assert full.fine_min_steps is None
     floored = cmp.estimate_from(found, full.integrators, full.dts, 2.0, 1, fine_min_steps=0)
@@ -312,7 +314,7 @@ def test_timing_noise_does_not_move_the_window(monkeypatch, noise):
         found = fake_probe(loaded.scene)
         found.curve_w = found.curve_w * factor
         found.per_step = {k: v * factor for k, v in found.per_step.items()}
-        monkeypatch.setattr(cmp, "probe", lambda *a, **k: found)
+        monkeypatch.setattr(planning, "probe", lambda *a, **k: found)
         return cmp.make_plan(loaded.scene, loaded.name, budget=3.0)
 
     base = plan_with(1.0)
@@ -324,14 +326,14 @@ def test_a_window_cut_short_names_the_events_it_leaves_out(monkeypatch):
     """A budget that cuts the window of a scene with contacts says they may be left out."""
     loaded = load_scene(SCENES / "bouncing_balls.yaml")  # planes: contacts
     found = fake_probe(loaded.scene)
-    monkeypatch.setattr(cmp, "probe", lambda *a, **k: found)
+    monkeypatch.setattr(planning, "probe", lambda *a, **k: found)
     plan = cmp.make_plan(loaded.scene, loaded.name, budget=3.0)
     assert plan.window < loaded.scene.duration
     (cut,) = [c for c in plan.cuts if c.startswith("compared over the first")]
     assert cut.endswith("(the contacts after it are not compared; --duration sets the window)")
     # a scene with nothing happening at moments of its own says nothing more
     pendulum = load_scene(SCENES / "spring_pendulum.yaml")
-    monkeypatch.setattr(cmp, "probe", lambda *a, **k: fake_probe(pendulum.scene))
+    monkeypatch.setattr(planning, "probe", lambda *a, **k: fake_probe(pendulum.scene))
     plan = cmp.make_plan(pendulum.scene, pendulum.name, budget=3.0)
     (cut,) = [c for c in plan.cuts if c.startswith("compared over the first")]
     assert cut.endswith(" s of 5 s")

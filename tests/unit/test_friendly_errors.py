@@ -5,7 +5,8 @@ from __future__ import annotations
 import pytest
 
 from animsim.errors import SceneError
-from animsim.scene.loader import did_you_mean, load_scene_text
+from animsim.scene.loader import load_scene_text
+from animsim.scene.messages import did_you_mean
 
 
 def errors_of(text: str) -> list[str]:

@@ -1,0 +1,376 @@
+"""The plan: what ``compare`` runs so that it finishes within its time budget, and the
+comparison run as planned.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from animsim.analysis.compare.costs import Estimate, Probe, estimate_from, probe
+from animsim.analysis.compare.options import (
+    DEFAULT_MAX_STEPS,
+    DEFAULT_REPEAT,
+    REFERENCE_KINDS,
+    default_dts,
+    parse_integrators,
+)
+from animsim.analysis.compare.results import Comparison
+from animsim.analysis.compare.runs import common_times, compare
+from animsim.analysis.references import (
+    FINE_MAX_FACTOR,
+)
+from animsim.compile import with_overrides
+from animsim.errors import UsageError
+from animsim.scene import models as m
+
+#: with default options, compare plans its runs to take about this long (s):
+#: with the probe, start-up and numba's compiling it finishes within 30 s
+DEFAULT_BUDGET = 20.0
+#: the methods kept when not every one fits the budget: first order, first
+#: order symplectic, second order, fourth order (and the scene's own method)
+CORE_INTEGRATORS = ("euler", "symplectic_euler", "midpoint", "rk4")
+#: the probe's time counts against the budget, but leaves the runs at least this fraction of it
+MIN_RUN_BUDGET = 0.5
+#: the compared window is never cut below this many steps of the largest dt
+MIN_WINDOW_STEPS = 20
+
+
+@dataclass
+class Plan:
+    """What ``compare`` will run, why, and what it should cost."""
+
+    integrators: list[str]
+    dts: list[float]
+    window: float  # the compared stretch from t = 0, s
+    duration: float  # the scene's, s
+    repeat: int
+    estimate: Estimate | None  # None when nobody asked (no budget, nothing to announce)
+    probe: Probe | None
+    budget: float | None
+    #: what was left out of the default plan to fit the budget, in words
+    cuts: list[str] = field(default_factory=list)
+    #: the RK4 reference's least step allowance (None: its own, FINE_MIN_STEPS)
+    fine_min_steps: int | None = None
+
+    @property
+    def run_budget(self) -> float | None:
+        """What the budget leaves for the runs: the probe's own time (compiling aside) is spent."""
+        if self.budget is None:
+            return None
+        spent = 0.0 if self.probe is None else self.probe.seconds - self.probe.compile_seconds
+        return max(self.budget - spent, MIN_RUN_BUDGET * self.budget)
+
+    @property
+    def over_budget(self) -> bool:
+        budget = self.run_budget
+        return budget is not None and self.estimate is not None and self.estimate.seconds > budget
+
+    def lines(self) -> list[str]:
+        """What ``animsim compare`` says before it starts."""
+        over = (
+            ""
+            if self.window >= self.duration
+            else f" over the first {self.window:g} s of {self.duration:g} s"
+        )
+        head = f"comparing {len(self.integrators)} methods at {len(self.dts)} step sizes{over}"
+        if self.estimate is None or self.probe is None:
+            return [head]
+        out = [f"{head}: {self.estimate.describe()}"]
+        probe_ = self.probe
+        compiled = (
+            f", numba compiling {probe_.compile_seconds:.1f} s wall" if probe_.backend == "numba" else ""
+        )
+        out.append(
+            f"  (from a probe of this scene: {probe_.seconds:.1f} s wall{compiled}, not in the estimate)"
+        )
+        if self.cuts:
+            out.append(
+                f"  to fit the time budget of {self.budget:g} s (--budget; the probe's time counts), "
+                "the default plan was cut: " + "; ".join(self.cuts)
+            )
+            if self.over_budget:
+                out.append(
+                    "  even so it is over the budget: this is the smallest plan compare makes by itself"
+                )
+            out.append(
+                "  --integrators, --dt and --duration choose these yourself; --budget 0 runs everything"
+            )
+        elif self.over_budget:
+            out.append(
+                f"  note: that is longer than the time budget of {self.budget:g} s (--budget); "
+                "the options given are run as given"
+            )
+        return out
+
+
+def _core_methods(scene: m.Scene, available: Sequence[str]) -> list[str]:
+    """CORE_INTEGRATORS, plus the scene's own method (the one a user cares about first)."""
+    core = [name for name in CORE_INTEGRATORS if name in available]
+    own = scene.integrator_name
+    if own in available and own not in core:
+        core.append(own)
+    return [name for name in available if name in core]
+
+
+def make_plan(
+    scene: m.Scene,
+    name: str,
+    *,
+    integrators: Sequence[str] | None = None,
+    dts: Sequence[float] | None = None,
+    duration: float | None = None,
+    repeat: int = DEFAULT_REPEAT,
+    reference: str = "auto",
+    budget: float | None = DEFAULT_BUDGET,
+    backend: str = "numpy",
+    jobs: int = 1,
+    max_steps: int = DEFAULT_MAX_STEPS,
+    notice: Callable[[str], None] | None = None,
+    estimate: bool = True,
+) -> Plan:
+    """Probe the scene and choose what to run.
+
+    What the caller names (``integrators``, ``dts``, ``duration``) is run as
+    named. What is left to the default is cut, in this order, until the
+    estimate fits ``budget`` seconds (None or 0: no budget): the finest of the
+    four default step sizes; then the compared window, down to half the
+    scene; then the methods, to CORE_INTEGRATORS and the scene's own; then the
+    window again, down to MIN_WINDOW_STEPS steps of the largest dt.
+    """
+    if repeat < 0:
+        raise UsageError(f"--repeat: must be >= 0, not {repeat}")
+    if budget is not None and not (math.isfinite(budget) and budget >= 0):
+        raise UsageError(f"--budget: must be a number of seconds >= 0, not {budget!r}")
+    budget = budget or None
+    total = scene.duration
+    if duration is not None:
+        if not (math.isfinite(duration) and duration > 0):
+            raise UsageError(f"--duration: must be a finite number > 0, not {duration!r}")
+        if duration > total:
+            raise UsageError(f"--duration: {duration:g} is longer than the scene ({total:g} s)")
+    window_given = duration is not None
+    window = duration if duration is not None else total
+    for v in dts or ():
+        if v > window:
+            raise UsageError(f"--dt: {v:g} is longer than the duration {window!r}")
+    if dts:  # refused before the probe runs
+        common_times(window_scene(scene, window), dts, max_steps)
+    all_methods = list(integrators) if integrators else parse_integrators(None)
+    method_sets = [all_methods]
+    if not integrators:
+        core = _core_methods(scene, all_methods)
+        if core != all_methods:
+            method_sets.append(core)
+    if dts:
+        dt_sets = [sorted(set(dts), reverse=True)]
+    else:
+        full_dts = default_dts(scene.dt, window)
+        dt_sets = [full_dts, full_dts[:-1]]
+    if budget is None and not estimate:  # nothing to fit and nobody to tell: no probe
+        common_times(window_scene(scene, window), dt_sets[0], max_steps)
+        return Plan(all_methods, dt_sets[0], window, total, repeat, None, None, None)
+    found = probe(scene, name, integrators=all_methods, reference=reference, backend=backend, notice=notice)
+    asked = budget
+    if budget is not None:  # the probe has spent part of it
+        budget = Plan([], [], 0.0, 0.0, 0, None, found, budget).run_budget
+    floors: list[int | None] = [None]
+    if found.reference_kind == "RK4" and not (integrators and dts):
+        floors.append(0)  # the RK4 reference held to FINE_MAX_FACTOR times the finest run's steps
+
+    def cost(methods: Sequence[str], steps: Sequence[float], w: float, floor: int | None) -> Estimate:
+        return estimate_from(found, methods, steps, w, repeat, jobs, floor)
+
+    def fits(level: tuple[list[str], list[float], int | None], w: float) -> bool:
+        return budget is None or cost(*level[:2], w, level[2]).seconds <= budget
+
+    def plan(level: tuple[list[str], list[float], int | None], w: float) -> Plan:
+        methods, steps, floor = level
+        common_times(window_scene(scene, w), steps, max_steps)  # refuses too many steps now
+        cuts = []
+        if floor is not None:
+            cuts.append(
+                f"the RK4 reference may take at most {FINE_MAX_FACTOR} times the finest run's steps "
+                "(a note says so if it has not converged by then)"
+            )
+        if len(steps) < len(dt_sets[0]):
+            sizes = ", ".join(f"{d:g}" for d in steps)
+            cuts.append(f"{len(steps)} step sizes ({sizes} s) instead of {len(dt_sets[0])}")
+        if len(methods) < len(all_methods):
+            cuts.append(f"the methods {', '.join(methods)} instead of all {len(all_methods)}")
+        if w < total and not window_given:
+            events = _events(scene)
+            cuts.append(
+                f"compared over the first {w:g} s of {total:g} s"
+                + (
+                    f" (the {', '.join(events)} after it are not compared; --duration sets the window)"
+                    if events
+                    else ""
+                )
+            )
+        return Plan(
+            list(methods),
+            list(steps),
+            w,
+            total,
+            repeat,
+            cost(methods, steps, w, floor),
+            found,
+            asked,
+            cuts,
+            floor,
+        )
+
+    def longest_window(level: tuple[list[str], list[float], int | None], shortest: float) -> float | None:
+        """The longest window on the ladder (window_ladder), >= shortest, whose plan fits (None: none).
+
+        The rungs are a factor of 2 apart, so the probe's timing noise cannot move the window
+        a little on every rerun: a rerun gives the same window unless the estimate crosses
+        the budget at a rung."""
+        times, _ = common_times(scene, level[1], DEFAULT_MAX_STEPS * 1000)
+        for w in window_ladder(times, total, shortest):
+            if fits(level, w):
+                return w
+        return None
+
+    first = (method_sets[0], dt_sets[0], None)
+    # Everything named, or no budget: run as asked (the estimate says what it costs).
+    if budget is None or (integrators and dts and window_given):
+        return plan(first, window)
+    # 1. the whole window, cutting as little as possible: the reference's floor,
+    #    the finest step size, the methods
+    levels = [first]
+    levels += [(method_sets[0], dt_sets[0], f) for f in floors[1:]]
+    levels += [(method_sets[0], ds, floors[-1]) for ds in dt_sets[1:]]
+    levels += [(ms, dt_sets[-1], floors[-1]) for ms in method_sets[1:]]
+    for level in levels:
+        if fits(level, window):
+            return plan(level, window)
+    if window_given:  # the window was named: it stays, and the plan says it is over budget
+        return plan(levels[-1], window)
+    # 2. every method still, the fewest step sizes, over at least half the scene
+    coarse = max(dt_sets[-1])
+    shortest = min(total, MIN_WINDOW_STEPS * coarse)
+    level = (method_sets[0], dt_sets[-1], floors[-1])
+    w = longest_window(level, max(shortest, 0.5 * total))
+    if w is not None:
+        return plan(level, w)
+    # 3. the fewest methods too, over as much of the scene as fits
+    level = levels[-1]
+    w = longest_window(level, shortest)
+    if w is None:  # nothing fits: the smallest plan, which says it is over budget
+        times, _ = common_times(scene, level[1], DEFAULT_MAX_STEPS * 1000)
+        w = next((float(t) for t in times if t >= shortest - 1e-12 and t > 0), total)
+    return plan(level, w)
+
+
+def _events(scene: m.Scene) -> list[str]:
+    """What a scene does at moments of its own that a window cut short may leave out."""
+    out = []
+    if scene.planes or scene.colliders or scene.particle_collisions is not None or scene.bodies:
+        out.append("contacts")
+    if scene.emitters:
+        out.append("births")
+    if any(sp.max_strain is not None for sp in scene.springs) or any(
+        getattr(s, "max_strain", None) is not None
+        or any(
+            getattr(f, "max_strain", None) is not None
+            for f in vars(s).values()
+            if isinstance(f, m.SpringFamily)
+        )
+        for s in scene.structures
+    ):
+        out.append("tearing")
+    return out
+
+
+def window_ladder(times: np.ndarray, total: float, shortest: float) -> list[float]:
+    """The windows a budget may cut the comparison to, longest first: total / 2^k, each
+    taken down to the record time at or before it, none shorter than ``shortest``."""
+    record = np.asarray([t for t in times if t > 0], dtype=np.float64)
+    out: list[float] = []
+    w = total
+    while record.size:
+        at = record[record <= w * (1 + 1e-12)]
+        if not at.size or at[-1] < shortest - 1e-12:
+            break
+        if not out or at[-1] < out[-1]:
+            out.append(float(at[-1]))
+        w /= 2
+    if not out or out[-1] > shortest + 1e-12:  # the shortest window itself is the last rung
+        first = record[record >= shortest - 1e-12]
+        if first.size and (not out or first[0] < out[-1]):
+            out.append(float(first[0]))
+    return out
+
+
+def window_scene(scene: m.Scene, duration: float) -> m.Scene:
+    """The scene cut to its first ``duration`` seconds (itself when that is all of it)."""
+    if duration >= scene.duration:
+        return scene
+    return with_overrides(scene, duration=duration)
+
+
+def run_planned(
+    scene: m.Scene,
+    name: str,
+    *,
+    integrators: Sequence[str] | None = None,
+    dts: Sequence[float] | None = None,
+    duration: float | None = None,
+    reference: str = "auto",
+    repeat: int = DEFAULT_REPEAT,
+    budget: float | None = DEFAULT_BUDGET,
+    backend: str = "numpy",
+    jobs: int = 1,
+    scheduler: Any = None,
+    max_steps: int = DEFAULT_MAX_STEPS,
+    progress: Callable[[str], None] | None = None,
+    notice: Callable[[str], None] | None = None,
+    on_plan: Callable[[Plan], None] | None = None,
+) -> Comparison:
+    """Plan (:func:`make_plan`: probe the scene, fit ``budget``), tell ``on_plan``, then
+    :func:`compare` what the plan chose; the result holds the plan and the time taken."""
+
+    if reference not in REFERENCE_KINDS:
+        raise UsageError(f"--reference: {reference!r} is not one of {', '.join(REFERENCE_KINDS)}")
+    plan = make_plan(
+        scene,
+        name,
+        integrators=integrators,
+        dts=dts,
+        duration=duration,
+        repeat=repeat,
+        reference=reference,
+        budget=budget,
+        backend=backend,
+        jobs=jobs,
+        max_steps=max_steps,
+        notice=notice,
+        estimate=budget is not None or on_plan is not None,
+    )
+    if on_plan is not None:
+        on_plan(plan)
+    start = time.perf_counter()
+    result = compare(
+        window_scene(scene, plan.window),
+        name,
+        integrators=plan.integrators,
+        dts=plan.dts,
+        reference=reference,
+        repeat=repeat,
+        progress=progress,
+        max_steps=max_steps,
+        jobs=jobs,
+        scheduler=scheduler,
+        backend=backend,
+        fine_min_steps=plan.fine_min_steps,
+    )
+    result.seconds = time.perf_counter() - start
+    result.plan = plan
+    return result
