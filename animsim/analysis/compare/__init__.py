@@ -37,22 +37,23 @@ from animsim.analysis.compare.costs import (
     rk4_reference_dts,
 )
 from animsim.analysis.compare.options import (
+    CLOSED_FORM_FAMILIES,
     DEFAULT_MAX_STEPS,
     DEFAULT_REPEAT,
     DEFAULT_STEP_FACTORS,
     REFERENCE_KINDS,
     default_dts,
     integrator_names,
+    no_closed_form,
     parse_dt_option,
     parse_dts,
     parse_integrators,
 )
+from animsim.analysis.compare.plan import MIN_RUN_BUDGET, Plan
 from animsim.analysis.compare.planning import (
     CORE_INTEGRATORS,
     DEFAULT_BUDGET,
-    MIN_RUN_BUDGET,
     MIN_WINDOW_STEPS,
-    Plan,
     make_plan,
     run_planned,
     window_ladder,
@@ -75,12 +76,10 @@ from animsim.analysis.compare.results import (
 )
 from animsim.analysis.compare.runs import (
     ASYMPTOTIC_LIMIT,
-    CLOSED_FORM_FAMILIES,
     EMITTER_ORDER_CAP,
     REFERENCE_MARGIN,
     common_times,
     compare,
-    no_closed_form,
 )
 from animsim.analysis.compare.tables import left_out, summary_lines, table, table_columns, write_csv
 

@@ -12,8 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from animsim.analysis.compare.options import DEFAULT_REPEAT
-from animsim.analysis.compare.runs import no_closed_form
+from animsim.analysis.compare.options import DEFAULT_REPEAT, no_closed_form
 from animsim.analysis.references import (
     FINE_MAX_FACTOR,
     FINE_MAX_STEPS,

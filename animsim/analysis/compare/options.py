@@ -79,3 +79,21 @@ def parse_dts(text: str | None, scene: m.Scene) -> list[float]:
         if v > scene.duration:
             raise UsageError(f"--dt: {v:g} is longer than the duration {scene.duration!r}")
     return values
+
+
+#: what --reference analytic knows the closed form of
+CLOSED_FORM_FAMILIES = (
+    "free flight under gravity with or without linear drag or steady wind",
+    "one particle on one spring to a pinned anchor, moving along the spring",
+    "two free particles on one spring, moving along it",
+    "particles on bound orbits around one attractor",
+    "free rigid bodies with no torque that are axisymmetric or spherical (or pinned)",
+)
+
+
+def no_closed_form(name: str, exc: Exception) -> UsageError:
+    return UsageError(
+        f"--reference analytic: scene {name!r} has no closed form: {exc}.\n"
+        f"  closed forms cover: {'; '.join(CLOSED_FORM_FAMILIES)}.\n"
+        "  use --reference fine (a converged run) or auto"
+    )

@@ -39,7 +39,7 @@ from animsim.analysis.references import (
 from animsim.compile import Compiled
 
 if TYPE_CHECKING:  # a comparison holds the plan it ran; only its type is named here
-    from animsim.analysis.compare.planning import Plan
+    from animsim.analysis.compare.plan import Plan
 
 
 COLUMNS = (

@@ -22,7 +22,12 @@ from typing import Any
 
 import numpy as np
 
-from animsim.analysis.compare.options import DEFAULT_MAX_STEPS, DEFAULT_REPEAT, REFERENCE_KINDS
+from animsim.analysis.compare.options import (
+    DEFAULT_MAX_STEPS,
+    DEFAULT_REPEAT,
+    REFERENCE_KINDS,
+    no_closed_form,
+)
 from animsim.analysis.compare.results import (
     STATUS_OK,
     STATUS_UNSTABLE,
@@ -62,14 +67,6 @@ REFERENCE_MARGIN = 3.0
 ASYMPTOTIC_LIMIT = 0.5
 #: the best order a scene with emitters allows (births within a step)
 EMITTER_ORDER_CAP = 2
-
-CLOSED_FORM_FAMILIES = (
-    "free flight under gravity with or without linear drag or steady wind",
-    "one particle on one spring to a pinned anchor, moving along the spring",
-    "two free particles on one spring, moving along it",
-    "particles on bound orbits around one attractor",
-    "free rigid bodies with no torque that are axisymmetric or spherical (or pinned)",
-)
 
 
 @dataclass
@@ -228,14 +225,6 @@ def compare(
     result = Comparison(name, ref, rows, orders, times, repeat, conservative, notes)
     result.reference_seconds = ref_seconds
     return result
-
-
-def no_closed_form(name: str, exc: Exception) -> UsageError:
-    return UsageError(
-        f"--reference analytic: scene {name!r} has no closed form: {exc}.\n"
-        f"  closed forms cover: {'; '.join(CLOSED_FORM_FAMILIES)}.\n"
-        "  use --reference fine (a converged run) or auto"
-    )
 
 
 def _measure(
