@@ -601,6 +601,11 @@ class PlaneColliders(StepStage):
             self._block_buffers = _Blocks(rows)
         return self._block_buffers
 
+    def project_rows(self, x: np.ndarray, v: np.ndarray, idx: np.ndarray) -> None:
+        """Put any of rows ``idx`` behind a plane onto it and stop its inward motion (another
+        stage pushed them: particle contacts, particle-body contacts)."""
+        self._project(x, v, idx)
+
     def _project(self, x: np.ndarray, v: np.ndarray, idx: np.ndarray) -> None:
         """Put any of ``idx`` still behind a plane onto it and stop its inward motion."""
         xs, vs = take_rows(x, idx), take_rows(v, idx)

@@ -343,7 +343,15 @@ def compile_scene(
     dynamics.drivers = tuple(solids.drivers)
     if bodies is not None:
         dynamics.bodies, body_stages, body_labels, body_left_out = build_body_elements(
-            scene, system, index_of, particle_position, bodies.orientation, chosen, solids.colliders
+            scene,
+            system,
+            index_of,
+            particle_position,
+            bodies.orientation,
+            chosen,
+            solids.colliders,
+            solids.radius,
+            planes_stage,
         )
         post_step.extend(body_stages)
         stages.extend(body_labels)

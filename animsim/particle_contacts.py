@@ -424,7 +424,7 @@ class ParticleContacts(StepStage):
             # the overlap removal may push a particle into a collider: never leave it there
             self.colliders.project(state, t0, t1)
         if changed and self.planes is not None:
-            self.planes._project(
+            self.planes.project_rows(
                 state.particle_position, state.particle_velocity, np.flatnonzero(self.active)
             )
         return changed

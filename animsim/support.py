@@ -234,13 +234,15 @@ def _no(why: str, instead: str) -> Cell:
     return Cell(REFUSED, why, instead)
 
 
-_NO_PARTICLE_BODY = _no(
-    "particles do not collide with bodies yet (they pass through)",
-    "for a fixed obstacle use a collider of the same shape instead of the body",
-)
 _NO_BOX_CAPSULE = _no(
     "a box body is not kept out of a capsule body's side (only the capsule's end spheres are tested)",
     "make one of the two a sphere, or both boxes",
+)
+
+
+_NO_KEYFRAMED_BODY = _no(
+    "a keyframed particle does not meet rigid bodies (it would pass through a pinned one)",
+    "move a small keyframed sphere collider along the keys instead; colliders push bodies",
 )
 
 
@@ -254,10 +256,11 @@ def _pair_cells() -> dict[tuple[str, str], Cell]:
             cells[(p, c)] = _ok("no particle ends a step inside the collider")
         cells[(p, "particle_contacts")] = _ok("particles stay at least the sum of their radii apart")
         for b in BODY_THINGS:
-            cells[(p, b)] = _NO_PARTICLE_BODY
+            cells[(p, b)] = _ok("no particle ends a step inside the body")
     for b in BODY_THINGS:
-        # a keyframed particle follows its keys and pushes what it meets; a body is not met
-        cells[("keyframed_particle", b)] = _NO_PARTICLE_BODY
+        # a keyframed particle follows its keys whatever it meets: against a pinned body
+        # nothing could give, so the pair is the keyframed collider's job
+        cells[("keyframed_particle", b)] = _NO_KEYFRAMED_BODY
     for b in BODY_THINGS:
         for plane in PLANE_THINGS:
             cells[(b, plane)] = _ok("the body's shape stays on the plane's side")
@@ -411,7 +414,7 @@ def _tethered(scene: Scene) -> set[Path_]:
     """Elements joined to a body by a chain of springs (a rope holding a body, a hook).
 
     They are the body's rigging, not obstacles for it, and are not refused for sharing the
-    scene with it; they still pass through bodies (docs/support.md says so).
+    scene with it (a particle a spring joins to a body does not touch that body).
     """
     parent: dict[Any, Any] = {}
 

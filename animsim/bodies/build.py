@@ -15,6 +15,7 @@ from animsim.bodies import quaternion as quat
 from animsim.bodies import shapes as sh
 from animsim.bodies.contacts import BodyContacts, PlaneTable
 from animsim.bodies.dynamics import BodyDynamics
+from animsim.bodies.particles import ParticleBodyContacts
 from animsim.bodies.springs import BodySprings
 from animsim.scene import models as m
 
@@ -90,11 +91,15 @@ def build_body_elements(
     q0: np.ndarray,
     backend: str,
     solid: Any = None,
+    radius: np.ndarray | None = None,
+    planes_stage: Any = None,
 ) -> tuple[BodyDynamics, list[Any], list[str], list[str]]:
     """(rotational dynamics, post-step stages, labels for explain, left-out notes for explain).
 
     ``solid``: the scene's colliders stage (animsim.colliders.Colliders), whose shapes and
-    keyframed motion the bodies meet as the particles do."""
+    keyframed motion the bodies meet as the particles do. ``radius``: every row's contact
+    radius (animsim.contact_stages); ``planes_stage``: the impulse planes, which particles
+    pushed out of a body are kept in front of."""
     body_index = {bid: b for b, bid in enumerate(system.body_ids)}
     labels: list[str] = []
     left_out: list[str] = []
@@ -139,7 +144,32 @@ def build_body_elements(
         left_out.extend(contact.left_out)
     else:
         left_out.append("body contacts: no planes and a single body")
-    left_out.append("bodies against particles: particles pass through bodies")
+    point_rows = system.point_rows
+    if point_rows.any():
+        joined: set[tuple[int, int]] = set()
+        if springs is not None:  # a particle held by a spring to a body does not touch that body
+            for ra, rb, ba, bb in zip(
+                springs.rows_a, springs.rows_b, springs.body_a, springs.body_b, strict=True
+            ):
+                if ba >= 0 and bb < 0:
+                    joined.add((int(rb), int(ba)))
+                if bb >= 0 and ba < 0:
+                    joined.add((int(ra), int(bb)))
+        touch = ParticleBodyContacts(
+            system.body_first,
+            system.body_shape,
+            system.particle_inv_mass[system.body_rows],
+            system.body_inv_inertia,
+            np.array([b.restitution for b in scene.bodies]),
+            np.array([b.friction for b in scene.bodies]),
+            point_rows,
+            np.zeros(system.particle_count) if radius is None else radius,
+            joined,
+        )
+        touch.planes = planes_stage
+        stages.append(touch)
+    else:
+        left_out.append("particle-body contacts: no particles")
     return dyn, stages, labels, left_out
 
 

@@ -596,8 +596,8 @@ def test_thing_in_consumer(thing: str, consumer: str, cell: support.Cell, tmp_pa
 @pytest.mark.parametrize(
     ("a", "b", "command"),
     [
-        ("particle", "body_box", ["run"]),
-        ("cloth", "body_sphere", ["check"]),  # check's verdict: INVALID, exit 1 (docs/cli.md)
+        ("keyframed_particle", "body_box", ["run"]),
+        ("keyframed_particle", "body_sphere", ["check"]),  # check's verdict: INVALID, exit 1 (docs/cli.md)
         ("body_box", "body_capsule", ["explain"]),
     ],
 )
