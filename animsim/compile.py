@@ -19,7 +19,7 @@ from animsim.bodies.build import body_rows, build_body_elements, particle_spring
 from animsim.bodies.export import header_springs
 from animsim.dynamics import Dynamics
 from animsim.elements import BuildContext, ForceElement, StepStage, build_elements
-from animsim.emitters import build_emitters
+from animsim.emitters import Emitters, build_emitters
 from animsim.errors import UsageError
 from animsim.forces.grid_springs import build_spring_term
 from animsim.forces.penalty import PenaltyPlane
@@ -45,7 +45,7 @@ class Compiled:
     integrator: Integrator
     #: what runs after each integrator step, in order (collisions, then births)
     post_step: tuple[StepStage, ...]
-    emitters: Any | None  # animsim.emitters.Emitters when the scene has emitters (also in post_step)
+    emitters: Emitters | None  # when the scene has emitters (also in post_step)
     clock: Clock
     record_steps: np.ndarray
     header: TrajectoryHeader
@@ -169,7 +169,7 @@ def compile_scene(
     left_out: list[str] = []
 
     # --- particles: listed ones, then structures -------------------------------
-    ids: list[str] = [p.id for p in scene.particles]
+    ids: list[str] = [p.id for p in scene.particles]  # type: ignore[misc]  # m.Id validates to str
     pos = [np.array([p.position for p in scene.particles], dtype=np.float64).reshape(-1, 3)]
     vel = [np.array([p.velocity for p in scene.particles], dtype=np.float64).reshape(-1, 3)]
     mass = [np.array([p.mass or 0.0 for p in scene.particles], dtype=np.float64)]
@@ -177,7 +177,7 @@ def compile_scene(
     spring_pairs: list[np.ndarray] = []
     spring_ks: list[np.ndarray] = []
     spring_kd: list[np.ndarray] = []
-    spring_rest: list[np.ndarray | None] = []  # None: auto
+    spring_rest: list[np.ndarray] = []  # NaN: auto
     families: list[tuple[str, int, int]] = []
     grids: list[tuple[int, tuple[int, ...], int, int]] = []
     spring_total = 0
@@ -296,7 +296,8 @@ def compile_scene(
     built = build_elements([*scene.forces, *scene.planes], ctx)
     terms: list[ForceElement] = [e for e in built if isinstance(e, ForceElement)]
     post_step: list[StepStage] = [e for e in built if isinstance(e, StepStage)]
-    present = {f.type for f in scene.forces}
+    # m.Force is a union built at import (no static type): each member's `type` is its literal
+    present: set[str] = {f.type for f in scene.forces}  # type: ignore[attr-defined]
     if any(getattr(f, "turbulence", 0) > 0 for f in scene.forces):
         present.add("turbulence")
     for kind in m.force_types():
@@ -335,7 +336,7 @@ def compile_scene(
     post_step = [*solids.front, *post_step, *solids.back]
     planes_stage = next((st for st in post_step if st.holds_planes), None)
     if solids.contacts is not None:  # contacts push out of planes too, after the colliders
-        solids.contacts.planes = planes_stage
+        solids.contacts.planes = planes_stage  # type: ignore[assignment]  # unannotated there (None until set)
     if solids.colliders is not None:  # moving colliders meet particles where the planes keep them
         solids.colliders.planes_first = planes_stage
     left_out.extend(solids.left_out)

@@ -25,7 +25,7 @@ import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 from animsim.compile_estimates import MACHINE, SECONDS
 
@@ -54,7 +54,7 @@ def family_of(dispatcher: Any) -> tuple[str, str]:
     """(family, kernel name) of a numba dispatcher, for notices."""
     fn = getattr(dispatcher, "py_func", None)
     module = getattr(fn, "__module__", "") or ""
-    name = getattr(fn, "__qualname__", None) or getattr(fn, "__name__", "kernel")
+    name = cast(str, getattr(fn, "__qualname__", None) or getattr(fn, "__name__", "kernel"))
     family = FAMILIES.get(module, module.rsplit(".", 1)[-1] or "kernel")
     return family, name
 
@@ -115,7 +115,7 @@ def listen() -> None:
         def on_end(self, ev: Any) -> None:
             _on_compile(False, ev.data)
 
-    event.register("numba:compile", _Listener())
+    event.register("numba:compile", _Listener())  # type: ignore[no-untyped-call]  # numba has no annotations
     _registered = True
 
 

@@ -11,14 +11,17 @@ import math
 import os
 import sys
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any, TextIO
+
+if TYPE_CHECKING:  # types only: rich loads when a table is printed
+    from rich.console import Console
 
 #: Width of a printed table when stdout is not a terminal and COLUMNS is not set
 #: (a file or a pipe): wide, so a log keeps whole rows.
 PIPE_TABLE_WIDTH = 200
 
 
-def table_width(stream: Any = None) -> int | None:
+def table_width(stream: TextIO | None = None) -> int | None:
     """Columns to lay tables out in: COLUMNS when set, the terminal's width, else PIPE_TABLE_WIDTH.
 
     None means "let rich measure the terminal". COLUMNS wins over the pipe
@@ -31,7 +34,7 @@ def table_width(stream: Any = None) -> int | None:
     return None if stream.isatty() else PIPE_TABLE_WIDTH
 
 
-def stdout_console(width: int | None = None) -> Any:
+def stdout_console(width: int | None = None) -> Console:
     """A rich Console on stdout at :func:`table_width` (or ``width``)."""
     from rich.console import Console
 
@@ -50,7 +53,7 @@ def sig(value: float | None, digits: int = 3) -> str:
     return f"{value:.{digits}g}"
 
 
-def terminal_notice(stream: Any = None) -> Callable[[str], None] | None:
+def terminal_notice(stream: TextIO | None = None) -> Callable[[str], None] | None:
     """A ``notice`` for the engine (e.g. "compiling numba kernels (first run only...)") on a terminal.
 
     The first numba run compiles for seconds; without a word it looks hung.
@@ -66,6 +69,8 @@ def terminal_notice(stream: Any = None) -> Callable[[str], None] | None:
     return notice
 
 
+# compiled: animsim.compile.Compiled, result: animsim.engine.RunResult, system: animsim.system.System;
+# Any because this module sits below them in the layers (docs/architecture.md), even for types
 def steps_text(compiled: Any, result: Any) -> str:
     """How many steps a run took, in words that fit fixed and adaptive runs.
 

@@ -24,8 +24,9 @@ Conventions fixed here (documented for users in docs/scene-language):
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -37,23 +38,29 @@ from animsim.scene import models as m
 from animsim.scene.structures import expand, pinned_rows, structure_spring_count, tears
 from animsim.tearing import Tearing
 
+if TYPE_CHECKING:  # types only
+    from animsim.elements import StepStage
+    from animsim.forces.springs import Springs
+    from animsim.integrators.base import Integrator
+    from animsim.system import System
+
 
 @dataclass
 class Built:
-    front: list[Any] = field(default_factory=list)  # before planes: keyframes, colliders
-    back: list[Any] = field(default_factory=list)  # after planes: contacts, tearing
-    contacts: Any = None
-    colliders: Any = None
-    drivers: list[Any] = field(default_factory=list)  # keyframe drives (forces see the path)
+    front: list[StepStage] = field(default_factory=list)  # before planes: keyframes, colliders
+    back: list[StepStage] = field(default_factory=list)  # after planes: contacts, tearing
+    contacts: ParticleContacts | None = None
+    colliders: Colliders | None = None
+    drivers: list[KeyframeDrive] = field(default_factory=list)  # keyframe drives (forces see the path)
     left_out: list[str] = field(default_factory=list)
-    tearing: Any = None
+    tearing: Tearing | None = None
     radius: np.ndarray | None = None
     #: t -> points on the colliders' surfaces, for drawing (None: no colliders)
-    collider_surface: Any = None
+    collider_surface: Callable[[float], np.ndarray] | None = None
 
 
 #: c in "a constant acceleration a over a step of dt moves a position by c dt^2 a", per method:
-def follow_weight(integrator: Any) -> float:
+def follow_weight(integrator: Integrator) -> float:
     """The integrator's c in x1 = x0 + dt (v0 + c dv): x1 = x0 + dt v1 for symplectic and
     implicit Euler (c = 1), x1 = x0 + dt v0 for explicit Euler (c = 0), and the exact
     dt^2 a / 2 of every method of order 2 or more (Runge-Kutta, Verlet, the averaged Euler),
@@ -76,7 +83,7 @@ def spring_max_strain(scene: m.Scene) -> np.ndarray:
     return np.concatenate(parts) if parts else np.zeros(0)
 
 
-def particle_radius(scene: m.Scene, system: Any) -> np.ndarray:
+def particle_radius(scene: m.Scene, system: System) -> np.ndarray:
     """Per row radius (m): own, else structure's, else particle_collisions', else 0."""
     n = system.particle_count
     default = scene.particle_collisions.radius if scene.particle_collisions is not None else 0.0
@@ -90,13 +97,13 @@ def particle_radius(scene: m.Scene, system: Any) -> np.ndarray:
     return radius
 
 
-def _point_rows(system: Any) -> np.ndarray:
+def _point_rows(system: System) -> np.ndarray:
     """Rows colliders and contacts act on: particles, not rigid-body centres (when bodies exist)."""
     rows = getattr(system, "point_rows", None)
     return np.ones(system.particle_count, dtype=bool) if rows is None else np.asarray(rows, dtype=bool)
 
 
-def collider_shape(c: Any) -> Any:
+def collider_shape(c: m.SphereCollider | m.BoxCollider | m.CapsuleCollider) -> Shape:
     """The :class:`animsim.colliders.Shape` of one scene collider, at its written position."""
 
     if isinstance(c, m.SphereCollider):
@@ -121,7 +128,9 @@ def collider_shape(c: Any) -> Any:
     )
 
 
-def build(scene: m.Scene, system: Any, backend: str, springs: Any | None, positions: np.ndarray) -> Built:
+def build(
+    scene: m.Scene, system: System, backend: str, springs: Springs | None, positions: np.ndarray
+) -> Built:
     """Every stage this module owns that ``scene`` uses (see the module docstring).
 
     ``springs``: the scene's spring element (tearing switches broken ones off in it);
@@ -133,7 +142,7 @@ def build(scene: m.Scene, system: Any, backend: str, springs: Any | None, positi
     numba = "numba" if backend == "numba" else "numpy"
 
     # --- keyframes: listed pinned particles, structures' pins ---------------------------
-    keys: list[list[tuple[float, tuple[float, float, float]]]] = []
+    keys: list[list[Any]] = []  # each path's keys as validated: [t, [x, y, z]] (m.Keyframe)
     smooth: list[bool] = []
     rows: list[int] = []
     which: list[int] = []
@@ -147,11 +156,12 @@ def build(scene: m.Scene, system: Any, backend: str, springs: Any | None, positi
             base.append(np.zeros(3))
     if scene.structures:
         for s, (first, _shape, _f0, _f1) in zip(scene.structures, system.structure_grids, strict=True):
-            if getattr(s, "pin_motion", None) is None:
+            motion = getattr(s, "pin_motion", None)  # not every structure kind has pins that move
+            if motion is None:
                 continue
             path = len(keys)
-            keys.append(list(s.pin_motion.keyframes))
-            smooth.append(s.pin_motion.interpolation == "smooth")
+            keys.append(list(motion.keyframes))
+            smooth.append(motion.interpolation == "smooth")
             for li in pinned_rows(s).tolist():
                 which.append(path)
                 rows.append(first + li)
@@ -208,7 +218,8 @@ def build(scene: m.Scene, system: Any, backend: str, springs: Any | None, positi
         contacts = ParticleContacts(
             radius, pc.restitution, pc.friction, system.particle_inv_mass, active, exclude, numba
         )
-        contacts.colliders = colliders
+        # ParticleContacts leaves its attribute unannotated (None until set here)
+        contacts.colliders = colliders  # type: ignore[assignment]
         out.back.append(contacts)
         out.contacts = contacts
     else:

@@ -20,12 +20,14 @@ import numpy as np
 from animsim.backends import numba_threads
 from animsim.compile import Compiled
 from animsim.compile_notice import compile_notices
+from animsim.dynamics import Dynamics
+from animsim.elements import StepStage
 from animsim.export.meta import run_facts
 from animsim.guard import Failure, Guard
 from animsim.measures.drift import annotate
 from animsim.record import Frame, FrameSink
 from animsim.startup import resume_collector
-from animsim.steppers import start
+from animsim.steppers import Fused, Stepper, start
 from animsim.system import State
 from animsim.version import __version__
 
@@ -182,6 +184,7 @@ def _run(
                 goal = int(record[next_rec]) if next_rec < len(record) else steps
                 verified = False  # the stepper checked the state at k and it passed
                 if inside:
+                    assert isinstance(stepper, Fused)  # only the fused chunks run the checks inside
                     # Several frames a call: the stepper copies the states at the record
                     # positions before the goal (observers read whole states: one a call).
                     ahead = min(next_rec + (1 if observers else stepper.shots_per_call), len(record))
@@ -240,6 +243,7 @@ def _run(
                 if check_now:
                     failure = guard.check(state)
                     if failure is not None and last_good is not None and state.step - passed_step > 1:
+                        assert books is not None  # kept with last_good (replayable runs)
                         failure = _first_failure(
                             state, last_good, books, failure, stepper, guard, dyn, passed_step, booked
                         )
@@ -311,14 +315,19 @@ def _flush(
     return count
 
 
-def _snapshot(compiled: Compiled, guard: Guard) -> tuple[Any, list[tuple[Any, Any]]]:
+#: what a replay restores besides the state: the watchdog's books (Guard.snapshot) and each
+#: replayed stage with its own bookkeeping (whatever that stage's snapshot returns)
+_Books = tuple[Any, list[tuple[StepStage, Any]]]
+
+
+def _snapshot(compiled: Compiled, guard: Guard) -> _Books:
     """What a replay restores besides the state: the watchdog's books and the stages' own
     bookkeeping (the emitters' random streams and pools)."""
     stages = [(st, st.snapshot()) for st in compiled.post_step if st.replays]
     return guard.snapshot(), stages
 
 
-def _restore(books: tuple[Any, list[tuple[Any, Any]]], guard: Guard) -> None:
+def _restore(books: _Books, guard: Guard) -> None:
     watch, stages = books
     guard.restore(watch)
     for st, snap in stages:
@@ -328,11 +337,11 @@ def _restore(books: tuple[Any, list[tuple[Any, Any]]], guard: Guard) -> None:
 def _first_failure(
     state: State,
     last_good: State,
-    books: Any,
+    books: _Books,
     failure: Failure,
-    stepper: Any,
+    stepper: Stepper,
     guard: Guard,
-    dyn: Any,
+    dyn: Dynamics,
     passed_step: int,
     booked: bool = False,
 ) -> Failure:
@@ -425,7 +434,7 @@ def _writing(stop: Callable[[], bool] | None) -> None:
 def finish(
     sinks: Sequence[FrameSink],
     state: State,
-    dyn: Any,
+    dyn: Dynamics,
     status: str,
     wall: float,
     energy_start: float,
@@ -488,6 +497,7 @@ def _with_bodies(frame: Frame, state: State, copy: bool) -> Frame:
     import dataclasses
 
     q, w = state.body_orientation, state.body_angular_velocity
+    assert w is not None  # bodies carry both (State)
     return dataclasses.replace(
         frame, orientation=q.copy() if copy else q, angular_velocity=w.copy() if copy else w
     )

@@ -104,7 +104,7 @@ def scene_record_steps(clock: Clock, every: int | None, fps: float | None) -> np
     return steps
 
 
-def landing_steps(clock: Clock, times: Sequence[float]) -> list[int | None]:
+def landing_steps(clock: Clock, times: Sequence[float] | np.ndarray) -> list[int | None]:
     """For each time, the step index whose clock time is that time (to rounding), or None."""
     out: list[int | None] = []
     for t in times:

@@ -62,7 +62,7 @@ The protocol (every stepper):
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -70,6 +70,10 @@ from animsim.backends import block_stage, fused_unsupported
 from animsim.guard import Failure, Guard
 from animsim.measures.stability import particle_name
 from animsim.system import State
+
+if TYPE_CHECKING:  # types only: compile and the fused backend import this module's neighbours
+    from animsim.backends.fused import FusedStepper
+    from animsim.compile import Compiled
 
 #: a doubled step has about DOUBLING_BASE^(p+1) times the local error of the two halves
 DOUBLING_BASE = 2.0
@@ -128,7 +132,7 @@ def next_step(h: float, distance: float, dt_min: float, dt_max: float) -> tuple[
     return h, False
 
 
-def start(compiled: Any, notice: Callable[[str], None] | None = None) -> tuple[State, Any, float]:
+def start(compiled: Compiled, notice: Callable[[str], None] | None = None) -> tuple[State, Stepper, float]:
     """What a run starts from: a fresh state, the elements bound to it and the stages reset,
     and the stepper prepared (numba's kernels compiled or loaded): (state, stepper, seconds
     spent compiling, which are not run time)."""
@@ -140,7 +144,7 @@ def start(compiled: Any, notice: Callable[[str], None] | None = None) -> tuple[S
     return state, stepper, stepper.prepare(state, notice)
 
 
-def make_stepper(compiled: Any) -> Any:
+def make_stepper(compiled: Compiled) -> Stepper:
     """The stepper for ``compiled`` on its backend (chosen once, at compile time)."""
     numba = compiled.backend == "numba"
     if compiled.adaptive is not None:
@@ -151,7 +155,7 @@ def make_stepper(compiled: Any) -> Any:
 
 
 class _Base:
-    def __init__(self, compiled: Any, numba: bool = False):
+    def __init__(self, compiled: Compiled, numba: bool = False):
         self.compiled = compiled
         self.clock = compiled.clock
         self.end = compiled.clock.steps
@@ -184,13 +188,13 @@ class _Base:
     def position(self, state: State) -> int:
         return state.step
 
-    def check_inside(self, guard: Any) -> bool:
+    def check_inside(self, guard: Guard) -> bool:
         return False
 
     #: the watchdog's booking of newborns after every step, when the stepper books them
     _book: Callable[[State], None] | None = None
 
-    def books_inside(self, guard: Any) -> bool:
+    def books_inside(self, guard: Guard) -> bool:
         """Book the newborns at every step here (``guard.book`` after its stages), for a
         replayable run: the loop then advances a run with births a stride at a time, not a
         step (its Python between two steps was about 40 us of a 100,000-slot fountain's
@@ -200,7 +204,7 @@ class _Base:
         self._book = guard.book
         return True
 
-    def quick_check(self, guard: Any) -> Callable[[State], bool] | None:
+    def quick_check(self, guard: Guard) -> Callable[[State], bool] | None:
         return None
 
     def summary(self) -> dict[str, Any]:
@@ -213,7 +217,9 @@ class _Base:
             # the only stage meets each block of rows inside the integrator's step, while the
             # block is in cache (the same values: each row meets it by itself)
             session = self._block_stage.block_session(state, dt)
-            self.compiled.integrator.step(state, dt, session)
+            # a block stage exists only for integrators with block_stages (symplectic Euler),
+            # whose step takes the stage's session
+            self.compiled.integrator.step(state, dt, session)  # type: ignore[call-arg]
             if session.finish():
                 state.revision += 1
             state.time = t1
@@ -269,7 +275,7 @@ class _NumbaDynamics:
 class StepByStep(_Base):
     """One step at a time through the integrator and the post-step stages."""
 
-    def __init__(self, compiled: Any, numba: bool = False):
+    def __init__(self, compiled: Compiled, numba: bool = False):
         super().__init__(compiled, numba)
 
     def advance(self, state: State, k: int, goal: int, max_steps: int | None = None) -> tuple[int, Any, bool]:
@@ -306,12 +312,12 @@ class Fused(_Base):
     collisions (and an emitter's step is one more compiled call of its own where its
     forces and colliders allow, :meth:`animsim.emitters.Emitters.use_numba`)."""
 
-    def __init__(self, compiled: Any):
+    def __init__(self, compiled: Compiled):
         super().__init__(compiled, numba=True)
         clock = compiled.clock
         self.times = clock.times()
         self.dts = clock.step_sizes()
-        self.fused: Any = None
+        self.fused: FusedStepper | None = None
         self.between = tuple(st for st in self.stages if st.numba_stage_source is None)
         n = compiled.system.particle_count
         #: record positions one advance_checked may pass (their states copied for the frames)
@@ -346,11 +352,17 @@ class Fused(_Base):
         self.fused.reset()
         return time.perf_counter() - t0
 
+    @property
+    def _ready(self) -> FusedStepper:
+        """The fused stepper ``prepare`` built (every call but ``forget`` comes after it)."""
+        assert self.fused is not None
+        return self.fused
+
     def forget(self) -> None:
         if self.fused is not None:
             self.fused.reset()
 
-    def check_inside(self, guard: Any) -> bool:
+    def check_inside(self, guard: Guard) -> bool:
         """Run the watchdog's checks inside the fused chunks when that saves the calls back
         to Python they cost (up to CHECKS_INSIDE_UP_TO particles) and the compiled checks
         decide as ``guard`` does: its own ``check`` (not a subclass's), no stage between the
@@ -361,13 +373,13 @@ class Fused(_Base):
             and not self.between
             and self.replayable
             and self.compiled.system.particle_count <= CHECKS_INSIDE_UP_TO
-            and self.fused.check_inside(guard.watch)
+            and self._ready.check_inside(guard.watch)
         )
 
-    def quick_check(self, guard: Any) -> Callable[[State], bool] | None:
+    def quick_check(self, guard: Guard) -> Callable[[State], bool] | None:
         """A compiled stand-in for ``guard``'s checks that stay in Python
         (:meth:`animsim.backends.fused.FusedStepper.quick_check`)."""
-        return self.fused.quick_check(guard.watch)
+        return self._ready.quick_check(guard.watch)
 
     def advance_checked(
         self, state: State, k: int, goal: int, checked: int, stride: int, rec: np.ndarray
@@ -379,8 +391,8 @@ class Fused(_Base):
             self._shots = (np.zeros((self.shots_per_call, n, 3)), np.zeros((self.shots_per_call, n, 3)))
         xs, vs = self._shots
         while k < goal and not stopped:
-            end = min(goal, k + self.fused.max_steps_per_call, k + STEPS_PER_CHECKED_CALL)
-            taken, evals, checked, stopped, got = self.fused.advance_checked(
+            end = min(goal, k + self._ready.max_steps_per_call, k + STEPS_PER_CHECKED_CALL)
+            taken, evals, checked, stopped, got = self._ready.advance_checked(
                 state,
                 k,
                 self.times[k : end + 1],
@@ -401,7 +413,7 @@ class Fused(_Base):
         return k, checked, stopped, shots
 
     def good_state(self, dest: State) -> None:
-        self.fused.good_state(dest)
+        self._ready.good_state(dest)
         dest.step = self._good_step
         dest.time = self.clock.time(self._good_step)
 
@@ -411,8 +423,8 @@ class Fused(_Base):
         if self.between:
             return self._advance_between(state, k, stop)
         while k < stop and not failed:
-            end = min(stop, k + self.fused.max_steps_per_call)
-            taken, evals, failed = self.fused.advance(state, self.times[k:end], self.dts[k:end])
+            end = min(stop, k + self._ready.max_steps_per_call)
+            taken, evals, failed = self._ready.advance(state, self.times[k:end], self.dts[k:end])
             self.compiled.dynamics.evaluations += evals
             k += taken
             state.step = k
@@ -423,10 +435,10 @@ class Fused(_Base):
         """One fused step at a time, each followed by the stages called from Python (as _one)
         and, when the stepper books them (books_inside), the newborns' energy books."""
         failed = False
-        threaded = self.fused.threaded()  # asked once for the stretch, not at every step
+        threaded = self._ready.threaded()  # asked once for the stretch, not at every step
         while k < stop and not failed:
             t0 = state.time
-            taken, evals, failed = self.fused.advance(
+            taken, evals, failed = self._ready.advance(
                 state, self.times[k : k + 1], self.dts[k : k + 1], threaded
             )
             self.compiled.dynamics.evaluations += evals
@@ -439,7 +451,7 @@ class Fused(_Base):
                 if stage.apply(state, self._x_old, self._v_old, t0, t1, dt):
                     state.revision += 1
             if state.revision != revision:
-                self.fused.reset()  # Verlet's force is stale after births and deaths
+                self._ready.reset()  # Verlet's force is stale after births and deaths
             state.time = t1
             if self._book is not None:
                 self._book(state)
@@ -470,9 +482,10 @@ class StepDoubling(_Base):
     would pass dt_max, the rest is split in two equal steps.
     """
 
-    def __init__(self, compiled: Any, numba: bool = False):
+    def __init__(self, compiled: Compiled, numba: bool = False):
         super().__init__(compiled, numba)
         spec = compiled.adaptive
+        assert spec is not None  # make_stepper picks this stepper only for an adaptive clock
         self.tolerance = float(spec.tolerance)
         self.dt_min = float(spec.dt_min)
         self.dt_max = float(spec.dt_max)
@@ -514,7 +527,7 @@ class StepDoubling(_Base):
             }
         }
 
-    def books_inside(self, guard: Any) -> bool:
+    def books_inside(self, guard: Guard) -> bool:
         return False  # births keep this stepper's runs checked (and booked) at every step
 
     def position(self, state: State) -> int:
@@ -535,6 +548,8 @@ class StepDoubling(_Base):
             # times the difference of angular velocities, times the body's bounding radius
             from animsim.bodies import quaternion as quat
 
+            assert big.body_orientation is not None and small.body_orientation is not None
+            assert big.body_angular_velocity is not None and small.body_angular_velocity is not None
             d = quat.multiply(big.body_orientation, quat.conjugate(small.body_orientation))
             angle = 2.0 * np.arctan2(np.linalg.norm(d[:, 1:], axis=1), np.abs(d[:, 0]))
             dw = np.abs(big.body_angular_velocity - small.body_angular_velocity).max(axis=1)
@@ -599,3 +614,7 @@ class StepDoubling(_Base):
             if landing:
                 k = goal
         return k, None, False
+
+
+#: the steppers the loop drives (make_stepper picks one)
+Stepper = StepByStep | Fused | StepDoubling

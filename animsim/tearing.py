@@ -10,9 +10,14 @@ alone, so a run tears the same springs at the same steps every time.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from animsim.elements import StepStage
+
+if TYPE_CHECKING:  # types only
+    from animsim.forces.springs import Springs
 
 
 def strain(x: np.ndarray, a: np.ndarray, b: np.ndarray, rest: np.ndarray) -> np.ndarray:
@@ -103,7 +108,7 @@ class Tearing(StepStage):
         self.broken = 0
         self.first_break: float | None = None
         #: the spring element (animsim.forces.springs.Springs) whose broken springs are switched off
-        self.springs = None
+        self.springs: Springs | None = None
         self.label = f"tearing: {self.which.size} spring(s) break for good past their max_strain " + (
             _families_text(self.limit, families)
             if families

@@ -25,6 +25,8 @@ from __future__ import annotations
 import importlib.util
 from collections.abc import Iterator
 from contextlib import contextmanager
+
+# ``compiled`` below is animsim.compile.Compiled: Any, since backends may not import compile (layers)
 from typing import Any
 
 from animsim.errors import UsageError
@@ -91,7 +93,7 @@ def numba_threads(compiled: Any) -> Iterator[None]:
         return
     import numba
 
-    most = numba.config.NUMBA_NUM_THREADS
+    most: int = numba.config.NUMBA_NUM_THREADS  # type: ignore[attr-defined]  # set at numba's import
     if threads > most:
         raise UsageError(f"threads: {threads} is more than numba may start here ({most}, NUMBA_NUM_THREADS)")
     before = numba.get_num_threads()

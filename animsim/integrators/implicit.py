@@ -53,7 +53,7 @@ from __future__ import annotations
 import functools
 import math
 import warnings
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -97,6 +97,13 @@ SPARSE_CHOLESKY = True
 LU_MAX_DOF = 60_000
 
 
+class _Factors(Protocol):
+    """What the step needs of factors of A (CHOLMOD's, banded Cholesky, SuperLU) and of the
+    Jacobi preconditioner: x with A x = b (or its approximation)."""
+
+    def solve(self, b: np.ndarray) -> np.ndarray: ...
+
+
 class ImplicitEuler(Integrator):
     method_name = "implicit_euler"
 
@@ -120,7 +127,7 @@ class ImplicitEuler(Integrator):
         #: the kind of the last factorisation: "cholmod", "banded float32", "banded float64",
         #: "superlu" (None before the first)
         self.factor_kind: str | None = None
-        self._lu: tuple[np.ndarray, object] | None = None  # (free DOF mask it was made for, factors)
+        self._lu: tuple[np.ndarray, _Factors] | None = None  # (free DOF mask it was made for, factors)
         self._stiff = False  # Jacobi CG was too slow once: LU from then on
         self._skip = 0  # steps left that factor directly instead of trying old factors
         self._backoff = 0
@@ -178,7 +185,7 @@ class ImplicitEuler(Integrator):
         v += self._dv.reshape(-1, 3)
         x += dt * v
 
-    def _factor(self, a_mat: sp.csr_matrix, free: np.ndarray, dtype: type = np.float64) -> Any:
+    def _factor(self, a_mat: sp.csr_matrix, free: np.ndarray, dtype: type = np.float64) -> _Factors | None:
         """Factors of A with a ``solve(b)``: CHOLMOD's (always double precision) when cvxopt is
         installed, else banded Cholesky (in ``dtype``) when the band is narrow, else SuperLU
         (float64 only: None for float32, the caller then factors in float64)."""
@@ -216,7 +223,7 @@ class ImplicitEuler(Integrator):
             )
         return self._made(free, lu, "superlu")
 
-    def _made(self, free: np.ndarray, lu: Any, kind: str) -> Any:
+    def _made(self, free: np.ndarray, lu: _Factors, kind: str) -> _Factors:
         """Keep new factors (for the next steps' reuse) and count them."""
         self._lu = (free.copy(), lu)
         self.factorizations += 1
@@ -227,7 +234,7 @@ class ImplicitEuler(Integrator):
         self,
         a_mat: sp.csr_matrix,
         rhs: np.ndarray,
-        precond: Any,
+        precond: _Factors,
         maxiter: int,
         probe: bool = False,
         warm: bool = True,
@@ -321,7 +328,8 @@ class ImplicitEuler(Integrator):
         except RuntimeError:  # exactly singular: the step is meaningless (see _fallback)
             self._lu = None
             return self._fallback(a_mat, rhs)
-        dv = lu.solve(rhs)  # type: ignore[attr-defined]
+        assert lu is not None  # in float64 SuperLU always factors (None is for float32 only)
+        dv = lu.solve(rhs)
         if not np.all(np.isfinite(dv)):
             self._lu = None
             return self._fallback(a_mat, rhs)
@@ -527,7 +535,9 @@ class _Assembly:
             if (m is None) != (pattern is None):
                 return False
             if m is not None and not (
-                np.array_equal(m.indptr, pattern[0]) and np.array_equal(m.indices, pattern[1])
+                pattern is not None  # both present: the check above
+                and np.array_equal(m.indptr, pattern[0])
+                and np.array_equal(m.indices, pattern[1])
             ):
                 return False
         return np.array_equal(free, self.free) and np.array_equal(m_dof, self.m_dof)
@@ -595,17 +605,19 @@ def _same_pattern(m: sp.csr_matrix, other: sp.csr_matrix) -> bool:
 
 def _keys(m: sp.csr_matrix, n: int) -> np.ndarray:
     rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(m.indptr))
-    return rows * n + m.indices
+    keys: np.ndarray = rows * n + m.indices
+    return keys
 
 
 class _Jacobi:
     """The diagonal preconditioner, with the factors' ``solve`` interface."""
 
     def __init__(self, diagonal: np.ndarray):
-        self.inverse = 1.0 / diagonal
+        self.inverse: np.ndarray = 1.0 / diagonal
 
     def solve(self, b: np.ndarray) -> np.ndarray:
-        return self.inverse * b
+        x: np.ndarray = self.inverse * b
+        return x
 
 
 def _diagonal(values: np.ndarray) -> sp.csr_matrix:

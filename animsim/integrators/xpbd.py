@@ -76,7 +76,8 @@ restitution see the substep's motion only.
 from __future__ import annotations
 
 import itertools
-from typing import Any, ClassVar
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -84,14 +85,27 @@ from animsim.dynamics import Dynamics
 from animsim.forces.springs import Springs
 from animsim.integrators.base import Integrator
 from animsim.methods.xpbd import DEFAULT_SUBSTEPS  # the one place it is set
-from animsim.system import State
+from animsim.system import State, System
+
+if TYPE_CHECKING:  # types only: the stages are handed in, never built here
+    from animsim.elements import StepStage
 
 #: a contact approaching slower than this many substeps of the external acceleration
 #: along its normal bounces with restitution 0 (Mueller et al. 2020, sec. 3.5: 2 |g| h)
 RESTING_SUBSTEPS = 2.0
 
 
-def _constraints_kernel(x, p_old, a, b, rest, ca, cb, da, db):  # numba: compiled
+def _constraints_kernel(  # numba: compiled
+    x: np.ndarray,
+    p_old: np.ndarray,
+    a: np.ndarray,
+    b: np.ndarray,
+    rest: np.ndarray,
+    ca: np.ndarray,
+    cb: np.ndarray,
+    da: np.ndarray,
+    db: np.ndarray,
+) -> None:
     """:meth:`XPBD._springs`, one constraint after the other in colour order: the constraints
     of a colour share no particle, so this computes what the NumPy pass computes a colour at
     a time (the same formulas, to rounding)."""
@@ -123,7 +137,9 @@ def _constraints_kernel(x, p_old, a, b, rest, ca, cb, da, db):  # numba: compile
         x[j, 2] += fb * d2
 
 
-def _tethers_kernel(x, pins, ptr, rows, limit):  # numba: compiled
+def _tethers_kernel(  # numba: compiled
+    x: np.ndarray, pins: np.ndarray, ptr: np.ndarray, rows: np.ndarray, limit: np.ndarray
+) -> None:
     """:meth:`_Tethers.project`, a pin after the other, each row after the other."""
     for k in range(pins.shape[0]):
         p = pins[k]
@@ -141,8 +157,26 @@ def _tethers_kernel(x, pins, ptr, rows, limit):  # numba: compiled
 
 
 def _steps_kernel(
-    x, v, p_old, dv, movable, substeps, h, a, b, rest, ca, cb, da, db, tethers, tp, tptr, tr, tl
-):
+    x: np.ndarray,
+    v: np.ndarray,
+    p_old: np.ndarray,
+    dv: np.ndarray,
+    movable: np.ndarray,
+    substeps: int,
+    h: float,
+    a: np.ndarray,
+    b: np.ndarray,
+    rest: np.ndarray,
+    ca: np.ndarray,
+    cb: np.ndarray,
+    da: np.ndarray,
+    db: np.ndarray,
+    tethers: bool,
+    tp: np.ndarray,
+    tptr: np.ndarray,
+    tr: np.ndarray,
+    tl: np.ndarray,
+) -> None:
     """A whole step of :meth:`XPBD.step` when every external force is constant (``dv`` = h a,
     0 on immovable rows) and nothing is driven or touches a plane: for each substep the
     prediction, the constraints' and the tethers' passes (the kernels above) and the new
@@ -167,10 +201,11 @@ def _steps_kernel(
 _constraints_pass = _constraints_kernel
 _tethers_pass = _tethers_kernel
 
+#: numba's dispatchers (untyped: numba ships no annotations for them)
 _JITTED: dict[str, Any] = {}
 
 
-def _jit(fn: Any) -> Any:
+def _jit(fn: Callable[..., None]) -> Any:
     """``fn`` compiled by numba (imported when an xpbd run asks for it; cached on disk)."""
     got = _JITTED.get(fn.__name__)
     if got is None:
@@ -183,7 +218,7 @@ def _jit(fn: Any) -> Any:
     return got
 
 
-def realised_stiffness(system: Any, h: float) -> np.ndarray:
+def realised_stiffness(system: System, h: float) -> np.ndarray:
     """The stiffness each spring has as a constraint solved once per substep of h:
     ks / (1 + ks (w_a + w_b) h^2), and 1 / ((w_a + w_b) h^2) for ks = inf.
 
@@ -204,7 +239,7 @@ def realised_stiffness(system: Any, h: float) -> np.ndarray:
     return out
 
 
-def spring_energy_term(system: Any, label: str, dt: float, substeps: int | None) -> Any:
+def spring_energy_term(system: System, label: str, dt: float, substeps: int | None) -> Springs:
     """The force term that stands for the springs in an xpbd run of steps ``dt``: it is never
     summed into a step (the constraints move the particles), but the energy watch, ``explain``
     and the stability report read it; its stiffness is :func:`realised_stiffness`."""
@@ -367,6 +402,8 @@ class XPBD(Integrator):
             system.spring_index, system.spring_rest_length, system.spring_ks, system.particle_pinned
         )
         #: impulse planes projected inside the substeps (animsim.collisions.ImpulsePlane)
+        # animsim.collisions.ImpulsePlane: Any, since the model layer may not import collisions
+        # (it reaches the scene language), not even for types
         self.planes: list[Any] = []
         n = system.particle_count
         self._a = np.zeros((n, 3))
@@ -401,7 +438,9 @@ class XPBD(Integrator):
             "one iteration per substep; " + "; ".join(parts)
         )
 
-    def configure(self, substeps: int | None, post_step: list[Any], backend: str = "numpy") -> list[Any]:
+    def configure(
+        self, substeps: int | None, post_step: list[StepStage], backend: str = "numpy"
+    ) -> list[StepStage]:
         """Take the run's options and the stages that become constraints here (compile time):
         the impulse planes are projected inside every substep, so their post-step stage goes.
         Returns the post-step stages that remain."""
@@ -418,7 +457,8 @@ class XPBD(Integrator):
         kept = []
         for stage in post_step:
             if stage.holds_planes:  # the impulse planes (animsim.collisions.PlaneColliders)
-                self.planes.extend(stage.planes)
+                # a PlaneColliders (see self.planes for why it is not named here)
+                self.planes.extend(stage.planes)  # type: ignore[attr-defined]
             else:
                 kept.append(stage)
         self._describe()

@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+
+# ``compiled`` below is animsim.compile.Compiled: Any, since measures may not import compile (layers)
 from typing import Any
 
 from animsim.errors import UsageError

@@ -10,6 +10,7 @@ A user who asked for an implicit method must be told.
 
 from __future__ import annotations
 
+# ``compiled`` below is animsim.compile.Compiled: Any, since measures may not import compile (layers)
 from typing import Any
 
 from animsim import methods
@@ -18,7 +19,7 @@ from animsim import methods
 def effective_integrator(compiled: Any) -> str:
     """The method the run's steps amount to on this scene (usually the one named): an implicit
     method with no implicit term computes its declared explicit fallback."""
-    name = compiled.integrator_name
+    name: str = compiled.integrator_name
     fallback = methods.get(name).explicit_fallback
     if fallback is not None and not compiled.integrator.implicit_terms:
         return fallback

@@ -15,11 +15,16 @@ angular velocity) and the system their principal moments.
 
 from __future__ import annotations
 
-from typing import Any
+# ``compiled`` below is animsim.compile.Compiled: Any, since measures may not import compile (layers)
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from animsim.errors import UsageError
+
+if TYPE_CHECKING:  # types only
+    from animsim.dynamics import Dynamics
+    from animsim.system import State, System
 
 #: the parts, in the order plots stack and list them
 PARTS = ("kinetic", "rotational", "gravitational", "spring", "other")
@@ -32,7 +37,7 @@ def term_part(term: Any) -> str:
     return str(declared) if declared in PARTS else "other"
 
 
-def rotational_energy(system: Any, state: Any) -> float | None:
+def rotational_energy(system: System, state: State) -> float | None:
     """1/2 sum_b w_b . I_b w_b over rigid bodies, or None when there are none."""
     # any state-like object: a run's State, or a trajectory's frame read back without bodies
     q = getattr(state, "body_orientation", None)
@@ -51,7 +56,7 @@ def rotational_energy(system: Any, state: Any) -> float | None:
     return float(0.5 * np.einsum("bi,bi,bi->", w_body, np.asarray(inertia, dtype=np.float64), w_body))
 
 
-def energy_parts(dynamics: Any, state: Any) -> dict[str, float]:
+def energy_parts(dynamics: Dynamics, state: State) -> dict[str, float]:
     """Energy of ``state`` by part (J): kinetic, gravitational, spring, and where present
     rotational and other; plus ``potential`` (their stored sum) and ``total``."""
     x, v = state.particle_position, state.particle_velocity
@@ -73,12 +78,12 @@ def energy_parts(dynamics: Any, state: Any) -> dict[str, float]:
 class EnergyRecorder:
     """An observer for ``simulate.run(..., observers=[...])``: energy parts at every recorded frame."""
 
-    def __init__(self, dynamics: Any):
+    def __init__(self, dynamics: Dynamics):
         self.dynamics = dynamics
         self.times: list[float] = []
         self.rows: list[dict[str, float]] = []
 
-    def __call__(self, state: Any) -> None:
+    def __call__(self, state: State) -> None:
         with np.errstate(over="ignore", invalid="ignore"):
             self.rows.append(energy_parts(self.dynamics, state))
         self.times.append(float(state.time))

@@ -37,13 +37,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+
+# ``compiled`` below is animsim.compile.Compiled: Any, since measures may not import compile (layers)
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from animsim import methods
 from animsim.errors import Diagnostic, SceneError
 from animsim.scene.structures import parse_structure_id
+
+if TYPE_CHECKING:  # types only
+    from animsim.system import System
 
 #: the suggested dt is this fraction of the limit, then rounded down to two significant digits
 SAFETY_FACTOR = 0.9
@@ -118,7 +123,7 @@ def spectral_radius(m: np.ndarray) -> np.ndarray:
     return np.where(finite & ~np.isnan(rho), rho, np.inf)
 
 
-def largest_stable_dt(method: str, omega: np.ndarray, zeta: np.ndarray) -> np.ndarray:
+def largest_stable_dt(method: str, omega: np.ndarray | float, zeta: np.ndarray | float) -> np.ndarray:
     """Largest stable step (s) of ``method`` on x'' + 2 zeta omega x' + omega^2 x = 0.
 
     Element-wise over arrays of omega (rad/s) and zeta; inf where there is no
@@ -177,7 +182,8 @@ def _bisect_limit(method: str, omega: np.ndarray, zeta: np.ndarray) -> np.ndarra
         bad = r > 1.0 + RADIUS_TOLERANCE
         hi = np.where(~done & bad, mid, hi)
         lo = np.where(~done & ~bad, mid, lo)
-    return np.where(np.isfinite(hi), lo, np.inf) / omega
+    dt: np.ndarray = np.where(np.isfinite(hi), lo, np.inf) / omega
+    return dt
 
 
 #: steps over which the energy swing of a stable step is taken (the swing's period is a few
@@ -230,7 +236,7 @@ def energy_excursion(method: str, theta: np.ndarray, zeta: np.ndarray) -> np.nda
 
 def _matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """a @ b for stacks of tiny matrices, as one broadcast product (NumPy's matmul loops per matrix)."""
-    out = a[..., :, 0:1] * b[..., 0:1, :]
+    out: np.ndarray = a[..., :, 0:1] * b[..., 0:1, :]
     for k in range(1, a.shape[-1]):
         out += a[..., :, k : k + 1] * b[..., k : k + 1, :]
     return out
@@ -560,13 +566,13 @@ def unconditional_method() -> str:
 
 def particle_name(compiled: Any, i: int) -> str:
     """The id of particle ``i``: listed and structure particles by their id, emitted ones as ``name#n``."""
-    ids = compiled.system.ids
+    ids: list[str] = compiled.system.ids
     if i < len(ids):
         return ids[i]
     emitted = compiled.emitters.particle_id(i) if compiled.emitters is not None else None
     return emitted if emitted is not None else f"#{i}"
 
 
-def spring_label(system: Any, s: int) -> str:
+def spring_label(system: System, s: int) -> str:
     a, b = system.spring_index[s]
     return f"{system.ids[a]!r}-{system.ids[b]!r}"

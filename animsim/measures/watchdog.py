@@ -37,7 +37,8 @@ anchors) switch the energy test off; the finiteness test stays.
 
 from __future__ import annotations
 
-from typing import Any
+# ``compiled`` below is animsim.compile.Compiled: Any, since measures may not import compile (layers)
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -45,6 +46,9 @@ from animsim.elements import DISSIPATIVE, ELASTIC, INJECTING, RELEASING
 from animsim.measures.stability import run_energy_excursion
 from animsim.system import kept_copies
 from animsim.vec import put_rows, take_rows
+
+if TYPE_CHECKING:  # types only
+    from animsim.system import State
 
 #: the energy may reach this multiple of its budget before the run is called unstable
 BLOWUP_FACTOR = 100.0
@@ -56,7 +60,20 @@ ENERGY_FLOOR_J = 1e-9
 COMPILED_SUMS_FROM = 4096
 
 
-def _newborn_rows(x, v, rows, dead, alive, alive_prev, mass, x_ref, idx, xb, vb, mb):  # numba
+def _newborn_rows(  # numba
+    x: np.ndarray,
+    v: np.ndarray,
+    rows: np.ndarray,
+    dead: np.ndarray,
+    alive: np.ndarray,
+    alive_prev: np.ndarray,
+    mass: np.ndarray,
+    x_ref: np.ndarray,
+    idx: np.ndarray,
+    xb: np.ndarray,
+    vb: np.ndarray,
+    mb: np.ndarray,
+) -> int:
     """EnergyWatch.book_births on the rows the emitters name, in one compiled pass: the rows
     of ``rows`` alive now and not at the last booking into ``idx`` (ascending, as ``rows``),
     their positions, velocities and masses gathered into ``xb``, ``vb``, ``mb`` and their
@@ -140,7 +157,7 @@ class EnergyWatch:
                 f(x_init, x_init, u)
         self.floor = ENERGY_FLOOR_J + self._external_floor(x0, v0)
 
-    def bind(self, state: Any) -> None:
+    def bind(self, state: State) -> None:
         """Book the run's live masses (pool births change them)."""
         self.mass = state.particle_mass
         self.inv_mass = state.particle_inv_mass
@@ -156,7 +173,7 @@ class EnergyWatch:
         inv = self.inv_mass
         return ENERGY_FLOOR_STEPS * self.dt**2 * float(np.dot(inv, np.einsum("ij,ij->i", f, f)))
 
-    def reset(self, state: Any) -> None:
+    def reset(self, state: State) -> None:
         """Start the books at ``state`` (the run's initial state)."""
         x = state.particle_position
         self.x_ref = x.copy()  # where each particle's released energy is measured from
@@ -173,7 +190,7 @@ class EnergyWatch:
     def kinetic(self, v: np.ndarray) -> float:
         return float(0.5 * np.dot(self.mass, np.einsum("ij,ij->i", v, v)))
 
-    def watched(self, state: Any) -> float:
+    def watched(self, state: State) -> float:
         """H = kinetic + spring + penalty energy (J)."""
         x = state.particle_position
         h = self.kinetic(state.particle_velocity)
@@ -194,7 +211,7 @@ class EnergyWatch:
         stretch = np.sqrt(np.einsum("ij,ij->i", d, d)) - springs.rest
         return 0.5 * float(np.dot(springs.ks, stretch * stretch))
 
-    def book_births(self, state: Any) -> None:
+    def book_births(self, state: State) -> None:
         """Book the particles alive now and not at the last booking: their kinetic energy joins
         the budget and their released energy is measured from here. The loop calls this after
         every step of a run with births (and each check does), so the books are those of a
@@ -233,7 +250,7 @@ class EnergyWatch:
         for t, u in self._u_booked:
             u[idx] = t.per_particle_potential(xb, idx)
 
-    def _book_compiled(self, state: Any, rows: np.ndarray, dead: np.ndarray) -> None:
+    def _book_compiled(self, state: State, rows: np.ndarray, dead: np.ndarray) -> None:
         """book_births' booking of ``rows`` (born, ascending) and ``dead`` through
         :func:`_newborn_rows`: the same numbers, its sums NumPy's on the gathered rows."""
         k = len(rows)
@@ -270,9 +287,10 @@ class EnergyWatch:
         np.copyto(self.x_ref, snap[1])
         for u, saved in zip(self.u_ref, snap[2], strict=True):
             np.copyto(u, saved)
+        assert self.alive_prev is not None  # a snapshot exists only with births (snapshot)
         np.copyto(self.alive_prev, snap[3])
 
-    def budget(self, state: Any) -> float:
+    def budget(self, state: State) -> float:
         """B: the most energy H may hold at ``state`` without the integrator making any."""
         x = state.particle_position
         self.book_births(state)
@@ -280,13 +298,14 @@ class EnergyWatch:
         for release, u in zip(self._released, self.u_ref, strict=True):
             released += release(x, self.x_ref, u)
         movable = self._movable if self.alive_prev is None else float(np.count_nonzero(self.mass))
-        return (
+        total: float = (
             self.h0
             + max(released, 0.0)
             + self.wind_power * movable * state.time
             + self.born_energy
             + self.floor
         )
+        return total
 
     def budget_constants(self) -> tuple[float, float, float, float, float]:
         """(h0, floor, wind power per particle, movable particles, born energy): the terms of
@@ -294,13 +313,13 @@ class EnergyWatch:
         without births (whose books never change)."""
         return self.h0, self.floor, float(self.wind_power), self._movable, self.born_energy
 
-    def growth(self, state: Any) -> tuple[float, float, float]:
+    def growth(self, state: State) -> tuple[float, float, float]:
         """(H, B, H/B) at ``state``."""
         h = self.watched(state)
         b = self.budget(state)
         return h, b, h / b
 
-    def blame(self, state: Any) -> tuple[int, int | None]:
+    def blame(self, state: State) -> tuple[int, int | None]:
         """The particle holding the most watched energy and the spring holding the most."""
         x, v = state.particle_position, state.particle_velocity
         e = 0.5 * self.mass * np.einsum("ij,ij->i", v, v)
