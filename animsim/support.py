@@ -242,7 +242,7 @@ _NO_BOX_CAPSULE = _no(
 
 _NO_KEYFRAMED_BODY = _no(
     "a keyframed particle does not meet rigid bodies (it would pass through a pinned one)",
-    "move a small keyframed sphere collider along the keys instead; colliders push bodies",
+    "move a small keyframed sphere collider along the keys; colliders push bodies",
 )
 
 
