@@ -574,7 +574,7 @@ class PlaneColliders(StepStage):
         if not single:
             # Only particles moved above can be behind a plane now: every other
             # one ended its step in front of all of them.
-            self._project(x, v, np.unique(np.concatenate(touched)))
+            self.project_rows(x, v, np.unique(np.concatenate(touched)))
         return True
 
     def meets_blocks(self) -> bool:
@@ -602,19 +602,16 @@ class PlaneColliders(StepStage):
         return self._block_buffers
 
     def project_rows(self, x: np.ndarray, v: np.ndarray, idx: np.ndarray) -> None:
-        """Put any of rows ``idx`` behind a plane onto it and stop its inward motion (another
-        stage pushed them: particle contacts, particle-body contacts)."""
-        self._project(x, v, idx)
-
-    def _project(self, x: np.ndarray, v: np.ndarray, idx: np.ndarray) -> None:
-        """Put any of ``idx`` still behind a plane onto it and stop its inward motion."""
+        """Put any of rows ``idx`` behind a plane onto it and stop its inward motion (after the
+        hits of :meth:`resolve`, and for the stages that push particles: particle contacts,
+        particle-body contacts)."""
         xs, vs = take_rows(x, idx), take_rows(v, idx)
         self._project_rows(xs, vs)
         put_rows(x, idx, xs)
         put_rows(v, idx, vs)
 
     def _project_rows(self, x: np.ndarray, v: np.ndarray, scratch: _Blocks | None = None) -> None:
-        """:meth:`_project` on gathered rows (k, 3), in place (``scratch``: buffers of at least k rows
+        """:meth:`project_rows` on gathered rows (k, 3), in place (``scratch``: buffers of at least k rows
         other than those holding x and v)."""
         buf = scratch if scratch is not None else _Blocks(len(x))
         for pl in self.planes:
@@ -667,7 +664,7 @@ def _settle(pl: ImpulsePlane, x: np.ndarray, v: np.ndarray, buf: _Blocks) -> Non
 
 
 # --- the numba kernel: the same rule, particle by particle ---------------------------------
-# Operation for operation as PlaneColliders.resolve and _project above (the dot
+# Operation for operation as PlaneColliders.resolve and project_rows above (the dot
 # products summed x, y, z), so the backends agree to rounding.
 #
 # Laid out for the processor's vector units: the rows of a run that are on or behind a
