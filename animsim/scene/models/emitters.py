@@ -13,8 +13,6 @@ from animsim.scene.models.common import Doc, HexColor, Model, NonNegative, Posit
 
 # Bounds that keep a typo from asking for an absurd number; the memory
 # budget (animsim.preflight) is the real guard, these only catch nonsense early.
-
-
 MAX_EMITTER_PARTICLES = 100_000_000
 DEFAULT_MAX_PARTICLES = 100_000
 
