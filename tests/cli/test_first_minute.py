@@ -107,7 +107,9 @@ def test_progress_bar_opens_after_two_seconds_whatever_the_step_count(monkeypatc
 
     out = io.StringIO()
     monkeypatch.setattr(sys.stderr, "isatty", lambda: True, raising=False)
-    monkeypatch.setattr(cli, "_stderr_console", lambda: Console(file=out, force_terminal=True, width=80))
+    monkeypatch.setattr(
+        cli.terminal, "stderr_console", lambda: Console(file=out, force_terminal=True, width=80)
+    )
     now = [100.0]
     with cli._progress(False, clock=lambda: now[0]) as update:
         update(10, 1000)  # a 1,000-step run: no bar in its first two seconds

@@ -16,7 +16,8 @@ import pytest
 from tests.conftest import ROOT
 
 PACKAGE = ROOT / "animsim"
-CLI = PACKAGE / "cli.py"
+#: the command line: a package, one module per command family
+CLI = PACKAGE / "cli"
 STEPPING = [
     PACKAGE / "engine.py",
     PACKAGE / "steppers.py",
@@ -56,7 +57,8 @@ def test_nothing_below_the_command_line_imports_it():
     offenders = [
         str(path.relative_to(ROOT))
         for path in sorted(PACKAGE.rglob("*.py"))
-        if path not in (CLI, PACKAGE / "__main__.py")
+        if CLI not in path.parents
+        and path != PACKAGE / "__main__.py"
         and any(m == "animsim.cli" or m.startswith("animsim.cli.") for m in _imports(_tree(path)))
     ]
     assert offenders == []
@@ -72,7 +74,12 @@ def _commands() -> dict[str, ast.FunctionDef]:
     from animsim.cli import app
 
     names = {info.callback.__name__ for info in app.registered_commands}
-    found = {node.name: node for node in _tree(CLI).body if isinstance(node, ast.FunctionDef)}
+    found = {
+        node.name: node
+        for path in sorted(CLI.glob("*.py"))
+        for node in _tree(path).body
+        if isinstance(node, ast.FunctionDef)
+    }
     assert names <= set(found), names - set(found)
     return {name: found[name] for name in sorted(names)}
 

@@ -165,7 +165,13 @@ HEAVY = {"animsim.backends.fused", "animsim.numba_cache"}
 #: the package face, the API and the command line import the rest of animsim inside their
 #: functions, so that ``animsim --help``, ``import animsim`` and a command load only what
 #: they use (test_the_command_line_starts_without_numpy_or_pydantic)
-START_UP = {"animsim", "animsim.api", "animsim.cli", "animsim.__main__"}
+START_UP = {
+    "animsim",
+    "animsim.api",
+    "animsim.__main__",
+    "animsim.cli",
+    *(f"animsim.cli.{p.stem}" for p in (PACKAGE / "cli").glob("*.py") if p.stem != "__init__"),
+}
 
 
 def _lazy_imports() -> list[tuple[str, int, str, str]]:

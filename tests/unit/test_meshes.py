@@ -142,7 +142,7 @@ def test_binary_and_unknown_files_are_refused(tmp_path: Path) -> None:
 
 
 def test_vertex_limit(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(meshes, "MAX_MESH_VERTICES", 3)
+    monkeypatch.setattr(meshes.geometry, "MAX_MESH_VERTICES", 3)  # where check_geometry reads it
     v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
     with pytest.raises(MeshError, match="4 vertices, more than the limit of 3"):
         check_geometry(v, [(1, [0, 1, 2]), (2, [0, 1, 3])])
