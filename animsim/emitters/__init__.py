@@ -98,6 +98,12 @@ Random streams
     from (scene seed, a hash of the emitter's name): one for birth times and
     rate noise, one for attributes. Adding, removing or reordering another
     emitter does not change this one's particles.
+
+The package's modules, each named for what it holds: ``births`` (the rate, the
+birth shapes and the seeded birth streams), ``pool`` (one emitter's slots and
+books), ``kernels`` (the numba kernels of the pools' bookkeeping) and ``stage``
+(the step stage the loop calls, and ``build_emitters``). Every public name of
+theirs is here too.
 """
 
 from animsim.colors import parse_color

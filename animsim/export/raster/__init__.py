@@ -23,6 +23,11 @@ Conventions
   elevation lifts the camera above the horizontal plane.
 * Colours are linear RGB(A) floats in [0, 1]; blending is the "over" operator
   (Porter and Duff 1984) done in float, then quantised to :data:`PALETTE`.
+
+The package's modules, each named for what it holds: ``palette`` (the colours
+and the lookup table), ``cameras`` (views, bounds, cameras and image sizes),
+``canvas`` (the float canvas, its font and its quantisation) and ``ground`` (the
+ground planes). Every public name of theirs is here too.
 """
 
 from __future__ import annotations
