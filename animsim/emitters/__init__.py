@@ -106,7 +106,10 @@ books), ``kernels`` (the numba kernels of the pools' bookkeeping) and ``stage``
 theirs is here too.
 """
 
-from animsim.colors import parse_color
+from __future__ import annotations
+
+# the emitters' tests take the colour parser from here, where it used to be imported
+from animsim.colors import parse_color as parse_color
 from animsim.emitters.births import (
     BALL_ACCEPTANCE,
     CHUNK_BIRTHS,
@@ -121,11 +124,15 @@ from animsim.emitters.births import (
     BirthStream,
     RateSchedule,
     ShapeSampler,
+    positive_gaussian,
 )
-from animsim.emitters.births import positive_gaussian as _positive_gaussian
-from animsim.emitters.kernels import numba_kernels as _numba_kernels
+from animsim.emitters.kernels import numba_kernels
 from animsim.emitters.pool import QUEUE_RUNS, QUEUE_SLACK, Pool
 from animsim.emitters.stage import Emitters, build_emitters
+
+# The names these two had while they were private to one module (the tests use them).
+_numba_kernels = numba_kernels
+_positive_gaussian = positive_gaussian
 
 __all__ = [
     "BALL_ACCEPTANCE",
@@ -145,8 +152,7 @@ __all__ = [
     "Pool",
     "RateSchedule",
     "ShapeSampler",
-    "_numba_kernels",
-    "_positive_gaussian",
     "build_emitters",
-    "parse_color",
+    "numba_kernels",
+    "positive_gaussian",
 ]
