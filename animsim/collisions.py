@@ -1018,8 +1018,9 @@ PlaneColliders.numba_stage_source = staticmethod(_stage_kernel)
 
 def _newborn_kernel(x_old, v_old, x, v, rest, fp, ip):
     """:meth:`PlaneColliders.collide_subset` compiled (the numba backend's birth step,
-    :func:`animsim.emitters._pool_step`): the planes of ``fp`` on newborn rows (k, 3), all movable,
-    each row over its own rest ``rest[j]`` of its birth step, in place; True if any row hit.
+    :func:`animsim.emitters.kernels._pool_step`): the planes of ``fp`` on newborn rows (k, 3),
+    all movable, each row over its own rest ``rest[j]`` of its birth step, in place; True if
+    any row hit.
 
     The order of _planes_hit (every plane's hits, then every plane's settling with its
     nudges), which for one plane gives _run_plane's numbers; only the step length is the

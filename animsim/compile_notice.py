@@ -32,7 +32,7 @@ from animsim.compile_estimates import MACHINE, SECONDS
 #: module -> the family named in notices (the rest: the module's last name)
 FAMILIES = {
     "animsim.backends.fused": "fused stepper",
-    "animsim.emitters": "emitters",
+    "animsim.emitters.kernels": "emitters",
     "animsim.particle_contacts": "particle contacts",
 }
 

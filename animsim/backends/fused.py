@@ -1055,7 +1055,7 @@ class NumbaForces:
         return out
 
     def newborn_tables(self, colliders: list[Any]) -> tuple[Any, ...] | None:
-        """What the compiled birth step (:func:`animsim.emitters._pool_step`) flies and
+        """What the compiled birth step (:func:`animsim.emitters.kernels._pool_step`) flies and
         collides an emitter's newborns with: (the force kernels, their float and integer
         parameters, the ``colliders``' newborn kernels, theirs). None unless the newborns'
         rows can be evaluated alone (every force pointwise, none left to NumPy, no row

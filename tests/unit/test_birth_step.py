@@ -2,8 +2,8 @@
 
 On the numba backend a step's births, newborns (flown on for the rest of their birth
 step, then collided) and deaths are one compiled call per emitter
-(:func:`animsim.emitters._pool_step`) when every force may be evaluated on the newborns'
-rows alone and every collider has a newborn kernel. It must give what the Python path of
+(:func:`animsim.emitters.kernels._pool_step`) when every force may be evaluated on the
+newborns' rows alone and every collider has a newborn kernel. It must give what the Python path of
 ``Emitters.advance`` gives, to the bit: the same frames, counters, force evaluations and
 energy books, on seeded random scenes with several emitters, short lifetimes, kill boxes,
 several planes (tilted ones too) and every fixed-step integrator; and the planes' newborn

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-import animsim.emitters as emitters_module
+import animsim.emitters.pool as pool_module
 from animsim.emitters import Pool
 from animsim.scene import models as m
 
@@ -95,8 +95,8 @@ def test_pool_kernels_match_full_scans(
 ) -> None:
     """Seeded random histories: the kernels give exactly the scans' slots, in the same order
     (also with a death queue so small that its runs are merged and its rows compacted often)."""
-    monkeypatch.setattr(emitters_module, "QUEUE_RUNS", runs)
-    monkeypatch.setattr(emitters_module, "QUEUE_SLACK", slack)
+    monkeypatch.setattr(pool_module, "QUEUE_RUNS", runs)
+    monkeypatch.setattr(pool_module, "QUEUE_SLACK", slack)
     rng = np.random.default_rng(2026 + seed)
     for trial in range(10):
         cap = int(rng.choice([1, 5, 40, 300]))

@@ -11,6 +11,7 @@ import pytest
 from animsim.errors import SimulationError
 from animsim.export import ply
 from animsim.export.ply import PlySequenceSink, read_ids
+from animsim.export.ply import sink as ply_sink
 from animsim.ply_reader import PlyFormatError, read_ply
 from animsim.record import Frame, TrajectoryHeader
 
@@ -252,7 +253,7 @@ def test_failed_write_leaves_no_partial_file(tmp_path: Path, monkeypatch: pytest
     sink.begin(header)
     sink.write(frames[0])
 
-    real = ply.AtomicFile
+    real = ply_sink.AtomicFile
 
     class FailingBody(real):  # type: ignore[misc, valid-type]
         def __init__(self, *args: object, **kwargs: object) -> None:
@@ -272,7 +273,8 @@ def test_failed_write_leaves_no_partial_file(tmp_path: Path, monkeypatch: pytest
 
             self.handle = Handle()
 
-    monkeypatch.setattr(ply, "AtomicFile", FailingBody)
+    # the sink module opens the frame files: its AtomicFile is the one to patch
+    monkeypatch.setattr(ply_sink, "AtomicFile", FailingBody)
     with pytest.raises(SimulationError, match="No space left"):
         sink.write(frames[1])
     assert sorted(p.name for p in tmp_path.iterdir()) == ["frames_00000.ply"]

@@ -21,6 +21,7 @@ from animsim.export.raster import (
     parse_size,
     quantise,
 )
+from animsim.export.raster import canvas as raster_canvas
 
 BOX = (np.zeros(3), np.full(3, 4.0))  # a 4 m cube from the origin
 SIZE = (100, 100)  # 25 px per metre for BOX in the orthographic views
@@ -396,8 +397,9 @@ def test_many_dots_and_long_lines_are_drawn_in_exact_batches(monkeypatch):
     whole = Canvas(30, 30)
     whole.draw_dots(centres, radii, colours)
     whole.draw_lines(centres[:25], centres[25:], (1.0, 1.0, 0.0))
-    monkeypatch.setattr(R, "DOT_CHUNK", 7)
-    monkeypatch.setattr(R, "LINE_SAMPLE_CHUNK", 40)
+    # the canvas module reads its batch sizes (the package only re-exports them)
+    monkeypatch.setattr(raster_canvas, "DOT_CHUNK", 7)
+    monkeypatch.setattr(raster_canvas, "LINE_SAMPLE_CHUNK", 40)
     batched = Canvas(30, 30)
     batched.draw_dots(centres, radii, colours)
     batched.draw_lines(centres[:25], centres[25:], (1.0, 1.0, 0.0))

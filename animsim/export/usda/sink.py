@@ -1,132 +1,17 @@
-"""USD (``.usda`` text, ``.usdc`` binary): the whole run as animated prims.
+"""The USD sink: frames streamed to per-attribute temporary files, one stage at close.
 
-Format sources: Pixar's USD documentation, "UsdGeomPoints" and
-"UsdGeomPointBased" (attribute names and types), "UsdGeom: Stage Metrics"
-(``upAxis``, ``metersPerUnit``), "UsdStage" time codes (``startTimeCode``,
-``endTimeCode``, ``timeCodesPerSecond``) and the ``.usda`` text syntax as
-written by USD itself (``#usda 1.0``, layer metadata in parentheses,
-``attr.timeSamples = { code: value, ... }``).
-
-What the file holds
--------------------
-::
-
-    #usda 1.0
-    ( customLayerData, defaultPrim, start/endTimeCode, timeCodesPerSecond,
-      framesPerSecond, metersPerUnit = 1, upAxis = "Y" )
-    def Xform "<scene>"
-    {
-        def Points "particles"
-        {
-            custom uniform string[] animsim:idTable   # the id strings
-            float3[]   extent.timeSamples             # bounds incl. widths/2
-            int64[]    ids.timeSamples                # row of animsim:idTable
-            point3f[]  points.timeSamples             # position, m
-            color3f[]  primvars:displayColor          # RGB, vertex interpolation
-            float[]    primvars:displayOpacity        # alpha, vertex interpolation
-            int[]      primvars:id                    # the same rows as ids (Blender: attribute "id")
-            vector3f[] velocities.timeSamples         # m/s (USD: units per second)
-            float[]    widths.timeSamples             # diameter = 2 * radius, vertex
-        }
-    }
-
-Structures keep their shape. When the run has cloth, soft boxes, meshes or
-strands (the trajectory header's connectivity), each becomes its own prim
-beside ``particles``, named after the structure (sanitised as below):
-
-* cloth, soft box (its outer surface) and mesh structures: ``def Mesh`` with
-  ``faceVertexCounts`` / ``faceVertexIndices`` (quads or triangles, wound
-  counter-clockwise seen from outside), ``subdivisionScheme = "none"``
-  (the faces are the simulated ones, not a control cage),
-  ``doubleSided = true``, and time-sampled ``points``, ``velocities``,
-  ``extent``; ``animsim:ids`` names the particle behind each point;
-* strands: ``def BasisCurves`` with ``type = "linear"``,
-  ``curveVertexCounts``, a constant ``widths`` of twice the strand's particle
-  radius (:data:`STRAND_RADIUS` when the scene gives none: 5 mm wide) and
-  time-sampled ``points``, ``velocities``, ``extent``.
-
-``particles`` then holds only the other particles (listed ones and emitted
-ones) and is left out when there are none and no emitters (a scene of rigid
-bodies alone has none). With emitters it
-also carries ``primvars:age`` (s since birth, vertex interpolation; ``nan``
-for particles that were not emitted).
-
-Colour space: scene colours are sRGB (``#rrggbb`` as on the web); USD's
-``displayColor`` is read as linear light by Blender, Houdini and usdview,
-so it holds the sRGB colour decoded to linear (IEC 61966-2-1). The PLY
-export stores the sRGB bytes, which those tools decode the same way, so a
-colour looks the same through both.
-
-Every time-sampled attribute has one sample per recorded frame, all at the
-same time codes. ``ids`` (int64 in ``UsdGeomPoints``) gives each point's
-identity, which is what USD uses to follow points when the count changes
-between samples (emitters); its values are rows of the run's id table (header
-ids then each frame's ``new_ids``), and the table itself is the
-``animsim:idTable`` string array. Importers that drop ``ids`` (Blender brings
-primvars in as attributes, not ``ids``) still get each point's row as the
-integer primvar ``primvars:id``. A point's width is twice its radius and its
-colour its own (the scene's ``radius`` and ``color``, an emitted particle's size
-and colour over life), else ``2 * DEFAULT_SIZE`` and opaque white, the rule
-every exporter shares (:mod:`animsim.export.look`).
-
-The scene name becomes the root prim's name with every character outside
-``[A-Za-z0-9_]`` replaced by ``_`` (and a leading ``_`` before a digit); the
-original name is in the prim's ``doc``.
-
-Time codes
-----------
-When the recorded frames are evenly spaced in time (within
-:data:`EVEN_SPACING_RTOL` of the period), frame ``k`` is time code ``k`` and
-``timeCodesPerSecond`` is the recorded frame rate ``1 / period`` (snapped to
-an integer when within that tolerance). Otherwise (``every=n`` with a
-shortened last interval, ``fps`` recording on a step grid that does not
-divide the frame period, a dt that does not divide the duration)
-``timeCodesPerSecond`` is the sink's ``uneven_rate`` (the scene's recording
-rate; default the run's ``fps``, else 24, USD's own default) and the time code
-of a frame at time ``t`` is the whole number nearest ``t * rate``: a frame
-recorded at the step nearest ``k / fps`` is time code ``k``, so players and
-Blender step through whole frames. Only when two frames would share a whole
-number is the code ``t * rate`` itself. The exact frame times and steps are
-always in ``customLayerData`` (``animsim`` dictionary, ``frameTimes`` and
-``frameSteps``), together with the run's ``close`` metadata (status and so on)
-but for its timings (``wall_time``, ``compile_time``), which only the
-``.meta.json`` sidecar holds, so the same scene and seed give the same bytes.
-
-Binary crate
-------------
-``-o run.usdc`` (or ``.usd``) writes the same stage in USD's binary crate
-format, through usd-core (the ``usd`` extra): the text is assembled next to
-the target, read back by usd-core's own parser and exported. The numbers are
-then float32 in the file (the schema's types), and a run of 10,000 particles
-over 51 frames takes about a quarter of the text's size.
-
-Precision
----------
-USD's schema types are single precision (``point3f``, ``vector3f``,
-``float``). Numbers are written with Python's ``repr`` of the float64 value,
-the shortest text that reads back to the same double, so the file itself
-holds the simulation exactly; USD parses the text as a double and rounds
-once to float32, which is the same as ``numpy.float32(value)``.
-
-Streaming and atomicity
------------------------
-A ``.usda`` prim must be written in one piece, while frames arrive one by
-one. Each attribute's samples therefore go, one line per frame, to its own
-temporary file in the target's folder; ``close`` writes the final file under
-a temporary name (:class:`animsim.atomic.AtomicFile`), copying the sample
-lines in with their time codes, and renames it when whole; then
-``<path>.meta.json``, like every trajectory sink. Memory stays
-bounded by one frame plus one time and step per frame. ``abort`` removes the
-temporary files and leaves no trace.
+:class:`UsdaSink` plans the prims from the trajectory header, writes each
+frame's samples as one line per attribute to temporary files next to the
+target, and at close assembles the ``.usda`` text (or converts it to the
+binary ``.usdc`` crate through usd-core) and renames it into place with its
+``.meta.json``.
 """
 
 from __future__ import annotations
 
 import contextlib
-import itertools
 import math
 import os
-import re
 import shutil
 import tempfile
 from collections.abc import Callable, Iterator
@@ -136,12 +21,36 @@ from typing import IO, Any
 import numpy as np
 
 from animsim.atomic import AtomicFile
-from animsim.bodies.export import body_colors
 from animsim.errors import SimulationError
 from animsim.export.look import DEFAULT_RGBA, DEFAULT_SIZE, SceneLook
 from animsim.export.meta import meta_file, reproducible
 from animsim.export.ply import validate_frame
 from animsim.export.topology import TornShapes
+from animsim.export.usda.prims import (
+    AGE_ATTRIBUTE,
+    ATTRIBUTES,
+    CURVE_TOPOLOGY,
+    MESH_TOPOLOGY,
+    SHAPE_ATTRIBUTES,
+    Attribute,
+    BodyPrims,
+    Prim,
+    body_plan,
+)
+from animsim.export.usda.text import (
+    INDENT,
+    USD_DEFAULT_TIME_CODES_PER_SECOND,
+    format_floats,
+    format_ints,
+    format_time_code,
+    format_tuples,
+    prim_name,
+    repeated_list,
+    srgb_to_linear,
+    time_codes,
+    usd_string,
+    usd_value_lines,
+)
 from animsim.record import Connectivity, Frame, TrajectoryHeader
 from animsim.version import __version__
 
@@ -149,173 +58,22 @@ USDA_MAGIC = "#usda 1.0"
 UP_AXIS = "Y"
 METERS_PER_UNIT = 1
 POINTS_PRIM = "particles"
-FALLBACK_ROOT = "scene"
 ID_TABLE_ATTR = "animsim:idTable"
 META_DICT = "animsim"
 GENERATOR = f"animsim {__version__}"
 
-# USD's default timeCodesPerSecond; used for uneven frames unless told otherwise.
-USD_DEFAULT_TIME_CODES_PER_SECOND = 24.0
-# Frames count as evenly spaced when every time is within this fraction of
-# the period from its slot; also the tolerance for snapping the rate to an integer.
-EVEN_SPACING_RTOL = 1e-9
-
 # Keys of the ``animsim`` dictionary the sink writes itself (meta cannot override them).
 RESERVED_META_KEYS = frozenset({"timeCodes", "frameTimes", "frameSteps"})
 
-INDENT = "    "
-VERTEX_INTERPOLATION = "vertex"
 #: half the width of a strand's curve when its particles have no radius (m): a thick hair, not a rope
 STRAND_RADIUS = 0.0025
-
-
-class _Attribute:
-    """One time-sampled attribute: its declaration and its sample text."""
-
-    def __init__(self, name: str, usd_type: str, interpolation: str | None = None) -> None:
-        self.name = name
-        self.usd_type = usd_type
-        self.interpolation = interpolation
-
-
-# In the order they appear in the file (alphabetical, as USD writes them).
-ATTRIBUTES: tuple[_Attribute, ...] = (
-    _Attribute("extent", "float3[]"),
-    _Attribute("ids", "int64[]"),
-    _Attribute("points", "point3f[]"),
-    _Attribute("primvars:displayColor", "color3f[]", VERTEX_INTERPOLATION),
-    _Attribute("primvars:displayOpacity", "float[]", VERTEX_INTERPOLATION),
-    # the id-table row again, as a primvar: Blender brings primvars in as attributes, not ``ids``
-    _Attribute("primvars:id", "int[]", VERTEX_INTERPOLATION),
-    _Attribute("velocities", "vector3f[]"),
-    _Attribute("widths", "float[]", VERTEX_INTERPOLATION),
-)
-
-AGE_ATTRIBUTE = _Attribute("primvars:age", "float[]", VERTEX_INTERPOLATION)
-# Time-sampled attributes of the shape prims (alphabetical, as USD writes them).
-SHAPE_ATTRIBUTES: tuple[_Attribute, ...] = (
-    _Attribute("extent", "float3[]"),
-    _Attribute("points", "point3f[]"),
-    _Attribute("velocities", "vector3f[]"),
-)
-# Topology that changes (springs that tear): time-sampled too, beside the shape's samples.
-MESH_TOPOLOGY = (_Attribute("faceVertexCounts", "int[]"), _Attribute("faceVertexIndices", "int[]"))
-CURVE_TOPOLOGY = (_Attribute("curveVertexCounts", "int[]"),)
-
-
-class _Prim:
-    """One prim of the output: its type, name and time-sampled attributes."""
-
-    def __init__(
-        self, usd_type: str, name: str, attributes: tuple[_Attribute, ...], conn: Connectivity | None
-    ) -> None:
-        self.usd_type = usd_type
-        self.name = name
-        self.attributes = attributes
-        self.conn = conn
-        self.tears = False  # topology time-sampled (springs of the structure can tear)
-
-    def key(self, attr: _Attribute) -> str:
-        return f"{self.name}/{attr.name}"
-
-
-def srgb_to_linear(c: np.ndarray) -> np.ndarray:
-    """IEC 61966-2-1 decoding of sRGB values in [0, 1] to linear light."""
-    c = np.asarray(c, dtype=np.float64)
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-
-
-_ESCAPES = {"\\": "\\\\", '"': '\\"', "\n": "\\n", "\r": "\\r", "\t": "\\t"}
-_CONTROL = re.compile(r"[\x00-\x1f\x7f]")
-
-
-def usd_string(text: str) -> str:
-    """A double-quoted USD string literal."""
-    out = "".join(_ESCAPES.get(ch, ch) for ch in text)
-    return '"' + _CONTROL.sub(lambda m: f"\\x{ord(m.group(0)):02x}", out) + '"'
-
-
-def prim_name(scene_name: str) -> str:
-    """A valid USD prim name for a scene (module docstring)."""
-    name = re.sub(r"[^A-Za-z0-9_]", "_", scene_name)
-    if not name:
-        return FALLBACK_ROOT
-    return "_" + name if name[0].isdigit() else name
-
-
-def format_floats(values: np.ndarray) -> str:
-    """``[a, b, ...]`` with each float64 as its ``repr``."""
-    return "[" + ", ".join(map(repr, np.asarray(values, dtype=np.float64).ravel().tolist())) + "]"
-
-
-def format_tuples(values: np.ndarray, width: int) -> str:
-    """``[(a, b, c), ...]`` for an (n, width) float array, ``repr`` per number."""
-    flat = list(map(repr, np.asarray(values, dtype=np.float64).ravel().tolist()))
-    groups = map(", ".join, zip(*(flat[j::width] for j in range(width)), strict=True))
-    return "[" + ", ".join(map("({})".format, groups)) + "]"
-
-
-def format_ints(values: np.ndarray) -> str:
-    return "[" + ", ".join(map(str, np.asarray(values, dtype=np.int64).tolist())) + "]"
-
-
-def _repeated(item: str, n: int) -> str:
-    return "[" + ", ".join([item] * n) + "]"
-
-
-def format_time_code(code: float) -> str:
-    """Integers without a fraction (``3``), others as ``repr`` (``3.125``)."""
-    return str(int(code)) if float(code).is_integer() else repr(float(code))
-
-
-def time_codes(times: list[float], uneven_rate: float) -> tuple[list[float], float, bool]:
-    """``(codes, timeCodesPerSecond, even)`` for the recorded frame times (module docstring)."""
-    count = len(times)
-    if count < 2:
-        return [0.0] * count, uneven_rate, True
-    period = (times[-1] - times[0]) / (count - 1)
-    if period > 0:
-        slots = times[0] + period * np.arange(count)
-        if np.all(np.abs(np.asarray(times) - slots) <= EVEN_SPACING_RTOL * period):
-            rate = 1.0 / period
-            if abs(rate - round(rate)) <= EVEN_SPACING_RTOL * rate:
-                rate = float(round(rate))
-            return [float(k) for k in range(count)], rate, True
-    codes = [t * uneven_rate for t in times]
-    # the nearest whole frame of the rate, when no two frames share one (a frame recorded at the
-    # step nearest k / fps lands on k); else the fractions, which keep every frame apart
-    whole = [float(round(c)) for c in codes]
-    if all(b > a for a, b in itertools.pairwise(whole)):
-        return whole, uneven_rate, False
-    return codes, uneven_rate, False
-
-
-def _usd_value(key: str, value: Any, depth: int) -> Iterator[str]:
-    """Lines of one ``customLayerData`` dictionary entry."""
-    pad = INDENT * depth
-    if isinstance(value, np.generic):
-        value = value.item()
-    label = usd_string(str(key))
-    if isinstance(value, dict):
-        yield f"{pad}dictionary {label} = {{"
-        for k, v in value.items():
-            yield from _usd_value(k, v, depth + 1)
-        yield f"{pad}}}"
-    elif isinstance(value, bool):
-        yield f"{pad}bool {label} = {'true' if value else 'false'}"
-    elif isinstance(value, int) and -(2**63) <= value < 2**63:
-        yield f"{pad}int64 {label} = {value}"
-    elif isinstance(value, float):
-        yield f"{pad}double {label} = {value!r}"
-    elif value is not None:
-        yield f"{pad}string {label} = {usd_string(str(value))}"
 
 
 class UsdaSink:
     """A :class:`animsim.record.FrameSink` writing one ``.usda`` file at close.
 
     ``path``: the ``.usda`` file. ``uneven_rate``: time codes per second
-    when the frames are not evenly spaced (see the module docstring; pass
+    when the frames are not evenly spaced (see :mod:`animsim.export.usda`; pass
     the scene's ``record.fps`` when it has one; None: the ``fps`` of the
     run's metadata, else 24). ``write_meta``: also write
     ``<path>.meta.json`` (:mod:`animsim.export.meta`), as the other
@@ -342,9 +100,9 @@ class UsdaSink:
         self._times: list[float] = []
         self._steps: list[int] = []
         self._tmp: dict[str, tuple[Path, IO[str]]] = {}
-        self._prims: list[_Prim] = []
+        self._prims: list[Prim] = []
         self._has_emitters = False
-        self._bodies: _BodyPrims | None = None
+        self._bodies: BodyPrims | None = None
         self._look = SceneLook(None)
         self._torn = TornShapes(None)
         self._pending: list[AtomicFile] = []  # the .usda, then the metadata
@@ -359,7 +117,7 @@ class UsdaSink:
         self._ids = list(header.ids)
         self._scene = header.scene_name
         self._has_emitters = header.has_emitters
-        self._bodies = _body_plan(header)
+        self._bodies = body_plan(header)
         self._look = SceneLook(header.extra)
         self._torn = TornShapes(header)
         self._prims = self._plan(header)
@@ -474,14 +232,14 @@ class UsdaSink:
         radius, rgba = (None, None) if plain else self._look.row_look(frame.index, frame.size, frame.color)
         if radius is None:
             widths = np.full(n, 2.0 * DEFAULT_SIZE)
-            widths_text = _repeated(repr(2.0 * DEFAULT_SIZE), n)
+            widths_text = repeated_list(repr(2.0 * DEFAULT_SIZE), n)
         else:
             widths = 2.0 * radius
             widths_text = format_floats(widths)
         if rgba is None:  # the default colour: repeat its text, no formatting per point
             r, g, b, a = map(repr, map(float, DEFAULT_RGBA))
-            color_text = _repeated(f"({r}, {g}, {b})", n)
-            opacity_text = _repeated(a, n)
+            color_text = repeated_list(f"({r}, {g}, {b})", n)
+            opacity_text = repeated_list(a, n)
         else:
             color_text = format_tuples(srgb_to_linear(rgba[:, :3]), 3)
             opacity_text = format_floats(rgba[:, 3])
@@ -501,9 +259,9 @@ class UsdaSink:
             "widths": widths_text,
         }
 
-    def _plan(self, header: TrajectoryHeader) -> list[_Prim]:
+    def _plan(self, header: TrajectoryHeader) -> list[Prim]:
         """The prims of this run: shapes of structures, then the loose particles (if any)."""
-        shapes: list[_Prim] = []
+        shapes: list[Prim] = []
         taken = {POINTS_PRIM}
         covered = 0
         for conn in header.connectivity:
@@ -519,14 +277,14 @@ class UsdaSink:
             if tears:
                 topo = MESH_TOPOLOGY if usd_type == "Mesh" else CURVE_TOPOLOGY
                 attrs = tuple(sorted(SHAPE_ATTRIBUTES + topo, key=lambda a: a.name))
-            shape = _Prim(usd_type, name, attrs, conn)
+            shape = Prim(usd_type, name, attrs, conn)
             shape.tears = tears
             shapes.append(shape)
             covered += conn.count
         if self._bodies is not None:
             covered += len(self._bodies.ids)  # bodies are Xforms of their own, not points
         attrs = ATTRIBUTES[:3] + ((AGE_ATTRIBUTE,) if header.has_emitters else ()) + ATTRIBUTES[3:]
-        points = _Prim("Points", POINTS_PRIM, attrs, None)
+        points = Prim("Points", POINTS_PRIM, attrs, None)
         if header.has_emitters or len(header.ids) > covered or not (shapes or self._bodies):
             return [points, *shapes]
         return shapes
@@ -605,7 +363,7 @@ class UsdaSink:
         w(f"{INDENT * 2}string generator = {usd_string(GENERATOR)}\n")
         w(f"{INDENT * 2}dictionary {META_DICT} = {{\n")
         for key, value in info.items():
-            for line in _usd_value(key, value, 3):
+            for line in usd_value_lines(key, value, 3):
                 w(line + "\n")
         w(f"{INDENT * 3}double[] frameTimes = {format_floats(np.asarray(self._times))}\n")
         w(f"{INDENT * 3}int64[] frameSteps = {format_ints(np.asarray(self._steps))}\n")
@@ -643,7 +401,7 @@ class UsdaSink:
             return float(r[c.first])
         return STRAND_RADIUS
 
-    def _write_topology(self, w: Callable[[str], Any], prim: _Prim) -> None:
+    def _write_topology(self, w: Callable[[str], Any], prim: Prim) -> None:
         c = prim.conn
         assert c is not None
         pad = INDENT * 2
@@ -663,7 +421,7 @@ class UsdaSink:
             w(f'{pad}{INDENT}interpolation = "constant"\n{pad})\n')
 
     def _copy_samples(
-        self, w: Callable[[str], Any], attr: _Attribute, codes: list[str], key: str | None = None
+        self, w: Callable[[str], Any], attr: Attribute, codes: list[str], key: str | None = None
     ) -> None:
         if attr.interpolation is not None:
             w(f"{INDENT * 2}{attr.usd_type} {attr.name} (\n")
@@ -701,96 +459,3 @@ def _structure_rows(frame: Frame, c: Connectivity, n: int) -> slice:
     if r0 + c.count > n or not np.array_equal(index[rows], np.arange(c.first, c.first + c.count)):
         raise ValueError(f"frame at step {frame.step}: the particles of {c.name!r} are not all in it")
     return rows
-
-
-# --- rigid bodies ---------------------------------------------------------------------
-# Each body is an Xform (UsdGeomXformable: ``xformOp:translate`` double3 and
-# ``xformOp:orient`` quatf, time-sampled, in that xformOpOrder) holding its shape
-# as a UsdGeom gprim: ``Cube`` (size 1, scaled by the edge lengths), ``Sphere``
-# (radius) or ``Capsule`` (axis Y, height = the segment length, radius).
-
-
-class _BodyPrims:
-    """Translate and orient samples of every body, kept per frame (B * 7 numbers a frame)."""
-
-    def __init__(self, info: dict[str, Any]) -> None:
-        self.first = int(info["first"])
-        self.ids = list(info["ids"])
-        self.shapes = tuple(info["shapes"])
-        self.colors = body_colors(info)
-        self.translate: list[np.ndarray] = []
-        self.orient: list[np.ndarray] = []
-
-    def rows_mask(self, frame: Frame) -> np.ndarray:
-        index = np.asarray(frame.index)
-        return (index >= self.first) & (index < self.first + len(self.ids))
-
-    def add(self, frame: Frame) -> None:
-        index = np.asarray(frame.index)
-        rows = np.flatnonzero(self.rows_mask(frame))
-        x = np.full((len(self.ids), 3), np.nan)
-        x[index[rows] - self.first] = np.asarray(frame.position)[rows]
-        self.translate.append(x)
-        q = frame.orientation if frame.orientation is not None else np.full((len(self.ids), 4), np.nan)
-        self.orient.append(np.asarray(q, dtype=np.float64).copy())
-
-    def write(self, w: Callable[[str], Any], codes: list[str], after_prim: bool) -> None:
-        taken: set[str] = set()
-        for b, (bid, shape) in enumerate(zip(self.ids, self.shapes, strict=True)):
-            name = prim_name(bid)
-            base, k = name, 1
-            while name in taken:
-                k += 1
-                name = f"{base}_{k}"
-            taken.add(name)
-            if after_prim or b:
-                w("\n")
-            pad = INDENT * 2
-            w(f"{INDENT}def Xform {usd_string(name)}\n{INDENT}{{\n")
-            w(f"{pad}custom uniform string animsim:id = {usd_string(bid)}\n")
-            w(f"{pad}double3 xformOp:translate.timeSamples = {{\n")
-            for code, x in zip(codes, self.translate, strict=True):
-                w(f"{pad}{INDENT}{code}: {format_tuples(x[b : b + 1], 3)[1:-1]},\n")
-            w(f"{pad}}}\n{pad}quatf xformOp:orient.timeSamples = {{\n")
-            for code, q in zip(codes, self.orient, strict=True):
-                w(f"{pad}{INDENT}{code}: {format_tuples(q[b : b + 1], 4)[1:-1]},\n")
-            w(f'{pad}}}\n{pad}uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:orient"]\n\n')
-            _write_body_shape(w, shape, pad, self.colors[b])
-            w(f"{INDENT}}}\n")
-
-
-def _body_plan(header: TrajectoryHeader) -> _BodyPrims | None:
-    info = (header.extra or {}).get("bodies")
-    return None if info is None else _BodyPrims(info)
-
-
-def _write_body_shape(w: Callable[[str], Any], shape: Any, pad: str, rgba: np.ndarray | None = None) -> None:
-    """The body's shape as a UsdGeom gprim named "shape", in the body frame; with the scene's
-    colour (sRGB ``rgba``) as its constant ``displayColor``, decoded to linear like the points'."""
-    inner = pad + INDENT
-    kind = shape.kind
-    if kind == "box":
-        sx, sy, sz = shape.size
-        w(f'{pad}def Cube "shape"\n{pad}{{\n')
-        half = [0.5 * sx, 0.5 * sy, 0.5 * sz]
-        w(f"{inner}float3[] extent = [(-0.5, -0.5, -0.5), (0.5, 0.5, 0.5)]\n")
-        w(f"{inner}double size = 1\n")
-        w(f"{inner}float3 xformOp:scale = ({float(sx)!r}, {float(sy)!r}, {float(sz)!r})\n")
-        w(f'{inner}uniform token[] xformOpOrder = ["xformOp:scale"]\n')
-        w(f"{inner}custom float3 animsim:halfExtents = ({half[0]!r}, {half[1]!r}, {half[2]!r})\n")
-    elif kind == "sphere":
-        r = float(shape.radius)
-        w(f'{pad}def Sphere "shape"\n{pad}{{\n')
-        w(f"{inner}float3[] extent = [({-r!r}, {-r!r}, {-r!r}), ({r!r}, {r!r}, {r!r})]\n")
-        w(f"{inner}double radius = {r!r}\n")
-    else:
-        r, h = float(shape.radius), float(shape.length)
-        top = 0.5 * h + r
-        w(f'{pad}def Capsule "shape"\n{pad}{{\n')
-        w(f'{inner}uniform token axis = "Y"\n')
-        w(f"{inner}float3[] extent = [({-r!r}, {-top!r}, {-r!r}), ({r!r}, {top!r}, {r!r})]\n")
-        w(f"{inner}double height = {h!r}\n")
-        w(f"{inner}double radius = {r!r}\n")
-    if rgba is not None:
-        w(f"{inner}color3f[] primvars:displayColor = {format_tuples(srgb_to_linear(rgba[None, :3]), 3)}\n")
-    w(f"{pad}}}\n")
