@@ -34,7 +34,7 @@ def test_every_schema_property_has_a_description():
     props = list(_properties(json.loads(schema_text())))
     assert len(props) > 100  # the walk reaches the nested definitions
     bare = [f"{where}.{key}" for where, key, p in props if not p.get("description", "").strip()]
-    assert bare == [], f"keys without a description (add Doc(...) in animsim/scene/models.py): {bare}"
+    assert bare == [], f"keys without a description (add Doc(...) in animsim/scene/models/): {bare}"
 
 
 def test_every_key_with_a_unit_says_it_in_its_description():
