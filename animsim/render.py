@@ -142,8 +142,21 @@ class _BoundsSink:
         pass
 
 
-def picture_bounds(lo: np.ndarray, hi: np.ndarray, planes: list[tuple[np.ndarray, np.ndarray]]) -> Any:
-    pts = [p for p in (lo, hi) if np.isfinite(p).all()]
+def body_reach(extra: dict[str, Any]) -> float:
+    """How far a rigid body's shape reaches beyond its recorded centre (m): the largest
+    bounding radius of the scene's bodies, 0 without bodies."""
+    bodies = extra.get("bodies")
+    if not bodies or not bodies.get("shapes"):
+        return 0.0
+    return max(float(s.bounding_radius) for s in bodies["shapes"])
+
+
+def picture_bounds(
+    lo: np.ndarray, hi: np.ndarray, planes: list[tuple[np.ndarray, np.ndarray]], reach: float = 0.0
+) -> Any:
+    """The box the picture shows: the positions' lo..hi grown by ``reach`` (a body's shape
+    around its centre), and the anchor point of every plane."""
+    pts = [p + s * reach for p, s in ((lo, -1.0), (hi, 1.0)) if np.isfinite(p).all()]
     # Keep the ground in view: the point where each plane is anchored.
     pts.extend(np.asarray(point, dtype=np.float64) for point, _ in planes)
     if not pts:
@@ -224,7 +237,7 @@ def render_scene(
     first = run(compiled, [bounds_sink], stop=stop)
     if first.status == "interrupted":
         return RenderResult(frames=0, outputs=[], status="interrupted")
-    bounds = picture_bounds(bounds_sink.lo, bounds_sink.hi, planes)
+    bounds = picture_bounds(bounds_sink.lo, bounds_sink.hi, planes, body_reach(compiled.header.extra))
     opts = with_view(
         opts, bounds_sink.lo, bounds_sink.hi, view_up(compiled.scene), has_surfaces(compiled.header)
     )
@@ -316,7 +329,7 @@ def render_trajectory(
         for t in np.asarray(traj.times, dtype=np.float64).tolist():
             pts = surface(t)
             lo, hi = np.minimum(lo, pts.min(axis=0)), np.maximum(hi, pts.max(axis=0))
-    bounds = picture_bounds(lo, hi, planes)
+    bounds = picture_bounds(lo, hi, planes, body_reach(extra))
     opts = with_view(
         opts,
         lo,

@@ -24,7 +24,7 @@ from animsim.errors import SimulationError
 from animsim.export.animation import MP4_QUALITY, FrameRenderer, GifStream, gif_delay_cs, require_ffmpeg
 from animsim.export.raster import make_camera, parse_size, quantise, to_rgb8, up_axis, view_up
 from animsim.panel_runs import simulate_panel
-from animsim.render import RenderResult, has_surfaces, picture_bounds, with_view
+from animsim.render import RenderResult, body_reach, has_surfaces, picture_bounds, with_view
 
 LABEL_RGB = (0.92, 0.92, 0.92)
 MARK_RGB = (1.0, 0.2, 0.2)  # a pure palette red: the GIF palette has it exactly
@@ -182,7 +182,8 @@ def render_side_by_side(
         camera_opts["azimuth"] = opts.azimuth
     if opts.elevation is not None:
         camera_opts["elevation"] = opts.elevation
-    camera = make_camera(opts.view, picture_bounds(lo, hi, planes), size, **camera_opts)
+    reach = body_reach(compiled[0].header.extra)
+    camera = make_camera(opts.view, picture_bounds(lo, hi, planes, reach), size, **camera_opts)
     sbs = SideBySide(runs, compiled, size, camera, planes, opts.dot_radius)
     writers = [
         w
