@@ -34,6 +34,8 @@ FAMILIES = {
     "animsim.backends.fused": "fused stepper",
     "animsim.emitters.kernels": "emitters",
     "animsim.particle_contacts": "particle contacts",
+    # the rigid-body contact kernels, measured (compile_estimates) when they lived in contacts.py
+    "animsim.bodies.contact_kernels": "contacts",
 }
 
 

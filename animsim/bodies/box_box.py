@@ -21,7 +21,7 @@ Faces are preferred: an edge axis wins only when it overlaps clearly less (``EDG
 ``FACE_ABSOLUTE``, so that a resting contact keeps one normal from step to step.
 
 Written on scalars, for both backends: NumPy calls it as Python, pair by pair; numba compiles
-it into the pair kernel (:func:`animsim.bodies.contacts.numba_pair_contacts`).
+it into the pair kernel (:func:`animsim.bodies.contact_kernels.numba_pair_contacts`).
 """
 
 from __future__ import annotations

@@ -13,7 +13,8 @@ import numpy as np
 
 from animsim.bodies import quaternion as quat
 from animsim.bodies import shapes as sh
-from animsim.bodies.contacts import BodyContacts, PlaneTable
+from animsim.bodies.contact_detection import PlaneTable
+from animsim.bodies.contacts import BodyContacts
 from animsim.bodies.dynamics import BodyDynamics
 from animsim.bodies.particles import ParticleBodyContacts
 from animsim.bodies.springs import BodySprings

@@ -2,8 +2,9 @@
 
 After each step (after the bodies met the planes and colliders), every particle (listed,
 structure, emitted; a point or a sphere of its radius) found inside a body's shape is a
-contact, with the shape's own signed distance in its frame (:func:`animsim.bodies.contacts.
-local_sdf`) and its outward normal n. The contacts are resolved as one system:
+contact, with the shape's own signed distance in its frame
+(:func:`animsim.bodies.contact_detection.local_sdf`) and its outward normal n. The contacts are
+resolved as one system:
 
 * **Velocities**: normal impulses along n at the body's surface point, with the body's
   restitution (an approach slower than what the step's relative acceleration adds in two
@@ -32,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from animsim.bodies import quaternion as quat
-from animsim.bodies.contacts import local_sdf, shape_arrays
+from animsim.bodies.contact_detection import local_sdf, shape_arrays
 from animsim.bodies.shapes import BodyShape
 from animsim.elements import StepStage
 

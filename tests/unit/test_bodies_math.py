@@ -11,14 +11,9 @@ import numpy as np
 import pytest
 
 from animsim.bodies import quaternion as quat
-from animsim.bodies.contacts import (
-    SHAPE_BOX,
-    SHAPE_CAPSULE,
-    SHAPE_SPHERE,
-    batches,
-    candidate_pairs,
-    local_sdf,
-)
+from animsim.bodies.contact_constants import SHAPE_BOX, SHAPE_CAPSULE, SHAPE_SPHERE
+from animsim.bodies.contact_detection import candidate_pairs, local_sdf
+from animsim.bodies.contact_solve import batches
 from animsim.bodies.shapes import Box, Capsule, Sphere, contact_table, mesh, outline
 
 RNG = np.random.default_rng(1234)
@@ -213,7 +208,7 @@ def test_batches_never_hold_a_body_twice_and_keep_order() -> None:
 
 def test_numba_sweep_finds_the_same_pairs_as_the_grid() -> None:
     pytest.importorskip("numba")
-    from animsim.bodies.contacts import numba_candidate_pairs
+    from animsim.bodies.contact_kernels import numba_candidate_pairs
 
     sweep = numba_candidate_pairs()
     for trial in range(60):

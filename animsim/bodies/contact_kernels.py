@@ -1,0 +1,598 @@
+"""The numba twins of rigid-body contacts (compiled on first use; same operations in the same
+order as the NumPy versions, so the backends agree to the bit): the candidate pairs by sweep
+and prune, the contacts between bodies, the plane contacts body by body, and the list solver
+(sequential impulses after Baraff 1997, section 8, and Catto 2005, then the bodies moved by
+the impulses). Each ``_..._loop`` is plain Python over arrays; a ``numba_*`` factory compiles it.
+
+Their NumPy versions: :mod:`animsim.bodies.contact_detection` (:func:`candidate_pairs`,
+:func:`pair_contacts`, :func:`plane_contacts`) and :mod:`animsim.bodies.contact_solve`
+(:func:`solve`, :func:`follow_impulses`). The model as a whole is described in
+:mod:`animsim.bodies.contacts`.
+"""
+
+from __future__ import annotations
+
+from functools import cache
+from typing import Any
+
+import numpy as np
+
+from animsim.bodies import box_box
+from animsim.bodies.box_box import box_box as box_box_contacts
+from animsim.bodies.contact_constants import (
+    MAX_BOX_POINTS,
+    RESTING_FLOOR,
+    SHAPE_BOX,
+    SHAPE_CAPSULE,
+    SWEEP_TOLERANCE,
+)
+from animsim.bodies.quaternion import rotate_scalar
+from animsim.collisions import kept_end_speed
+from animsim.elements import compile_helpers
+
+
+def _sweep_pairs_loop(x: np.ndarray, bound: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Twin of :func:`candidate_pairs` for numba: sweep and prune along the axis of the widest
+    spread (every overlapping pair overlaps along it), the same overlap test, the same sorted
+    output."""
+    b = x.shape[0]
+    axis = 0
+    widest = -1.0
+    for k in range(3):
+        spread = x[:, k].max() - x[:, k].min()
+        if spread > widest:
+            widest, axis = spread, k
+    lo = x[:, axis] - bound
+    order = np.argsort(lo)
+    keys = []
+    for s in range(b):
+        i = order[s]
+        hi = x[i, axis] + bound[i]
+        for t in range(s + 1, b):
+            j = order[t]
+            if lo[j] > hi:
+                break
+            d0, d1, d2 = x[i, 0] - x[j, 0], x[i, 1] - x[j, 1], x[i, 2] - x[j, 2]
+            reach = bound[i] + bound[j]
+            if (d0 * d0 + d1 * d1) + d2 * d2 <= reach * reach:
+                keys.append(min(i, j) * b + max(i, j))
+    out = np.sort(np.array(keys, dtype=np.int64))
+    return out // b, out % b
+
+
+@cache
+def numba_candidate_pairs() -> Any:
+    """:func:`_sweep_pairs_loop` compiled by numba."""
+    from numba import njit
+
+    return njit(cache=True)(_sweep_pairs_loop)
+
+
+def _pair_contacts_loop(
+    x: np.ndarray,
+    q: np.ndarray,
+    points: np.ndarray,
+    radii: np.ndarray,
+    counts: np.ndarray,
+    kind: np.ndarray,
+    dims: np.ndarray,
+    restitution: np.ndarray,
+    friction: np.ndarray,
+    ci: np.ndarray,
+    cj: np.ndarray,
+) -> tuple[np.ndarray, ...]:
+    """Twin of :func:`pair_contacts` (given its candidate pairs) for numba: the same tests in the
+    same order (round sources first, then round targets, then box pairs; per pair its
+    spheres in order) and the same arithmetic (:func:`quaternion.rotate`, :func:`local_sdf`)."""
+    kmax = points.shape[1]
+    cap = 2 * ci.shape[0] * kmax
+    a_out = np.empty(cap, dtype=np.int64)
+    b_out = np.empty(cap, dtype=np.int64)
+    ra_out = np.empty((cap, 3))
+    rb_out = np.empty((cap, 3))
+    n_out = np.empty((cap, 3))
+    depth_out = np.empty(cap)
+    e_out = np.empty(cap)
+    mu_out = np.empty(cap)
+    c = 0
+    box_points = np.empty((MAX_BOX_POINTS, 3))
+    box_depth = np.empty(MAX_BOX_POINTS)
+    box_normal = np.empty(3)
+    for stage in range(3):
+        for p in range(ci.shape[0]):
+            i, j = ci[p], cj[p]
+            round_i, round_j = kind[i] != SHAPE_BOX, kind[j] != SHAPE_BOX
+            if stage == 0 and round_i:
+                src, dst = i, j
+            elif stage == 1 and not round_i and round_j:
+                src, dst = j, i
+            elif stage == 2 and not round_i and not round_j:
+                # two boxes: face against face (box_box), source j, target i
+                k = box_box_contacts(
+                    x[i], q[i], dims[i], x[j], q[j], dims[j], box_points, box_depth, box_normal
+                )
+                for m in range(k):
+                    px_, py_, pz_ = box_points[m, 0], box_points[m, 1], box_points[m, 2]
+                    a_out[c], b_out[c] = j, i
+                    ra_out[c, 0], ra_out[c, 1], ra_out[c, 2] = px_ - x[j, 0], py_ - x[j, 1], pz_ - x[j, 2]
+                    rb_out[c, 0], rb_out[c, 1], rb_out[c, 2] = px_ - x[i, 0], py_ - x[i, 1], pz_ - x[i, 2]
+                    n_out[c, 0], n_out[c, 1], n_out[c, 2] = box_normal[0], box_normal[1], box_normal[2]
+                    depth_out[c] = box_depth[m]
+                    e_out[c] = 0.5 * (restitution[j] + restitution[i])
+                    mu_out[c] = np.sqrt(friction[j] * friction[i])
+                    c += 1
+                continue
+            else:
+                continue
+            qw, qx, qy, qz = q[src, 0], q[src, 1], q[src, 2], q[src, 3]
+            tw, tx_, ty_, tz_ = q[dst, 0], q[dst, 1], q[dst, 2], q[dst, 3]
+            for k in range(counts[src]):
+                # the sphere's centre in the world: x + R(q) p
+                rx, ry, rz = rotate_scalar(
+                    qw, qx, qy, qz, points[src, k, 0], points[src, k, 1], points[src, k, 2]
+                )
+                cx, cy, cz = x[src, 0] + rx, x[src, 1] + ry, x[src, 2] + rz
+                # ... in the target's frame: R(q)^T v, the rotation by the conjugate
+                lx, ly, lz = rotate_scalar(
+                    tw, -tx_, -ty_, -tz_, cx - x[dst, 0], cy - x[dst, 1], cz - x[dst, 2]
+                )
+                # signed distance and outward normal in the target's frame (local_sdf)
+                if kind[dst] == SHAPE_BOX:
+                    q0 = abs(lx) - dims[dst, 0]
+                    q1 = abs(ly) - dims[dst, 1]
+                    q2 = abs(lz) - dims[dst, 2]
+                    o0, o1, o2 = max(q0, 0.0), max(q1, 0.0), max(q2, 0.0)
+                    out_len = np.sqrt((o0 * o0 + o1 * o1) + o2 * o2)
+                    big = q0
+                    axis = 0
+                    if q1 > big:
+                        big, axis = q1, 1
+                    if q2 > big:
+                        big, axis = q2, 2
+                    d = out_len + min(big, 0.0)
+                    if out_len > 0:
+                        nx = (np.sign(lx) * o0) / out_len
+                        ny = (np.sign(ly) * o1) / out_len
+                        nz = (np.sign(lz) * o2) / out_len
+                    else:
+                        nx, ny, nz = 0.0, 0.0, 0.0
+                        pa = lx if axis == 0 else (ly if axis == 1 else lz)
+                        face = 1.0 if pa >= 0 else -1.0
+                        if axis == 0:
+                            nx = face
+                        elif axis == 1:
+                            ny = face
+                        else:
+                            nz = face
+                else:
+                    half = dims[dst, 1] if kind[dst] == SHAPE_CAPSULE else 0.0
+                    r0 = lx - 0.0
+                    r1 = ly - min(max(ly, -half), half)
+                    r2 = lz - 0.0
+                    dist = np.sqrt((r0 * r0 + r1 * r1) + r2 * r2)
+                    d = dist - dims[dst, 0]
+                    if dist > 0:
+                        nx, ny, nz = r0 / dist, r1 / dist, r2 / dist
+                    else:
+                        nx, ny, nz = 0.0, 1.0, 0.0
+                rr = radii[src, k]
+                d = d - rr
+                if not d < 0.0:
+                    continue
+                # the normal in the world: R(q_dst) n
+                t0 = 2.0 * (ty_ * nz - tz_ * ny)
+                t1 = 2.0 * (tz_ * nx - tx_ * nz)
+                t2 = 2.0 * (tx_ * ny - ty_ * nx)
+                wx = nx + tw * t0 + (ty_ * t2 - tz_ * t1)
+                wy = ny + tw * t1 + (tz_ * t0 - tx_ * t2)
+                wz = nz + tw * t2 + (tx_ * t1 - ty_ * t0)
+                half_d = 0.5 * d
+                px_ = (cx - rr * wx) + half_d * wx  # halfway between the two surfaces
+                py_ = (cy - rr * wy) + half_d * wy
+                pz_ = (cz - rr * wz) + half_d * wz
+                a_out[c], b_out[c] = src, dst
+                ra_out[c, 0], ra_out[c, 1], ra_out[c, 2] = px_ - x[src, 0], py_ - x[src, 1], pz_ - x[src, 2]
+                rb_out[c, 0], rb_out[c, 1], rb_out[c, 2] = px_ - x[dst, 0], py_ - x[dst, 1], pz_ - x[dst, 2]
+                n_out[c, 0], n_out[c, 1], n_out[c, 2] = wx, wy, wz
+                depth_out[c] = -d
+                e_out[c] = 0.5 * (restitution[src] + restitution[dst])
+                mu_out[c] = np.sqrt(friction[src] * friction[dst])
+                c += 1
+    return (
+        a_out[:c],
+        b_out[:c],
+        ra_out[:c],
+        rb_out[:c],
+        n_out[:c],
+        depth_out[:c],
+        e_out[:c],
+        mu_out[:c],
+    )
+
+
+@cache
+def numba_pair_contacts() -> Any:
+    """:func:`_pair_contacts_loop` compiled by numba."""
+    from numba import njit
+
+    compile_helpers(vars(box_box))
+    compile_helpers(globals())
+    return njit(cache=True)(_pair_contacts_loop)
+
+
+@cache
+def numba_kernels() -> tuple[Any, Any]:
+    """(plane detection, list solver) compiled by numba."""
+    from numba import njit
+
+    compile_helpers(globals())
+    detect = njit(cache=True)(_detect_planes_loop)
+    solver = njit(cache=True)(_solve_list_loop)
+    return detect, solver
+
+
+def _detect_planes_loop(
+    x: np.ndarray,
+    q: np.ndarray,
+    points: np.ndarray,
+    radii: np.ndarray,
+    counts: np.ndarray,
+    plane_point: np.ndarray,
+    plane_normal: np.ndarray,
+    plane_e: np.ndarray,
+    plane_mu: np.ndarray,
+    a_out: np.ndarray,
+    ra_out: np.ndarray,
+    n_out: np.ndarray,
+    depth_out: np.ndarray,
+    e_out: np.ndarray,
+    mu_out: np.ndarray,
+    plane_out: np.ndarray,
+) -> int:
+    """Twin of :func:`plane_contacts`, body by body (each body's contacts in the same order:
+    plane, then sphere). Writes the contacts into the outs; returns how many."""
+    c = 0
+    for bi in range(x.shape[0]):
+        qw, qx, qy, qz = q[bi, 0], q[bi, 1], q[bi, 2], q[bi, 3]
+        for p in range(plane_point.shape[0]):
+            nx, ny, nz = plane_normal[p, 0], plane_normal[p, 1], plane_normal[p, 2]
+            for k in range(counts[bi]):
+                rx, ry, rz = rotate_scalar(
+                    qw, qx, qy, qz, points[bi, k, 0], points[bi, k, 1], points[bi, k, 2]
+                )
+                cx, cy, cz = x[bi, 0] + rx, x[bi, 1] + ry, x[bi, 2] + rz
+                rr = radii[bi, k]
+                d = ((cx - plane_point[p, 0]) * nx + (cy - plane_point[p, 1]) * ny) + (
+                    cz - plane_point[p, 2]
+                ) * nz
+                d = d - rr
+                if d < 0.0:
+                    a_out[c] = bi
+                    ra_out[c, 0] = cx - rr * nx - x[bi, 0]
+                    ra_out[c, 1] = cy - rr * ny - x[bi, 1]
+                    ra_out[c, 2] = cz - rr * nz - x[bi, 2]
+                    n_out[c, 0], n_out[c, 1], n_out[c, 2] = nx, ny, nz
+                    depth_out[c] = -d
+                    e_out[c] = plane_e[p]
+                    mu_out[c] = plane_mu[p]
+                    plane_out[c] = p
+                    c += 1
+    return c
+
+
+def _solve_list_loop(
+    count: int,
+    a: np.ndarray,
+    b: np.ndarray,
+    ra: np.ndarray,
+    rb: np.ndarray,
+    n: np.ndarray,
+    depth: np.ndarray,
+    restitution: np.ndarray,
+    friction: np.ndarray,
+    plane: np.ndarray,
+    x: np.ndarray,
+    v: np.ndarray,
+    w: np.ndarray,
+    q: np.ndarray,
+    inv_mass: np.ndarray,
+    inv_inertia: np.ndarray,
+    resting_speed: np.ndarray,
+    dv: np.ndarray,
+    dx: np.ndarray,
+    iterations: int,
+    e_used: np.ndarray,
+    impact: np.ndarray,
+    h: float,
+    depth_out: np.ndarray,
+    kh: float,
+    dt: float,
+    jn: np.ndarray,
+    jt: np.ndarray,
+    max_sweeps: int,
+) -> None:
+    """Twin of :func:`solve` then :func:`follow_impulses` (when h > 0): the first ``count``
+    contacts one after the other, ``iterations`` times; then the bodies moved as the impulses
+    moved them (the depths left into ``depth_out``). ``jn`` (C,), ``jt`` (C, 3): the impulses to
+    start from (warm starting; applied first, contact by contact, except on impacts), in place
+    the impulses each contact ended with."""
+    v0 = v.copy()
+    w0 = w.copy()
+    mat = np.empty((count, 12))  # per contact: I_a^-1 (6), I_b^-1 (6)
+    g = np.empty((count, 12))  # r_a x n, I_a^-1 (r_a x n), r_b x n, I_b^-1 (r_b x n)
+    inv_kn = np.empty(count)
+    ma = np.empty(count)
+    mb = np.empty(count)
+    tgt = np.empty(count)
+    kt6 = np.zeros((count, 6))  # K = [r]x^T I^-1 [r]x of both ends (solve's k_t)
+    gm = np.zeros((count, 18))  # G = I^-1 [r]x of each end, column by column (solve's ga, gb)
+    mt = np.empty(count)
+    cols = np.empty((3, 3))
+    mc = np.empty((3, 3))
+    for i in range(count):
+        for side in range(2):
+            body = a[i] if side == 0 else b[i]
+            o = 6 * side
+            if body < 0:
+                for k in range(6):
+                    mat[i, o + k] = 0.0
+                continue
+            qw, qx, qy, qz = q[body, 0], q[body, 1], q[body, 2], q[body, 3]
+            r00 = 1 - 2 * (qy * qy + qz * qz)
+            r01 = 2 * (qx * qy - qw * qz)
+            r02 = 2 * (qx * qz + qw * qy)
+            r10 = 2 * (qx * qy + qw * qz)
+            r11 = 1 - 2 * (qx * qx + qz * qz)
+            r12 = 2 * (qy * qz - qw * qx)
+            r20 = 2 * (qx * qz - qw * qy)
+            r21 = 2 * (qy * qz + qw * qx)
+            r22 = 1 - 2 * (qx * qx + qy * qy)
+            i0, i1, i2 = inv_inertia[body, 0], inv_inertia[body, 1], inv_inertia[body, 2]
+            mat[i, o + 0] = r00 * i0 * r00 + r01 * i1 * r01 + r02 * i2 * r02
+            mat[i, o + 1] = r00 * i0 * r10 + r01 * i1 * r11 + r02 * i2 * r12
+            mat[i, o + 2] = r00 * i0 * r20 + r01 * i1 * r21 + r02 * i2 * r22
+            mat[i, o + 3] = r10 * i0 * r10 + r11 * i1 * r11 + r12 * i2 * r12
+            mat[i, o + 4] = r10 * i0 * r20 + r11 * i1 * r21 + r12 * i2 * r22
+            mat[i, o + 5] = r20 * i0 * r20 + r21 * i1 * r21 + r22 * i2 * r22
+            # K_ij = c_i . M c_j, c_j the columns of [r]x (as _arm_inertia)
+            if side == 0:
+                rx, ry, rz = ra[i, 0], ra[i, 1], ra[i, 2]
+            else:
+                rx, ry, rz = rb[i, 0], rb[i, 1], rb[i, 2]
+            cols[0, 0], cols[0, 1], cols[0, 2] = 0.0, rz, -ry
+            cols[1, 0], cols[1, 1], cols[1, 2] = -rz, 0.0, rx
+            cols[2, 0], cols[2, 1], cols[2, 2] = ry, -rx, 0.0
+            m0, m1, m2 = mat[i, o + 0], mat[i, o + 1], mat[i, o + 2]
+            m3, m4, m5 = mat[i, o + 3], mat[i, o + 4], mat[i, o + 5]
+            for j in range(3):
+                cx, cy, cz = cols[j, 0], cols[j, 1], cols[j, 2]
+                mc[j, 0] = (m0 * cx + m1 * cy) + m2 * cz
+                mc[j, 1] = (m1 * cx + m3 * cy) + m4 * cz
+                mc[j, 2] = (m2 * cx + m4 * cy) + m5 * cz
+                gm[i, 9 * side + 3 * j + 0] = mc[j, 0]
+                gm[i, 9 * side + 3 * j + 1] = mc[j, 1]
+                gm[i, 9 * side + 3 * j + 2] = mc[j, 2]
+            kk = 0
+            for ci in range(3):
+                for cj in range(ci, 3):
+                    val = (cols[ci, 0] * mc[cj, 0] + cols[ci, 1] * mc[cj, 1]) + cols[ci, 2] * mc[cj, 2]
+                    if side == 0:
+                        kt6[i, kk] = val
+                    else:
+                        kt6[i, kk] = kt6[i, kk] + val
+                    kk += 1
+        ai, bi = a[i], b[i]
+        nx, ny, nz = n[i, 0], n[i, 1], n[i, 2]
+        ax, ay, az = ra[i, 0], ra[i, 1], ra[i, 2]
+        bx, by, bz = rb[i, 0], rb[i, 1], rb[i, 2]
+        m0, m1, m2, m3, m4, m5 = mat[i, 0], mat[i, 1], mat[i, 2], mat[i, 3], mat[i, 4], mat[i, 5]
+        ux, uy, uz = ay * nz - az * ny, az * nx - ax * nz, ax * ny - ay * nx
+        gx = (m0 * ux + m1 * uy) + m2 * uz
+        gy = (m1 * ux + m3 * uy) + m4 * uz
+        gz = (m2 * ux + m4 * uy) + m5 * uz
+        g[i, 0], g[i, 1], g[i, 2], g[i, 3], g[i, 4], g[i, 5] = ux, uy, uz, gx, gy, gz
+        ma[i] = inv_mass[ai]
+        da = (ux * gx + uy * gy) + uz * gz
+        vx = v[ai, 0] + (w[ai, 1] * az - w[ai, 2] * ay)
+        vy = v[ai, 1] + (w[ai, 2] * ax - w[ai, 0] * az)
+        vz = v[ai, 2] + (w[ai, 0] * ay - w[ai, 1] * ax)
+        rest = resting_speed[ai]
+        dvx, dvy, dvz = dv[ai, 0], dv[ai, 1], dv[ai, 2]
+        dxx, dxy, dxz = dx[ai, 0], dx[ai, 1], dx[ai, 2]
+        if bi >= 0:
+            m0, m1, m2, m3, m4, m5 = mat[i, 6], mat[i, 7], mat[i, 8], mat[i, 9], mat[i, 10], mat[i, 11]
+            ux, uy, uz = by * nz - bz * ny, bz * nx - bx * nz, bx * ny - by * nx
+            gx = (m0 * ux + m1 * uy) + m2 * uz
+            gy = (m1 * ux + m3 * uy) + m4 * uz
+            gz = (m2 * ux + m4 * uy) + m5 * uz
+            g[i, 6], g[i, 7], g[i, 8], g[i, 9], g[i, 10], g[i, 11] = ux, uy, uz, gx, gy, gz
+            mb[i] = inv_mass[bi]
+            kn = (ma[i] + mb[i]) + (da + ((ux * gx + uy * gy) + uz * gz))
+            mt[i] = ma[i] + mb[i]
+            vx = vx - (v[bi, 0] + (w[bi, 1] * bz - w[bi, 2] * by))
+            vy = vy - (v[bi, 1] + (w[bi, 2] * bx - w[bi, 0] * bz))
+            vz = vz - (v[bi, 2] + (w[bi, 0] * by - w[bi, 1] * bx))
+            rest = rest + resting_speed[bi]
+            dvx, dvy, dvz = dvx - dv[bi, 0], dvy - dv[bi, 1], dvz - dv[bi, 2]
+            dxx, dxy, dxz = dxx - dx[bi, 0], dxy - dx[bi, 1], dxz - dx[bi, 2]
+        else:
+            for k in range(6, 12):
+                g[i, k] = 0.0
+            mb[i] = 0.0
+            kn = ma[i] + da
+            mt[i] = ma[i]
+            rest = rest + 0.0
+        inv_kn[i] = 1.0 / kn if kn > 0.0 else 0.0
+        vn0 = (vx * nx + vy * ny) + vz * nz
+        if vn0 < -(rest + RESTING_FLOOR) and depth[i] >= 0.0:
+            e = restitution[i]
+            e_used[i] = e
+            impact[i] = True
+            # time of impact inside the step (as _impact_target)
+            dvn = (dvx * nx + dvy * ny) + dvz * nz
+            dxn = (dxx * nx + dxy * ny) + dxz * nz
+            d0 = -dxn - depth[i]
+            span = d0 + depth[i]
+            s = d0 / span if span > 0 else 0.0
+            s = min(max(s, 0.0), 1.0)
+            vn_imp = vn0 - (1.0 - s) * dvn
+            tgt[i] = max(-e * vn_imp + (1.0 - s) * dvn, 0.0)
+            if kh != 0.0 and e > 0.0:
+                kept = kept_end_speed(vn0 - dvn, max(d0, 0.0), dvn / dt, e * depth[i], e, kh)
+                if kept > 0.0:
+                    tgt[i] = kept
+        else:
+            e_used[i] = 0.0
+            impact[i] = False
+            tgt[i] = min(depth[i], 0.0) / dt  # a speculative contact may close its gap
+    # warm start (solve's _apply_warm): normal impulse on a, on b, then friction on a, on b
+    for i in range(count):
+        if impact[i]:
+            jn[i] = 0.0
+            jt[i, 0], jt[i, 1], jt[i, 2] = 0.0, 0.0, 0.0
+        ai, bi = a[i], b[i]
+        dj = jn[i]
+        ix, iy, iz = jt[i, 0], jt[i, 1], jt[i, 2]
+        if dj == 0.0 and ix == 0.0 and iy == 0.0 and iz == 0.0:
+            continue
+        s = ma[i] * dj
+        for k in range(3):
+            v[ai, k] += s * n[i, k]
+            w[ai, k] += dj * g[i, 3 + k]
+        if bi >= 0:
+            s = mb[i] * dj
+            for k in range(3):
+                v[bi, k] -= s * n[i, k]
+                w[bi, k] -= dj * g[i, 9 + k]
+        v[ai, 0] += ma[i] * ix
+        v[ai, 1] += ma[i] * iy
+        v[ai, 2] += ma[i] * iz
+        for k in range(3):
+            w[ai, k] += (gm[i, k] * ix + gm[i, 3 + k] * iy) + gm[i, 6 + k] * iz
+        if bi >= 0:
+            v[bi, 0] -= mb[i] * ix
+            v[bi, 1] -= mb[i] * iy
+            v[bi, 2] -= mb[i] * iz
+            for k in range(3):
+                w[bi, k] -= (gm[i, 9 + k] * ix + gm[i, 12 + k] * iy) + gm[i, 15 + k] * iz
+    for sweep in range(max(iterations, max_sweeps)):
+        change = 0.0
+        for i in range(count):
+            ai, bi = a[i], b[i]
+            nx, ny, nz = n[i, 0], n[i, 1], n[i, 2]
+            ax, ay, az = ra[i, 0], ra[i, 1], ra[i, 2]
+            im_a, im_b = ma[i], mb[i]
+            vn = (v[ai, 0] * nx + v[ai, 1] * ny) + v[ai, 2] * nz
+            vn = vn + ((w[ai, 0] * g[i, 0] + w[ai, 1] * g[i, 1]) + w[ai, 2] * g[i, 2])
+            if bi >= 0:
+                vnb = (v[bi, 0] * nx + v[bi, 1] * ny) + v[bi, 2] * nz
+                vnb = vnb + ((w[bi, 0] * g[i, 6] + w[bi, 1] * g[i, 7]) + w[bi, 2] * g[i, 8])
+                vn = vn - vnb
+            new = jn[i] + (tgt[i] - vn) * inv_kn[i]
+            if new < 0.0:
+                new = 0.0
+            dj = new - jn[i]
+            jn[i] = new
+            s = im_a * dj
+            v[ai, 0] += s * nx
+            v[ai, 1] += s * ny
+            v[ai, 2] += s * nz
+            w[ai, 0] += dj * g[i, 3]
+            w[ai, 1] += dj * g[i, 4]
+            w[ai, 2] += dj * g[i, 5]
+            if bi >= 0:
+                s = im_b * dj
+                v[bi, 0] -= s * nx
+                v[bi, 1] -= s * ny
+                v[bi, 2] -= s * nz
+                w[bi, 0] -= dj * g[i, 9]
+                w[bi, 1] -= dj * g[i, 10]
+                w[bi, 2] -= dj * g[i, 11]
+            # friction
+            vx = v[ai, 0] + (w[ai, 1] * az - w[ai, 2] * ay)
+            vy = v[ai, 1] + (w[ai, 2] * ax - w[ai, 0] * az)
+            vz = v[ai, 2] + (w[ai, 0] * ay - w[ai, 1] * ax)
+            if bi >= 0:
+                bx, by, bz = rb[i, 0], rb[i, 1], rb[i, 2]
+                vx = vx - (v[bi, 0] + (w[bi, 1] * bz - w[bi, 2] * by))
+                vy = vy - (v[bi, 1] + (w[bi, 2] * bx - w[bi, 0] * bz))
+                vz = vz - (v[bi, 2] + (w[bi, 0] * by - w[bi, 1] * bx))
+            vn = (vx * nx + vy * ny) + vz * nz
+            tx, ty, tz = vx - vn * nx, vy - vn * ny, vz - vn * nz
+            s2 = (tx * tx + ty * ty) + tz * tz
+            wx, wy, wz = jt[i, 0], jt[i, 1], jt[i, 2]
+            if s2 > 0.0:
+                k0, k1, k2, k3, k4, k5 = kt6[i, 0], kt6[i, 1], kt6[i, 2], kt6[i, 3], kt6[i, 4], kt6[i, 5]
+                qf = (tx * ((k0 * tx + k1 * ty) + k2 * tz) + ty * ((k1 * tx + k3 * ty) + k4 * tz)) + tz * (
+                    (k2 * tx + k4 * ty) + k5 * tz
+                )
+                den = mt[i] * s2 + qf
+                if den > 0.0:
+                    f = s2 / den
+                    wx, wy, wz = wx - f * tx, wy - f * ty, wz - f * tz
+            capj = friction[i] * jn[i]
+            mag2 = (wx * wx + wy * wy) + wz * wz
+            if mag2 > capj * capj:
+                s = capj / np.sqrt(mag2)
+                wx, wy, wz = wx * s, wy * s, wz * s
+            ix, iy, iz = wx - jt[i, 0], wy - jt[i, 1], wz - jt[i, 2]
+            jt[i, 0], jt[i, 1], jt[i, 2] = wx, wy, wz
+            big = max(abs(dj), max(abs(ix), max(abs(iy), abs(iz))))
+            change = max(change, mt[i] * big)
+            v[ai, 0] += im_a * ix
+            v[ai, 1] += im_a * iy
+            v[ai, 2] += im_a * iz
+            for k in range(3):  # w += I^-1 (r x imp) = sum_j G_j imp_j
+                w[ai, k] += (gm[i, k] * ix + gm[i, 3 + k] * iy) + gm[i, 6 + k] * iz
+            if bi >= 0:
+                bx, by, bz = rb[i, 0], rb[i, 1], rb[i, 2]
+                v[bi, 0] -= im_b * ix
+                v[bi, 1] -= im_b * iy
+                v[bi, 2] -= im_b * iz
+                for k in range(3):
+                    w[bi, k] -= (gm[i, 9 + k] * ix + gm[i, 12 + k] * iy) + gm[i, 15 + k] * iz
+        if sweep + 1 >= iterations and not change > SWEEP_TOLERANCE:
+            break
+    # the bodies moved as the impulses moved them (follow_impulses)
+    for i in range(count):
+        depth_out[i] = depth[i]
+    if h > 0.0:
+        nb = x.shape[0]
+        bounced = np.zeros(nb, dtype=np.bool_)
+        for i in range(count):
+            if impact[i]:
+                bounced[a[i]] = True
+                if b[i] >= 0:
+                    bounced[b[i]] = True
+        sx = np.zeros((nb, 3))
+        sw = np.zeros((nb, 3))
+        for bi in range(nb):
+            if not bounced[bi]:
+                for k in range(3):
+                    sx[bi, k] = h * (v[bi, k] - v0[bi, k])
+                    sw[bi, k] = h * (w[bi, k] - w0[bi, k])
+        for i in range(count):
+            ai = a[i]
+            px = sx[ai, 0] + (sw[ai, 1] * ra[i, 2] - sw[ai, 2] * ra[i, 1])
+            py = sx[ai, 1] + (sw[ai, 2] * ra[i, 0] - sw[ai, 0] * ra[i, 2])
+            pz = sx[ai, 2] + (sw[ai, 0] * ra[i, 1] - sw[ai, 1] * ra[i, 0])
+            mv = (px * n[i, 0] + py * n[i, 1]) + pz * n[i, 2]
+            bi = b[i]
+            if bi >= 0:
+                px = sx[bi, 0] + (sw[bi, 1] * rb[i, 2] - sw[bi, 2] * rb[i, 1])
+                py = sx[bi, 1] + (sw[bi, 2] * rb[i, 0] - sw[bi, 0] * rb[i, 2])
+                pz = sx[bi, 2] + (sw[bi, 0] * rb[i, 1] - sw[bi, 1] * rb[i, 0])
+                mv = mv - ((px * n[i, 0] + py * n[i, 1]) + pz * n[i, 2])
+            depth_out[i] = depth[i] - mv
+        for bi in range(nb):
+            for k in range(3):
+                x[bi, k] += sx[bi, k]
+            if not bounced[bi] and (sw[bi, 0] != 0.0 or sw[bi, 1] != 0.0 or sw[bi, 2] != 0.0):
+                wx, wy, wz = sw[bi, 0], sw[bi, 1], sw[bi, 2]
+                qw, qx, qy, qz = q[bi, 0], q[bi, 1], q[bi, 2], q[bi, 3]
+                q0 = qw + 0.5 * ((-wx * qx - wy * qy) - wz * qz)
+                q1 = qx + 0.5 * ((wx * qw + wy * qz) - wz * qy)
+                q2 = qy + 0.5 * ((-wx * qz + wy * qw) + wz * qx)
+                q3 = qz + 0.5 * ((wx * qy - wy * qx) + wz * qw)
+                norm = np.sqrt(((q0 * q0 + q1 * q1) + q2 * q2) + q3 * q3)
+                q[bi, 0], q[bi, 1], q[bi, 2], q[bi, 3] = q0 / norm, q1 / norm, q2 / norm, q3 / norm

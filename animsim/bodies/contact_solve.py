@@ -1,0 +1,440 @@
+"""The contact solver of rigid bodies: sequential impulses on the contact list, with
+restitution, resting contacts and Coulomb friction, warm starting, the time of impact inside
+the step, and the move of the bodies by the impulses (:func:`follow_impulses`).
+
+Baraff 1997, "Rigid Body Simulation", section 8 (colliding contact; the effective mass along
+the normal), solved as sequential impulses (Catto 2005): the contacts one after the other,
+``iterations`` times, on NumPy in batches in which no body appears twice (:func:`batches`), a
+batch being one vectorised update whose result is the sequential one. Every sum is written in
+the order of the numba twin (:mod:`animsim.bodies.contact_kernels`), so the backends agree to
+the bit. The model as a whole is described in :mod:`animsim.bodies.contacts`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from animsim.bodies import quaternion as quat
+from animsim.bodies.contact_constants import ITERATIONS, MAX_SWEEPS, RESTING_FLOOR, SWEEP_TOLERANCE
+from animsim.bodies.contact_detection import Contacts
+from animsim.collisions import kept_end_speed
+
+# --- fixed-order arithmetic shared by the NumPy solver and its numba twins ---------------
+#
+# Vectors of the NumPy solver are (3, k) arrays, one row per component, and every sum is
+# written out in the order the numba kernels use (x, then y, then z; a matrix row as
+# (m0 u0 + m1 u1) + m2 u2): the two backends then round alike, contact by contact.
+
+
+def _cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b of (3, k) arrays."""
+    return np.stack((a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]))
+
+
+def _dot3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a . b of (3, k) arrays, (k,): (a0 b0 + a1 b1) + a2 b2."""
+    return (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2]
+
+
+def _sym_matvec(m: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """M u for symmetric M given as (6, k) rows (m00, m01, m02, m11, m12, m22) and u (3, k)."""
+    return np.stack(
+        (
+            (m[0] * u[0] + m[1] * u[1]) + m[2] * u[2],
+            (m[1] * u[0] + m[3] * u[1]) + m[4] * u[2],
+            (m[2] * u[0] + m[4] * u[1]) + m[5] * u[2],
+        )
+    )
+
+
+def _arm_inertia(m: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+    """(K, G) for symmetric M (6, k) and lever arms r (3, k): K = [r]x^T M [r]x as (6, k) rows
+    (k00, k01, k02, k11, k12, k22), K_ij = c_i . M c_j with c_j the columns of [r]x; and
+    G = M [r]x as its three columns M c_j, (3, k) each, so that M (r x f) = sum_j G_j f_j."""
+    zero = np.zeros_like(r[0])
+    cols = (np.stack((zero, r[2], -r[1])), np.stack((-r[2], zero, r[0])), np.stack((r[1], -r[0], zero)))
+    mc = [_sym_matvec(m, c) for c in cols]
+    return np.stack(
+        (
+            _dot3(cols[0], mc[0]),
+            _dot3(cols[0], mc[1]),
+            _dot3(cols[0], mc[2]),
+            _dot3(cols[1], mc[1]),
+            _dot3(cols[1], mc[2]),
+            _dot3(cols[2], mc[2]),
+        )
+    ), mc
+
+
+def inv_world_inertia(q: np.ndarray, inv_inertia: np.ndarray) -> np.ndarray:
+    """R diag(I^-1) R^T of every body as (6, B) rows (m00, m01, m02, m11, m12, m22)."""
+    qw, qx, qy, qz = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    r00 = 1 - 2 * (qy * qy + qz * qz)
+    r01 = 2 * (qx * qy - qw * qz)
+    r02 = 2 * (qx * qz + qw * qy)
+    r10 = 2 * (qx * qy + qw * qz)
+    r11 = 1 - 2 * (qx * qx + qz * qz)
+    r12 = 2 * (qy * qz - qw * qx)
+    r20 = 2 * (qx * qz - qw * qy)
+    r21 = 2 * (qy * qz + qw * qx)
+    r22 = 1 - 2 * (qx * qx + qy * qy)
+    i0, i1, i2 = inv_inertia[:, 0], inv_inertia[:, 1], inv_inertia[:, 2]
+    return np.stack(
+        (
+            r00 * i0 * r00 + r01 * i1 * r01 + r02 * i2 * r02,
+            r00 * i0 * r10 + r01 * i1 * r11 + r02 * i2 * r12,
+            r00 * i0 * r20 + r01 * i1 * r21 + r02 * i2 * r22,
+            r10 * i0 * r10 + r11 * i1 * r11 + r12 * i2 * r12,
+            r10 * i0 * r20 + r11 * i1 * r21 + r12 * i2 * r22,
+            r20 * i0 * r20 + r21 * i1 * r21 + r22 * i2 * r22,
+        )
+    )
+
+
+def batches(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """A batch number per contact such that no body appears twice in a batch and contacts keep their
+    order within each body: greedy, in list order (vectorised per round)."""
+    c = a.size
+    batch = np.full(c, -1, dtype=np.int64)
+    remaining = np.arange(c)
+    level = 0
+    while remaining.size:
+        ra, rb = a[remaining], b[remaining]
+        # static "bodies" (-1) never conflict: give each its own key
+        rb_key = np.where(rb >= 0, rb, -1 - np.arange(rb.size))
+        keys = np.stack([ra, rb_key], axis=1).ravel()
+        _, first, inv = np.unique(keys, return_index=True, return_inverse=True)
+        is_first = first[inv.reshape(-1)] == np.arange(keys.size)
+        # a contact whose two ends are one body (a test's random pairs) conflicts with nothing else
+        take = is_first[0::2] & (is_first[1::2] | (rb_key == ra))
+        if not take.any():  # cannot happen with the rule above; never loop forever
+            take[0] = True
+        batch[remaining[take]] = level
+        remaining = remaining[~take]
+        level += 1
+    return batch
+
+
+def _slot_batches(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`batches` for lists in which no contact joins two bodies (planes, colliders): the
+    batch of a contact is how many contacts of its body come before it (one sort, no rounds)."""
+    order = np.argsort(a, kind="stable")
+    sa = a[order]
+    start = np.flatnonzero(np.r_[True, sa[1:] != sa[:-1]])
+    rank = np.arange(a.size) - np.repeat(start, np.diff(np.r_[start, a.size]))
+    batch = np.empty(a.size, dtype=np.int64)
+    batch[order] = rank
+    return batch
+
+
+def solve(
+    contacts: Contacts,
+    v: np.ndarray,
+    w: np.ndarray,
+    q: np.ndarray,
+    inv_mass: np.ndarray,
+    inv_inertia: np.ndarray,
+    resting_speed: np.ndarray,
+    iterations: int = ITERATIONS,
+    dv: np.ndarray | None = None,
+    dx: np.ndarray | None = None,
+    kh: float = 0.0,
+    dt: float = 1.0,
+    surface: np.ndarray | None = None,
+    warm: tuple[np.ndarray, np.ndarray] | None = None,
+    max_sweeps: int = MAX_SWEEPS,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Sequential impulses on v (B,3), w (B,3) in place; returns the restitution applied per contact,
+    which contacts were impacts (approaching faster than resting; they bounce with it), and the
+    normal (C,) and friction (C, 3) impulses each contact ended with.
+    ``warm``: impulses (C,), (C, 3) to start from (warm starting, :mod:`animsim.bodies.warm`);
+    applied first, contact by contact, except on impacts.
+    ``kh``: the method's energy shift times the step ``dt`` (:func:`_impact_target`).
+    ``surface``: (C, 3) the velocity of the surface each contact touches (a keyframed collider;
+    None: all still): every speed the contacts work with is relative to it.
+
+    The contacts are solved one after the other in list order, ``iterations`` times
+    (Catto 2005). Contacts that share no body commute, so the list is cut into
+    batches in which no body appears twice and that keep each body's contacts in
+    order (:func:`batches`); a batch is one vectorised update and the result is the
+    sequential one, operation for operation (the numba twin, ``_solve_list``, walks
+    the list itself).
+    """
+    c = contacts
+    count = c.count
+    e_out = np.zeros(count)
+    if count == 0:
+        return e_out, np.zeros(0, dtype=bool), np.zeros(0), np.zeros((0, 3))
+    coupled = bool((c.b >= 0).any())
+    batch = batches(c.a, c.b) if coupled else _slot_batches(c.a, c.b)
+    order = np.argsort(batch, kind="stable")
+    cuts = np.searchsorted(batch[order], np.arange(int(batch.max()) + 2))
+    a, b = c.a[order], c.b[order]
+    has_b = b >= 0
+    bb = np.where(has_b, b, 0)
+    n, ra, rb = c.n[order].T, c.ra[order].T, c.rb[order].T
+    restitution, friction, depth = c.restitution[order], c.friction[order], c.depth[order]
+    # per contact, once per step: the world inverse inertias, the angular response to a unit
+    # normal impulse g = I^-1 (r x n), and the effective mass along n (Baraff 1997, sec. 8):
+    # 1/K = 1/m_a + (r_a x n) . I_a^-1 (r_a x n) (+ the same for b)
+    m_body = inv_world_inertia(q, inv_inertia)
+    ma = inv_mass[a]
+    mat_a = m_body[:, a]
+    rna = _cross3(ra, n)
+    gna = _sym_matvec(mat_a, rna)
+    kn = ma + _dot3(rna, gna)
+    mb = np.where(has_b, inv_mass[bb], 0.0)
+    mat_b = np.where(has_b, m_body[:, bb], 0.0)
+    rnb = _cross3(rb, n)
+    gnb = _sym_matvec(mat_b, rnb)
+    if coupled:
+        kn = np.where(has_b, (ma + mb) + (_dot3(rna, gna) + _dot3(rnb, gnb)), kn)
+    # two immovable things (a pinned body on a floor) exchange no impulse
+    inv_kn = np.where(kn > 0, 1.0 / np.where(kn > 0, kn, 1.0), 0.0)
+    # tangential response: along a unit direction e the effective mass is 1/(m_t + e . K e) with
+    # K = [r]x^T I^-1 [r]x (the angular part, r x e = [r]x e), summed over both bodies
+    k_t, ga = _arm_inertia(mat_a, ra)
+    m_t = ma
+    gb = ga
+    if coupled:
+        k_b, gb = _arm_inertia(mat_b, rb)
+        k_t = np.where(has_b, k_t + k_b, k_t)
+        m_t = np.where(has_b, ma + mb, ma)
+    vT, wT = v.T.copy(), w.T.copy()
+    sv = None if surface is None else surface[order].T  # (3, C), in the solver's order
+    vel = vT[:, a] + _cross3(wT[:, a], ra)
+    if coupled:
+        vel = np.where(has_b, vel - (vT[:, bb] + _cross3(wT[:, bb], rb)), vel)
+    if sv is not None:
+        vel = vel - sv
+    vn0 = _dot3(vel, n)
+    rest_b = np.where(has_b, resting_speed[bb], 0.0)
+    # a speculative contact (a gap, depth < 0) never bounces: it may close its gap in the step
+    bounce = (vn0 < -(resting_speed[a] + rest_b + RESTING_FLOOR)) & (depth >= 0.0)
+    e_used = np.where(bounce, restitution, 0.0)
+    target = np.where(bounce, -restitution * vn0, np.minimum(depth, 0.0) / dt)
+    if dv is not None and dx is not None and bounce.any():
+        # against a moving surface the approach over the step is relative to its move too
+        target = np.where(
+            bounce,
+            _impact_target(
+                a, bb, has_b, n, depth, restitution, vn0, dv, dx, kh, dt, None if sv is None else sv * dt
+            ),
+            target,
+        )
+    jn = np.zeros(count)
+    jt = np.zeros((3, count))
+    vT_rows, wT_rows = vT.T, wT.T  # (B, 3) views
+    if warm is not None:
+        jn = np.where(bounce, 0.0, warm[0][order])
+        jt = np.where(bounce, 0.0, warm[1][order].T)
+        _apply_warm(a, bb, has_b, ma, mb, n, gna, gnb, ga, gb, jn, jt, vT_rows, wT_rows)
+    groups = []
+    for k in range(cuts.size - 1):
+        s = slice(int(cuts[k]), int(cuts[k + 1]))
+        hb = np.flatnonzero(has_b[s])
+        groups.append((s, a[s], hb, b[s][hb], cuts[k] + hb))
+
+    for sweep in range(max(iterations, max_sweeps)):
+        change = 0.0
+        for s, ai, hb, bi, sb in groups:
+            ns, ras = n[:, s], ra[:, s]
+            va, wa = vT[:, ai], wT[:, ai]
+            # normal: push (never pull) toward the target approach speed
+            vn = _dot3(va, ns) + _dot3(wa, rna[:, s])
+            if hb.size:
+                vb, wb = vT[:, bi], wT[:, bi]
+                vn[hb] = vn[hb] - (_dot3(vb, n[:, sb]) + _dot3(wb, rnb[:, sb]))
+            if sv is not None:
+                vn = vn - _dot3(sv[:, s], ns)
+            new = np.maximum(jn[s] + (target[s] - vn) * inv_kn[s], 0.0)
+            dj = new - jn[s]
+            jn[s] = new
+            va += (ma[s] * dj) * ns
+            wa += dj * gna[:, s]
+            if hb.size:
+                vb -= (mb[sb] * dj[hb]) * n[:, sb]
+                wb -= dj[hb] * gnb[:, sb]
+            # Coulomb friction: stop the sliding, within mu * (normal impulse so far)
+            vel = va + _cross3(wa, ras)
+            if hb.size:
+                vel[:, hb] = vel[:, hb] - (vb + _cross3(wb, rb[:, sb]))
+            if sv is not None:
+                vel = vel - sv[:, s]
+            vt = vel - _dot3(vel, ns) * ns
+            # the impulse that stops the sliding: -vt / (m_t + e.K e), e = vt/|vt|, written
+            # without the square root as -vt |vt|^2 / (m_t |vt|^2 + vt.K vt)
+            s2 = _dot3(vt, vt)
+            den = m_t[s] * s2 + _dot3(vt, _sym_matvec(k_t[:, s], vt))
+            live = (s2 > 0.0) & (den > 0.0)
+            f = np.where(live, s2 / np.where(live, den, 1.0), 0.0)
+            jts = jt[:, s]
+            want = jts - f * vt
+            # ... within mu * (normal impulse so far)
+            cap = friction[s] * jn[s]
+            mag2 = _dot3(want, want)
+            over = mag2 > cap * cap
+            want = np.where(over, want * (cap / np.sqrt(np.where(over, mag2, 1.0))), want)
+            imp = want - jts
+            jt[:, s] = want
+            change = max(change, float(np.max(m_t[s] * np.maximum(np.abs(dj), np.abs(imp).max(axis=0)))))
+            va += ma[s] * imp
+            wa += (ga[0][:, s] * imp[0] + ga[1][:, s] * imp[1]) + ga[2][:, s] * imp[2]
+            vT[:, ai] = va
+            wT[:, ai] = wa
+            if hb.size:
+                ib = imp[:, hb]
+                vb -= mb[sb] * ib
+                wb -= (gb[0][:, sb] * ib[0] + gb[1][:, sb] * ib[1]) + gb[2][:, sb] * ib[2]
+                vT[:, bi] = vb
+                wT[:, bi] = wb
+        if sweep + 1 >= iterations and not change > SWEEP_TOLERANCE:
+            break
+    v[:] = vT.T
+    w[:] = wT.T
+    e_out[order] = e_used
+    hit_out = np.zeros(count, dtype=bool)
+    hit_out[order] = bounce
+    jn_out = np.empty(count)
+    jn_out[order] = jn
+    jt_out = np.empty((count, 3))
+    jt_out[order] = jt.T
+    return e_out, hit_out, jn_out, jt_out
+
+
+def _apply_warm(
+    a: np.ndarray,
+    bb: np.ndarray,
+    has_b: np.ndarray,
+    ma: np.ndarray,
+    mb: np.ndarray,
+    n: np.ndarray,
+    gna: np.ndarray,
+    gnb: np.ndarray,
+    ga: list[np.ndarray],
+    gb: list[np.ndarray],
+    jn: np.ndarray,
+    jt: np.ndarray,
+    v: np.ndarray,
+    w: np.ndarray,
+) -> None:
+    """Apply the starting impulses jn (C,), jt (3, C) to v, w (B, 3) in place: per contact (in the
+    solver's order, which keeps each body's contacts in list order) its normal impulse on a,
+    on b, then its friction impulse on a, on b; ``np.add.at`` adds in index order, so every body
+    sums as the numba twin's loop does."""
+    sn = ma * jn
+    sbn = mb * jn
+    rot_a = (ga[0] * jt[0] + ga[1] * jt[1]) + ga[2] * jt[2]
+    rot_b = (gb[0] * jt[0] + gb[1] * jt[1]) + gb[2] * jt[2]
+    # four updates per contact, interleaved: (a, normal), (b, normal), (a, friction), (b, friction)
+    body = np.stack([a, bb, a, bb], axis=1).reshape(-1)
+    live = np.stack([np.ones_like(has_b), has_b, np.ones_like(has_b), has_b], axis=1).reshape(-1)
+    dvel = np.stack([(sn * n).T, -(sbn * n).T, (ma * jt).T, -(mb * jt).T], axis=1).reshape(-1, 3)
+    dw = np.stack([(jn * gna).T, -(jn * gnb).T, rot_a.T, -rot_b.T], axis=1).reshape(-1, 3)
+    np.add.at(v, body[live], dvel[live])
+    np.add.at(w, body[live], dw[live])
+
+
+def _impact_target(
+    a: np.ndarray,
+    bb: np.ndarray,
+    has_b: np.ndarray,
+    n: np.ndarray,
+    depth: np.ndarray,
+    restitution: np.ndarray,
+    vn0: np.ndarray,
+    dv: np.ndarray,
+    dx: np.ndarray,
+    kh: float = 0.0,
+    dt: float = 1.0,
+    moved: np.ndarray | None = None,
+) -> np.ndarray:
+    """Bounce targets corrected for the time of impact inside the step.
+
+    The step ended with the contact d = depth inside; the centres approached by
+    dx_n = n . (x - x_old) and the forces changed the normal speed by dv_n =
+    n . (v - v_old). The impact happened at the fraction s = d0 / (d0 + d) of the
+    step (d0 the distance at its start, d0 = -dx_n - d), with approach speed
+    vn_imp = vn - (1 - s) dv_n; reflected there and carried on for the rest of the
+    step, the normal speed ends at -e vn_imp + (1 - s) dv_n. (Without this the
+    forces of the part of the step after the impact would be reflected too: a
+    ball would gain height at every bounce.)
+
+    A method not exact under a constant acceleration (``kh`` = kappa dt != 0, symplectic
+    Euler's 1/2 dt) conserves a shifted energy; there the target is the speed that keeps e^2
+    of it at the place the projection leaves the contact, e depth out of the surface
+    (:func:`animsim.collisions.kept_end_speed`), so the apexes reach e^(2n) of the drop as
+    with the exact methods.
+    """
+    rel_dv = dv[a].T - np.where(has_b, dv[bb].T, 0.0)
+    rel_dx = dx[a].T - np.where(has_b, dx[bb].T, 0.0)
+    if moved is not None:  # (3, C) how far the touched surface moved in the step
+        rel_dx = rel_dx - moved
+    dvn = _dot3(rel_dv, n)
+    dxn = _dot3(rel_dx, n)
+    d0 = -dxn - depth
+    span = d0 + depth
+    s = np.clip(np.divide(d0, span, out=np.zeros_like(d0), where=span > 0), 0.0, 1.0)
+    vn_imp = vn0 - (1.0 - s) * dvn
+    target = np.maximum(-restitution * vn_imp + (1.0 - s) * dvn, 0.0)
+    if kh == 0.0:
+        return target
+    kept = kept_end_speed(vn0 - dvn, np.maximum(d0, 0.0), dvn / dt, restitution * depth, restitution, kh)
+    return np.where((restitution > 0.0) & (kept > 0.0), kept, target)
+
+
+def follow_impulses(
+    contacts: Contacts,
+    impact: np.ndarray,
+    x: np.ndarray,
+    q: np.ndarray,
+    dvel: np.ndarray,
+    domega: np.ndarray,
+    h: float,
+) -> np.ndarray:
+    """Move bodies as the contact impulses of this step would have moved them; returns the depths
+    that are left (C,). In place on x (B,3) and q (B,4).
+
+    A resting or sliding contact's impulse stands for a force that acted during the whole
+    step, so it moves the body as the step's forces did: a constant acceleration a over a
+    step of dt moves a body by c dt^2 a (c = 1 for symplectic Euler, x1 = x0 + dt v1; 1/2 for
+    Runge-Kutta and Verlet), so the velocity change dv of the impulses moves it by h dv,
+    h = c dt, and turns it by h domega. Without this the step's own push down a slope
+    (dt^2 g sin(theta) along it) stays in the position while friction takes it out of the
+    velocity, and a box held by static friction creeps. A body with a bouncing contact
+    is left alone: its impulse is an impact at one instant, placed by the time of impact
+    (``_impact_target`` and the (1 + e) projection). What the move took out of each
+    contact's penetration (the contact point's move along n, linear in the move) is taken
+    off its depth; a depth that turns negative (the body started the step short of the
+    surface and is moved back there) lets the projection bring it down onto the surface,
+    so a body never hovers where its last step started.
+    """
+    c = contacts
+    nb = x.shape[0]
+    bounced = np.zeros(nb, dtype=bool)
+    bounced[c.a[impact]] = True
+    hb = c.b[impact]
+    bounced[hb[hb >= 0]] = True
+    sx = np.where(bounced[:, None], 0.0, h * dvel)
+    sw = np.where(bounced[:, None], 0.0, h * domega)
+    a, ra, rb, n = c.a, c.ra, c.rb, c.n
+    has_b = c.b >= 0
+    bb = np.where(has_b, c.b, 0)
+    move = _point_move(sx[a], sw[a], ra, n)
+    if has_b.any():
+        move = np.where(has_b, move - _point_move(sx[bb], sw[bb], rb, n), move)
+    depth = c.depth - move
+    x += sx
+    turn = np.flatnonzero(~bounced & (sw != 0.0).any(axis=1))
+    if turn.size:
+        qt = q[turn]
+        q[turn] = quat.normalise(qt + quat.derivative(qt, sw[turn]))
+    return depth
+
+
+def _point_move(sx: np.ndarray, sw: np.ndarray, r: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """n . (sx + sw x r) per row, summed as the numba twin sums it."""
+    px = sx[:, 0] + (sw[:, 1] * r[:, 2] - sw[:, 2] * r[:, 1])
+    py = sx[:, 1] + (sw[:, 2] * r[:, 0] - sw[:, 0] * r[:, 2])
+    pz = sx[:, 2] + (sw[:, 0] * r[:, 1] - sw[:, 1] * r[:, 0])
+    return (px * n[:, 0] + py * n[:, 1]) + pz * n[:, 2]
