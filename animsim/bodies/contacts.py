@@ -126,13 +126,13 @@ class BodyContacts(StepStage):
         self._skin = SKIN * float(self.bound.max()) if self.count else 0.0
         self._built_at: np.ndarray | None = None
         self._candidates: tuple[np.ndarray, np.ndarray] | None = None
-        # the numba kernel covers steps in which bodies touch only planes; a step with contacts
-        # between bodies (or colliders) runs the NumPy path on both backends, so the two agree
+        # the numba kernels find plane contacts and solve; colliders are found on the NumPy
+        # path only, so a scene with colliders runs that path on both backends
         self.use_numba = backend == "numba" and not colliders
         self._buffers: tuple[np.ndarray, ...] | None = None
         self.numba_broadphase = backend == "numba"
         #: the last step's impulses, where each step's sweeps start (warm starting)
-        self.warm = WarmStart(self.bound)
+        self.warm = WarmStart(self.bound, planes.count)
         kinds = sorted({s.kind for s in shapes})
         parts = []
         if planes.count:

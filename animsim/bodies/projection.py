@@ -108,7 +108,7 @@ def settle(
                 need = push[c] - apart
                 if need > best:
                     best, pick = need, c
-            if pick < 0 or best == -np.inf or (sweep > 0 and not best > tolerance):
+            if pick < 0 or (sweep > 0 and not best > tolerance):
                 continue
             if best > worst:
                 worst = best

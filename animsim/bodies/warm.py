@@ -25,8 +25,11 @@ REACH = 0.05
 class WarmStart:
     """The last step's contacts and impulses, and the guesses they give for this step's."""
 
-    def __init__(self, bound: np.ndarray) -> None:
+    def __init__(self, bound: np.ndarray, planes: int) -> None:
         self.bound = bound
+        # what a contact joins body a to: another body (0 .. B-1), a collider (B), a plane
+        # (B + 1 ..): the keys below stay distinct for any number of planes
+        self._others = bound.shape[0] + 1 + planes
         self.forget()
 
     def forget(self) -> None:
@@ -38,9 +41,10 @@ class WarmStart:
     def _keys(self, a: np.ndarray, b: np.ndarray, plane: np.ndarray, n: np.ndarray) -> np.ndarray:
         """One integer per (body a, body b or plane, side of a collider by normal)."""
         nb = self.bound.shape[0]
-        side = np.argmax(np.abs(n), axis=1) * 2 + (n[np.arange(n.shape[0]), np.argmax(np.abs(n), axis=1)] > 0)
+        axis = np.argmax(np.abs(n), axis=1)
+        side = axis * 2 + (n[np.arange(n.shape[0]), axis] > 0)
         other = np.where(b >= 0, b, nb + 1 + np.maximum(plane, -1))
-        return (a * (2 * nb + 64) + other) * 6 + side
+        return (a * self._others + other) * 6 + side
 
     def guess(
         self, a: np.ndarray, b: np.ndarray, plane: np.ndarray, n: np.ndarray, ra: np.ndarray, q: np.ndarray
