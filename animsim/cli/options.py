@@ -75,6 +75,18 @@ def complete_plot_view(incomplete: str) -> list[str]:
 
 
 SceneArg = Annotated[Path, typer.Argument(help="The scene file (YAML).", show_default=False, metavar="SCENE")]
+SourceArg = Annotated[
+    Path,
+    typer.Argument(
+        help="A scene (simulated first) or a trajectory (.csv, .npz).", metavar="SCENE_OR_TRAJECTORY"
+    ),
+]
+# the overrides of a scene's integrator, step and duration, as run, render, view and plot take them
+IntegratorOpt = Annotated[
+    str | None, typer.Option(help="Override the scene's integrator.", autocompletion=complete_integrator)
+]
+DtOpt = Annotated[float | None, typer.Option(help="Override the step size (s).")]
+DurationOpt = Annotated[float | None, typer.Option(help="Override the duration (s).")]
 BackendOpt = Annotated[
     str,
     typer.Option(

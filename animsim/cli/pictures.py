@@ -11,8 +11,11 @@ import typer
 
 from animsim.cli.options import (
     BackendOpt,
+    DtOpt,
+    DurationOpt,
+    IntegratorOpt,
+    SourceArg,
     checked_backend,
-    complete_integrator,
     complete_integrators,
     complete_render_view,
     complete_viewer_view,
@@ -24,12 +27,7 @@ from animsim.errors import EXIT_FAILED, EXIT_INTERRUPTED
 
 @limit_options
 def render(
-    source: Annotated[
-        Path,
-        typer.Argument(
-            help="A scene (simulated first) or a trajectory (.csv, .npz).", metavar="SCENE_OR_TRAJECTORY"
-        ),
-    ],
+    source: SourceArg,
     gif: Annotated[Path | None, typer.Option("--gif", help="Write an animated GIF here.")] = None,
     mp4: Annotated[
         Path | None, typer.Option("--mp4", help="Write an MP4 here (needs the mp4 extra: imageio-ffmpeg).")
@@ -66,11 +64,9 @@ def render(
     dot_radius: Annotated[
         float, typer.Option("--dot-radius", help="Radius in pixels of particles that have no size.")
     ] = 3.0,
-    integrator: Annotated[
-        str | None, typer.Option(help="Override the scene's integrator.", autocompletion=complete_integrator)
-    ] = None,
-    dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
-    duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
+    integrator: IntegratorOpt = None,
+    dt: DtOpt = None,
+    duration: DurationOpt = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
     integrators: Annotated[
         str | None,
@@ -141,12 +137,7 @@ def render(
 
 @limit_options
 def view(
-    source: Annotated[
-        Path,
-        typer.Argument(
-            help="A scene (simulated first) or a trajectory (.csv, .npz).", metavar="SCENE_OR_TRAJECTORY"
-        ),
-    ],
+    source: SourceArg,
     output: Annotated[Path, typer.Option("-o", "--output", help="The HTML file to write.")],
     integrators: Annotated[
         str | None,
@@ -169,11 +160,9 @@ def view(
         Path | None,
         typer.Option("--scene", help="The scene of a trajectory, for springs, pins, planes and energy."),
     ] = None,
-    integrator: Annotated[
-        str | None, typer.Option(help="Override the scene's integrator.", autocompletion=complete_integrator)
-    ] = None,
-    dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
-    duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
+    integrator: IntegratorOpt = None,
+    dt: DtOpt = None,
+    duration: DurationOpt = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
     backend: BackendOpt = "auto",
     *,

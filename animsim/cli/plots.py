@@ -13,8 +13,11 @@ import typer
 
 from animsim.cli.options import (
     BackendOpt,
+    DtOpt,
+    DurationOpt,
+    IntegratorOpt,
+    SourceArg,
     checked_backend,
-    complete_integrator,
     complete_integrators,
     complete_plot_view,
     limit_options,
@@ -30,12 +33,7 @@ class PlotKind(StrEnum):
 
 @limit_options
 def plot(
-    source: Annotated[
-        Path,
-        typer.Argument(
-            help="A scene (simulated first) or a trajectory (.csv, .npz).", metavar="SCENE_OR_TRAJECTORY"
-        ),
-    ],
+    source: SourceArg,
     output: Annotated[Path, typer.Option("-o", "--output", help="Picture file: .png, .svg or .pdf.")],
     kind: Annotated[
         PlotKind,
@@ -56,11 +54,9 @@ def plot(
             autocompletion=complete_plot_view,
         ),
     ] = None,
-    integrator: Annotated[
-        str | None, typer.Option(help="Override the scene's integrator.", autocompletion=complete_integrator)
-    ] = None,
-    dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
-    duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
+    integrator: IntegratorOpt = None,
+    dt: DtOpt = None,
+    duration: DurationOpt = None,
     integrators: Annotated[
         str | None,
         typer.Option(

@@ -13,6 +13,9 @@ import typer
 from animsim.cli.options import (
     BackendOpt,
     DriftWarnOpt,
+    DtOpt,
+    DurationOpt,
+    IntegratorOpt,
     SceneArg,
     checked_backend,
     complete_integrator,
@@ -32,11 +35,9 @@ def run(
             "-o", "--output", help="Trajectory file; default <scene stem>.csv here; '-' for stdout."
         ),
     ] = None,
-    integrator: Annotated[
-        str | None, typer.Option(help="Override the scene's integrator.", autocompletion=complete_integrator)
-    ] = None,
-    dt: Annotated[float | None, typer.Option(help="Override the step size (s).")] = None,
-    duration: Annotated[float | None, typer.Option(help="Override the duration (s).")] = None,
+    integrator: IntegratorOpt = None,
+    dt: DtOpt = None,
+    duration: DurationOpt = None,
     seed: Annotated[int | None, typer.Option(help="Override the random seed.")] = None,
     format: Annotated[
         str | None,
