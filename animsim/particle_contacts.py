@@ -16,21 +16,27 @@ sum of their radii are found and resolved:
   displacements, so a pile falling as one never rebuilds it). Each step keeps
   the candidates that overlap, by the same test on both backends, in (i, j)
   order: the pairs are the same whenever the list was built.
-* **Velocities**: pairwise normal impulses along the line of centres, mass
-  weighted (``J = -(1 + e) v_n / (1/m_i + 1/m_j)``, the textbook two-body
-  impact, e.g. Goldstein, "Classical Mechanics", section 3.11), solved by a
-  few Jacobi iterations with accumulated, clamped impulses (Catto,
-  "Iterative Dynamics with Temporal Coherence", GDC 2005). The restitution
-  target is set from the approach speed before the iterations, so repeated
-  passes never re-bounce. An approach slower than what the relative
-  acceleration adds in two steps is resting (restitution 0), as on planes.
-  Each pair's correction is scaled by ``RELAX`` over the larger contact count (at most 1)
-  of its two particles (averaged, over-relaxed Jacobi as in Macklin et al.,
-  "Unified Particle Physics for Real-Time Applications", SIGGRAPH 2014), which
-  keeps piles from over-correcting and keeps every exchange equal and
-  opposite: momentum is conserved exactly.
-  Coulomb friction then takes at most ``friction * J`` off the pair's sliding
-  velocity, also equal and opposite.
+* **Impacts**: pairs approaching faster than what the step's forces added to
+  either sphere, twice over (slower is resting contact) bounce by
+  Newton's law of restitution, ``J = -(1 + e) v_n / (1/m_i + 1/m_j)`` along the
+  line of centres (the textbook two-body impact, e.g. Goldstein, "Classical
+  Mechanics", section 3.11), one pair at a time in pair order, sweep after sweep
+  until nothing approaches that fast (:func:`bounce_sweeps`; the collision pass
+  of Guendelman, Bridson and Fedkiw, SIGGRAPH 2003). Sequential impacts pass a
+  blow on through touching spheres as a Newton's cradle does, and keep the energy
+  at e = 1; a simultaneous solution would share it out and lose energy.
+* **Velocities**: then no pair may still approach: normal impulses solved by a
+  few Jacobi iterations with accumulated, clamped impulses (Catto, "Iterative
+  Dynamics with Temporal Coherence", GDC 2005). Each pair's correction is
+  scaled by ``RELAX`` over the larger contact count (at most 1) of its two
+  particles (averaged, over-relaxed Jacobi as in Macklin et al., "Unified
+  Particle Physics for Real-Time Applications", SIGGRAPH 2014), which keeps
+  piles from over-correcting and keeps every exchange equal and opposite:
+  momentum is conserved exactly. Coulomb friction then takes at most
+  ``friction * J`` off the pair's sliding velocity (J: the pair's impact and
+  resting impulses together), also equal and opposite, in one pass averaged
+  over the contact count but not over-relaxed (an over-relaxed stop overshoots
+  and sets a pile jittering).
 * **Positions**: the overlap is removed along the line of centres, each
   particle moving in proportion to its inverse mass, so the pair's centre of
   mass does not move (a few Jacobi passes, averaged as above).
@@ -72,6 +78,12 @@ ITERATIONS = 6
 RESTING_STEPS = 2.0
 #: over-relaxation of the averaged Jacobi passes (1: plain averaging)
 RELAX = 1.5
+#: at most this many sequential sweeps of the impact pass, forward and backward in turn (a
+#: row of touching balls takes one or two, whichever end is struck; piles a few more)
+BOUNCE_SWEEPS = 20
+#: an approach slower than this (m/s) is never an impact: grains falling together close at
+#: rounding speeds (1e-17 m/s) that would bounce back and forth to the sweep limit
+BOUNCE_FLOOR = 1e-6
 #: the Verlet list's skin, as a fraction of the largest contact distance ``2 * max radius``
 SKIN = 0.3
 # One candidate pair of the contact list: its (i, j) index pair as built (16), the k-d
@@ -190,6 +202,122 @@ def _gather_diff(a: np.ndarray, i: np.ndarray, j: np.ndarray, out: np.ndarray, t
     return out
 
 
+@numba_helper
+def bounce_pair(i, j, n0, n1, n2, w, limit, e, v, inv_mass):  # pragma: no cover - compiled too
+    """One impact between two spheres, in place on ``v``; returns the normal impulse (0.0: none).
+
+    Newton's law of restitution for a two-body impact along the line of centres
+    ``n`` (Goldstein, "Classical Mechanics", section 3.11): ``J = -(1 + e) v_n / w``
+    with ``w = 1/m_i + 1/m_j``, ``+J n`` on j and ``-J n`` on i. Only an approach
+    faster than ``limit`` (twice what the step's forces added to either sphere) is an
+    impact; a slower one is resting contact, left to the Jacobi passes.
+    """
+    vn = (v[j, 0] - v[i, 0]) * n0 + (v[j, 1] - v[i, 1]) * n1 + (v[j, 2] - v[i, 2]) * n2
+    if not -vn > limit:
+        return 0.0
+    jn = -(1.0 + e) * vn / w
+    ci = inv_mass[i] * jn
+    cj = inv_mass[j] * jn
+    v[i, 0] -= ci * n0
+    v[i, 1] -= ci * n1
+    v[i, 2] -= ci * n2
+    v[j, 0] += cj * n0
+    v[j, 1] += cj * n1
+    v[j, 2] += cj * n2
+    return jn
+
+
+@numba_helper
+def bounce_sweeps(pi, pj, nrm, w, limit, e, v, inv_mass, jb, p, sweeps):  # pragma: no cover - compiled
+    """The impact pass: :func:`bounce_pair` on every pair (Gauss-Seidel), sweep after sweep,
+    in pair order and back again in turn (symmetric Gauss-Seidel: a blow travels a row of
+    touching spheres in one sweep from either end), until a sweep has no impact (at most
+    ``sweeps``); ``jb[k]``: pair k's impulses.
+
+    Sequential, not simultaneous: an impact is passed on through touching spheres one pair
+    at a time, as in the collision pass of Guendelman, Bridson and Fedkiw, "Nonconvex rigid
+    bodies with stacking", SIGGRAPH 2003 (section 6). So a ball hitting a row of touching
+    equal balls stops and the last one leaves with its speed (Newton's cradle); a
+    simultaneous (Jacobi) solution shares the impulse and loses energy even at e = 1.
+    """
+    for k in range(p):
+        jb[k] = 0.0
+    for sweep in range(sweeps):
+        hit = False
+        for m in range(p):
+            k = m if sweep % 2 == 0 else p - 1 - m
+            jn = bounce_pair(pi[k], pj[k], nrm[k, 0], nrm[k, 1], nrm[k, 2], w[k], limit[k], e, v, inv_mass)
+            if jn != 0.0:
+                jb[k] += jn
+                hit = True
+        if not hit:
+            return
+
+
+def bounce_sweeps_numpy(
+    i: np.ndarray,
+    j: np.ndarray,
+    n: np.ndarray,
+    w: np.ndarray,
+    limit: np.ndarray,
+    e: float,
+    v: np.ndarray,
+    inv_mass: np.ndarray,
+    sweeps: int = BOUNCE_SWEEPS,
+) -> np.ndarray:
+    """:func:`bounce_sweeps` for NumPy, visiting only the pairs that can have an impact; returns jb.
+
+    ``n``: (P, 3) unit normals. A sweep of :func:`bounce_sweeps` changes a pair only if
+    the pair approached at the sweep's start or one of its spheres was struck earlier in
+    the sweep: those are the pairs this visits, in the sweep's order (a heap), each by the same
+    :func:`bounce_pair`, so the two backends give the same bits while NumPy's Python loop
+    touches only the impacts and their neighbours, not every pair of a pile.
+    """
+    import heapq
+
+    p = i.size
+    jb = np.zeros(p)
+    if p == 0 or not sweeps > 0:
+        return jb
+    incident: dict[int, list[int]] | None = None
+    n0, n1, n2 = n[:, 0], n[:, 1], n[:, 2]
+    # Python numbers for the loop (the same doubles; a NumPy scalar costs more per operation)
+    il, jl, wl, ll = i.tolist(), j.tolist(), w.tolist(), limit.tolist()
+    n0l, n1l, n2l = n0.tolist(), n1.tolist(), n2.tolist()
+    for sweep in range(sweeps):
+        dv = v[j] - v[i]
+        # (d0 n0 + d1 n1) + d2 n2: bounce_pair's order, the same bits
+        vn = dv[:, 0] * n0 + dv[:, 1] * n1
+        vn += dv[:, 2] * n2
+        due = np.flatnonzero(-vn > limit)
+        if due.size == 0:
+            return jb
+        if incident is None:  # pairs of each sphere, in pair order
+            incident = {}
+            for k in range(p):
+                incident.setdefault(il[k], []).append(k)
+                incident.setdefault(jl[k], []).append(k)
+        # the heap pops pairs in the sweep's order: k forward, -k backward
+        sign = 1 if sweep % 2 == 0 else -1
+        heap = [sign * int(k) for k in due]
+        heapq.heapify(heap)
+        queued = set(heap)
+        while heap:
+            key = heapq.heappop(heap)
+            k = sign * key
+            jn = bounce_pair(il[k], jl[k], n0l[k], n1l[k], n2l[k], wl[k], ll[k], e, v, inv_mass)
+            if jn == 0.0:
+                continue
+            jb[k] += jn
+            for r in (il[k], jl[k]):
+                for q in incident[r]:
+                    later = sign * q
+                    if later > key and later not in queued:
+                        queued.add(later)
+                        heapq.heappush(heap, later)
+    return jb
+
+
 def resolve_pairs_numpy(
     i: np.ndarray,
     j: np.ndarray,
@@ -279,21 +407,23 @@ def resolve_pairs_numpy(
     pos = dist > 0
     if not pos.all():
         n[0, ~pos], n[1, ~pos], n[2, ~pos] = 0.0, 1.0, 0.0
-    # restitution target from the approach before any pass
-    vn0 = dot(gather_diff(v), n, np.empty(p))
-    dv = (np.take(v, j, axis=0) - np.take(v_old, j, axis=0)) - (
-        np.take(v, i, axis=0) - np.take(v_old, i, axis=0)
-    )
-    ar = dot(np.ascontiguousarray(dv.T), n, np.empty(p)) / dt
-    resting = -vn0 <= RESTING_STEPS * np.maximum(-ar, 0.0) * dt
-    target = np.where((vn0 < 0) & ~resting, -restitution * vn0, 0.0)
+    # impacts first, sequentially (bounce_sweeps), when anything bounces at all
+    jb = None
+    if restitution > 0:
+        # resting: slower than what the step's forces added to either sphere, twice over (in
+        # a pile every grain gains g dt, though two grains falling together close at none)
+        dv = v - v_old
+        added = np.sqrt((dv[:, 0] * dv[:, 0] + dv[:, 1] * dv[:, 1]) + dv[:, 2] * dv[:, 2])
+        limit = RESTING_STEPS * np.maximum(added[i], added[j]) + BOUNCE_FLOOR
+        jb = bounce_sweeps_numpy(i, j, np.ascontiguousarray(n.T), w, limit, restitution, v, inv_mass)
+    # then the Jacobi passes: no pair left approaching (the target speed is 0)
     lam = np.zeros(p)
     new = np.empty(p)
     vn = np.empty(p)
     dl = np.empty(p)
     for _ in range(iterations):
         dot(gather_diff(v), n, vn)
-        np.subtract(target, vn, out=dl)
+        np.subtract(0.0, vn, out=dl)
         dl /= w
         dl *= relax
         np.add(lam, dl, out=new)
@@ -305,12 +435,15 @@ def resolve_pairs_numpy(
         np.multiply(n, dl, out=q)
         scatter_add(v)  # +J n on j, -J n on i: momentum kept
     if friction > 0:
+        # one pass, so averaged but not over-relaxed: a grain's contacts stop at most its sliding
+        share = np.minimum(1.0 / np.maximum(count[i], count[j]), 1.0)
         dvel = gather_diff(v)
         dot(dvel, n, vn)
         vt = dvel - vn * n
         speed = np.sqrt(dot(vt, vt, np.empty(p)))
         with np.errstate(divide="ignore", invalid="ignore"):
-            jt = np.minimum(speed / w * relax, friction * lam) / speed
+            # Coulomb's bound on the whole normal impulse: the impact's and the resting one
+            jt = np.minimum(speed / w * share, friction * (lam if jb is None else lam + jb)) / speed
         # pairs at no sliding speed add nothing (a 0.0 weight leaves every sum's bits alone);
         # the numba kernel adds +jt vt on i and -jt vt on j: the scatter of -(jt vt)
         jt = np.where(speed > 0, jt, 0.0)
@@ -535,8 +668,12 @@ class ParticleContacts(StepStage):
                 b.get("nrm", (p, 3)),
                 b.get("tgt", (p,)),
                 b.get("lam", (p,)),
+                b.get("jb", (p,)),
                 b.get("dv", (n_rows, 3)),
                 b.get("count", (n_rows,), np.int64),
+                RESTING_STEPS,
+                BOUNCE_FLOOR,
+                BOUNCE_SWEEPS,
             )
             self.pairs_last = int(found)
             return bool(changed)
@@ -829,12 +966,16 @@ def numba_kernels() -> NumbaKernels:
         nrm,
         tgt,
         lam,
+        jb,
         dv,
         count,
+        resting_steps,
+        bounce_floor,
+        bounce_limit,
     ):  # pragma: no cover - compiled
         """Keep the candidates that overlap, then the passes of :func:`resolve_pairs_numpy`.
 
-        ``pi`` .. ``lam``: buffers of at least the candidates' length; ``dv`` (N, 3)
+        ``pi`` .. ``jb``: buffers of at least the candidates' length; ``dv`` (N, 3)
         and ``count`` (N,): per particle. Returns (overlapping pairs, whether any
         pair was resolved).
         """
@@ -877,15 +1018,22 @@ def numba_kernels() -> NumbaKernels:
                     nrm[k, a] /= dist
             else:
                 nrm[k, 0], nrm[k, 1], nrm[k, 2] = 0.0, 1.0, 0.0
-            vn0 = 0.0
-            ar = 0.0
-            for a in range(3):
-                vn0 += (v[j, a] - v[i, a]) * nrm[k, a]
-                ar += ((v[j, a] - v_old[j, a]) - (v[i, a] - v_old[i, a])) * nrm[k, a]
-            ar /= dt
-            resting = -vn0 <= 2.0 * max(-ar, 0.0) * dt
-            tgt[k] = -e * vn0 if (vn0 < 0 and not resting) else 0.0
+            if e > 0:  # the impact pass's limit (resolve_pairs_numpy's)
+                si = 0.0
+                sj = 0.0
+                for a in range(3):
+                    t = v[i, a] - v_old[i, a]
+                    si += t * t
+                    t = v[j, a] - v_old[j, a]
+                    sj += t * t
+                tgt[k] = resting_steps * max(np.sqrt(si), np.sqrt(sj)) + bounce_floor
             lam[k] = 0.0
+        # impacts first, sequentially (see bounce_sweeps), when anything bounces at all
+        if e > 0:
+            bounce_sweeps(pi, pj, nrm, w, tgt, e, v, inv_mass, jb, p, bounce_limit)
+        else:
+            for k in range(p):
+                jb[k] = 0.0
         # each pass scatters pair by pair into dv (every particle's sum in pair order, from
         # 0.0), then adds dv / m; a pass that changed nothing adds nothing
         for _ in range(iterations):
@@ -897,7 +1045,7 @@ def numba_kernels() -> NumbaKernels:
                 vn = 0.0
                 for a in range(3):
                     vn += (v[j, a] - v[i, a]) * nrm[k, a]
-                dl = (tgt[k] - vn) / w[k] * rel[k]
+                dl = (0.0 - vn) / w[k] * rel[k]
                 new = max(lam[k] + dl, 0.0)
                 dl = new - lam[k]
                 lam[k] = new
@@ -925,7 +1073,8 @@ def numba_kernels() -> NumbaKernels:
                 t2 = v[j, 2] - v[i, 2] - vn * nrm[k, 2]
                 speed = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
                 if speed > 0:  # else it adds nothing
-                    jt = min(speed / w[k] * rel[k], mu * lam[k]) / speed
+                    share = min(1.0 / max(count[i], count[j]), 1.0)
+                    jt = min(speed / w[k] * share, mu * (lam[k] + jb[k])) / speed
                     dv[i, 0] += jt * t0
                     dv[i, 1] += jt * t1
                     dv[i, 2] += jt * t2

@@ -29,6 +29,9 @@ COLD_SWEEPS = 2000
 RESTING_FACTOR = 2.0
 #: and below this absolute approach speed, m/s (rounding of a body already at rest)
 RESTING_FLOOR = 1e-6
+#: sweeps of the impact pass between bodies, forward and backward in turn (a row of touching
+#: balls takes one or two, whichever end is struck)
+IMPACT_SWEEPS = 20
 #: candidate pairs are kept while no body moved more than half of SKIN * the largest bound
 SKIN = 0.5
 

@@ -20,6 +20,7 @@ import numpy as np
 from animsim.bodies import box_box
 from animsim.bodies.box_box import box_box as box_box_contacts
 from animsim.bodies.contact_constants import (
+    IMPACT_SWEEPS,
     MAX_BOX_POINTS,
     RESTING_FLOOR,
     SHAPE_BOX,
@@ -327,6 +328,10 @@ def _solve_list_loop(
     kt6 = np.zeros((count, 6))  # K = [r]x^T I^-1 [r]x of both ends (solve's k_t)
     gm = np.zeros((count, 18))  # G = I^-1 [r]x of each end, column by column (solve's ga, gb)
     mt = np.empty(count)
+    limit = np.empty(count)  # the resting speed: slower approaches never bounce
+    dvn_all = np.empty(count)  # what the step's forces added along n, and its move along n
+    dxn_all = np.empty(count)
+    struck = np.empty(count, dtype=np.bool_)  # impacts of the impact pass
     cols = np.empty((3, 3))
     mc = np.empty((3, 3))
     for i in range(count):
@@ -423,14 +428,66 @@ def _solve_list_loop(
             mt[i] = ma[i]
             rest = rest + 0.0
         inv_kn[i] = 1.0 / kn if kn > 0.0 else 0.0
+        limit[i] = rest + RESTING_FLOOR
+        dvn_all[i] = (dvx * nx + dvy * ny) + dvz * nz
+        dxn_all[i] = (dxx * nx + dxy * ny) + dxz * nz
+    # impacts between bodies first, one contact at a time (solve's _impact_pass)
+    for i in range(count):
+        struck[i] = False
+    for sweep in range(IMPACT_SWEEPS):
+        hit = False
+        for m in range(count):
+            i = m if sweep % 2 == 0 else count - 1 - m
+            ai, bi = a[i], b[i]
+            if bi < 0 or not restitution[i] > 0.0 or not inv_kn[i] > 0.0:
+                continue
+            nx, ny, nz = n[i, 0], n[i, 1], n[i, 2]
+            vn = (v[ai, 0] * nx + v[ai, 1] * ny) + v[ai, 2] * nz
+            vn = vn + ((w[ai, 0] * g[i, 0] + w[ai, 1] * g[i, 1]) + w[ai, 2] * g[i, 2])
+            vnb = (v[bi, 0] * nx + v[bi, 1] * ny) + v[bi, 2] * nz
+            vnb = vnb + ((w[bi, 0] * g[i, 6] + w[bi, 1] * g[i, 7]) + w[bi, 2] * g[i, 8])
+            vn = vn - vnb
+            if not (vn < -limit[i] and (depth[i] >= 0.0 or depth[i] - vn * dt >= 0.0)):
+                continue
+            hit = True
+            struck[i] = True
+            dj = -(1.0 + restitution[i]) * vn * inv_kn[i]
+            s = ma[i] * dj
+            v[ai, 0] += s * nx
+            v[ai, 1] += s * ny
+            v[ai, 2] += s * nz
+            w[ai, 0] += dj * g[i, 3]
+            w[ai, 1] += dj * g[i, 4]
+            w[ai, 2] += dj * g[i, 5]
+            s = mb[i] * dj
+            v[bi, 0] -= s * nx
+            v[bi, 1] -= s * ny
+            v[bi, 2] -= s * nz
+            w[bi, 0] -= dj * g[i, 9]
+            w[bi, 1] -= dj * g[i, 10]
+            w[bi, 2] -= dj * g[i, 11]
+        if not hit:
+            break
+    for i in range(count):
+        ai, bi = a[i], b[i]
+        nx, ny, nz = n[i, 0], n[i, 1], n[i, 2]
+        ax, ay, az = ra[i, 0], ra[i, 1], ra[i, 2]
+        vx = v[ai, 0] + (w[ai, 1] * az - w[ai, 2] * ay)
+        vy = v[ai, 1] + (w[ai, 2] * ax - w[ai, 0] * az)
+        vz = v[ai, 2] + (w[ai, 0] * ay - w[ai, 1] * ax)
+        if bi >= 0:
+            bx, by, bz = rb[i, 0], rb[i, 1], rb[i, 2]
+            vx = vx - (v[bi, 0] + (w[bi, 1] * bz - w[bi, 2] * by))
+            vy = vy - (v[bi, 1] + (w[bi, 2] * bx - w[bi, 0] * bz))
+            vz = vz - (v[bi, 2] + (w[bi, 0] * by - w[bi, 1] * bx))
         vn0 = (vx * nx + vy * ny) + vz * nz
-        if vn0 < -(rest + RESTING_FLOOR) and depth[i] >= 0.0:
+        if vn0 < -limit[i] and depth[i] >= 0.0:
             e = restitution[i]
             e_used[i] = e
             impact[i] = True
             # time of impact inside the step (as _impact_target)
-            dvn = (dvx * nx + dvy * ny) + dvz * nz
-            dxn = (dxx * nx + dxy * ny) + dxz * nz
+            dvn = dvn_all[i]
+            dxn = dxn_all[i]
             d0 = -dxn - depth[i]
             span = d0 + depth[i]
             s = d0 / span if span > 0 else 0.0
@@ -442,8 +499,8 @@ def _solve_list_loop(
                 if kept > 0.0:
                     tgt[i] = kept
         else:
-            e_used[i] = 0.0
-            impact[i] = False
+            e_used[i] = restitution[i] if struck[i] else 0.0
+            impact[i] = struck[i]
             tgt[i] = min(depth[i], 0.0) / dt  # a speculative contact may close its gap
     # warm start (solve's _apply_warm): normal impulse on a, on b, then friction on a, on b
     for i in range(count):

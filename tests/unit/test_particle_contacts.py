@@ -188,7 +188,8 @@ def test_a_pile_of_500_settles_without_overlaps(backend: str) -> None:
     g = np.array([0.0, -9.81, 0.0])
     dt = 0.002
     history = []
-    for step in range(1500):
+    # 3.5 s: a grain pushed off the heap's edge as it spreads may still slide at 2.9 s
+    for step in range(1750):
         x_old, v_old = x.copy(), v.copy()
         v += g * dt
         x += v * dt
@@ -196,7 +197,7 @@ def test_a_pile_of_500_settles_without_overlaps(backend: str) -> None:
         t0, t1 = step * dt, (step + 1) * dt
         walls_stage.apply(st, x_old, v_old, t0, t1)
         contacts.apply(st, x_old, v_old, t0, t1)
-        if step >= 1400:
+        if step >= 1650:
             history.append(x.copy())
     d = np.linalg.norm(x[:, None] - x[None], axis=2) + np.eye(n) * 10
     overlap = 2 * r - d.min()
