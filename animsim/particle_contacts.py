@@ -16,8 +16,9 @@ sum of their radii are found and resolved:
   displacements, so a pile falling as one never rebuilds it). Each step keeps
   the candidates that overlap, by the same test on both backends, in (i, j)
   order: the pairs are the same whenever the list was built.
-* **Impacts**: pairs approaching faster than what the step's forces added to
-  either sphere, twice over (slower is resting contact) bounce by
+* **Impacts**: pairs whose bounce would be faster than twice what the step's
+  forces added to a sphere touching either one (slower is resting contact)
+  bounce by
   Newton's law of restitution, ``J = -(1 + e) v_n / (1/m_i + 1/m_j)`` along the
   line of centres (the textbook two-body impact, e.g. Goldstein, "Classical
   Mechanics", section 3.11), one pair at a time in pair order, sweep after sweep
@@ -78,9 +79,9 @@ ITERATIONS = 6
 RESTING_STEPS = 2.0
 #: over-relaxation of the averaged Jacobi passes (1: plain averaging)
 RELAX = 1.5
-#: at most this many sequential sweeps of the impact pass, forward and backward in turn (a
-#: row of touching balls takes one or two, whichever end is struck; piles a few more)
-BOUNCE_SWEEPS = 20
+#: at most this many sweeps of the impact pass: a blow crosses one pair of touching spheres per
+#: sweep, so a row of up to 33 touching balls passes it on whole
+BOUNCE_SWEEPS = 32
 #: an approach slower than this (m/s) is never an impact: grains falling together close at
 #: rounding speeds (1e-17 m/s) that would bounce back and forth to the sweep limit
 BOUNCE_FLOOR = 1e-6
@@ -209,8 +210,9 @@ def bounce_pair(i, j, n0, n1, n2, w, limit, e, v, inv_mass):  # pragma: no cover
     Newton's law of restitution for a two-body impact along the line of centres
     ``n`` (Goldstein, "Classical Mechanics", section 3.11): ``J = -(1 + e) v_n / w``
     with ``w = 1/m_i + 1/m_j``, ``+J n`` on j and ``-J n`` on i. Only an approach
-    faster than ``limit`` (twice what the step's forces added to either sphere) is an
-    impact; a slower one is resting contact, left to the Jacobi passes.
+    faster than ``limit`` is an impact (its bounce, e times it, would be faster than twice
+    what the step's forces added to a sphere touching either); a slower one is resting contact, left
+    to the Jacobi passes (a grain settling into a pile does not bounce by a hair).
     """
     vn = (v[j, 0] - v[i, 0]) * n0 + (v[j, 1] - v[i, 1]) * n1 + (v[j, 2] - v[i, 2]) * n2
     if not -vn > limit:
@@ -228,30 +230,48 @@ def bounce_pair(i, j, n0, n1, n2, w, limit, e, v, inv_mass):  # pragma: no cover
 
 
 @numba_helper
-def bounce_sweeps(pi, pj, nrm, w, limit, e, v, inv_mass, jb, p, sweeps):  # pragma: no cover - compiled
-    """The impact pass: :func:`bounce_pair` on every pair (Gauss-Seidel), sweep after sweep,
-    in pair order and back again in turn (symmetric Gauss-Seidel: a blow travels a row of
-    touching spheres in one sweep from either end), until a sweep has no impact (at most
-    ``sweeps``); ``jb[k]``: pair k's impulses.
+def approaching(pi, pj, nrm, limit, v, due, p):  # pragma: no cover - compiled
+    """due[k]: pair k approaches faster than its limit now; returns how many do."""
+    count = 0
+    for k in range(p):
+        i = pi[k]
+        j = pj[k]
+        vn = (
+            (v[j, 0] - v[i, 0]) * nrm[k, 0]
+            + (v[j, 1] - v[i, 1]) * nrm[k, 1]
+            + (v[j, 2] - v[i, 2]) * nrm[k, 2]
+        )
+        due[k] = -vn > limit[k]
+        if due[k]:
+            count += 1
+    return count
+
+
+@numba_helper
+def bounce_sweeps(pi, pj, nrm, w, limit, e, v, inv_mass, jb, due, p, sweeps):  # pragma: no cover - compiled
+    """The impact pass; ``jb[k]``: pair k's impulses. Each sweep marks the pairs that approach
+    faster than resting, then strikes them one after the other in pair order
+    (:func:`bounce_pair`, which looks again: an earlier impact may have parted the pair),
+    until no pair approaches (at most ``sweeps``).
 
     Sequential, not simultaneous: an impact is passed on through touching spheres one pair
-    at a time, as in the collision pass of Guendelman, Bridson and Fedkiw, "Nonconvex rigid
+    per sweep, as in the collision pass of Guendelman, Bridson and Fedkiw, "Nonconvex rigid
     bodies with stacking", SIGGRAPH 2003 (section 6). So a ball hitting a row of touching
     equal balls stops and the last one leaves with its speed (Newton's cradle); a
     simultaneous (Jacobi) solution shares the impulse and loses energy even at e = 1.
+    Marking first and striking only the marked is what lets NumPy run the same pass as
+    cheaply (:func:`bounce_sweeps_numpy`): its Python loop sees the impacts, not every pair.
     """
     for k in range(p):
         jb[k] = 0.0
-    for sweep in range(sweeps):
-        hit = False
-        for m in range(p):
-            k = m if sweep % 2 == 0 else p - 1 - m
-            jn = bounce_pair(pi[k], pj[k], nrm[k, 0], nrm[k, 1], nrm[k, 2], w[k], limit[k], e, v, inv_mass)
-            if jn != 0.0:
-                jb[k] += jn
-                hit = True
-        if not hit:
+    for _ in range(sweeps):
+        if approaching(pi, pj, nrm, limit, v, due, p) == 0:
             return
+        for k in range(p):
+            if due[k]:
+                jb[k] += bounce_pair(
+                    pi[k], pj[k], nrm[k, 0], nrm[k, 1], nrm[k, 2], w[k], limit[k], e, v, inv_mass
+                )
 
 
 def bounce_sweeps_numpy(
@@ -265,56 +285,34 @@ def bounce_sweeps_numpy(
     inv_mass: np.ndarray,
     sweeps: int = BOUNCE_SWEEPS,
 ) -> np.ndarray:
-    """:func:`bounce_sweeps` for NumPy, visiting only the pairs that can have an impact; returns jb.
+    """:func:`bounce_sweeps` for NumPy (``n``: (P, 3) unit normals); returns jb.
 
-    ``n``: (P, 3) unit normals. A sweep of :func:`bounce_sweeps` changes a pair only if
-    the pair approached at the sweep's start or one of its spheres was struck earlier in
-    the sweep: those are the pairs this visits, in the sweep's order (a heap), each by the same
-    :func:`bounce_pair`, so the two backends give the same bits while NumPy's Python loop
-    touches only the impacts and their neighbours, not every pair of a pile.
+    The marking is vectorised, in :func:`approaching`'s order of operations (the same bits);
+    the marked pairs are struck by the same :func:`bounce_pair`, in pair order.
     """
-    import heapq
-
     p = i.size
     jb = np.zeros(p)
-    if p == 0 or not sweeps > 0:
-        return jb
-    incident: dict[int, list[int]] | None = None
     n0, n1, n2 = n[:, 0], n[:, 1], n[:, 2]
-    # Python numbers for the loop (the same doubles; a NumPy scalar costs more per operation)
-    il, jl, wl, ll = i.tolist(), j.tolist(), w.tolist(), limit.tolist()
-    n0l, n1l, n2l = n0.tolist(), n1.tolist(), n2.tolist()
-    for sweep in range(sweeps):
+    for _ in range(sweeps):
         dv = v[j] - v[i]
-        # (d0 n0 + d1 n1) + d2 n2: bounce_pair's order, the same bits
         vn = dv[:, 0] * n0 + dv[:, 1] * n1
         vn += dv[:, 2] * n2
         due = np.flatnonzero(-vn > limit)
         if due.size == 0:
-            return jb
-        if incident is None:  # pairs of each sphere, in pair order
-            incident = {}
-            for k in range(p):
-                incident.setdefault(il[k], []).append(k)
-                incident.setdefault(jl[k], []).append(k)
-        # the heap pops pairs in the sweep's order: k forward, -k backward
-        sign = 1 if sweep % 2 == 0 else -1
-        heap = [sign * int(k) for k in due]
-        heapq.heapify(heap)
-        queued = set(heap)
-        while heap:
-            key = heapq.heappop(heap)
-            k = sign * key
-            jn = bounce_pair(il[k], jl[k], n0l[k], n1l[k], n2l[k], wl[k], ll[k], e, v, inv_mass)
-            if jn == 0.0:
-                continue
-            jb[k] += jn
-            for r in (il[k], jl[k]):
-                for q in incident[r]:
-                    later = sign * q
-                    if later > key and later not in queued:
-                        queued.add(later)
-                        heapq.heappush(heap, later)
+            break
+        for k in due.tolist():
+            jb[k] += bounce_pair(
+                int(i[k]),
+                int(j[k]),
+                float(n0[k]),
+                float(n1[k]),
+                float(n2[k]),
+                float(w[k]),
+                float(limit[k]),
+                e,
+                v,
+                inv_mass,
+            )
     return jb
 
 
@@ -410,11 +408,17 @@ def resolve_pairs_numpy(
     # impacts first, sequentially (bounce_sweeps), when anything bounces at all
     jb = None
     if restitution > 0:
-        # resting: slower than what the step's forces added to either sphere, twice over (in
-        # a pile every grain gains g dt, though two grains falling together close at none)
+        # resting: slower than twice what the step's forces added to a sphere touching either
+        # one (in a pile every grain gains g dt, though two grains falling together close at
+        # none and one on the floor is held at rest) ...
         dv = v - v_old
         added = np.sqrt((dv[:, 0] * dv[:, 0] + dv[:, 1] * dv[:, 1]) + dv[:, 2] * dv[:, 2])
-        limit = RESTING_STEPS * np.maximum(added[i], added[j]) + BOUNCE_FLOOR
+        pair_added = np.maximum(added[i], added[j])
+        near = np.zeros(n_rows)
+        np.maximum.at(near, i, pair_added)
+        np.maximum.at(near, j, pair_added)
+        # ... and an impact only where the bounce, e times the approach, would be faster than that
+        limit = (RESTING_STEPS * np.maximum(near[i], near[j]) + BOUNCE_FLOOR) / restitution
         jb = bounce_sweeps_numpy(i, j, np.ascontiguousarray(n.T), w, limit, restitution, v, inv_mass)
     # then the Jacobi passes: no pair left approaching (the target speed is 0)
     lam = np.zeros(p)
@@ -669,6 +673,7 @@ class ParticleContacts(StepStage):
                 b.get("tgt", (p,)),
                 b.get("lam", (p,)),
                 b.get("jb", (p,)),
+                b.get("due", (p,), np.bool_),
                 b.get("dv", (n_rows, 3)),
                 b.get("count", (n_rows,), np.int64),
                 RESTING_STEPS,
@@ -967,6 +972,7 @@ def numba_kernels() -> NumbaKernels:
         tgt,
         lam,
         jb,
+        due,
         dv,
         count,
         resting_steps,
@@ -1026,11 +1032,19 @@ def numba_kernels() -> NumbaKernels:
                     si += t * t
                     t = v[j, a] - v_old[j, a]
                     sj += t * t
-                tgt[k] = resting_steps * max(np.sqrt(si), np.sqrt(sj)) + bounce_floor
+                tgt[k] = max(np.sqrt(si), np.sqrt(sj))
             lam[k] = 0.0
+        if e > 0:  # the largest of those touching each sphere (dv[:, 0] as scratch), then the limit
+            for r in range(n_rows):
+                dv[r, 0] = 0.0
+            for k in range(p):
+                dv[pi[k], 0] = max(dv[pi[k], 0], tgt[k])
+                dv[pj[k], 0] = max(dv[pj[k], 0], tgt[k])
+            for k in range(p):
+                tgt[k] = (resting_steps * max(dv[pi[k], 0], dv[pj[k], 0]) + bounce_floor) / e
         # impacts first, sequentially (see bounce_sweeps), when anything bounces at all
         if e > 0:
-            bounce_sweeps(pi, pj, nrm, w, tgt, e, v, inv_mass, jb, p, bounce_limit)
+            bounce_sweeps(pi, pj, nrm, w, tgt, e, v, inv_mass, jb, due, p, bounce_limit)
         else:
             for k in range(p):
                 jb[k] = 0.0
