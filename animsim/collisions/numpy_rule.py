@@ -150,18 +150,8 @@ class Blocks:
     ) -> np.ndarray:
         """The rule on candidates ``idx`` whose end-of-step rows are xh, vh; ``old`` is the
         step's start: whole arrays (x_old, v_old), or with ``gathered`` the rows of idx."""
-        n, off, m = pl.normal, pl.offset, idx.size
-        d1 = dot3(xh, n, out=self.d1[:m])
-        d1 -= off
-        # Behind the plane, or exactly on it and still moving in (a contact that
-        # would cross next step: Lander's "colliding contact"); never pinned
-        # particles or dead pool slots.
-        keep = np.less(dot3(vh, n, out=self.w1[:m]), 0, out=self.b1[:m])
-        keep |= np.less(d1, 0, out=self.b2[:m])
-        keep &= np.less_equal(d1, 0, out=self.b2[:m])
-        # the rows' inverse masses (with ``gathered``, inv_mass holds the rows of idx already)
-        im = inv_mass[:m] if gathered else np.take(inv_mass, idx, out=self.w1[:m])
-        keep &= np.greater(im, 0, out=self.b2[:m])
+        m = idx.size
+        d1, keep = self._touching(pl, idx, xh, vh, inv_mass, gathered)
         if keep.all():
             hit = idx
         else:
@@ -185,6 +175,56 @@ class Blocks:
             xo = np.compress(keep, old[0], axis=0, out=self.xo[:k])
             vo = np.compress(keep, old[1], axis=0, out=self.vo[:k])
         dt_row = dt if np.ndim(dt) == 0 else np.asarray(dt)[hit]
+        d0, s, acc = self._to_impact(pl, xh, vh, xo, vo, d1, dt_row)
+        vc = vh
+        vn, vn_new = self._reflect(pl, vc, vo, acc, d0, s, dt_row, kappa)
+        vr = self._tangential(pl, vc, vn, vn_new, acc)
+        self._fly_on(xh, vr, acc, s, dt_row)
+        if project is not None:  # one plane: settle the rows before writing them back, once
+            project.project_gathered(xh, vr, self)
+        put_rows(x, hit, xh)
+        put_rows(v, hit, vr)
+        return hit
+
+    def _touching(
+        self,
+        pl: ImpulsePlane,
+        idx: np.ndarray,
+        xh: np.ndarray,
+        vh: np.ndarray,
+        inv_mass: np.ndarray,
+        gathered: bool,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(distance from the plane at the step's end, which candidates touch it) of the
+        m candidates ``idx`` (in the buffers d1 and b1)."""
+        n, off, m = pl.normal, pl.offset, idx.size
+        d1 = dot3(xh, n, out=self.d1[:m])
+        d1 -= off
+        # Behind the plane, or exactly on it and still moving in (a contact that
+        # would cross next step: Lander's "colliding contact"); never pinned
+        # particles or dead pool slots.
+        keep = np.less(dot3(vh, n, out=self.w1[:m]), 0, out=self.b1[:m])
+        keep |= np.less(d1, 0, out=self.b2[:m])
+        keep &= np.less_equal(d1, 0, out=self.b2[:m])
+        # the rows' inverse masses (with ``gathered``, inv_mass holds the rows of idx already)
+        im = inv_mass[:m] if gathered else np.take(inv_mass, idx, out=self.w1[:m])
+        keep &= np.greater(im, 0, out=self.b2[:m])
+        return d1, keep
+
+    def _to_impact(
+        self,
+        pl: ImpulsePlane,
+        xh: np.ndarray,
+        vh: np.ndarray,
+        xo: np.ndarray,
+        vo: np.ndarray,
+        d1: np.ndarray,
+        dt_row: float | np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(distance at the step's start, fraction of the step at impact s, the step's mean
+        acceleration) of the k rows that touch; xh and vh become the position and velocity
+        at the impact, in place."""
+        n, off, k = pl.normal, pl.offset, len(xh)
         d0 = dot3(xo, n, out=self.d0[:k])
         d0 -= off
         np.maximum(d0, 0.0, out=d0)
@@ -206,7 +246,22 @@ class Blocks:
         xh += xo  # xc = xo + s (xh - xo)
         scale_rows(vh, s)
         vh += vo  # vc = vo + s (vh - vo)
-        vc = vh
+        return d0, s, acc
+
+    def _reflect(
+        self,
+        pl: ImpulsePlane,
+        vc: np.ndarray,
+        vo: np.ndarray,
+        acc: np.ndarray,
+        d0: np.ndarray,
+        s: np.ndarray,
+        dt_row: float | np.ndarray,
+        kappa: float,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(normal speed at the impact, normal speed after it) of the k rows at impact with
+        velocity ``vc`` (in the buffers vn and vnn)."""
+        n, k = pl.normal, len(vc)
         # Reflect the approaching ones (Lander Eq. 3) with Coulomb friction.
         # An approach slower than what the pressing acceleration adds in
         # RESTING_STEPS steps is a resting contact: it stops instead of
@@ -230,6 +285,14 @@ class Blocks:
             vn_new[app] = neg_e * vn_a
             if kappa != 0.0 and pl.restitution > 0.0:
                 self._keep_energy(pl, app[~resting], vo, acc, d0, s, dt_row, kappa, vn_new)
+        return vn, vn_new
+
+    def _tangential(
+        self, pl: ImpulsePlane, vc: np.ndarray, vn: np.ndarray, vn_new: np.ndarray, acc: np.ndarray
+    ) -> np.ndarray:
+        """The velocity after the impact, vt + vn_new n with Coulomb friction on vt = vc - vn n,
+        in place of ``vc``; the rows static friction holds lose ``acc`` too."""
+        n, k = pl.normal, len(vc)
         tmp = self.w2[:k]
         for j in range(3):  # vt = vc - vn n
             sub_scaled(vc[:, j], vn, n[j], vc[:, j], tmp)
@@ -243,7 +306,15 @@ class Blocks:
         vr = vt
         if pl.friction != 0.0:
             hold_by_static_friction(vr, vn_new, acc, n, pl.friction)
-        # Fly on for the rest of the step: r = (1 - s) dt.
+        return vr
+
+    def _fly_on(
+        self, xh: np.ndarray, vr: np.ndarray, acc: np.ndarray, s: np.ndarray, dt_row: float | np.ndarray
+    ) -> None:
+        """Fly on for the rest of the step, r = (1 - s) dt, at the step's mean acceleration:
+        xh (at the impact) and vr (after it) become the step's end, in place."""
+        k = len(xh)
+        tmp = self.w2[:k]
         r = np.subtract(1.0, s, out=self.w1[:k])
         r *= dt_row
         half_r2 = np.multiply(r, 0.5, out=self.w3[:k])
@@ -255,11 +326,6 @@ class Blocks:
             xh[:, j] += tmp  # ... + (r^2 / 2) a
             np.multiply(r, acc[:, j], out=tmp)
             vr[:, j] += tmp  # v = vr + r a
-        if project is not None:  # one plane: settle the rows before writing them back, once
-            project.project_gathered(xh, vr, self)
-        put_rows(x, hit, xh)
-        put_rows(v, hit, vr)
-        return hit
 
     @staticmethod
     def _keep_energy(
@@ -274,7 +340,8 @@ class Blocks:
         vn_new: np.ndarray,
     ) -> None:
         """The bouncing ``rows`` get the normal speed that keeps e^2 of the method's energy
-        (:func:`kept_bounce_speed`, as :func:`animsim.collisions.kernels._hit_row` computes it), in ``vn_new``."""
+        (:func:`kept_bounce_speed`, as ``_hit_row`` of :mod:`animsim.collisions.kernels` computes
+        it), in ``vn_new``."""
         if rows.size == 0:
             return
         dt_rows = dt if np.ndim(dt) == 0 else np.asarray(dt)[rows]
