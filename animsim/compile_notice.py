@@ -39,6 +39,8 @@ FAMILIES = {
     # the plane kernels and the response rules they share, measured when they lived in collisions.py
     "animsim.collisions.kernels": "collisions",
     "animsim.collisions.response": "collisions",
+    # the solid colliders' kernels, measured when they lived in colliders.py
+    "animsim.colliders.kernels": "colliders",
 }
 
 
