@@ -36,6 +36,11 @@ FAMILIES = {
     "animsim.particle_contacts": "particle contacts",
     # the rigid-body contact kernels, measured (compile_estimates) when they lived in contacts.py
     "animsim.bodies.contact_kernels": "contacts",
+    # the plane kernels and the response rules they share, measured when they lived in collisions.py
+    "animsim.collisions.kernels": "collisions",
+    "animsim.collisions.response": "collisions",
+    # the solid colliders' kernels, measured when they lived in colliders.py
+    "animsim.colliders.kernels": "colliders",
 }
 
 

@@ -288,8 +288,8 @@ def unregister(model: type) -> None:
 #: packages whose every module may hold elements (found, not listed: a new force family
 #: is a new module in animsim/forces and nothing else here)
 ELEMENT_PACKAGES = ("animsim.forces",)
-#: single modules that hold elements
-ELEMENT_MODULES = ("animsim.collisions",)
+#: single modules that hold elements (the impulse planes' builder)
+ELEMENT_MODULES = ("animsim.collisions.stage",)
 
 
 @functools.cache

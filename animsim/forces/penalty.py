@@ -50,7 +50,7 @@ def _energy(x, x_ref, u_ref, mass, fp, ip):  # numba: ENERGY_SIGNATURE
 
 
 class PenaltyPlane(ForceElement):
-    """Built by the plane module (:mod:`animsim.collisions`) for planes with ``response: penalty``."""
+    """Built by the plane module (:mod:`animsim.collisions.stage`) for planes with ``response: penalty``."""
 
     #: row i of its force reads only row i (the numba backend may evaluate it on a few rows)
     pointwise = True

@@ -174,10 +174,12 @@ def test_numpy_plane_stage_equals_the_numba_kernel_bit_for_bit(seed, monkeypatch
     planes, with and without friction, over several blocks and with per-row step lengths."""
     pytest.importorskip("numba")
     from animsim import collisions
+    from animsim.collisions import kernels
+    from animsim.collisions import stage as plane_stage
     from animsim.elements import jit_kernel
 
-    monkeypatch.setattr(collisions, "BLOCK", 257)  # several blocks, the last one partial
-    kernel = jit_kernel(collisions._stage_kernel, stage=True)
+    monkeypatch.setattr(plane_stage, "BLOCK", 257)  # several blocks, the last one partial
+    kernel = jit_kernel(kernels.stage_kernel, stage=True)
     rng = np.random.default_rng(seed)
     for trial in range(12):
         n = int(rng.integers(1, 1500))
@@ -210,9 +212,10 @@ def test_one_plane_kernel_for_the_ground_equals_the_numpy_stage_bit_for_bit(norm
     stage's bits (a -0.0 component keeps the signs of its products)."""
     pytest.importorskip("numba")
     from animsim import collisions
+    from animsim.collisions import kernels
     from animsim.elements import jit_kernel
 
-    kernel = jit_kernel(collisions._stage_kernel, stage=True)
+    kernel = jit_kernel(kernels.stage_kernel, stage=True)
     rng = np.random.default_rng(7)
     for trial in range(8):
         n = int(rng.integers(1, 700))

@@ -253,6 +253,13 @@ def test_the_private_name_check_finds_one() -> None:
         ("animsim.collisions", "_helper"),
         ("animsim.collisions", "BLOCK"),
     ]
+    # a module of a package: the name is the module's, not the package's
+    node = ast.parse("from animsim.collisions.stage import _Capture, BLOCK").body[0]
+    assert isinstance(node, ast.ImportFrom)
+    assert _targets("animsim.colliders", node) == [
+        ("animsim.collisions.stage", "_Capture"),
+        ("animsim.collisions.stage", "BLOCK"),
+    ]
 
 
 def test_the_import_contracts_are_kept() -> None:

@@ -2,7 +2,7 @@
 
 Many particles under pointwise forces step a block of rows at a time; a single
 impulse plane then takes each block's contacts while the block is in cache
-(``collisions._Capture``) instead of copying the whole step's start and
+(``collisions.stage._Capture``) instead of copying the whole step's start and
 gathering the contacts from memory afterwards. Each row meets the plane by
 itself, so the bits must be those of the plane applied after the whole step.
 """
@@ -12,8 +12,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from animsim import collisions
 from animsim import dynamics as dyn_module
+from animsim.collisions import stage as plane_stage
 from animsim.compile import compile_scene
 from animsim.scene.loader import load_scene_text
 from animsim.steppers import start
@@ -75,8 +75,8 @@ def _run(planes: str, blocks_on: bool, monkeypatch) -> tuple[np.ndarray, np.ndar
 def test_plane_in_blocks_gives_the_bits_of_the_plane_after_the_step(name, monkeypatch) -> None:
     # small blocks, so the capture spans many blocks and carries contacts over between flushes
     monkeypatch.setattr(dyn_module, "BLOCKS_FROM", 2000)
-    monkeypatch.setattr(collisions, "CAPTURE_ROWS", 700)
-    monkeypatch.setattr(collisions, "BLOCK", 1000)
+    monkeypatch.setattr(plane_stage, "CAPTURE_ROWS", 700)
+    monkeypatch.setattr(plane_stage, "BLOCK", 1000)
     x_b, v_b, rev_b, used = _run(PLANES[name], True, monkeypatch)
     x_w, v_w, rev_w, _ = _run(PLANES[name], False, monkeypatch)
     assert used == (name != "two planes")  # several planes: each sees the one before it
