@@ -31,7 +31,11 @@ from animsim.compile_estimates import MACHINE, SECONDS
 
 #: module -> the family named in notices (the rest: the module's last name)
 FAMILIES = {
-    "animsim.backends.fused": "fused stepper",
+    # the fused stepper's kernels, measured (compile_estimates) when they lived in fused.py
+    "animsim.backends.fused_kernels": "fused stepper",
+    # the stand-ins for an empty tuple of kernels (no force, no stage, ...), in the family
+    # they were measured in when they lived in fused.py
+    "animsim.backends.kernel_calls": "fused stepper",
     "animsim.emitters.kernels": "emitters",
     "animsim.particle_contacts": "particle contacts",
     # the rigid-body contact kernels, measured (compile_estimates) when they lived in contacts.py

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from typing import Any
 
-# The type of a first-class function argument (animsim.backends.fused passes each
+# The type of a first-class function argument (animsim.backends.kernel_calls passes each
 # element's kernel by address) is found by this module's typeof rule, which numba
 # only imports during the refresh this module avoids.
 import numba.experimental.function_type  # noqa: F401

@@ -7,7 +7,7 @@ metadata, sinks) is the loop's, so it is the same for every stepper:
 
 * :class:`StepByStep`: one integrator step at a time, then the post-step
   stages (collisions, births). NumPy kernels, or the elements' numba kernels
-  (:class:`animsim.backends.fused.NumbaForces`) on the numba backend.
+  (:class:`animsim.backends.numba_forces.NumbaForces`) on the numba backend.
 * :class:`Fused`: the numba backend's fused chunks, many steps per call.
 * :class:`StepDoubling`: adaptive step size (the course notes' "Adaptive
   Stepsizes"), on either backend's kernels.
@@ -239,7 +239,7 @@ def _compile_numba(stepper: Any, state: State, notice: Callable[[str], None] | N
     import time
 
     t0 = time.perf_counter()
-    from animsim.backends.fused import NumbaForces
+    from animsim.backends.numba_forces import NumbaForces
 
     integ = stepper.compiled.integrator
     dyn = stepper.compiled.dynamics
@@ -335,7 +335,7 @@ class Fused(_Base):
         self.check_stride = CHECK_STRIDE if self.replayable else 1
         emitters = self.compiled.emitters
         if emitters is not None:  # newborns fly on with the numba force sum, as step by step
-            from animsim.backends.fused import NumbaForces
+            from animsim.backends.numba_forces import NumbaForces
 
             dyn = self.compiled.dynamics
             forces = NumbaForces(dyn)

@@ -41,7 +41,7 @@ ALL_BACKENDS = (*BACKENDS, BACKEND_REFERENCE)
 
 INSTALL_HINT = 'pip install -e ".[fast]"'
 
-#: rows per block of the numba backend's blocked chunk (animsim.backends.fused), here so
+#: rows per block of the numba backend's blocked chunk (animsim.backends.fused_kernels), here so
 #: that ``explain`` can tell without importing numba: a block's position, velocity, acceleration and
 #: step-start copies (5 x 512 x 24 bytes, 60 KB) stay in the near caches over all of a
 #: call's steps; measured on 1e6 particles with a plane, 1 thread: 128 rows 43 M

@@ -287,7 +287,7 @@ def _pool_step(
             for c in range(3):
                 x0[j, c] = xs[r, c]
                 v0[j, c] = vs[r, c]
-        # fused._acc's sum, written here rather than called: numba's disk cache does not
+        # fused_kernels.accelerations' sum, written here rather than called: numba's disk cache does not
         # notice when a compiled callee in another file changes, and would keep stale code
         for k in range(len(kernels)):
             kernels[k](x0, v0, t_mid, a, mm, fps[k], ips[k])

@@ -94,7 +94,7 @@ class Emitters(StepStage):
         tables = None if (forces is None or state is None) else forces.newborn_tables(self.colliders)
         if tables is None:
             return
-        from animsim.backends.fused import FastCall
+        from animsim.backends.kernel_calls import FastCall
 
         both = (forces.masses(), tables)
         # one call that changes nothing (no events, nothing due by -inf, no row outside a

@@ -21,7 +21,7 @@ from animsim import methods
 from animsim.dynamics import Dynamics
 from animsim.system import State
 
-#: method families of the numba backend's fused kernel (animsim.backends.fused)
+#: method families of the numba backend's fused kernel (animsim.backends.fused_kernels)
 FUSED_SYMPLECTIC_EULER = 0
 FUSED_EULER_AVERAGE = 1
 FUSED_VERLET = 2

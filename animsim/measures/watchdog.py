@@ -343,7 +343,7 @@ def _compiled_book_rows(n: int) -> Any:
     with the types a run passes (``n`` slots), and called without the dispatcher's typing."""
     import numba
 
-    from animsim.backends.fused import FastCall
+    from animsim.backends.kernel_calls import FastCall
 
     kernel = numba.njit(cache=True)(_newborn_rows)
     i, f = np.zeros(0, dtype=np.int64), np.zeros((0, 3))

@@ -65,11 +65,11 @@ planes:
 
 
 def _run(text: str, backend: str, python_path: bool, monkeypatch: pytest.MonkeyPatch) -> dict[str, Any]:
-    from animsim.backends import fused
+    from animsim.backends import numba_forces
 
     with monkeypatch.context() as m:
         if python_path:  # no tables: the emitters take the Python path on numba
-            m.setattr(fused.NumbaForces, "newborn_tables", lambda self, colliders: None)
+            m.setattr(numba_forces.NumbaForces, "newborn_tables", lambda self, colliders: None)
         compiled = compile_scene(load_scene_text(text).scene, "t", backend=backend)
         guard = Guard(compiled)
         sink = MemorySink()

@@ -1,7 +1,7 @@
 """The numba backend's blocked chunks: pointwise scenes stepped a block of particles at a time.
 
 When every force and every collision acts on each particle alone, the fused stepper runs
-all of a call's steps on one block of rows before the next (animsim.backends.fused,
+all of a call's steps on one block of rows before the next (animsim.backends.fused_kernels,
 ``blocked_chunk``). It must give the bits of the one-pass-per-step chunk (``fused_chunk``)
 and of the NumPy backend, count the same force evaluations and the same steps a collision
 changed, and stop after the same first non-finite step, however the blocks fall. The
@@ -30,6 +30,7 @@ pytest.importorskip("numba")
 import numba
 
 from animsim.backends import fused as fused_module  # after the skip: it imports numba
+from animsim.backends import fused_kernels, kernel_calls
 
 #: rows per block in these tests: 43 particles make 6 full blocks and one of 1 row
 SMALL_BLOCK = 7
@@ -124,7 +125,7 @@ def _call(kind: str, stepper, state, times, dts):
     if kind != PARALLEL:
         return stepper.advance(state, times, dts)
     with pytest.MonkeyPatch.context() as m:
-        m.setattr(fused_module, "blocked_chunk", fused_module.blocked_chunk_parallel)
+        m.setattr(fused_module, "blocked_chunk", fused_kernels.blocked_chunk_parallel)
         return stepper.advance(state, times, dts)
 
 
@@ -156,13 +157,13 @@ def _advance_all(compiled, monkeypatch, chunk: int) -> tuple[list[tuple], object
                 (state.particle_velocity, s_plain.particle_velocity),
             ):
                 assert a.tobytes() == b.tobytes(), (kind, k)  # the same bits, NaNs included
-            if stepper.method == fused_module.VERLET and stepper.a0_valid:
+            if stepper.method == fused_kernels.VERLET and stepper.a0_valid:
                 assert stepper.work[0].tobytes() == plain.work[2].tobytes(), (kind, k)  # its cached force
         calls.append(want)
         if want[2]:  # not finite: the loop stops here
             break
         k += want[0]
-    assert list(runs[PARALLEL][0]._chunks) == [fused_module.blocked_chunk_parallel]
+    assert list(runs[PARALLEL][0]._chunks) == [fused_kernels.blocked_chunk_parallel]
     return calls, runs[PARALLEL][0], runs[PARALLEL][1]
 
 
@@ -378,9 +379,9 @@ def test_the_parallel_build_runs_for_enough_blocks_and_threads(threads, monkeypa
     clock_times = np.array([0.0, 0.002, 0.004])
     dts = np.full(2, 0.002)
     for blocks, count, wanted in (
-        (animsim.backends.PARALLEL_MIN_BLOCKS, 2, fused_module.blocked_chunk_parallel),
-        (animsim.backends.PARALLEL_MIN_BLOCKS, 1, fused_module.blocked_chunk),
-        (animsim.backends.PARALLEL_MIN_BLOCKS - 1, 2, fused_module.blocked_chunk),
+        (animsim.backends.PARALLEL_MIN_BLOCKS, 2, fused_kernels.blocked_chunk_parallel),
+        (animsim.backends.PARALLEL_MIN_BLOCKS, 1, fused_kernels.blocked_chunk),
+        (animsim.backends.PARALLEL_MIN_BLOCKS - 1, 2, fused_kernels.blocked_chunk),
     ):
         compiled = _crowd(SMALL_BLOCK * blocks, 1)
         compiled.dynamics.bind(compiled.fresh_state())
@@ -415,7 +416,7 @@ def test_threads_is_numba_thread_count_during_a_run_only():
 
 SMALL_RUN = """
 import numba.np.ufunc.parallel as pool
-from animsim.backends import fused
+from animsim.backends import fused_kernels
 from animsim.compile import compile_scene
 from animsim.engine import run
 from animsim.scene.loader import load_scene_text
@@ -425,7 +426,7 @@ text += "planes: [{point: [0, 0, 0], normal: [0, 1, 0]}]\\nparticles: [{id: p, m
 compiled = compile_scene(load_scene_text(text).scene, "t", backend="numba")
 assert "in blocks" in compiled.stages[-1], compiled.stages
 assert run(compiled, []).status == "ok"
-print(bool(fused.blocked_chunk.overloads), bool(fused.blocked_chunk_parallel.overloads), pool._is_initialized)
+print(bool(fused_kernels.blocked_chunk.overloads), bool(fused_kernels.blocked_chunk_parallel.overloads), pool._is_initialized)
 """
 
 
@@ -508,7 +509,7 @@ def test_both_builds_load_before_the_run_and_switching_keeps_the_bits(threads, m
     compiled.dynamics.bind(state)
     stepper = fused_module.FusedStepper(compiled)
     stepper.warm_up(state)
-    assert set(stepper._chunks) == {fused_module.blocked_chunk, fused_module.blocked_chunk_parallel}
+    assert set(stepper._chunks) == {fused_kernels.blocked_chunk, fused_kernels.blocked_chunk_parallel}
     used = []
     for k in range(0, 40, 4):
         used.append(stepper.chooser.pick())
@@ -582,7 +583,7 @@ planes:
 
 
 def _pieces_scene():
-    count = 2 * fused_module.CHECK_PIECE + 1234
+    count = 2 * fused_kernels.CHECK_PIECE + 1234
     text = PIECES + (
         f"structures: [{{type: strand, id: s, start: [0, 0, 0], end: [1, 0, 0], count: {count}, mass: 0.5}}]\n"
     )
@@ -609,10 +610,10 @@ def test_the_quick_check_in_pieces_sums_and_decides_as_the_one_pass_check():
     state.particle_position[:] += 0.01  # some energy released since the books opened
     elastic, releasing = watch.elastic, watch.releasing
     assert [type(t).__name__ for t in releasing] == ["Gravity", "Attractor"] and len(elastic) == 1
-    tables = (*fused_module._energy_table(elastic), *fused_module._energy_table(releasing))
-    u_refs = fused_module._array_tuple(list(watch.u_ref), np.float64)
+    tables = (*kernel_calls.energy_table(elastic), *kernel_calls.energy_table(releasing))
+    u_refs = kernel_calls.array_tuple(list(watch.u_ref), np.float64)
     n = len(state.particle_mass)
-    pieces = -(-n // fused_module.CHECK_PIECE)
+    pieces = -(-n // fused_kernels.CHECK_PIECE)
     assert pieces == 3
     room = fused_module.check_room(pieces, tables)
     assert room[2].shape == (pieces, 4)  # kinetic, the spring, gravity, the attractor
@@ -620,10 +621,12 @@ def test_the_quick_check_in_pieces_sums_and_decides_as_the_one_pass_check():
 
     def both(limit: float, x: np.ndarray, m: np.ndarray = m) -> tuple[bool, bool, float, float]:
         books = np.array([1.0, 0.0, 0.0, 0.0, 0.0, limit])
-        one = fused_module._quick_check(x, v, 0.1, m, *tables, u_refs, watch.x_ref, np.zeros(0), books, True)
+        one = fused_kernels.quick_check_state(
+            x, v, 0.1, m, *tables, u_refs, watch.x_ref, np.zeros(0), books, True
+        )
         split = books.copy()
         split[3] = 0.0
-        shared = fused_module._quick_check_pieces(
+        shared = fused_kernels.quick_check_pieces(
             x, v, 0.1, m, *tables, u_refs, watch.x_ref, np.zeros(0), split, True, *room
         )
         return bool(one), bool(shared), books[3], split[3]
@@ -645,7 +648,7 @@ def test_the_quick_check_in_pieces_sums_and_decides_as_the_one_pass_check():
     ratio = h / (1.0 + max(released, 0.0))
     assert both(ratio * (1 + 1e-9), x)[:2] == (True, True)
     assert both(ratio * (1 - 1e-9), x)[:2] == (False, False)
-    piece = fused_module.CHECK_PIECE
+    piece = fused_kernels.CHECK_PIECE
     for row in (0, piece - 1, piece, 2 * piece - 1, 2 * piece, n - 1):
         bad = x.copy()
         bad[row, row % 3] = np.inf if row % 2 else np.nan
@@ -657,16 +660,16 @@ def test_the_quick_check_in_pieces_has_a_column_for_the_kernel_standing_in_for_n
     compiled check still calls one kernel for each empty list (one that adds nothing),
     so its room has a column for each. Sized from the lists instead, the check wrote past
     its room's end (a heap corruption that aborted a hypothesis run)."""
-    empty = (*fused_module._energy_table([]), *fused_module._energy_table([]))
+    empty = (*kernel_calls.energy_table([]), *kernel_calls.energy_table([]))
     assert len(empty[0]) == len(empty[3]) == 1
     pieces = 3
     ok, movable, sums = fused_module.check_room(pieces, empty)
     assert sums.shape == (pieces, 3)
-    n = pieces * fused_module.CHECK_PIECE - 7
+    n = pieces * fused_kernels.CHECK_PIECE - 7
     rng = np.random.default_rng(3)
     x, v, m = rng.normal(size=(n, 3)), rng.normal(size=(n, 3)), rng.uniform(0.5, 1.0, n)
     books = np.array([1.0, 0.0, 0.0, 0.0, 0.0, 1e30])
-    passed = fused_module._quick_check_pieces(
+    passed = fused_kernels.quick_check_pieces(
         x, v, 0.0, m, *empty, (np.zeros(0),), x.copy(), np.zeros(0), books, True, ok, movable, sums
     )
     assert passed and books[3] == n
@@ -680,7 +683,7 @@ def test_a_run_checked_in_pieces_on_two_threads_is_the_run_on_one(threads, monke
     """A run whose quick checks share their pieces among two threads: the same bits and
     status as on one thread, where the one-pass check runs."""
     used = []
-    pieces = fused_module._quick_check_pieces
+    pieces = fused_kernels.quick_check_pieces
 
     def counted(*args):
         used.append(True)
@@ -691,7 +694,7 @@ def test_a_run_checked_in_pieces_on_two_threads_is_the_run_on_one(threads, monke
         numba.set_num_threads(count)
         compiled = _pieces_scene()
         with monkeypatch.context() as m:
-            m.setattr(fused_module, "_quick_check_pieces", counted)
+            m.setattr(fused_module, "quick_check_pieces", counted)
             results.append(run(compiled, []))
         assert bool(used) == (count == 2)
         used.clear()

@@ -161,7 +161,13 @@ def test_no_import_cycle_even_through_imports_inside_functions() -> None:
 
 
 #: modules whose import loads numba: imported inside the functions that need them
-HEAVY = {"animsim.backends.fused", "animsim.numba_cache"}
+HEAVY = {
+    "animsim.backends.fused",
+    "animsim.backends.fused_kernels",
+    "animsim.backends.kernel_calls",
+    "animsim.backends.numba_forces",
+    "animsim.numba_cache",
+}
 #: the package face, the API and the command line import the rest of animsim inside their
 #: functions, so that ``animsim --help``, ``import animsim`` and a command load only what
 #: they use (test_the_command_line_starts_without_numpy_or_pydantic)

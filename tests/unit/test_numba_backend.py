@@ -245,9 +245,9 @@ except SystemExit as exc:
     assert not exc.code, exc.code
 import numba
 from animsim import elements
-from animsim.backends import fused
+from animsim.backends import fused_kernels
 kernels = [*elements._JITTED.values()]
-kernels += [d for d in vars(fused).values() if isinstance(d, numba.core.dispatcher.Dispatcher)]
+kernels += [d for d in vars(fused_kernels).values() if isinstance(d, numba.core.dispatcher.Dispatcher)]
 used = [d for d in kernels if d.overloads]
 print(json.dumps({
     "modules": sorted(m for m in sys.modules if m.startswith(("numba.np.linalg", "scipy.linalg"))),
