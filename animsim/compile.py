@@ -1,25 +1,37 @@
 """Compile a validated Scene into arrays and the stages this scene needs.
 
-Ids become indices here, once; structures expand here; each force family is
-built only when the scene uses it, and everything left out is named so
-``animsim explain`` can show it. The result (:class:`Compiled`) holds no
+:func:`compile_scene` lists the steps a scene goes through: its particle and spring
+rows become a frozen System (:mod:`animsim.compile_rows`, where ids become indices
+and structures expand); then the elements the scene uses are built, each force
+family only when the scene has it, and everything left out is named so
+``animsim explain`` can show it; then the method, the recording schedule, the
+trajectory header and the initial state. The result (:class:`Compiled`) holds no
 strings that the step loop looks at.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from animsim import contact_stages, methods
 from animsim.backends import BACKEND_REFERENCE, backend_line, choose_backend
-from animsim.bodies.build import body_rows, build_body_elements, particle_springs
+from animsim.bodies.build import build_body_elements
 from animsim.bodies.export import header_springs
+from animsim.compile_rows import (
+    ParticleRows,
+    Particles,
+    emitter_pools,
+    gather_particles,
+    gather_springs,
+    make_system,
+    particle_arrays,
+)
 from animsim.dynamics import Dynamics
 from animsim.elements import BuildContext, ForceElement, StepStage, build_elements
-from animsim.emitters import Emitters, build_emitters
+from animsim.emitters import Emitters
 from animsim.errors import UsageError
 from animsim.forces.grid_springs import build_spring_term
 from animsim.forces.penalty import PenaltyPlane
@@ -28,9 +40,12 @@ from animsim.integrators.base import Integrator
 from animsim.record import Clock, TrajectoryHeader, landing_steps, recording_rule, scene_record_steps
 from animsim.scene import models as m
 from animsim.scene.messages import method_from_option
-from animsim.scene.structures import connectivity, expand
+from animsim.scene.structures import connectivity
 from animsim.scene.validate import method_problems
 from animsim.system import State, System
+
+if TYPE_CHECKING:  # types only
+    from animsim.forces.springs import Springs
 
 
 @dataclass
@@ -127,25 +142,6 @@ def with_overrides(
     return new
 
 
-def _body_header(scene: m.Scene, system: System, dynamics: Dynamics) -> dict[str, Any]:
-    """What sinks and renderers learn about bodies: rows, ids, shapes, colours (``#rrggbb`` or
-    None, per body), springs to bodies."""
-    return {
-        "first": system.body_first,
-        "ids": system.body_ids,
-        "shapes": system.body_shape,
-        "colors": [b.color for b in scene.bodies],
-        "springs": header_springs(dynamics.bodies),
-    }
-
-
-def _particle_springs(scene: m.Scene) -> list[Any]:
-    """Springs between two particles (springs to points of bodies are the bodies' element)."""
-    if not scene.bodies:
-        return list(scene.springs)
-    return particle_springs(scene)
-
-
 def compile_scene(
     scene: m.Scene,
     name: str = "scene",
@@ -163,136 +159,74 @@ def compile_scene(
     and sweeps compare runs there) instead of the scene's ``record`` schedule;
     a time no step lands on is a RuntimeError.
     """
+    check_threads(threads)
+    left_out: list[str] = []  # what the scene does not need, in the order explain lists it
+
+    # --- the arrays: particle rows, spring rows, the frozen System (animsim.compile_rows) ---
+    rows = gather_particles(scene)
+    springs = gather_springs(scene, rows)
+    emitters = emitter_pools(scene, len(rows.ids), left_out)
+    particles = particle_arrays(rows, emitters)
+    system = make_system(rows, particles, springs)
+    chosen, backend_note = choose_backend(backend)
+
+    # --- the elements: only those the scene uses -------------------------------------------
+    ctx = BuildContext(system=system, index_of=rows.index_of, seed=scene.seed, backend=chosen)
+    terms, post_step = forces_and_planes(scene, ctx, left_out)
+    can_tear = springs_can_tear(scene, system)
+    # tearing switches single springs off: the generic kernel, not grid slices
+    grid = backend != BACKEND_REFERENCE and not can_tear
+    springs_term = add_springs(scene, system, terms, left_out, grid=grid)
+    penalty = plane_responses(scene, left_out)
+    solids, post_step, planes = add_solids(ctx, scene, springs_term, particles, post_step, left_out)
+    dynamics = Dynamics(system, terms)
+    dynamics.drivers = tuple(solids.drivers)
+    body_lines = add_bodies(ctx, scene, rows, particles, dynamics, solids, planes, post_step, left_out)
+    add_births(emitters, dynamics, post_step)
+
+    # --- the method, the recording schedule, and what explain and the sinks are told --------
+    integrator, post_step = make_integrator(scene, dynamics, post_step, chosen)
+    schedule = recording_schedule(scene, record_times)
+    conservative = is_conservative(dynamics, particles, post_step, penalty)
+    stages = [*(t.label for t in terms), *body_lines, *method_lines(integrator, post_step), schedule.line]
+    pools = emitters is not None
+    header = trajectory_header(scene, name, rows, system, dynamics, solids, pools=pools, can_tear=can_tear)
+    initial = initial_state(particles, system, rows, pools=pools, can_tear=can_tear)
+    compiled = Compiled(
+        name=name,
+        scene=scene,
+        system=system,
+        initial=initial,
+        dynamics=dynamics,
+        integrator=integrator,
+        post_step=tuple(post_step),
+        emitters=emitters,
+        clock=schedule.clock,
+        record_steps=schedule.steps,
+        header=header,
+        seed=scene.seed,
+        stages=stages,
+        left_out=left_out,
+        conservative=conservative,
+        adaptive=adaptive_spec(scene),
+    )
+    compiled.backend = chosen
+    compiled.threads = threads
+    compiled.stages.append(backend_line(compiled, chosen, backend_note))
+    return compiled
+
+
+def check_threads(threads: int | None) -> None:
+    """``threads`` is None or a whole number >= 1 (UsageError otherwise)."""
     if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
         raise UsageError(f"threads: must be a whole number >= 1 (or None for every core), not {threads!r}")
-    stages: list[str] = []
-    left_out: list[str] = []
 
-    # --- particles: listed ones, then structures -------------------------------
-    ids: list[str] = [p.id for p in scene.particles]  # type: ignore[misc]  # m.Id validates to str
-    pos = [np.array([p.position for p in scene.particles], dtype=np.float64).reshape(-1, 3)]
-    vel = [np.array([p.velocity for p in scene.particles], dtype=np.float64).reshape(-1, 3)]
-    mass = [np.array([p.mass or 0.0 for p in scene.particles], dtype=np.float64)]
-    pinned = [np.array([p.pinned for p in scene.particles], dtype=bool)]
-    spring_pairs: list[np.ndarray] = []
-    spring_ks: list[np.ndarray] = []
-    spring_kd: list[np.ndarray] = []
-    spring_rest: list[np.ndarray] = []  # NaN: auto
-    families: list[tuple[str, int, int]] = []
-    grids: list[tuple[int, tuple[int, ...], int, int]] = []
-    spring_total = 0
 
-    index_of = {pid: i for i, pid in enumerate(ids)}
-    expanded = []
-    for s in scene.structures:
-        e = expand(s)
-        base = len(ids)
-        for k, pid in enumerate(e.ids):
-            index_of[pid] = base + k
-        ids.extend(e.ids)
-        pos.append(e.position)
-        vel.append(e.velocity)
-        mass.append(e.mass)
-        pinned.append(e.pinned)
-        expanded.append((s, e, base))
-
-    # --- rigid bodies: each centre of mass is a particle row, after the structures ------
-    bodies = None
-    if scene.bodies:
-        bodies = body_rows(scene)
-        body_first = len(ids)
-        for k, bid in enumerate(bodies.ids):
-            index_of[bid] = body_first + k
-        ids.extend(bodies.ids)
-        pos.append(bodies.position)
-        vel.append(bodies.velocity)
-        mass.append(bodies.mass)
-        pinned.append(bodies.pinned)
-
-    listed = _particle_springs(scene)
-    if listed:
-        pairs = np.array(
-            [[index_of[a], index_of[b]] for a, b in (sp.between for sp in listed)], dtype=np.int64
-        )
-        spring_pairs.append(pairs)
-        spring_ks.append(np.array([sp.ks for sp in listed]))
-        spring_kd.append(np.array([sp.kd for sp in listed]))
-        spring_rest.append(np.array([np.nan if sp.rest == "auto" else sp.rest for sp in listed]))
-        families.append(("listed springs", 0, len(listed)))
-        spring_total += len(listed)
-    for _, e, base in expanded:
-        grids.append((base, e.grid_shape, len(families), len(families) + len(e.springs)))
-        for group in e.springs:
-            k = len(group.index)
-            spring_pairs.append(group.index + base)
-            spring_ks.append(np.full(k, group.ks))
-            spring_kd.append(np.full(k, group.kd))
-            spring_rest.append(np.full(k, np.nan))
-            families.append((group.family, spring_total, spring_total + k))
-            spring_total += k
-
-    # --- emitter pools (issue 3) go after every fixed particle --------------------
-    emitters = None
-    fixed_count = len(ids)
-    particle_position = np.concatenate(pos) if pos else np.zeros((0, 3))
-    particle_velocity = np.concatenate(vel) if vel else np.zeros((0, 3))
-    particle_mass = np.concatenate(mass)
-    particle_pinned = np.concatenate(pinned)
-    particle_alive = None
-    if scene.emitters:
-        emitters = build_emitters(scene, first_index=fixed_count)
-        extra = emitters.capacity
-        particle_position = np.concatenate([particle_position, np.zeros((extra, 3))])
-        particle_velocity = np.concatenate([particle_velocity, np.zeros((extra, 3))])
-        particle_mass = np.concatenate([particle_mass, np.zeros(extra)])
-        particle_pinned = np.concatenate([particle_pinned, np.zeros(extra, dtype=bool)])
-        particle_alive = np.concatenate([np.ones(fixed_count, dtype=bool), np.zeros(extra, dtype=bool)])
-    else:
-        left_out.append("emitters: no births, deaths, ageing or over-life attributes")
-
-    particle_mass = np.where(particle_pinned, 0.0, particle_mass)
-    with np.errstate(divide="ignore"):
-        particle_inv_mass = np.where(
-            particle_mass > 0, 1.0 / np.where(particle_mass > 0, particle_mass, 1.0), 0.0
-        )
-
-    if spring_pairs:
-        spring_index = np.concatenate(spring_pairs)
-        rest = np.concatenate(spring_rest)
-        auto = np.isnan(rest)
-        d = particle_position[spring_index[auto, 0]] - particle_position[spring_index[auto, 1]]
-        rest[auto] = np.sqrt(np.einsum("ij,ij->i", d, d))
-        ks = np.concatenate(spring_ks)
-        kd = np.concatenate(spring_kd)
-    else:
-        spring_index = np.zeros((0, 2), dtype=np.int64)
-        rest = ks = kd = np.zeros(0)
-
-    system = System(
-        ids=ids,
-        particle_mass=particle_mass,
-        particle_inv_mass=particle_inv_mass,
-        particle_pinned=particle_pinned,
-        spring_index=spring_index,
-        spring_rest_length=rest,
-        spring_ks=ks,
-        spring_kd=kd,
-        spring_families=families,
-        structure_grids=grids,
-    )
-    if bodies is not None:
-        system.body_first = body_first
-        system.body_count = len(bodies.ids)
-        system.body_ids = list(bodies.ids)
-        system.body_inertia = bodies.inertia
-        system.body_inv_inertia = bodies.inv_inertia
-        system.body_shape = bodies.shapes
-
-    system.freeze()
-    chosen, backend_note = choose_backend(backend)
-    ctx = BuildContext(system=system, index_of=index_of, seed=scene.seed, backend=chosen)
-
-    # --- elements: only those the scene uses (each module registers its builder) -----
+def forces_and_planes(
+    scene: m.Scene, ctx: BuildContext, left_out: list[str]
+) -> tuple[list[ForceElement], list[StepStage]]:
+    """(force terms, stages after each step) of the scene's forces and planes (each module
+    registers its builder); the force kinds the scene does not use go to ``left_out``."""
     built = build_elements([*scene.forces, *scene.planes], ctx)
     terms: list[ForceElement] = [e for e in built if isinstance(e, ForceElement)]
     post_step: list[StepStage] = [e for e in built if isinstance(e, StepStage)]
@@ -305,34 +239,63 @@ def compile_scene(
             left_out.append(f"{kind}: not in the scene's forces")
     if "wind" in present and "turbulence" not in present:
         left_out.append("turbulence: the wind has none")
+    return terms, post_step
 
-    # keyframes, solid colliders, particle contacts, tearing (animsim.contact_stages)
+
+def springs_can_tear(scene: m.Scene, system: System) -> bool:
+    """Whether some spring has a tearing limit (animsim.contact_stages builds the stage)."""
     tearing_limits = contact_stages.spring_max_strain(scene)
-    can_tear = bool(system.spring_count and np.isfinite(tearing_limits).any())
-    springs_term = None
-    if system.spring_count:
-        label = f"springs: {system.spring_count} in {len(families)} famil{'y' if len(families) == 1 else 'ies'} ({', '.join(f'{name} {b - a}' for name, a, b in families)})"
-        # tearing switches single springs off: the generic kernel, not grid slices
-        constraints = spring_constraints(scene.integrator_name)
-        if constraints is not None:
-            # the springs are the method's constraints; the term keeps their energy for the watchdog
-            springs_term = constraints(system, label, scene.dt, scene.substeps)
-        else:
-            springs_term = build_spring_term(
-                system, label, grid=backend != BACKEND_REFERENCE and not can_tear
-            )
-        terms.insert(sum(1 for e in terms if not isinstance(e, PenaltyPlane)), springs_term)
-    else:
-        left_out.append("springs: none, so no spring forces or scatter")
+    return bool(system.spring_count and np.isfinite(tearing_limits).any())
 
+
+def springs_label(system: System) -> str:
+    """The springs' line in explain: how many, in which families."""
+    families = system.spring_families
+    return f"springs: {system.spring_count} in {len(families)} famil{'y' if len(families) == 1 else 'ies'} ({', '.join(f'{name} {b - a}' for name, a, b in families)})"
+
+
+def add_springs(
+    scene: m.Scene, system: System, terms: list[ForceElement], left_out: list[str], *, grid: bool
+) -> Springs | None:
+    """The springs' term, inserted in ``terms`` before the penalty planes (None without
+    springs); ``grid``: the grid kernels may take a structure's springs by slices."""
+    if not system.spring_count:
+        left_out.append("springs: none, so no spring forces or scatter")
+        return None
+    label = springs_label(system)
+    constraints = spring_constraints(scene.integrator_name)
+    springs_term: Springs
+    if constraints is not None:
+        # the springs are the method's constraints; the term keeps their energy for the watchdog
+        springs_term = constraints(system, label, scene.dt, scene.substeps)
+    else:
+        springs_term = build_spring_term(system, label, grid=grid)
+    terms.insert(sum(1 for e in terms if not isinstance(e, PenaltyPlane)), springs_term)
+    return springs_term
+
+
+def plane_responses(scene: m.Scene, left_out: list[str]) -> int:
+    """How many of the scene's planes push by penalty (the others collide by impulse)."""
     impulse_planes = [p for p in scene.planes if p.response == "impulse"]
     penalty = len(scene.planes) - len(impulse_planes)
     if not impulse_planes:
         left_out.append("plane collisions: no impulse planes, so no collision detection")
     if not penalty:
         left_out.append("penalty contact: no penalty planes")
+    return penalty
 
-    solids = contact_stages.build(scene, system, chosen, springs_term, particle_position)
+
+def add_solids(
+    ctx: BuildContext,
+    scene: m.Scene,
+    springs_term: Springs | None,
+    particles: Particles,
+    post_step: list[StepStage],
+    left_out: list[str],
+) -> tuple[contact_stages.Built, list[StepStage], StepStage | None]:
+    """Keyframes, solid colliders, particle contacts and tearing (animsim.contact_stages)
+    around the planes' stages: (what was built, every stage so far, the planes' stage)."""
+    solids = contact_stages.build(scene, ctx.system, ctx.backend, springs_term, particles.position)
     post_step = [*solids.front, *post_step, *solids.back]
     planes_stage = next((st for st in post_step if st.holds_planes), None)
     if solids.contacts is not None:  # contacts push out of planes too, after the colliders
@@ -340,30 +303,54 @@ def compile_scene(
     if solids.colliders is not None:  # moving colliders meet particles where the planes keep them
         solids.colliders.planes_first = planes_stage
     left_out.extend(solids.left_out)
-    dynamics = Dynamics(system, terms)
-    dynamics.drivers = tuple(solids.drivers)
-    if bodies is not None:
-        dynamics.bodies, body_stages, body_labels, body_left_out = build_body_elements(
-            scene,
-            system,
-            index_of,
-            particle_position,
-            bodies.orientation,
-            chosen,
-            solids.colliders,
-            solids.radius,
-            planes_stage,
-        )
-        post_step.extend(body_stages)
-        stages.extend(body_labels)
-        left_out.extend(body_left_out)
-    else:
+    return solids, post_step, planes_stage
+
+
+def add_bodies(
+    ctx: BuildContext,
+    scene: m.Scene,
+    rows: ParticleRows,
+    particles: Particles,
+    dynamics: Dynamics,
+    solids: contact_stages.Built,
+    planes_stage: StepStage | None,
+    post_step: list[StepStage],
+    left_out: list[str],
+) -> list[str]:
+    """The rigid bodies' rotational half (on ``dynamics``) and their stages (appended to
+    ``post_step``); their lines for explain."""
+    if rows.bodies is None:
         left_out.append("rigid bodies: none in the scene")
+        return []
+    dynamics.bodies, body_stages, body_labels, body_left_out = build_body_elements(
+        scene,
+        ctx.system,
+        rows.index_of,
+        particles.position,
+        rows.bodies.orientation,
+        ctx.backend,
+        solids.colliders,
+        solids.radius,
+        planes_stage,
+    )
+    post_step.extend(body_stages)
+    left_out.extend(body_left_out)
+    return body_labels
+
+
+def add_births(emitters: Emitters | None, dynamics: Dynamics, post_step: list[StepStage]) -> None:
+    """The emitters' stage, last: births run after the step and its collisions."""
     if emitters is not None:
         emitters.attach(dynamics, [st for st in post_step if st.collides_newborns])
-        post_step.append(emitters)  # births run after the step and its collisions
-    name_ = scene.integrator_name
+        post_step.append(emitters)
 
+
+def make_integrator(
+    scene: m.Scene, dynamics: Dynamics, post_step: list[StepStage], backend: str
+) -> tuple[Integrator, list[StepStage]]:
+    """The scene's method on ``dynamics``, and the stages that still run after each step
+    once the method has taken its options (xpbd: its substeps, and the planes it projects)."""
+    name_ = scene.integrator_name
     refused = method_problems(scene)  # the file's own are refused with their line when loaded
     if refused:
         raise UsageError("; ".join(f"{'.'.join(map(str, path))}: {msg}" for path, msg, _ in refused))
@@ -371,12 +358,24 @@ def compile_scene(
         integrator = integrator_class(name_)(dynamics)
     except KeyError:
         raise UsageError(f"integrator {name_!r} is not available in this build") from None
-    # a method's own options (xpbd: its substeps, and the planes it projects itself)
-    post_step = integrator.configure(scene.substeps, post_step, chosen)
+    post_step = integrator.configure(scene.substeps, post_step, backend)
     for st in post_step:  # contact impulses move what they touch as the integrator moves positions
         if st.follow_weight is not None:
             st.follow_weight = contact_stages.follow_weight(integrator)
+    return integrator, post_step
 
+
+@dataclass(frozen=True)
+class RecordSchedule:
+    """The steps of a run and those it records, with explain's line for them."""
+
+    clock: Clock
+    steps: np.ndarray  # the recorded steps, ascending
+    line: str
+
+
+def recording_schedule(scene: m.Scene, record_times: np.ndarray | None) -> RecordSchedule:
+    """The scene's ``record`` rule, or exactly the steps that end at ``record_times``."""
     clock = Clock.make(scene.duration, scene.dt)
     every, fps = recording_rule(scene.record.every, scene.record.fps, clock.dt)
     if record_times is None:
@@ -386,9 +385,22 @@ def compile_scene(
         if any(s is None for s in landing):
             raise RuntimeError(f"dt = {clock.dt!r} does not land on every requested record time")
         rec = np.unique(np.array(landing, dtype=np.int64))
+    line = (
+        f"record: {len(rec)} frames of {clock.steps} steps"
+        + (f" (every {every})" if scene.record.every else "")
+        + (f" ({fps} fps)" if scene.record.fps else "")
+        + (f" ({fps:g} fps by default)" if fps is not None and scene.record.fps is None else "")
+    )
+    return RecordSchedule(clock, rec, line)
 
-    moving_anchor = bool(np.any(particle_pinned & np.any(particle_velocity != 0, axis=1)))
-    conservative = (
+
+def is_conservative(
+    dynamics: Dynamics, particles: Particles, post_step: list[StepStage], penalty: int
+) -> bool:
+    """Whether the run keeps its energy (up to integration error): conservative forces, no
+    anchor moving, no stage that injects or dissipates, no penalty planes, no body damping."""
+    moving_anchor = bool(np.any(particles.pinned & np.any(particles.velocity != 0, axis=1)))
+    return (
         dynamics.conservative
         and not moving_anchor
         and not any(st.injects or st.dissipative for st in post_step)
@@ -396,22 +408,45 @@ def compile_scene(
         and not (dynamics.bodies is not None and any(t.has_damping for t in dynamics.bodies.terms))
     )
 
-    stages[:0] = [t.label for t in terms]
-    stages.append(f"integrator: {integrator.name} ({integrator.description})")
-    for st in post_step:
-        stages.extend(st.explain_lines())
-    stages.append(
-        f"record: {len(rec)} frames of {clock.steps} steps"
-        + (f" (every {every})" if scene.record.every else "")
-        + (f" ({fps} fps)" if scene.record.fps else "")
-        + (f" ({fps:g} fps by default)" if fps is not None and scene.record.fps is None else "")
-    )
 
-    header = TrajectoryHeader(
+def method_lines(integrator: Integrator, post_step: list[StepStage]) -> list[str]:
+    """Explain's lines for the integrator and each stage after it."""
+    lines = [f"integrator: {integrator.name} ({integrator.description})"]
+    for st in post_step:
+        lines.extend(st.explain_lines())
+    return lines
+
+
+def body_header(scene: m.Scene, system: System, dynamics: Dynamics) -> dict[str, Any]:
+    """What sinks and renderers learn about bodies: rows, ids, shapes, colours (``#rrggbb`` or
+    None, per body), springs to bodies."""
+    return {
+        "first": system.body_first,
+        "ids": system.body_ids,
+        "shapes": system.body_shape,
+        "colors": [b.color for b in scene.bodies],
+        "springs": header_springs(dynamics.bodies),
+    }
+
+
+def trajectory_header(
+    scene: m.Scene,
+    name: str,
+    rows: ParticleRows,
+    system: System,
+    dynamics: Dynamics,
+    solids: contact_stages.Built,
+    *,
+    pools: bool,
+    can_tear: bool,
+) -> TrajectoryHeader:
+    """What the sinks and renderers are told before the first frame (``pools``: the scene has
+    emitters; ``can_tear``: some spring may tear)."""
+    return TrajectoryHeader(
         scene_name=name,
-        ids=list(ids),
-        spring_index=spring_index,
-        has_emitters=emitters is not None,
+        ids=list(rows.ids),
+        spring_index=system.spring_index,
+        has_emitters=pools,
         extra={
             "planes": [
                 (np.array(p.point), np.array(p.normal) / np.linalg.norm(p.normal)) for p in scene.planes
@@ -423,48 +458,34 @@ def compile_scene(
             "collider_surface": solids.collider_surface,
             # trajectory files then say which springs tore when (animsim.export.trajectory)
             "springs_can_tear": can_tear,
-            **({} if bodies is None else {"bodies": _body_header(scene, system, dynamics)}),
+            **({} if rows.bodies is None else {"bodies": body_header(scene, system, dynamics)}),
         },
-        connectivity=connectivity([(s.id, e, base) for s, e, base in expanded]),
+        connectivity=connectivity([(s.id, e, first) for s, e, first in rows.structures]),
     )
-    initial = State(
-        particle_position=particle_position,
-        particle_velocity=particle_velocity,
+
+
+def initial_state(
+    particles: Particles, system: System, rows: ParticleRows, *, pools: bool, can_tear: bool
+) -> State:
+    """The state at t = 0 (``pools``: the scene has emitters, whose state owns its masses)."""
+    bodies = rows.bodies
+    return State(
+        particle_position=particles.position,
+        particle_velocity=particles.velocity,
         # pools switch masses on and off: such a state owns its mass arrays
-        particle_mass=system.particle_mass.copy() if emitters is not None else system.particle_mass,
-        particle_inv_mass=(
-            system.particle_inv_mass.copy() if emitters is not None else system.particle_inv_mass
-        ),
+        particle_mass=system.particle_mass.copy() if pools else system.particle_mass,
+        particle_inv_mass=system.particle_inv_mass.copy() if pools else system.particle_inv_mass,
         time=0.0,
         step=0,
-        particle_alive=particle_alive,
+        particle_alive=particles.alive,
         spring_intact=np.ones(system.spring_count, dtype=bool) if can_tear else None,
         body_orientation=None if bodies is None else bodies.orientation.copy(),
         body_angular_velocity=None if bodies is None else bodies.angular_velocity.copy(),
     )
-    compiled = Compiled(
-        name=name,
-        scene=scene,
-        system=system,
-        initial=initial,
-        dynamics=dynamics,
-        integrator=integrator,
-        post_step=tuple(post_step),
-        emitters=emitters,
-        clock=clock,
-        record_steps=rec,
-        header=header,
-        seed=scene.seed,
-        stages=stages,
-        left_out=left_out,
-        conservative=conservative,
-        adaptive=(
-            None
-            if scene.adaptive is None
-            else AdaptiveSpec(scene.adaptive.tolerance, scene.adaptive.dt_min, scene.adaptive.dt_max)
-        ),
-    )
-    compiled.backend = chosen
-    compiled.threads = threads
-    compiled.stages.append(backend_line(compiled, chosen, backend_note))
-    return compiled
+
+
+def adaptive_spec(scene: m.Scene) -> AdaptiveSpec | None:
+    """Step doubling's settings when the scene asks for adaptive steps."""
+    if scene.adaptive is None:
+        return None
+    return AdaptiveSpec(scene.adaptive.tolerance, scene.adaptive.dt_min, scene.adaptive.dt_max)

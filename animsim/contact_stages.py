@@ -140,8 +140,15 @@ def build(
     radius = particle_radius(scene, system)
     out.radius = radius
     numba = "numba" if backend == "numba" else "numpy"
+    _add_keyframes(out, scene, system, positions, numba)
+    _add_colliders(out, scene, system, radius, numba)
+    _add_contacts(out, scene, system, radius, numba)
+    _add_tearing(out, scene, system, springs, numba)
+    return out
 
-    # --- keyframes: listed pinned particles, structures' pins ---------------------------
+
+def _add_keyframes(out: Built, scene: m.Scene, system: System, positions: np.ndarray, numba: str) -> None:
+    """The keyframe drive of the listed pinned particles and the structures' pins."""
     keys: list[list[Any]] = []  # each path's keys as validated: [t, [x, y, z]] (m.Keyframe)
     smooth: list[bool] = []
     rows: list[int] = []
@@ -175,70 +182,72 @@ def build(
     else:
         out.left_out.append("keyframes: no keyframed particles or pins")
 
-    # --- solid colliders ------------------------------------------------------------------
-    colliders = None
-    if scene.colliders:
-        shapes: list[Shape] = []
-        motion_keys: list[list[Any]] = []
-        motion_smooth: list[bool] = []
-        moving: list[int] = []
-        for c in scene.colliders:
-            shapes.append(collider_shape(c))
-            if c.motion is not None:
-                moving.append(len(motion_keys))
-                motion_keys.append(list(c.motion.keyframes))
-                motion_smooth.append(c.motion.interpolation == "smooth")
-            else:
-                moving.append(-1)
-        evaluator = None
-        if motion_keys:
-            evaluator = PathEvaluator(make_paths(motion_keys, motion_smooth), numba)
-        colliders = Colliders(
-            shapes,
-            system.particle_inv_mass,
-            radius=radius,
-            active=_point_rows(system),
-            motion=evaluator,
-            moving=np.array(moving, dtype=np.int64),
-            backend=numba,
-        )
-        out.front.append(colliders)
-        out.colliders = colliders
-        out.collider_surface = colliders.surface_points
-    else:
+
+def _add_colliders(out: Built, scene: m.Scene, system: System, radius: np.ndarray, numba: str) -> None:
+    """The solid colliders (spheres, boxes, capsules), still or keyframed."""
+    if not scene.colliders:
         out.left_out.append("colliders: no spheres, boxes or capsules")
+        return
+    shapes: list[Shape] = []
+    motion_keys: list[list[Any]] = []
+    motion_smooth: list[bool] = []
+    moving: list[int] = []
+    for c in scene.colliders:
+        shapes.append(collider_shape(c))
+        if c.motion is not None:
+            moving.append(len(motion_keys))
+            motion_keys.append(list(c.motion.keyframes))
+            motion_smooth.append(c.motion.interpolation == "smooth")
+        else:
+            moving.append(-1)
+    evaluator = None
+    if motion_keys:
+        evaluator = PathEvaluator(make_paths(motion_keys, motion_smooth), numba)
+    colliders = Colliders(
+        shapes,
+        system.particle_inv_mass,
+        radius=radius,
+        active=_point_rows(system),
+        motion=evaluator,
+        moving=np.array(moving, dtype=np.int64),
+        backend=numba,
+    )
+    out.front.append(colliders)
+    out.colliders = colliders
+    out.collider_surface = colliders.surface_points
 
-    # --- particle contacts ------------------------------------------------------------------
-    if scene.particle_collisions is not None:
-        pc = scene.particle_collisions
-        active = _point_rows(system) & (radius > 0)
-        exclude = spring_exclusions(
-            system.spring_index, system.spring_rest_length, radius, system.particle_count
-        )
-        contacts = ParticleContacts(
-            radius, pc.restitution, pc.friction, system.particle_inv_mass, active, exclude, numba
-        )
-        # ParticleContacts leaves its attribute unannotated (None until set here)
-        contacts.colliders = colliders  # type: ignore[assignment]
-        out.back.append(contacts)
-        out.contacts = contacts
-    else:
+
+def _add_contacts(out: Built, scene: m.Scene, system: System, radius: np.ndarray, numba: str) -> None:
+    """Contacts between particles of a radius (after the colliders, which they know)."""
+    if scene.particle_collisions is None:
         out.left_out.append("particle contacts: no particle_collisions")
+        return
+    pc = scene.particle_collisions
+    active = _point_rows(system) & (radius > 0)
+    exclude = spring_exclusions(system.spring_index, system.spring_rest_length, radius, system.particle_count)
+    contacts = ParticleContacts(
+        radius, pc.restitution, pc.friction, system.particle_inv_mass, active, exclude, numba
+    )
+    # ParticleContacts leaves its attribute unannotated (None until set here)
+    contacts.colliders = out.colliders  # type: ignore[assignment]
+    out.back.append(contacts)
+    out.contacts = contacts
 
-    # --- tearing ----------------------------------------------------------------------------------
+
+def _add_tearing(out: Built, scene: m.Scene, system: System, springs: Springs | None, numba: str) -> None:
+    """Tearing, when some spring has a max_strain (it switches broken ones off in ``springs``)."""
     limits = spring_max_strain(scene)
-    if system.spring_count and np.isfinite(limits).any():
-        tear = Tearing(
-            system.spring_index, system.spring_rest_length, limits, numba, families=system.spring_families
-        )
-        tear.springs = springs
-        out.back.append(tear)
-        out.tearing = tear
-    else:
+    if not (system.spring_count and np.isfinite(limits).any()):
         out.left_out.append(
             "tearing: needs a max_strain on a spring, a spring family or a structure; none has one"
         )
-    return out
+        return
+    tear = Tearing(
+        system.spring_index, system.spring_rest_length, limits, numba, families=system.spring_families
+    )
+    tear.springs = springs
+    out.back.append(tear)
+    out.tearing = tear
 
 
 def particles_inside_colliders(scene: Any) -> list[tuple[tuple[str | int, ...], str, bool]]:

@@ -25,7 +25,8 @@ from animsim.elements import StepStage
 from animsim.export.meta import run_facts
 from animsim.guard import Failure, Guard
 from animsim.measures.drift import annotate
-from animsim.record import Frame, FrameSink
+from animsim.record import FrameSink
+from animsim.run_frames import Held, arrays_frame, emit, emit_arrays, flush, frame_copy
 from animsim.startup import resume_collector
 from animsim.steppers import Fused, Stepper, start
 from animsim.system import State
@@ -117,13 +118,9 @@ def _run(
     # Compiling numba kernels (first run on a machine) is not run time.
     state, stepper, compile_seconds = start(compiled, notice)
     dyn = compiled.dynamics
-    clock = compiled.clock
     guard = guard or Guard(compiled, dt=stepper.largest_dt)
     resume_collector()  # start-up is over (animsim.startup): collect as usual from here
-    record = compiled.record_steps
-    next_rec = 0
     dyn.evaluations = 0
-    steps = clock.steps
 
     # The first poll says the loop has begun: a stop asked for before it (loading, compiling the
     # scene or its numba kernels) unwinds at once and writes nothing; from here on it finishes
@@ -133,33 +130,117 @@ def _run(
     for sink in sinks:
         sink.begin(compiled.header)
     try:
-        frames = 0
-        if record[0] == 0:
-            _emit(compiled, state, sinks, observers)
-            frames += 1
-            next_rec = 1
+        frames = next_rec = 0
+        if compiled.record_steps[0] == 0:
+            emit(compiled, state, sinks, observers)
+            frames = next_rec = 1
         # Overflow on the way to a blow-up is the watchdog's to report, not numpy's.
         with np.errstate(over="ignore", invalid="ignore"):
-            energy_start = dyn.energy(
-                state.particle_position,
-                state.particle_velocity,
-                state.body_orientation,
-                state.body_angular_velocity,
-            )
+            energy_start = _energy(dyn, state)
             guard.start(state)
-        failure: Failure | None = None
-        status = STATUS_OK
         t_start = _time.perf_counter()
-        # The watchdog runs every `stride` steps, at the end, and when a stepper
-        # reports a non-finite state. Frames recorded in between wait (copied, a
-        # bounded number) until a check has passed, so no unverified frame
-        # reaches a sink; a failure is traced back to its first step by replaying
-        # from the last good check, one step at a time.
-        stride = stepper.check_stride
+        loop = _Loop.begin(compiled, stepper, guard, state, sinks, observers, frames, next_rec)
+        with np.errstate(over="ignore", invalid="ignore"):
+            while loop.k < loop.steps:
+                if not loop.stretch(stop, progress):
+                    break
+        wall = _time.perf_counter() - t_start
+        with np.errstate(over="ignore", invalid="ignore"):
+            energy_end = _energy(dyn, state)
+        meta = _meta(compiled, loop.status, state, wall, energy_start, energy_end, loop.frames, loop.failure)
+        _run_facts(meta, compiled, stepper, compile_seconds, meta_extra)
+        _writing(stop)
+        return finish(
+            sinks, state, dyn, loop.status, wall, energy_start, energy_end, loop.frames, loop.failure, meta
+        )
+    except BaseException:
+        for sink in sinks:
+            sink.abort()
+        raise
+
+
+def _energy(dyn: Dynamics, state: State) -> float:
+    return dyn.energy(
+        state.particle_position,
+        state.particle_velocity,
+        state.body_orientation,
+        state.body_angular_velocity,
+    )
+
+
+def _run_facts(
+    meta: dict[str, Any],
+    compiled: Compiled,
+    stepper: Stepper,
+    compile_seconds: float,
+    meta_extra: dict[str, Any] | None,
+) -> None:
+    """Add to ``meta`` what the backend, the stepper, the caller and the stages say of the run."""
+    meta["backend"] = compiled.backend
+    if compile_seconds:
+        meta["compile_time"] = compile_seconds
+    meta.update(stepper.summary())
+    meta.update(meta_extra or {})
+    annotate(meta, compiled)  # energy drift as a verdict of its own, in the metadata
+    if compiled.emitters is not None:
+        meta["emitters"] = compiled.emitters.summary()
+    for stage in compiled.post_step:  # tearing: how many springs broke, and when first
+        report = stage.run_summary()
+        if report is not None:
+            meta.update(report)
+
+
+@dataclass
+class _Loop:
+    """What the loop keeps from one stretch of steps to the next.
+
+    The watchdog runs every ``stride`` steps, at the end, and when a stepper
+    reports a non-finite state. Frames recorded in between wait (copied, a
+    bounded number) until a check has passed, so no unverified frame
+    reaches a sink; a failure is traced back to its first step by replaying
+    from the last good check, one step at a time.
+    """
+
+    compiled: Compiled
+    stepper: Stepper
+    guard: Guard
+    state: State
+    sinks: Sequence[FrameSink]
+    observers: Sequence[Callable[[State], None]]
+    steps: int  # the clock's
+    stride: int
+    replayable: bool
+    births: bool  # the run has emitters: the watchdog books every newborn at its birth step
+    booked: bool  # the stepper books them itself, after each step
+    one: int | None  # 1: advance one step at a time (to book newborns or check every step)
+    inside: bool  # the stepper runs the checks itself
+    last_good: State | None  # a copy of a checked state kept for a replay
+    books: _Books | None  # what a replay restores with it
+    passed_step: int  # the step of the last state that passed a check
+    frames: int  # frames handed to the sinks so far
+    next_rec: int  # the position in record_steps of the next frame to record
+    pending: list[Held] = field(default_factory=list)
+    k: int = 0  # position on the nominal clock (== steps taken, except with adaptive steps)
+    checked: int = 0  # the position of the last check
+    failure: Failure | None = None
+    status: str = STATUS_OK
+
+    @classmethod
+    def begin(
+        cls,
+        compiled: Compiled,
+        stepper: Stepper,
+        guard: Guard,
+        state: State,
+        sinks: Sequence[FrameSink],
+        observers: Sequence[Callable[[State], None]],
+        frames: int,
+        next_rec: int,
+    ) -> _Loop:
+        """The loop's start, ``frames`` recorded already."""
         replayable = stepper.replayable
         last_good = state.copy() if replayable else None
         books = _snapshot(compiled, guard) if replayable else None
-        passed_step = state.step  # the step of the last state that passed a check
         # A run that cannot be replayed is checked after every step. The watchdog books every
         # newborn at its birth step (as a check at every step would): the stepper after each
         # step when it can, else the loop, stepping the run one step at a time; the full
@@ -174,145 +255,160 @@ def _run(
         inside = stepper.check_inside(guard)
         if not inside:  # the checks stay here: the stepper may pass the clear ones compiled
             guard.quick = stepper.quick_check(guard)
-        pending: list[tuple[int, Frame | None, State | None]] = []
-        k = 0  # position on the nominal clock (== steps taken, except with adaptive steps)
-        checked = 0
-        with np.errstate(over="ignore", invalid="ignore"):
-            while k < steps:
-                while next_rec < len(record) and record[next_rec] <= k:  # never aim behind us
-                    next_rec += 1
-                goal = int(record[next_rec]) if next_rec < len(record) else steps
-                verified = False  # the stepper checked the state at k and it passed
-                if inside:
-                    assert isinstance(stepper, Fused)  # only the fused chunks run the checks inside
-                    # Several frames a call: the stepper copies the states at the record
-                    # positions before the goal (observers read whole states: one a call).
-                    ahead = min(next_rec + (1 if observers else stepper.shots_per_call), len(record))
-                    if ahead > next_rec:
-                        goal = int(record[ahead - 1])
-                    rec = record[next_rec : ahead - 1] if ahead > next_rec else record[:0]
-                    k, passed, nonfinite, shots = stepper.advance_checked(
-                        state, k, goal, checked, stride, rec
-                    )
-                    if passed > checked:  # as the check at `passed` would have: frames out, good state
-                        frames += _flush(pending, sinks, observers, None)
-                        checked = passed
-                        verified = passed == k
-                        if last_good is not None:
-                            stepper.good_state(last_good)
-                            books = _snapshot(compiled, guard)
-                            passed_step = last_good.step
-                    for at, x_at, v_at in shots:  # frames passed on the way, in order
-                        next_rec += 1
-                        if at <= checked:
-                            frames += _emit_arrays(compiled, at, x_at, v_at, sinks)
-                        else:  # to wait for the next check, as a frame between checks does
-                            pending.append((at, _arrays_frame(compiled, at, x_at.copy(), v_at.copy()), None))
-                else:
-                    goal = min(goal, checked + stride)
-                    k, failure, nonfinite = stepper.advance(state, k, goal, max_steps=one)
-                if births and not booked:
-                    guard.book(state)
-                if failure is not None:  # the stepper itself gave up (adaptive: below dt_min)
-                    status = STATUS_UNSTABLE
-                    frames += _flush(pending, sinks, observers, None)
-                    break
-                recording = next_rec < len(record) and record[next_rec] == k
-                if recording:
-                    next_rec += 1
-                interrupted = stop is not None and stop()
-                check_now = not verified and (
-                    k - checked >= stride
-                    or not replayable
-                    or k == steps
-                    or nonfinite
-                    or interrupted
-                    or len(pending) >= MAX_PENDING_FRAMES
-                )
-                if verified and recording:
-                    _emit(compiled, state, sinks, observers)
-                    frames += 1
-                if recording and not check_now and not verified:
-                    pending.append(
-                        (
-                            state.step,
-                            _frame_copy(compiled, state) if sinks else None,
-                            state.copy() if observers else None,
-                        )
-                    )
-                if check_now:
-                    failure = guard.check(state)
-                    if failure is not None and last_good is not None and state.step - passed_step > 1:
-                        assert books is not None  # kept with last_good (replayable runs)
-                        failure = _first_failure(
-                            state, last_good, books, failure, stepper, guard, dyn, passed_step, booked
-                        )
-                    frames += _flush(pending, sinks, observers, failure)
-                    checked = k
-                    if failure is not None:
-                        status = STATUS_UNSTABLE
-                        break
-                    passed_step = state.step
-                    if recording:
-                        _emit(compiled, state, sinks, observers)
-                        frames += 1
-                    if last_good is not None and state.step - last_good.step >= REPLAY_COPY_EVERY:
-                        last_good.assign(state)
-                        books = _snapshot(compiled, guard)
-                if progress is not None:
-                    progress(k, steps)
-                if interrupted:
-                    status = STATUS_INTERRUPTED
-                    frames += _flush(pending, sinks, observers, None)
-                    break
-        wall = _time.perf_counter() - t_start
-        with np.errstate(over="ignore", invalid="ignore"):
-            energy_end = dyn.energy(
-                state.particle_position,
-                state.particle_velocity,
-                state.body_orientation,
-                state.body_angular_velocity,
+        return cls(
+            compiled,
+            stepper,
+            guard,
+            state,
+            sinks,
+            observers,
+            steps=compiled.clock.steps,
+            stride=stepper.check_stride,
+            replayable=replayable,
+            births=births,
+            booked=booked,
+            one=one,
+            inside=inside,
+            last_good=last_good,
+            books=books,
+            passed_step=state.step,
+            frames=frames,
+            next_rec=next_rec,
+        )
+
+    def stretch(self, stop: Callable[[], bool] | None, progress: Callable[[int, int], None] | None) -> bool:
+        """Advance to the next record step or check, then check, record, poll ``stop`` and
+        report ``progress``; False when the run ends here (a failure, or a stop)."""
+        goal = self.aim()
+        verified = False  # the stepper checked the state at k and it passed
+        if self.inside:
+            nonfinite, verified = self.advance_checked(goal)
+        else:
+            goal = min(goal, self.checked + self.stride)
+            self.k, self.failure, nonfinite = self.stepper.advance(
+                self.state, self.k, goal, max_steps=self.one
             )
-        meta = _meta(compiled, status, state, wall, energy_start, energy_end, frames, failure)
-        meta["backend"] = compiled.backend
-        if compile_seconds:
-            meta["compile_time"] = compile_seconds
-        meta.update(stepper.summary())
-        meta.update(meta_extra or {})
-        annotate(meta, compiled)  # energy drift as a verdict of its own, in the metadata
-        if compiled.emitters is not None:
-            meta["emitters"] = compiled.emitters.summary()
-        for stage in compiled.post_step:  # tearing: how many springs broke, and when first
-            report = stage.run_summary()
-            if report is not None:
-                meta.update(report)
-        _writing(stop)
-        return finish(sinks, state, dyn, status, wall, energy_start, energy_end, frames, failure, meta)
-    except BaseException:
-        for sink in sinks:
-            sink.abort()
-        raise
+        if self.births and not self.booked:
+            self.guard.book(self.state)
+        if self.failure is not None:  # the stepper itself gave up (adaptive: below dt_min)
+            return self.end(STATUS_UNSTABLE)
+        record = self.compiled.record_steps
+        recording = self.next_rec < len(record) and record[self.next_rec] == self.k
+        if recording:
+            self.next_rec += 1
+        interrupted = stop is not None and stop()
+        check_now = not verified and (
+            self.k - self.checked >= self.stride
+            or not self.replayable
+            or self.k == self.steps
+            or nonfinite
+            or interrupted
+            or len(self.pending) >= MAX_PENDING_FRAMES
+        )
+        if verified and recording:
+            self.record_frame()
+        if recording and not check_now and not verified:
+            self.hold()
+        if check_now and not self.check(recording):
+            return False
+        if progress is not None:
+            progress(self.k, self.steps)
+        if interrupted:
+            return self.end(STATUS_INTERRUPTED)
+        return True
 
+    def aim(self) -> int:
+        """The next record step ahead of the clock (the last step when none is left)."""
+        record = self.compiled.record_steps
+        while self.next_rec < len(record) and record[self.next_rec] <= self.k:  # never aim behind us
+            self.next_rec += 1
+        return int(record[self.next_rec]) if self.next_rec < len(record) else self.steps
 
-def _flush(
-    pending: list[tuple[int, Frame | None, State | None]],
-    sinks: Sequence[FrameSink],
-    observers: Sequence[Callable[[State], None]],
-    failure: Failure | None,
-) -> int:
-    """Hand the held frames before ``failure``'s step (all, without one) to the sinks; how many."""
-    count = 0
-    for step, frame, seen in pending:
-        if failure is None or step < failure.step:
-            if seen is not None:
-                for observe in observers:
-                    observe(seen)
-            if frame is not None:
-                for sink in sinks:
-                    sink.write(frame)
-            count += 1
-    pending.clear()
-    return count
+    def advance_checked(self, goal: int) -> tuple[bool, bool]:
+        """Advance with the stepper running the checks (and copying the states at the record
+        positions on the way): (non-finite state met, the state at k checked and passed)."""
+        stepper = self.stepper
+        assert isinstance(stepper, Fused)  # only the fused chunks run the checks inside
+        # Several frames a call: the stepper copies the states at the record
+        # positions before the goal (observers read whole states: one a call).
+        record = self.compiled.record_steps
+        ahead = min(self.next_rec + (1 if self.observers else stepper.shots_per_call), len(record))
+        if ahead > self.next_rec:
+            goal = int(record[ahead - 1])
+        rec = record[self.next_rec : ahead - 1] if ahead > self.next_rec else record[:0]
+        self.k, passed, nonfinite, shots = stepper.advance_checked(
+            self.state, self.k, goal, self.checked, self.stride, rec
+        )
+        verified = False
+        if passed > self.checked:  # as the check at `passed` would have: frames out, good state
+            self.frames += flush(self.pending, self.sinks, self.observers, None)
+            self.checked = passed
+            verified = passed == self.k
+            if self.last_good is not None:
+                stepper.good_state(self.last_good)
+                self.books = _snapshot(self.compiled, self.guard)
+                self.passed_step = self.last_good.step
+        for at, x_at, v_at in shots:  # frames passed on the way, in order
+            self.next_rec += 1
+            if at <= self.checked:
+                self.frames += emit_arrays(self.compiled, at, x_at, v_at, self.sinks)
+            else:  # to wait for the next check, as a frame between checks does
+                self.pending.append((at, arrays_frame(self.compiled, at, x_at.copy(), v_at.copy()), None))
+        return nonfinite, verified
+
+    def check(self, recording: bool) -> bool:
+        """The watchdog's check of the state now (a failure traced back to its first step),
+        the held frames handed on; False when the run fails here."""
+        state = self.state
+        failure = self.guard.check(state)
+        if failure is not None and self.last_good is not None and state.step - self.passed_step > 1:
+            assert self.books is not None  # kept with last_good (replayable runs)
+            failure = _first_failure(
+                state,
+                self.last_good,
+                self.books,
+                failure,
+                self.stepper,
+                self.guard,
+                self.compiled.dynamics,
+                self.passed_step,
+                self.booked,
+            )
+        self.failure = failure
+        self.frames += flush(self.pending, self.sinks, self.observers, failure)
+        self.checked = self.k
+        if failure is not None:
+            self.status = STATUS_UNSTABLE
+            return False
+        self.passed_step = state.step
+        if recording:
+            self.record_frame()
+        if self.last_good is not None and state.step - self.last_good.step >= REPLAY_COPY_EVERY:
+            self.last_good.assign(state)
+            self.books = _snapshot(self.compiled, self.guard)
+        return True
+
+    def record_frame(self) -> None:
+        """Record the state now (it passed a check)."""
+        emit(self.compiled, self.state, self.sinks, self.observers)
+        self.frames += 1
+
+    def hold(self) -> None:
+        """Keep a copy of the state now until the next check."""
+        state = self.state
+        self.pending.append(
+            (
+                state.step,
+                frame_copy(self.compiled, state) if self.sinks else None,
+                state.copy() if self.observers else None,
+            )
+        )
+
+    def end(self, status: str) -> bool:
+        """End the run with ``status``, the held frames handed on; False."""
+        self.status = status
+        self.frames += flush(self.pending, self.sinks, self.observers, None)
+        return False
 
 
 #: what a replay restores besides the state: the watchdog's books (Guard.snapshot) and each
@@ -378,49 +474,6 @@ def _first_failure(
     return first
 
 
-def _frame_copy(compiled: Compiled, state: State) -> Frame:
-    """A frame that owns its arrays, held until a check passes."""
-    if compiled.emitters is not None:
-        # the alive rows, gathered (so copies); ids are given in recording order, as _emit does
-        frame = compiled.emitters.frame(compiled, state)
-        if state.spring_intact is not None:
-            import dataclasses
-
-            frame = dataclasses.replace(frame, spring_intact=state.spring_intact.copy())
-        return _with_bodies(frame, state, copy=True)
-    return _with_bodies(
-        Frame(
-            step=state.step,
-            time=state.time,
-            index=_all_index(compiled),
-            position=state.particle_position.copy(),
-            velocity=state.particle_velocity.copy(),
-            spring_intact=None if state.spring_intact is None else state.spring_intact.copy(),
-        ),
-        state,
-        copy=True,
-    )
-
-
-def _arrays_frame(compiled: Compiled, step: int, x: np.ndarray, v: np.ndarray) -> Frame:
-    """The frame of a state a stepper copied on its way (a run without emitters, bodies or
-    tearing springs, whose frames hold positions and velocities only)."""
-    return Frame(
-        step=step, time=compiled.clock.time(step), index=_all_index(compiled), position=x, velocity=v
-    )
-
-
-def _emit_arrays(
-    compiled: Compiled, step: int, x: np.ndarray, v: np.ndarray, sinks: Sequence[FrameSink]
-) -> int:
-    """Write the frame of a copied state that passed a check (as _emit); 1, the frame count."""
-    if sinks:
-        frame = _arrays_frame(compiled, step, x, v)
-        for sink in sinks:
-            sink.write(frame)
-    return 1
-
-
 def _writing(stop: Callable[[], bool] | None) -> None:
     """Tell ``stop`` that the steps are over and the sinks are about to write their files,
     when it listens (a ``writing`` method, as the CLI's flag has): a signal from here on
@@ -458,57 +511,6 @@ def finish(
         failure=failure,
         meta=meta,
     )
-
-
-def _emit(
-    compiled: Compiled,
-    state: State,
-    sinks: Sequence[FrameSink],
-    observers: Sequence[Callable[[State], None]] = (),
-) -> None:
-    for observe in observers:
-        observe(state)
-    if not sinks:
-        return
-    if compiled.emitters is None:
-        frame = Frame(
-            step=state.step,
-            time=state.time,
-            index=_all_index(compiled),
-            position=state.particle_position,
-            velocity=state.particle_velocity,
-            spring_intact=state.spring_intact,
-        )
-    else:
-        frame = compiled.emitters.frame(compiled, state)
-        if state.spring_intact is not None:
-            import dataclasses
-
-            frame = dataclasses.replace(frame, spring_intact=state.spring_intact)
-    frame = _with_bodies(frame, state, copy=False)
-    for sink in sinks:
-        sink.write(frame)
-
-
-def _with_bodies(frame: Frame, state: State, copy: bool) -> Frame:
-    """The frame with the bodies' orientations and angular velocities (unchanged without bodies)."""
-    if state.body_orientation is None:
-        return frame
-    import dataclasses
-
-    q, w = state.body_orientation, state.body_angular_velocity
-    assert w is not None  # bodies carry both (State)
-    return dataclasses.replace(
-        frame, orientation=q.copy() if copy else q, angular_velocity=w.copy() if copy else w
-    )
-
-
-def _all_index(compiled: Compiled) -> np.ndarray:
-    idx = getattr(compiled, "_all_index", None)
-    if idx is None:
-        idx = np.arange(compiled.system.particle_count, dtype=np.int64)
-        compiled._all_index = idx  # type: ignore[attr-defined]
-    return idx
 
 
 def _meta(

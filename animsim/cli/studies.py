@@ -257,19 +257,9 @@ def compare(
     (use --fail-on-unstable to exit 1 instead), 2 for a bad scene or option.
     """
     from animsim import api
-    from animsim.analysis.compare import left_out, summary_lines, table
     from animsim.console import terminal_notice
 
     with _compare_progress() as (progress, planned):
-
-        def announce(plan: Any) -> None:
-            from animsim.analysis.check import wrap
-            from animsim.console import table_width
-
-            for line in plan.lines():  # at the screen's width, as the table under it
-                err(wrap(line, table_width(sys.stderr)))
-            planned(len(plan.integrators) * len(plan.dts))
-
         result = api.compare(
             scene,
             integrators,
@@ -286,9 +276,28 @@ def compare(
             scheduler=scheduler,
             progress=progress,
             notice=terminal_notice(),
-            on_plan=announce,
+            on_plan=lambda plan: _announce_plan(plan, planned),
             comparison=True,
         )
+    _print_comparison(result, output, plot)
+    if fail_on_unstable and result.any_unstable:
+        raise typer.Exit(EXIT_FAILED)
+
+
+def _announce_plan(plan: Any, planned: Any) -> None:
+    """The plan's lines on stderr, before the runs; the progress bar learns how many there are."""
+    from animsim.analysis.check import wrap
+    from animsim.console import table_width
+
+    for line in plan.lines():  # at the screen's width, as the table under it
+        err(wrap(line, table_width(sys.stderr)))
+    planned(len(plan.integrators) * len(plan.dts))
+
+
+def _print_comparison(result: Any, output: Path | None, plot: Path | None) -> None:
+    """The table (what does not fit the width named under it), the summary, the files written."""
+    from animsim.analysis.compare import left_out, summary_lines, table
+
     console = _stdout_console()
     console.print(table(result, width=console.width))
     hidden = left_out(result, console.width)
@@ -303,8 +312,6 @@ def compare(
     for path in (output, plot):
         if path is not None:
             console.print(f"wrote {path}", highlight=False, markup=False)
-    if fail_on_unstable and result.any_unstable:
-        raise typer.Exit(EXIT_FAILED)
 
 
 @contextmanager

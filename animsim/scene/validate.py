@@ -12,8 +12,10 @@ A rule whose inputs did not validate is skipped (never guessed at).
 from __future__ import annotations
 
 import difflib
+import functools
 import itertools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, get_args
 
@@ -130,6 +132,24 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
     errors; rules that would only echo those errors are skipped.
     """
     out: list[Problem] = []
+    _check_run(scene, partial, out)
+    structures = _check_structures(scene, out)
+    structure_of = functools.partial(_structure_of, structures)
+    particle_ids = _check_particles(scene, structure_of, out)
+    body_ids = _check_bodies(scene.bodies or [], particle_ids, structure_of, out)
+    for i, c in enumerate(scene.colliders or []):
+        if c is not None and hasattr(c, "orientation"):
+            _check_orientation(("colliders", i, "orientation"), c.orientation, out)
+    _check_spring_ends(scene, particle_ids, body_ids, structures, structure_of, ids_complete, out)
+    _check_self_springs(scene, out)
+    _check_emitters(scene, out)
+    if not partial:  # a partial scene does not carry its integrator (it may not have validated)
+        out.extend(method_problems(scene))
+    return out
+
+
+def _check_run(scene: Scene, partial: bool, out: list[Problem]) -> None:
+    """dt against the duration, and something to simulate."""
     if scene.dt is not None and scene.duration is not None and scene.dt > scene.duration:
         out.append((("dt",), f"dt = {scene.dt!r} is longer than the duration {scene.duration!r}", False))
     # With other errors present an empty scene is most likely a typo'd or
@@ -140,7 +160,10 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
             ((), "the scene has no particles, structures, emitters or bodies: nothing to simulate", False)
         )
 
-    # Structure ids and the ids they generate.
+
+def _check_structures(scene: Scene, out: list[Problem]) -> dict[str, Any]:
+    """Structure ids (unique), their pins (each a particle of the structure) and pin motions
+    (only with pins); returns {structure id: structure}."""
     structures = {}
     for i, s in enumerate(scene.structures):
         if s is None:
@@ -171,23 +194,28 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
                         False,
                     )
                 )
-
-    def structure_of(pid: str):
-        parsed = parse_structure_id(pid)
-        if parsed is None or parsed[0] not in structures:
-            return None
-        s = structures[parsed[0]]
-        if isinstance(s, MeshStructure) and s._geometry is None:
-            return s  # its file could not be read (reported there): do not guess which ids exist
-        return s if local_index(s, pid) is not None else None
-
     for i, s in enumerate(scene.structures):
         if s is not None and getattr(s, "pin_motion", None) is not None and not s.pin:
             out.append(
                 (("structures", i, "pin_motion"), "pin_motion moves the pins, but there are none", True)
             )
+    return structures
 
-    # Particles: unique ids (after 1 -> "1"), masses.
+
+def _structure_of(structures: dict[str, Any], pid: str) -> Any:
+    """The structure that generates the particle ``pid``, or None."""
+    parsed = parse_structure_id(pid)
+    if parsed is None or parsed[0] not in structures:
+        return None
+    s = structures[parsed[0]]
+    if isinstance(s, MeshStructure) and s._geometry is None:
+        return s  # its file could not be read (reported there): do not guess which ids exist
+    return s if local_index(s, pid) is not None else None
+
+
+def _check_particles(scene: Scene, structure_of: Callable[[str], Any], out: list[Problem]) -> dict[str, int]:
+    """Particle ids (unique after 1 -> "1", none a structure's), positions, keyframes and
+    masses; returns {particle id: its first index}."""
     first_seen: dict[str, int] = {}
     for i, p in enumerate(scene.particles):
         if p is None:
@@ -236,12 +264,21 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
                     True,
                 )
             )
+    return first_seen
 
-    body_ids = _check_bodies(bodies, first_seen, structure_of, out)
-    for i, c in enumerate(scene.colliders or []):
-        if c is not None and hasattr(c, "orientation"):
-            _check_orientation(("colliders", i, "orientation"), c.orientation, out)
-    known = list(first_seen)
+
+def _check_spring_ends(
+    scene: Scene,
+    particle_ids: dict[str, int],
+    body_ids: dict[str, int],
+    structures: dict[str, Any],
+    structure_of: Callable[[str], Any],
+    ids_complete: bool,
+    out: list[Problem],
+) -> None:
+    """What each spring's ends name exists: a particle (listed or generated) or a body point.
+    Missing particle ids are said only when every id could be known (``ids_complete``)."""
+    known = list(particle_ids)
     # A renamed particle breaks every spring that names it: report each
     # missing id once, at its first use, and list the other places there,
     # instead of one follow-on error per spring.
@@ -262,7 +299,7 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
                         False,
                     )
                 )
-            elif ids_complete and pid not in first_seen and structure_of(pid) is None:
+            elif ids_complete and pid not in particle_ids and structure_of(pid) is None:
                 missing.setdefault(pid, []).append(("springs", i, "between", k))
     for pid, places in missing.items():
         msg = _missing_id_message(pid, known, structures)
@@ -271,6 +308,10 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
             more = f" and {len(places) - 4} more" if len(places) > 4 else ""
             msg += f" (also named at {also}{more})"
         out.append((places[0], msg, False))
+
+
+def _check_self_springs(scene: Scene, out: list[Problem]) -> None:
+    """No spring joins a particle to itself."""
     for i, sp in enumerate(scene.springs):
         if sp is None:
             continue
@@ -284,6 +325,9 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
                 )
             )
 
+
+def _check_emitters(scene: Scene, out: list[Problem]) -> None:
+    """Emitter names (unique), rate keyframes (in time order), kill boxes (min <= max)."""
     names: dict[str, int] = {}
     for i, e in enumerate(scene.emitters):
         if e is None:
@@ -299,9 +343,6 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
             lo > hi for lo, hi in zip(e.kill_box.min, e.kill_box.max, strict=True)
         ):
             out.append((("emitters", i, "kill_box"), "kill_box min must not exceed max in any axis", False))
-    if not partial:  # a partial scene does not carry its integrator (it may not have validated)
-        out.extend(method_problems(scene))
-    return out
 
 
 def method_problems(scene: Scene) -> list[Problem]:

@@ -20,6 +20,7 @@ PACKAGE = ROOT / "animsim"
 CLI = PACKAGE / "cli"
 STEPPING = [
     PACKAGE / "engine.py",
+    PACKAGE / "run_frames.py",
     PACKAGE / "steppers.py",
     PACKAGE / "system.py",
     *sorted((PACKAGE / "backends").glob("*.py")),

@@ -7,11 +7,12 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from animsim.analysis.compare.costs import Estimate, estimate_from, probe
+from animsim.analysis.compare.costs import Estimate, Probe, estimate_from, probe
 from animsim.analysis.compare.options import (
     DEFAULT_MAX_STEPS,
     DEFAULT_REPEAT,
@@ -73,24 +74,68 @@ def make_plan(
     scene; then the methods, to CORE_INTEGRATORS and the scene's own; then the
     window again, down to MIN_WINDOW_STEPS steps of the largest dt.
     """
+    _check_numbers(repeat, budget)
+    budget = budget or None
+    window = _checked_window(scene, duration, dts, max_steps)
+    method_sets, dt_sets = _candidates(scene, integrators, dts, window)
+    if budget is None and not estimate:  # nothing to fit and nobody to tell: no probe
+        common_times(window_scene(scene, window), dt_sets[0], max_steps)
+        return Plan(method_sets[0], dt_sets[0], window, scene.duration, repeat, None, None, None)
+    found = probe(
+        scene, name, integrators=method_sets[0], reference=reference, backend=backend, notice=notice
+    )
+    planner = _Planner(
+        scene,
+        found,
+        all_methods=method_sets[0],
+        all_dts=dt_sets[0],
+        window_given=duration is not None,
+        repeat=repeat,
+        jobs=jobs,
+        max_steps=max_steps,
+        asked=budget,
+        # the probe has spent part of the budget
+        budget=None if budget is None else Plan([], [], 0.0, 0.0, 0, None, found, budget).run_budget,
+    )
+    floors: list[int | None] = [None]
+    if found.reference_kind == "RK4" and not (integrators and dts):
+        floors.append(0)  # the RK4 reference held to FINE_MAX_FACTOR times the finest run's steps
+    named = bool(integrators and dts and duration is not None)
+    return planner.choose(method_sets, dt_sets, floors, window, named=named)
+
+
+def _check_numbers(repeat: int, budget: float | None) -> None:
     if repeat < 0:
         raise UsageError(f"--repeat: must be >= 0, not {repeat}")
     if budget is not None and not (math.isfinite(budget) and budget >= 0):
         raise UsageError(f"--budget: must be a number of seconds >= 0, not {budget!r}")
-    budget = budget or None
+
+
+def _checked_window(
+    scene: m.Scene, duration: float | None, dts: Sequence[float] | None, max_steps: int
+) -> float:
+    """The compared window (``duration``, else the whole scene), the step sizes named
+    checked against it before the probe runs."""
     total = scene.duration
     if duration is not None:
         if not (math.isfinite(duration) and duration > 0):
             raise UsageError(f"--duration: must be a finite number > 0, not {duration!r}")
         if duration > total:
             raise UsageError(f"--duration: {duration:g} is longer than the scene ({total:g} s)")
-    window_given = duration is not None
     window = duration if duration is not None else total
     for v in dts or ():
         if v > window:
             raise UsageError(f"--dt: {v:g} is longer than the duration {window!r}")
     if dts:  # refused before the probe runs
         common_times(window_scene(scene, window), dts, max_steps)
+    return window
+
+
+def _candidates(
+    scene: m.Scene, integrators: Sequence[str] | None, dts: Sequence[float] | None, window: float
+) -> tuple[list[list[str]], list[list[float]]]:
+    """(method sets, step-size sets), each the fullest first: the methods named, else every
+    one and then the core ones; the step sizes named, else the four defaults and then three."""
     all_methods = list(integrators) if integrators else parse_integrators(None)
     method_sets = [all_methods]
     if not integrators:
@@ -102,39 +147,93 @@ def make_plan(
     else:
         full_dts = default_dts(scene.dt, window)
         dt_sets = [full_dts, full_dts[:-1]]
-    if budget is None and not estimate:  # nothing to fit and nobody to tell: no probe
-        common_times(window_scene(scene, window), dt_sets[0], max_steps)
-        return Plan(all_methods, dt_sets[0], window, total, repeat, None, None, None)
-    found = probe(scene, name, integrators=all_methods, reference=reference, backend=backend, notice=notice)
-    asked = budget
-    if budget is not None:  # the probe has spent part of it
-        budget = Plan([], [], 0.0, 0.0, 0, None, found, budget).run_budget
-    floors: list[int | None] = [None]
-    if found.reference_kind == "RK4" and not (integrators and dts):
-        floors.append(0)  # the RK4 reference held to FINE_MAX_FACTOR times the finest run's steps
+    return method_sets, dt_sets
 
-    def cost(methods: Sequence[str], steps: Sequence[float], w: float, floor: int | None) -> Estimate:
-        return estimate_from(found, methods, steps, w, repeat, jobs, floor)
 
-    def fits(level: tuple[list[str], list[float], int | None], w: float) -> bool:
-        return budget is None or cost(*level[:2], w, level[2]).seconds <= budget
+#: a candidate plan but for its window: (methods, step sizes, the RK4 reference's floor)
+_Level = tuple[list[str], list[float], int | None]
 
-    def plan(level: tuple[list[str], list[float], int | None], w: float) -> Plan:
+
+@dataclass
+class _Planner:
+    """The probe's estimates weighed against the budget, and the plans they lead to."""
+
+    scene: m.Scene
+    found: Probe
+    all_methods: list[str]  # the fullest method set
+    all_dts: list[float]  # the fullest step-size set
+    window_given: bool  # the window was named (--duration)
+    repeat: int
+    jobs: int
+    max_steps: int
+    asked: float | None  # the budget asked for
+    budget: float | None  # what it leaves for the runs
+
+    def cost(self, methods: Sequence[str], steps: Sequence[float], w: float, floor: int | None) -> Estimate:
+        return estimate_from(self.found, methods, steps, w, self.repeat, self.jobs, floor)
+
+    def fits(self, level: _Level, w: float) -> bool:
+        return self.budget is None or self.cost(*level[:2], w, level[2]).seconds <= self.budget
+
+    def choose(
+        self,
+        method_sets: list[list[str]],
+        dt_sets: list[list[float]],
+        floors: list[int | None],
+        window: float,
+        *,
+        named: bool,
+    ) -> Plan:
+        """The least cut plan that fits (see make_plan); ``named``: everything was named."""
+        first = (method_sets[0], dt_sets[0], None)
+        # Everything named, or no budget: run as asked (the estimate says what it costs).
+        if self.budget is None or named:
+            return self.plan(first, window)
+        # 1. the whole window, cutting as little as possible: the reference's floor,
+        #    the finest step size, the methods
+        levels: list[_Level] = [first]
+        levels += [(method_sets[0], dt_sets[0], f) for f in floors[1:]]
+        levels += [(method_sets[0], ds, floors[-1]) for ds in dt_sets[1:]]
+        levels += [(ms, dt_sets[-1], floors[-1]) for ms in method_sets[1:]]
+        for level in levels:
+            if self.fits(level, window):
+                return self.plan(level, window)
+        if self.window_given:  # the window was named: it stays, and the plan says it is over budget
+            return self.plan(levels[-1], window)
+        # 2. every method still, the fewest step sizes, over at least half the scene
+        total = self.scene.duration
+        coarse = max(dt_sets[-1])
+        shortest = min(total, MIN_WINDOW_STEPS * coarse)
+        level = (method_sets[0], dt_sets[-1], floors[-1])
+        w = self.longest_window(level, max(shortest, 0.5 * total))
+        if w is not None:
+            return self.plan(level, w)
+        # 3. the fewest methods too, over as much of the scene as fits
+        level = levels[-1]
+        w = self.longest_window(level, shortest)
+        if w is None:  # nothing fits: the smallest plan, which says it is over budget
+            times, _ = common_times(self.scene, level[1], DEFAULT_MAX_STEPS * 1000)
+            w = next((float(t) for t in times if t >= shortest - 1e-12 and t > 0), total)
+        return self.plan(level, w)
+
+    def plan(self, level: _Level, w: float) -> Plan:
+        """The plan of ``level`` over the window ``w``, saying what was cut."""
         methods, steps, floor = level
-        common_times(window_scene(scene, w), steps, max_steps)  # refuses too many steps now
+        total = self.scene.duration
+        common_times(window_scene(self.scene, w), steps, self.max_steps)  # refuses too many steps now
         cuts = []
         if floor is not None:
             cuts.append(
                 f"the RK4 reference may take at most {FINE_MAX_FACTOR} times the finest run's steps "
                 "(a note says so if it has not converged by then)"
             )
-        if len(steps) < len(dt_sets[0]):
+        if len(steps) < len(self.all_dts):
             sizes = ", ".join(f"{d:g}" for d in steps)
-            cuts.append(f"{len(steps)} step sizes ({sizes} s) instead of {len(dt_sets[0])}")
-        if len(methods) < len(all_methods):
-            cuts.append(f"the methods {', '.join(methods)} instead of all {len(all_methods)}")
-        if w < total and not window_given:
-            events = _events(scene)
+            cuts.append(f"{len(steps)} step sizes ({sizes} s) instead of {len(self.all_dts)}")
+        if len(methods) < len(self.all_methods):
+            cuts.append(f"the methods {', '.join(methods)} instead of all {len(self.all_methods)}")
+        if w < total and not self.window_given:
+            events = _events(self.scene)
             cuts.append(
                 f"compared over the first {w:g} s of {total:g} s"
                 + (
@@ -148,55 +247,25 @@ def make_plan(
             list(steps),
             w,
             total,
-            repeat,
-            cost(methods, steps, w, floor),
-            found,
-            asked,
+            self.repeat,
+            self.cost(methods, steps, w, floor),
+            self.found,
+            self.asked,
             cuts,
             floor,
         )
 
-    def longest_window(level: tuple[list[str], list[float], int | None], shortest: float) -> float | None:
+    def longest_window(self, level: _Level, shortest: float) -> float | None:
         """The longest window on the ladder (window_ladder), >= shortest, whose plan fits (None: none).
 
         The rungs are a factor of 2 apart, so the probe's timing noise cannot move the window
         a little on every rerun: a rerun gives the same window unless the estimate crosses
         the budget at a rung."""
-        times, _ = common_times(scene, level[1], DEFAULT_MAX_STEPS * 1000)
-        for w in window_ladder(times, total, shortest):
-            if fits(level, w):
+        times, _ = common_times(self.scene, level[1], DEFAULT_MAX_STEPS * 1000)
+        for w in window_ladder(times, self.scene.duration, shortest):
+            if self.fits(level, w):
                 return w
         return None
-
-    first = (method_sets[0], dt_sets[0], None)
-    # Everything named, or no budget: run as asked (the estimate says what it costs).
-    if budget is None or (integrators and dts and window_given):
-        return plan(first, window)
-    # 1. the whole window, cutting as little as possible: the reference's floor,
-    #    the finest step size, the methods
-    levels = [first]
-    levels += [(method_sets[0], dt_sets[0], f) for f in floors[1:]]
-    levels += [(method_sets[0], ds, floors[-1]) for ds in dt_sets[1:]]
-    levels += [(ms, dt_sets[-1], floors[-1]) for ms in method_sets[1:]]
-    for level in levels:
-        if fits(level, window):
-            return plan(level, window)
-    if window_given:  # the window was named: it stays, and the plan says it is over budget
-        return plan(levels[-1], window)
-    # 2. every method still, the fewest step sizes, over at least half the scene
-    coarse = max(dt_sets[-1])
-    shortest = min(total, MIN_WINDOW_STEPS * coarse)
-    level = (method_sets[0], dt_sets[-1], floors[-1])
-    w = longest_window(level, max(shortest, 0.5 * total))
-    if w is not None:
-        return plan(level, w)
-    # 3. the fewest methods too, over as much of the scene as fits
-    level = levels[-1]
-    w = longest_window(level, shortest)
-    if w is None:  # nothing fits: the smallest plan, which says it is over budget
-        times, _ = common_times(scene, level[1], DEFAULT_MAX_STEPS * 1000)
-        w = next((float(t) for t in times if t >= shortest - 1e-12 and t > 0), total)
-    return plan(level, w)
 
 
 def _events(scene: m.Scene) -> list[str]:
