@@ -6,12 +6,11 @@ which stays finite at the centre; eps = 0 is the exact inverse-square law.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
 from animsim.elements import RELEASING, BuildContext, ForceElement, register
 from animsim.scene import models as m
+from animsim.system import State
 from animsim.vec import dot3
 
 
@@ -58,7 +57,7 @@ class Attractor(ForceElement):
         self.label = f"attractor at {self.center.tolist()} gm = {self.gm} m^3/s^2"
         self.closed_form = {"attractor": (self.center, self.gm, self.eps2)}
 
-    def bind(self, state: Any) -> None:
+    def bind(self, state: State) -> None:
         self.mass = state.particle_mass
 
     def accumulate(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None:

@@ -8,6 +8,7 @@ import numpy as np
 
 from animsim.elements import RELEASING, BuildContext, ForceElement, live_array, register
 from animsim.scene import models as m
+from animsim.system import State
 from animsim.vec import dot3
 
 
@@ -70,7 +71,7 @@ class Gravity(ForceElement):
         self.closed_form = {"gravity": self.g}
         self._copies: dict[int, np.ndarray] = {}  # see live_array
 
-    def bind(self, state: Any) -> None:
+    def bind(self, state: State) -> None:
         self.mass = state.particle_mass
 
     def accumulate(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None:

@@ -28,12 +28,11 @@ pushed harder than a heavy one.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
 from animsim.elements import UNKNOWN, ForceElement
 from animsim.scene import models as m
+from animsim.system import State
 
 #: Number of Fourier modes. More modes make the field's one-point statistics
 #: closer to Gaussian; the cost per evaluation is O(particles * modes).
@@ -146,7 +145,7 @@ class Turbulence(ForceElement):
     watch_role = UNKNOWN
     no_closed_form = "turbulent wind is a random force field"
 
-    def bind(self, state: Any) -> None:
+    def bind(self, state: State) -> None:
         self.mass = state.particle_mass
 
     numba_source = staticmethod(_kernel)

@@ -12,7 +12,7 @@ Euler takes it exactly.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -73,5 +73,5 @@ class Vortex(ForceElement):
 
 
 @register(m.Vortex)
-def build(entries: list[tuple[int, m.Vortex]], ctx: BuildContext) -> list[Any]:
+def build(entries: list[tuple[int, m.Vortex]], ctx: BuildContext) -> list[ForceElement]:
     return [Vortex(np.array(f.center), np.array(f.axis), f.k) for _, f in entries]
