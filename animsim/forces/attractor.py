@@ -14,7 +14,9 @@ from animsim.system import State
 from animsim.vec import dot3
 
 
-def _kernel(x, v, t, out, mass, fp, ip):
+def _kernel(
+    x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray, mass: np.ndarray, fp: np.ndarray, ip: np.ndarray
+) -> None:
     c0, c1, c2, gm, eps2 = fp[0], fp[1], fp[2], fp[3], fp[4]
     for i in range(x.shape[0]):
         r0 = x[i, 0] - c0
@@ -28,7 +30,9 @@ def _kernel(x, v, t, out, mass, fp, ip):
             out[i, 2] += s * r2
 
 
-def _released_energy(x, x_ref, u_ref, mass, fp, ip):  # numba: ENERGY_SIGNATURE
+def _released_energy(  # numba: ENERGY_SIGNATURE
+    x: np.ndarray, x_ref: np.ndarray, u_ref: np.ndarray, mass: np.ndarray, fp: np.ndarray, ip: np.ndarray
+) -> float:
     """U(x_ref) - U(x) = sum (u_ref_i - U_i(x)), U_i = -gm m_i / sqrt(|x_i - c|^2 + eps^2) where
     that root is positive, else 0 (per_particle_potential's terms, summed in particle order)."""
     c0, c1, c2, gm, eps2 = fp[0], fp[1], fp[2], fp[3], fp[4]

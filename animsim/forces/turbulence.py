@@ -44,7 +44,9 @@ TURBULENCE_STREAM_TAG = 0x7475_7262  # "turb"
 DIMENSIONS = 3
 
 
-def _kernel(x, v, t, out, mass, fp, ip):
+def _kernel(
+    x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray, mass: np.ndarray, fp: np.ndarray, ip: np.ndarray
+) -> None:
     # fp = [modes, kt (3*M, row-major 3 x M), omega (M), phi (M), direction (M*3)]
     modes = int(fp[0])
     kt = fp[1 : 1 + 3 * modes]
