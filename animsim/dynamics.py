@@ -8,12 +8,12 @@ are the live ones of the run's state (:meth:`bind`): pool births switch them on.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from animsim.elements import DISSIPATIVE, ELASTIC, RELEASING, ForceElement
-from animsim.system import System
+from animsim.system import State, System
 
 #: rows per block when a step runs a block of rows at a time (:meth:`Dynamics.blocks`): the
 #: block's position, velocity, force and scratch rows (about 1.3 MB) stay in a core's cache
@@ -39,6 +39,14 @@ def _uniform_rows(f0: np.ndarray | None, inv3: np.ndarray) -> tuple[np.ndarray, 
     return np.tile(row, (BLOCK_ROWS, 1)), float(inv3[0, 0])
 
 
+class Driver(Protocol):
+    """Puts driven rows on their path (animsim.keyframes.KeyframeDrive, a layer above)."""
+
+    def drive(self, t: float, x: np.ndarray, v: np.ndarray) -> None:
+        """Write the driven rows' positions and velocities at time ``t`` into ``x`` and ``v``."""
+        ...
+
+
 class Dynamics:
     def __init__(self, system: System, terms: Sequence[ForceElement]):
         self.system = system
@@ -51,8 +59,10 @@ class Dynamics:
         self._pinned = np.flatnonzero(system.particle_pinned)
         #: keyframe drives (animsim.keyframes.KeyframeDrive): driven rows are put on their
         #: path before every force evaluation, so springs to them see the path inside a step
-        self.drivers: tuple[Any, ...] = ()
+        self.drivers: tuple[Driver, ...] = ()
         #: the rotational half when the scene has rigid bodies (animsim.bodies.dynamics)
+        # Any: BodyDynamics is a layer above (the model may not name it, even for types) and
+        # its callers use most of it (accelerations, energies, inertia, terms, rows, ...)
         self.bodies: Any = None
         self._has_pinned = bool(len(self._pinned))
         # Inverse masses repeated on three columns, so a = F/m is one same-shape
@@ -158,7 +168,7 @@ class Dynamics:
     def _repeat3(inv_mass: np.ndarray) -> np.ndarray:
         return np.ascontiguousarray(np.repeat(inv_mass[:, None], 3, axis=1))
 
-    def bind(self, state: Any) -> None:
+    def bind(self, state: State) -> None:
         """Use ``state``'s live masses, and hand it to every element that reads state arrays."""
         self.mass = state.particle_mass
         self.inv_mass = state.particle_inv_mass

@@ -40,12 +40,21 @@ module registered is a compile error, never a silent omission.
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, ClassVar, Literal, cast
+from typing import TYPE_CHECKING, ClassVar, Literal, TypeAlias, TypedDict, TypeVar, cast
 
 import numpy as np
+
+# types only: SciPy loads when implicit Euler asks for a Jacobian, numba when a kernel compiles
+if TYPE_CHECKING:
+    import scipy.sparse as sp
+    from numba.core.dispatcher import Dispatcher
+    from numba.core.typing.templates import Signature
+
+    from animsim.record import Clock
+    from animsim.system import State, System
 
 #: numba backend name, as the compiler passes it in the build context
 NUMBA = "numba"
@@ -67,13 +76,27 @@ UNKNOWN = "unknown"
 class BuildContext:
     """What a builder may read besides its own spec (all frozen, all compile-time)."""
 
-    system: Any  # animsim.system.System
+    system: System
     index_of: Mapping[str, int]
     seed: int
     backend: str  # "numpy" | "numba" | "reference"
     scene_dir: Path | None = None
-    clock: Any = None  # animsim.record.Clock
+    clock: Clock | None = None
     body_index_of: Mapping[str, int] | None = None
+
+
+class ClosedFormTerms(TypedDict, total=False):
+    """What a force contributes to an analytic reference (:mod:`animsim.analysis.references`);
+    the references add up each key over the scene's forces."""
+
+    #: uniform gravitational acceleration (3,), m/s^2
+    gravity: np.ndarray
+    #: linear drag coefficient, N s/m
+    drag: float
+    #: uniform push (3,), N (a wind's k w)
+    push: np.ndarray
+    #: a point attractor: (centre (3,) m, GM m^3/s^2, softening^2 m^2)
+    attractor: tuple[np.ndarray, float, float]
 
 
 class ForceElement:
@@ -86,7 +109,7 @@ class ForceElement:
     has_damping: bool = False
     #: allow-list entry for analytic references: a dict of what the element contributes
     #: (see animsim.analysis.references), or None when no closed form may include it
-    closed_form: Mapping[str, Any] | None = None
+    closed_form: ClosedFormTerms | None = None
     #: why no analytic reference may include it (when closed_form is None), for ``compare``
     no_closed_form: str | None = None
     #: the plain Python function numba compiles into this element's kernel
@@ -132,7 +155,7 @@ class ForceElement:
     def potential(self, x: np.ndarray) -> float | None:
         return None
 
-    def jacobians(self, x: np.ndarray, v: np.ndarray) -> tuple[Any, Any]:
+    def jacobians(self, x: np.ndarray, v: np.ndarray) -> tuple[sp.csr_matrix | None, sp.csr_matrix | None]:
         """(dF/dx, dF/dv) as sparse (3N, 3N) matrices, None where it contributes nothing, for
         implicit Euler; an element without them enters implicit Euler explicitly."""
         raise NotImplementedError
@@ -174,7 +197,7 @@ class ForceElement:
         """(float parameters, integer parameters) for ``numba_energy_kernel`` (the force's own)."""
         return self.numba_params()
 
-    def bind(self, state: Any) -> None:
+    def bind(self, state: State) -> None:
         """Called once per run with the live state (elements that read state arrays keep them)."""
 
 
@@ -212,7 +235,7 @@ class StepStage:
     #: the method, animsim.contact_stages.follow_weight); None for stages that have none
     follow_weight: float | None = None
 
-    def reset(self, state: Any) -> None:
+    def reset(self, state: State) -> None:
         """Called at the start of every run (and replay) with the run's state."""
 
     def explain_lines(self) -> list[str]:
@@ -227,7 +250,7 @@ class StepStage:
         """What limits its dt instead of a stiffness (``check`` prints it), or None."""
         return None
 
-    def run_summary(self) -> dict[str, Any] | None:
+    def run_summary(self) -> Mapping[str, object] | None:
         """Numbers for the run's metadata (tearing: how many springs broke, and when)."""
         return None
 
@@ -236,15 +259,16 @@ class StepStage:
         list): ``budget`` is the bytes it may reach, the memory limit less the rest of the
         pre-flight's estimate. A stage that would need more stops the run saying so."""
 
-    def snapshot(self) -> Any:
-        """What a replay restores besides the state (``replays`` stages)."""
+    def snapshot(self) -> object:
+        """What a replay restores besides the state (``replays`` stages): a token only this
+        stage reads, handed back unopened to its :meth:`restore`."""
         return None
 
-    def restore(self, snap: Any) -> None:
-        """Put back what :meth:`snapshot` returned."""
+    def restore(self, snap: object) -> None:
+        """Put back what :meth:`snapshot` returned (a stage casts the token to what it made)."""
 
     def apply(
-        self, state: Any, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, dt: float
+        self, state: State, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, dt: float
     ) -> bool:
         """After the integrator's step of ``dt`` from t0 to t1 (t1 is the clock's time, which
         may differ from t0 + dt in the last bit): change the state in place; True if changed."""
@@ -266,15 +290,23 @@ class StepStage:
         return cast(Callable[..., bool], jit_kernel(self.numba_newborn_source, newborn=True))
 
 
-Builder = Callable[[list[tuple[int, Any]], BuildContext], list[Any]]
-_BUILDERS: dict[type, Builder] = {}
+#: what a builder makes: force elements and post-step stages
+Element: TypeAlias = ForceElement | StepStage
+#: the scene model class a builder reads (a pydantic model of animsim.scene, which the
+#: element contract may not import: the builder's own module names it)
+SpecT = TypeVar("SpecT")
+#: a builder: its entries (position in the scene's list, spec) and the context -> elements
+Builder: TypeAlias = Callable[[list[tuple[int, SpecT]], BuildContext], Sequence[Element]]
+#: each builder is stored with its spec type forgotten; build_elements hands it only entries
+#: of the exact class it was registered for, which is what makes the cast in register sound
+_BUILDERS: dict[type, Builder[object]] = {}
 
 
-def register(model: type) -> Callable[[Builder], Builder]:
+def register(model: type[SpecT]) -> Callable[[Builder[SpecT]], Builder[SpecT]]:
     """Register the builder of the elements made from scene entries of class ``model``."""
 
-    def wrap(fn: Builder) -> Builder:
-        _BUILDERS[model] = fn
+    def wrap(fn: Builder[SpecT]) -> Builder[SpecT]:
+        _BUILDERS[model] = cast("Builder[object]", fn)
         return fn
 
     return wrap
@@ -306,17 +338,17 @@ def _load_element_modules() -> None:
         importlib.import_module(module)
 
 
-def build_elements(specs: Iterable[Any], ctx: BuildContext) -> list[Any]:
+def build_elements(specs: Iterable[object], ctx: BuildContext) -> list[Element]:
     """Elements for ``specs`` (scene entries), grouped by model class in first-seen order.
 
     Each builder gets its entries as (position in ``specs``, spec) pairs: the
     position tells two entries of one class apart (a seed stream, a label).
     """
     _load_element_modules()
-    groups: dict[type, list[tuple[int, Any]]] = {}
+    groups: dict[type, list[tuple[int, object]]] = {}
     for i, spec in enumerate(specs):
         groups.setdefault(type(spec), []).append((i, spec))
-    out: list[Any] = []
+    out: list[Element] = []
     for model, group in groups.items():
         builder = _BUILDERS.get(model)
         if builder is None:
@@ -327,9 +359,12 @@ def build_elements(specs: Iterable[Any], ctx: BuildContext) -> list[Any]:
 
 # --- numba kernels -----------------------------------------------------------------
 
+#: a plain Python function marked or compiled for numba, kept as the type it came in as
+FunctionT = TypeVar("FunctionT", bound=Callable[..., object])
+
 
 @functools.cache
-def kernel_signature() -> Any:
+def kernel_signature() -> Signature:
     """(x f8[:,::1], v f8[:,::1], t f8, out f8[:,::1], mass f8[::1], fp f8[::1], ip i64[::1]) -> None.
 
     ``mass`` is the live particle mass (kg, 0 for pinned rows and dead pool slots).
@@ -342,7 +377,7 @@ def kernel_signature() -> Any:
 
 
 @functools.cache
-def stage_signature() -> Any:
+def stage_signature() -> Signature:
     """(x_old, v_old, x, v, dt, inv_mass, fp, ip) -> bool: a post-step stage's numba kernel."""
     from numba import types
 
@@ -353,7 +388,7 @@ def stage_signature() -> Any:
 
 
 @functools.cache
-def newborn_signature() -> Any:
+def newborn_signature() -> Signature:
     """(x_old, v_old, x, v, rest f8[::1], fp, ip) -> bool: a stage's ``collide_subset`` as a
     numba kernel, on newborn rows (k, 3) each moved over its own ``rest`` of its birth step."""
     from numba import types
@@ -364,7 +399,7 @@ def newborn_signature() -> Any:
 
 
 @functools.cache
-def energy_signature() -> Any:
+def energy_signature() -> Signature:
     """(x f8[:,::1], x_ref f8[:,::1], u_ref f8[::1], mass f8[::1], fp f8[::1], ip i64[::1]) -> f8.
 
     An element's share of the watchdog's energy sums at positions ``x``
@@ -380,7 +415,7 @@ def energy_signature() -> Any:
     return types.float64(a2, a2, a1, a1, a1, types.int64[::1])
 
 
-def element_signature(*, stage: bool = False, energy: bool = False, newborn: bool = False) -> Any:
+def element_signature(*, stage: bool = False, energy: bool = False, newborn: bool = False) -> Signature:
     """The uniform signature of an element's kernel: a force's (the default), a stage's, an
     energy sum's or a stage's newborn kernel's."""
     if energy:
@@ -392,7 +427,7 @@ def element_signature(*, stage: bool = False, energy: bool = False, newborn: boo
     return kernel_signature()
 
 
-def numba_helper(fn: Callable[..., Any]) -> Callable[..., Any]:
+def numba_helper(fn: FunctionT) -> FunctionT:
     """Mark a module-level function a numba kernel calls; it is compiled with the kernel.
 
     Until then it stays plain Python (importing an element never imports numba).
@@ -401,7 +436,7 @@ def numba_helper(fn: Callable[..., Any]) -> Callable[..., Any]:
     return fn
 
 
-def numba_inline_helper(fn: Callable[..., Any]) -> Callable[..., Any]:
+def numba_inline_helper(fn: FunctionT) -> FunctionT:
     """:func:`numba_helper` whose body numba copies into each caller (``inline="always"``).
 
     For a rule of one row called in a loop: the compiler's own inlining leaves a long
@@ -422,27 +457,31 @@ def live_array(a: np.ndarray, cache: dict[int, np.ndarray]) -> np.ndarray:
     return got
 
 
-def compile_helpers(namespace: dict[str, Any]) -> None:
+def compile_helpers(namespace: dict[str, object]) -> None:
     import numba
 
     for name, obj in list(namespace.items()):
         # a dispatcher from an earlier call answers for its function's attributes too
-        if getattr(obj, "_numba_helper", False) and not isinstance(obj, numba.core.dispatcher.Dispatcher):
+        if (
+            callable(obj)
+            and getattr(obj, "_numba_helper", False)
+            and not isinstance(obj, numba.core.dispatcher.Dispatcher)
+        ):
             inline: Literal["always", "never"] = "always" if getattr(obj, "_numba_inline", False) else "never"
             namespace[name] = numba.njit(cache=True, inline=inline)(obj)
 
 
-_JITTED: dict[tuple[Callable[..., Any], bool, bool, bool, bool], Any] = {}
+_JITTED: dict[tuple[Callable[..., object], bool, bool, bool, bool], Dispatcher[Callable[..., object]]] = {}
 
 
 def jit_kernel(
-    fn: Callable[..., Any],
+    fn: Callable[..., object],
     *,
     parallel: bool = False,
     stage: bool = False,
     energy: bool = False,
     newborn: bool = False,
-) -> Any:
+) -> Dispatcher[Callable[..., object]]:
     """``fn`` compiled by numba with the uniform element signature (imported lazily, cached on
     disk): a force kernel's, a stage's (``stage``), an energy kernel's (``energy``) or a
     stage's newborn kernel's (``newborn``)."""

@@ -28,6 +28,7 @@ import numpy as np
 
 from animsim.elements import StepStage
 from animsim.paths import Paths, evaluate_numpy
+from animsim.system import State
 
 LINEAR = 0
 SMOOTH = 1
@@ -148,11 +149,17 @@ class KeyframeDrive(StepStage):
         x[self.rows] = self.base + pos[self.which]
         v[self.rows] = vel[self.which]
 
-    def reset(self, state) -> None:
+    def reset(self, state: State) -> None:
         self.drive(state.time, state.particle_position, state.particle_velocity)
 
     def apply(
-        self, state, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, dt: float | None = None
+        self,
+        state: State,
+        x_old: np.ndarray,
+        v_old: np.ndarray,
+        t0: float,
+        t1: float,
+        dt: float | None = None,
     ) -> bool:
         self.drive(t1, state.particle_position, state.particle_velocity)
         return True

@@ -12,9 +12,51 @@ masses of emitter pool slots, which births and deaths switch on and off.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Protocol
 
 import numpy as np
+
+
+class RigidShape(Protocol):
+    """What every rigid body's shape answers, in its body frame about its centre of mass.
+
+    The shapes themselves (Box, Sphere, Capsule) are the plain frozen dataclasses of
+    animsim.bodies.shapes, a layer above this one, which the model does not import (not even
+    for types, the layer contract counts those too): code that needs one kind narrows
+    with ``isinstance`` against those classes.
+    """
+
+    @property
+    def kind(self) -> str:
+        """Its name: ``box``, ``sphere`` or ``capsule``."""
+        ...
+
+    @property
+    def volume(self) -> float:
+        """m^3."""
+        ...
+
+    @property
+    def bounding_radius(self) -> float:
+        """Of the smallest sphere about the centre of mass that holds the shape, m."""
+        ...
+
+    @property
+    def thickness(self) -> float:
+        """Its thinnest extent, m: what another body must cross to pass through it."""
+        ...
+
+    def inertia(self, mass: float) -> tuple[float, float, float]:
+        """Principal moments along the body axes, kg m^2, for a uniform solid of ``mass``."""
+        ...
+
+    def contact_spheres(self) -> tuple[np.ndarray, np.ndarray]:
+        """(K, 3) centres in the body frame and (K,) radii of the spheres contacts see."""
+        ...
+
+    def describe(self) -> str:
+        """One line for ``explain`` (its kind and sizes)."""
+        ...
 
 
 @dataclass
@@ -51,7 +93,7 @@ class System:
     body_inertia: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     body_inv_inertia: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     #: one plain frozen shape per body (animsim.bodies.shapes)
-    body_shape: tuple[Any, ...] = ()
+    body_shape: tuple[RigidShape, ...] = ()
 
     @property
     def body_rows(self) -> slice:

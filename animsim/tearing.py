@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from animsim.elements import StepStage
+from animsim.system import State
 
 if TYPE_CHECKING:  # types only
     from animsim.forces.springs import Springs
@@ -118,7 +119,7 @@ class Tearing(StepStage):
     def stability_note(self, dt: float) -> str:
         return "tearing: the bound above counts every spring; torn springs only lower it"
 
-    def reset(self, state) -> None:
+    def reset(self, state: State) -> None:
         """At a run's start (or a replay's): the springs broken in ``state`` are the broken ones."""
         self.broken = 0 if state.spring_intact is None else int((~state.spring_intact).sum())
         self.first_break = None
@@ -126,7 +127,13 @@ class Tearing(StepStage):
             self.springs.set_intact(state.spring_intact)
 
     def apply(
-        self, state, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, dt: float | None = None
+        self,
+        state: State,
+        x_old: np.ndarray,
+        v_old: np.ndarray,
+        t0: float,
+        t1: float,
+        dt: float | None = None,
     ) -> bool:
         intact = state.spring_intact
         if intact is None:

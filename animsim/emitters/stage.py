@@ -9,7 +9,7 @@ per emitter of a scene.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -131,8 +131,9 @@ class Emitters(StepStage):
         """
         return [p.snapshot() for p in self.pools]
 
-    def restore(self, snap: list[tuple[Any, ...]]) -> None:
-        for p, s in zip(self.pools, snap, strict=True):
+    def restore(self, snap: object) -> None:
+        # the token is what snapshot made (StepStage.restore takes any stage's, unopened)
+        for p, s in zip(self.pools, cast("list[tuple[Any, ...]]", snap), strict=True):
             p.restore(s)
 
     def attach(self, dynamics: Any, colliders: list[Any]) -> None:

@@ -6,16 +6,17 @@ which stays finite at the centre; eps = 0 is the exact inverse-square law.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
 from animsim.elements import RELEASING, BuildContext, ForceElement, register
 from animsim.scene import models as m
+from animsim.system import State
 from animsim.vec import dot3
 
 
-def _kernel(x, v, t, out, mass, fp, ip):
+def _kernel(
+    x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray, mass: np.ndarray, fp: np.ndarray, ip: np.ndarray
+) -> None:
     c0, c1, c2, gm, eps2 = fp[0], fp[1], fp[2], fp[3], fp[4]
     for i in range(x.shape[0]):
         r0 = x[i, 0] - c0
@@ -29,7 +30,9 @@ def _kernel(x, v, t, out, mass, fp, ip):
             out[i, 2] += s * r2
 
 
-def _released_energy(x, x_ref, u_ref, mass, fp, ip):  # numba: ENERGY_SIGNATURE
+def _released_energy(  # numba: ENERGY_SIGNATURE
+    x: np.ndarray, x_ref: np.ndarray, u_ref: np.ndarray, mass: np.ndarray, fp: np.ndarray, ip: np.ndarray
+) -> float:
     """U(x_ref) - U(x) = sum (u_ref_i - U_i(x)), U_i = -gm m_i / sqrt(|x_i - c|^2 + eps^2) where
     that root is positive, else 0 (per_particle_potential's terms, summed in particle order)."""
     c0, c1, c2, gm, eps2 = fp[0], fp[1], fp[2], fp[3], fp[4]
@@ -58,7 +61,7 @@ class Attractor(ForceElement):
         self.label = f"attractor at {self.center.tolist()} gm = {self.gm} m^3/s^2"
         self.closed_form = {"attractor": (self.center, self.gm, self.eps2)}
 
-    def bind(self, state: Any) -> None:
+    def bind(self, state: State) -> None:
         self.mass = state.particle_mass
 
     def accumulate(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None:

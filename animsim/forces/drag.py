@@ -19,7 +19,9 @@ if TYPE_CHECKING:  # SciPy loads only when implicit Euler asks for a Jacobian
     import scipy.sparse as sp
 
 
-def _drag_kernel(x, v, t, out, mass, fp, ip):
+def _drag_kernel(
+    x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray, mass: np.ndarray, fp: np.ndarray, ip: np.ndarray
+) -> None:
     k = fp[0]
     for i in range(x.shape[0]):
         out[i, 0] -= k * v[i, 0]
@@ -27,7 +29,9 @@ def _drag_kernel(x, v, t, out, mass, fp, ip):
         out[i, 2] -= k * v[i, 2]
 
 
-def _quadratic_kernel(x, v, t, out, mass, fp, ip):
+def _quadratic_kernel(
+    x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray, mass: np.ndarray, fp: np.ndarray, ip: np.ndarray
+) -> None:
     c = fp[0]
     for i in range(x.shape[0]):
         s = c * np.sqrt(v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1] + v[i, 2] * v[i, 2])

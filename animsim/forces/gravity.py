@@ -8,10 +8,13 @@ import numpy as np
 
 from animsim.elements import RELEASING, BuildContext, ForceElement, live_array, register
 from animsim.scene import models as m
+from animsim.system import State
 from animsim.vec import dot3
 
 
-def _kernel(x, v, t, out, mass, fp, ip):  # numba: KERNEL_SIGNATURE
+def _kernel(  # numba: KERNEL_SIGNATURE
+    x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray, mass: np.ndarray, fp: np.ndarray, ip: np.ndarray
+) -> None:
     # Axis by axis, zero components skipped, as accumulate does: adding 0.0 * m to a row
     # would turn an -0.0 left by an earlier force into +0.0, and a ground scene's one
     # nonzero axis is one load, multiply-add and store a row where all three were three
@@ -23,7 +26,9 @@ def _kernel(x, v, t, out, mass, fp, ip):  # numba: KERNEL_SIGNATURE
                 out[i, k] += gk * mass[i]
 
 
-def _released_terms(x, x_ref, g, mass, out):  # numba: compiled by Gravity.released_numba
+def _released_terms(  # numba: compiled by Gravity.released_numba
+    x: np.ndarray, x_ref: np.ndarray, g: np.ndarray, mass: np.ndarray, out: np.ndarray
+) -> None:
     """out_i = m_i g.(x_i - x_ref_i) with dot3's operations in dot3's order,
     ((d0 g0) + (d1 g1)) + d2 g2: the array Gravity.released sums, in one pass."""
     g0, g1, g2 = g[0], g[1], g[2]
@@ -34,7 +39,9 @@ def _released_terms(x, x_ref, g, mass, out):  # numba: compiled by Gravity.relea
         out[i] = mass[i] * r
 
 
-def _released_energy(x, x_ref, u_ref, mass, fp, ip):  # numba: ENERGY_SIGNATURE
+def _released_energy(  # numba: ENERGY_SIGNATURE
+    x: np.ndarray, x_ref: np.ndarray, u_ref: np.ndarray, mass: np.ndarray, fp: np.ndarray, ip: np.ndarray
+) -> float:
     """U(x_ref) - U(x) = sum m_i g.(x_i - x_ref_i), each term as _released_terms makes it,
     summed in particle order (the watchdog's checks inside the fused chunks)."""
     g0, g1, g2 = fp[0], fp[1], fp[2]
@@ -70,7 +77,7 @@ class Gravity(ForceElement):
         self.closed_form = {"gravity": self.g}
         self._copies: dict[int, np.ndarray] = {}  # see live_array
 
-    def bind(self, state: Any) -> None:
+    def bind(self, state: State) -> None:
         self.mass = state.particle_mass
 
     def accumulate(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None:

@@ -23,7 +23,9 @@ if TYPE_CHECKING:  # SciPy loads only when implicit Euler asks for a Jacobian
     import scipy.sparse as sp
 
 
-def _kernel(x, v, t, out, mass, fp, ip):
+def _kernel(
+    x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray, mass: np.ndarray, fp: np.ndarray, ip: np.ndarray
+) -> None:
     p0, p1, p2, n0, n1, n2, k, c = fp[0], fp[1], fp[2], fp[3], fp[4], fp[5], fp[6], fp[7]
     for i in range(x.shape[0]):
         d = (x[i, 0] - p0) * n0 + (x[i, 1] - p1) * n1 + (x[i, 2] - p2) * n2
@@ -38,9 +40,12 @@ def _kernel(x, v, t, out, mass, fp, ip):
             out[i, 2] += push * n2
 
 
-def _energy(x, x_ref, u_ref, mass, fp, ip):  # numba: ENERGY_SIGNATURE
+def _energy(  # numba: ENERGY_SIGNATURE
+    x: np.ndarray, x_ref: np.ndarray, u_ref: np.ndarray, mass: np.ndarray, fp: np.ndarray, ip: np.ndarray
+) -> float:
     """The potential 1/2 k sum min(d_i, 0)^2, d_i = (x_i - p).n (PenaltyPlane.potential)."""
-    p0, p1, p2, n0, n1, n2, k = fp[0], fp[1], fp[2], fp[3], fp[4], fp[5], fp[6]
+    p0, p1, p2, n0, n1, n2 = fp[0], fp[1], fp[2], fp[3], fp[4], fp[5]
+    k: float = fp[6]
     total = 0.0
     for i in range(x.shape[0]):
         d = (x[i, 0] - p0) * n0 + (x[i, 1] - p1) * n1 + (x[i, 2] - p2) * n2

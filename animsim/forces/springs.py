@@ -14,11 +14,11 @@ end indices; ``out[idx] += f`` would apply a repeated index only once.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from animsim.elements import ELASTIC, ForceElement
+from animsim.elements import ELASTIC, ClosedFormTerms, ForceElement
 from animsim.vec import dot3, take_rows
 
 if TYPE_CHECKING:  # SciPy loads only when implicit Euler asks for a Jacobian
@@ -151,7 +151,7 @@ class Springs(ForceElement):
     watch_role = ELASTIC
     energy_part = "spring"
     #: springs take part in closed forms through the system's spring arrays (no uniform part)
-    closed_form: dict[str, Any] = {}  # noqa: RUF012 - read-only allow-list entry
+    closed_form: ClosedFormTerms | None = {}  # noqa: RUF012 - read-only allow-list entry
 
     def stiffness_rows(self, inv_mass: np.ndarray, k_rows: np.ndarray, c_rows: np.ndarray) -> None:
         """Gershgorin rows of M^-1/2 K M^-1/2: spring k adds k (1/m_a + 1/sqrt(m_a m_b)) on row a."""

@@ -28,12 +28,11 @@ pushed harder than a heavy one.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
 from animsim.elements import UNKNOWN, ForceElement
 from animsim.scene import models as m
+from animsim.system import State
 
 #: Number of Fourier modes. More modes make the field's one-point statistics
 #: closer to Gaussian; the cost per evaluation is O(particles * modes).
@@ -45,7 +44,9 @@ TURBULENCE_STREAM_TAG = 0x7475_7262  # "turb"
 DIMENSIONS = 3
 
 
-def _kernel(x, v, t, out, mass, fp, ip):
+def _kernel(
+    x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray, mass: np.ndarray, fp: np.ndarray, ip: np.ndarray
+) -> None:
     # fp = [modes, kt (3*M, row-major 3 x M), omega (M), phi (M), direction (M*3)]
     modes = int(fp[0])
     kt = fp[1 : 1 + 3 * modes]
@@ -146,7 +147,7 @@ class Turbulence(ForceElement):
     watch_role = UNKNOWN
     no_closed_form = "turbulent wind is a random force field"
 
-    def bind(self, state: Any) -> None:
+    def bind(self, state: State) -> None:
         self.mass = state.particle_mass
 
     numba_source = staticmethod(_kernel)

@@ -12,7 +12,7 @@ Euler takes it exactly.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -24,7 +24,9 @@ if TYPE_CHECKING:  # SciPy loads only when implicit Euler asks for a Jacobian
     import scipy.sparse as sp
 
 
-def _kernel(x, v, t, out, mass, fp, ip):
+def _kernel(
+    x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray, mass: np.ndarray, fp: np.ndarray, ip: np.ndarray
+) -> None:
     c0, c1, c2, a0, a1, a2, k = fp[0], fp[1], fp[2], fp[3], fp[4], fp[5], fp[6]
     for i in range(x.shape[0]):
         r0 = x[i, 0] - c0
@@ -73,5 +75,5 @@ class Vortex(ForceElement):
 
 
 @register(m.Vortex)
-def build(entries: list[tuple[int, m.Vortex]], ctx: BuildContext) -> list[Any]:
+def build(entries: list[tuple[int, m.Vortex]], ctx: BuildContext) -> list[ForceElement]:
     return [Vortex(np.array(f.center), np.array(f.axis), f.k) for _, f in entries]

@@ -21,7 +21,9 @@ if TYPE_CHECKING:  # SciPy loads only when implicit Euler asks for a Jacobian
     import scipy.sparse as sp
 
 
-def _kernel(x, v, t, out, mass, fp, ip):
+def _kernel(
+    x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray, mass: np.ndarray, fp: np.ndarray, ip: np.ndarray
+) -> None:
     k, w0, w1, w2 = fp[0], fp[1], fp[2], fp[3]
     for i in range(x.shape[0]):
         out[i, 0] += k * (w0 - v[i, 0])

@@ -15,11 +15,14 @@ change the state behind the integrator's back.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 from animsim import methods
 from animsim.dynamics import Dynamics
 from animsim.system import State
+
+if TYPE_CHECKING:  # types only: the stages are handed in, never built here
+    from animsim.elements import StepStage
 
 #: method families of the numba backend's fused kernel (animsim.backends.fused_kernels)
 FUSED_SYMPLECTIC_EULER = 0
@@ -40,7 +43,7 @@ class Integrator(ABC):
     evaluations_per_step: ClassVar[int]
     description: str
 
-    def __init_subclass__(cls, **kwargs: Any) -> None:
+    def __init_subclass__(cls, **kwargs: object) -> None:
         super().__init_subclass__(**kwargs)
         name = cls.__dict__.get("method_name")
         if name is not None:
@@ -58,7 +61,9 @@ class Integrator(ABC):
     #: what limits the step of a method without a stiffness limit (said by ``check``), or None
     stability_note: ClassVar[str | None] = None
 
-    def configure(self, substeps: int | None, post_step: list[Any], backend: str = "numpy") -> list[Any]:
+    def configure(
+        self, substeps: int | None, post_step: list[StepStage], backend: str = "numpy"
+    ) -> list[StepStage]:
         """Take the run's options and the post-step stages at compile time; return the stages
         that still run after each step (a method that makes some of them constraints of its
         own, as xpbd does with the planes, keeps the rest). Most methods keep them all."""
@@ -91,6 +96,6 @@ class Integrator(ABC):
     def reset(self) -> None:  # noqa: B027 - optional hook, most methods cache nothing
         """Forget anything cached between steps."""
 
-    def numba_chunk_kind(self) -> tuple[int, Any] | None:
+    def numba_chunk_kind(self) -> tuple[int, methods.Tableau | None] | None:
         """(fused family, tableau or None) when the numba backend can fuse this method's steps."""
         return None
