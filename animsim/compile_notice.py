@@ -37,7 +37,7 @@ FAMILIES = {
     # they were measured in when they lived in fused.py
     "animsim.backends.kernel_calls": "fused stepper",
     "animsim.emitters.kernels": "emitters",
-    "animsim.particle_contacts": "particle contacts",
+    "animsim.particle_contacts.kernels": "particle contacts",
     # the rigid-body contact kernels, measured (compile_estimates) when they lived in contacts.py
     "animsim.bodies.contact_kernels": "contacts",
     # the plane kernels and the response rules they share, measured when they lived in collisions.py

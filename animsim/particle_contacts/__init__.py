@@ -1,0 +1,90 @@
+"""Contacts between particles: every particle a sphere that others cannot enter.
+
+After each step (and after the colliders), pairs of particles closer than the
+sum of their radii are found and resolved:
+
+* **Neighbours** never by all pairs, and not searched afresh every step: a
+  Verlet list (Verlet, Phys. Rev. 159, 98, 1967; Allen and Tildesley,
+  "Computer Simulation of Liquids", section 5.2) keeps the *candidate* pairs
+  closer than ``2 * max radius + skin``, found by ``scipy.spatial.cKDTree``
+  (NumPy) or a uniform grid of cells that wide, sorted by cell with a counting
+  sort (numba; a spatial hash when the particles' box would need too many
+  cells, Teschner et al., "Optimized Spatial Hashing for Collision Detection
+  of Deformable Objects", VMV 2003). The list stays valid while no two
+  particles have closed by more than the skin, which the step checks from how
+  far the particles moved since it was built (the spread of their
+  displacements, so a pile falling as one never rebuilds it). Each step keeps
+  the candidates that overlap, by the same test on both backends, in (i, j)
+  order: the pairs are the same whenever the list was built.
+* **Impacts**: pairs whose bounce would be faster than twice what the step's
+  forces added to a sphere touching either one (slower is resting contact)
+  bounce by
+  Newton's law of restitution, ``J = -(1 + e) v_n / (1/m_i + 1/m_j)`` along the
+  line of centres (the textbook two-body impact, e.g. Goldstein, "Classical
+  Mechanics", section 3.11), one pair at a time in pair order, sweep after sweep
+  until nothing approaches that fast (:func:`bounce_sweeps`; the collision pass
+  of Guendelman, Bridson and Fedkiw, SIGGRAPH 2003). Sequential impacts pass a
+  blow on through touching spheres as a Newton's cradle does, and keep the energy
+  at e = 1; a simultaneous solution would share it out and lose energy.
+* **Velocities**: then no pair may still approach: normal impulses solved by a
+  few Jacobi iterations with accumulated, clamped impulses (Catto, "Iterative
+  Dynamics with Temporal Coherence", GDC 2005). Each pair's correction is
+  scaled by ``RELAX`` over the larger contact count (at most 1) of its two
+  particles (averaged, over-relaxed Jacobi as in Macklin et al., "Unified
+  Particle Physics for Real-Time Applications", SIGGRAPH 2014), which keeps
+  piles from over-correcting and keeps every exchange equal and opposite:
+  momentum is conserved exactly. Coulomb friction then takes at most
+  ``friction * J`` off the pair's sliding velocity (J: the pair's impact and
+  resting impulses together), also equal and opposite, in one pass averaged
+  over the contact count but not over-relaxed (an over-relaxed stop overshoots
+  and sets a pile jittering).
+* **Positions**: the overlap is removed along the line of centres, each
+  particle moving in proportion to its inverse mass, so the pair's centre of
+  mass does not move (a few Jacobi passes, averaged as above).
+
+A pass that changes nothing (every correction exactly zero, as for grains
+that touch and fall together) ends its iterations: the passes after it would
+change nothing either.
+
+Both backends do the same operations in the same order: every particle's
+corrections are summed from 0.0 in pair order (the numba kernel scatters pair
+by pair, NumPy adds with ``np.add.at``, which is unbuffered and in index
+order), so the backends agree to the bit (granular flow is chaotic: any
+last-bit difference would grow).
+
+Pinned particles act as infinitely heavy; dead emitter slots and rigid-body
+rows take no part. Two particles joined by a spring whose rest length is
+shorter than the sum of their radii would touch at rest: their contact is
+left out (the spring keeps them apart), or a cloth with a radius would push
+its own neighbours apart and explode. So cloth with a radius does not pass
+through itself where its particles meet in a fold (vertex against vertex);
+a thin fold can still slip between vertices, since triangles do not collide.
+Contacts are found at the end of each step: two particles fast enough to pass
+through each other within one step are not caught.
+"""
+
+from __future__ import annotations
+
+from animsim.particle_contacts.constants import CONTACT_PAIR_BYTES, ITERATIONS, SKIN
+from animsim.particle_contacts.kernels import numba_kernels
+from animsim.particle_contacts.neighbours import (
+    candidates_numpy,
+    count_pairs_numpy,
+    find_pairs_numpy,
+    spring_exclusions,
+)
+from animsim.particle_contacts.resolve import resolve_pairs_numpy
+from animsim.particle_contacts.stage import ParticleContacts
+
+__all__ = [
+    "CONTACT_PAIR_BYTES",
+    "ITERATIONS",
+    "SKIN",
+    "ParticleContacts",
+    "candidates_numpy",
+    "count_pairs_numpy",
+    "find_pairs_numpy",
+    "numba_kernels",
+    "resolve_pairs_numpy",
+    "spring_exclusions",
+]

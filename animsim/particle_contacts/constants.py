@@ -1,0 +1,26 @@
+"""The constants of particle contacts: passes, the resting rule, the impact pass, the Verlet list's skin
+and what a candidate pair costs in memory (see :mod:`animsim.particle_contacts`)."""
+
+from __future__ import annotations
+
+ITERATIONS = 6
+RESTING_STEPS = 2.0
+#: over-relaxation of the averaged Jacobi passes (1: plain averaging)
+RELAX = 1.5
+#: at most this many sweeps of the impact pass: a blow crosses one pair of touching spheres per
+#: sweep, so a row of up to 33 touching balls passes it on whole
+BOUNCE_SWEEPS = 32
+#: an approach slower than this (m/s) is never an impact: grains falling together close at
+#: rounding speeds (1e-17 m/s) that would bounce back and forth to the sweep limit
+BOUNCE_FLOOR = 1e-6
+#: the Verlet list's skin, as a fraction of the largest contact distance ``2 * max radius``
+SKIN = 0.3
+# One candidate pair of the contact list: its (i, j) index pair as built (16), the k-d
+# tree's or the grid's output before sorting (16), and the per-step arrays of a pair that
+# overlaps (gathered differences and normals, distances, normal speeds, impulses and the
+# Jacobi work arrays: about 20 float64), so a list where everything touches costs this much
+# (the pre-flight counts the list at the start with it; bound_memory bounds it later).
+CONTACT_PAIR_BYTES = 16 + 16 + 20 * 8
+#: the list is rebuilt once two particles may have closed by this fraction of the skin
+#: (the rest is margin for rounding in the distances)
+SKIN_USE = 0.9

@@ -1,0 +1,245 @@
+"""The NumPy contact passes of one step: impacts (:func:`bounce_sweeps_numpy`), then the Jacobi
+velocity, friction and position passes (:func:`resolve_pairs_numpy`), in the numba kernel's order."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from animsim.particle_contacts.constants import BOUNCE_FLOOR, BOUNCE_SWEEPS, ITERATIONS, RELAX, RESTING_STEPS
+from animsim.particle_contacts.kernels import bounce_pair
+
+
+class Buffers:
+    """Arrays kept between steps, so a step of 100,000 grains allocates (and page-faults) nothing big."""
+
+    def __init__(self) -> None:
+        self._store: dict[str, np.ndarray] = {}
+
+    def get(self, name: str, shape: tuple[int, ...], dtype: type = np.float64) -> np.ndarray:
+        size = int(np.prod(shape))
+        buf = self._store.get(name)
+        if buf is None or buf.size < size or buf.dtype != dtype:
+            buf = np.empty(max(16, size + size // 4), dtype=dtype)
+            self._store[name] = buf
+        return buf[:size].reshape(shape)
+
+
+def dot3_into(a: np.ndarray, b: np.ndarray, out: np.ndarray, tmp: np.ndarray) -> np.ndarray:
+    """:func:`animsim.vec.dot3` into ``out`` ((a0 b0 + a1 b1) + a2 b2, the same bits)."""
+    np.multiply(a[:, 0], b[:, 0], out=out)
+    np.multiply(a[:, 1], b[:, 1], out=tmp)
+    out += tmp
+    np.multiply(a[:, 2], b[:, 2], out=tmp)
+    out += tmp
+    return out
+
+
+def gather_diff(a: np.ndarray, i: np.ndarray, j: np.ndarray, out: np.ndarray, tmp: np.ndarray) -> np.ndarray:
+    """``a[j] - a[i]`` into ``out``."""
+    np.take(a, j, axis=0, out=out, mode="clip")  # "raise" would buffer the output
+    np.take(a, i, axis=0, out=tmp, mode="clip")
+    out -= tmp
+    return out
+
+
+def bounce_sweeps_numpy(
+    i: np.ndarray,
+    j: np.ndarray,
+    n: np.ndarray,
+    w: np.ndarray,
+    limit: np.ndarray,
+    e: float,
+    v: np.ndarray,
+    inv_mass: np.ndarray,
+    sweeps: int = BOUNCE_SWEEPS,
+) -> np.ndarray:
+    """:func:`bounce_sweeps` for NumPy (``n``: (P, 3) unit normals); returns jb.
+
+    The marking is vectorised, in :func:`approaching`'s order of operations (the same bits);
+    the marked pairs are struck by the same :func:`bounce_pair`, in pair order.
+    """
+    p = i.size
+    jb = np.zeros(p)
+    n0, n1, n2 = n[:, 0], n[:, 1], n[:, 2]
+    for _ in range(sweeps):
+        dv = v[j] - v[i]
+        vn = dv[:, 0] * n0 + dv[:, 1] * n1
+        vn += dv[:, 2] * n2
+        due = np.flatnonzero(-vn > limit)
+        if due.size == 0:
+            break
+        for k in due.tolist():
+            jb[k] += bounce_pair(
+                int(i[k]),
+                int(j[k]),
+                float(n0[k]),
+                float(n1[k]),
+                float(n2[k]),
+                float(w[k]),
+                float(limit[k]),
+                e,
+                v,
+                inv_mass,
+            )
+    return jb
+
+
+def resolve_pairs_numpy(
+    i: np.ndarray,
+    j: np.ndarray,
+    x: np.ndarray,
+    v: np.ndarray,
+    x_old: np.ndarray,
+    v_old: np.ndarray,
+    inv_mass: np.ndarray,
+    radius: np.ndarray,
+    restitution: float,
+    friction: float,
+    dt: float,
+    iterations: int = ITERATIONS,
+    buffers: Buffers | None = None,
+) -> bool:
+    """Impulses and overlap removal for the pairs (i, j) (sorted by (i, j)), in place (NumPy kernel).
+
+    Every operation is the numba kernel's, in its order and association
+    (``(a - b) / w * r`` is not ``(a - b) * (r / w)`` in floating point), and
+    pair quantities reach the particles in pair order (one ``np.bincount`` over
+    interleaved bins ``[3 i0 + (0, 1, 2), 3 j0 + (0, 1, 2), 3 i1 + ...]``, which
+    adds its weights bin by bin in array order from 0.0, as the numba kernel's
+    per-particle sums do), so both backends give the same bits.
+    """
+    ok = inv_mass[i] + inv_mass[j] > 0
+    if not ok.all():
+        i, j = i[ok], j[ok]
+    p = i.size
+    if p == 0:
+        return False
+    buf = Buffers() if buffers is None else buffers
+    n_rows = len(x)
+    w = inv_mass[i] + inv_mass[j]
+    count = np.bincount(i, minlength=n_rows) + np.bincount(j, minlength=n_rows)
+    relax = np.minimum(RELAX / np.maximum(count[i], count[j]), 1.0)
+    # One coordinate at a time (rows of (3, P) arrays): NumPy's gathers and products run on
+    # contiguous memory. The sums per particle are np.add.at over interleaved bins
+    # [i0, j0, i1, j1, ...] with weights [-q0, +q0, -q1, ...]: add.at adds in index order,
+    # unbuffered, from 0.0, as the numba kernel's loops do (and np.bincount, slower here).
+    bins = buf.get("bins", (p, 2), np.int64)
+    bins[:, 0] = i
+    bins[:, 1] = j
+    bins_flat = bins.reshape(-1)
+    weights = buf.get("weights", (3, p, 2))
+    q = buf.get("q", (3, p))  # what each pair adds to j (and takes from i), per coordinate
+    acc = buf.get("acc", (3, n_rows))
+    state_t = buf.get("state_t", (3, n_rows))
+    d = buf.get("d", (3, p))
+    t1 = buf.get("t1", (p,))
+    t2 = buf.get("t2", (p,))
+
+    def scatter_add(target: np.ndarray) -> None:
+        """target += (sum in pair order of -q on i, +q on j) * inverse mass, for all rows."""
+        for a in range(3):
+            weights[a, :, 1] = q[a]
+            np.negative(q[a], out=weights[a, :, 0])
+            acc[a].fill(0.0)
+            np.add.at(acc[a], bins_flat, weights[a].reshape(-1))
+        np.multiply(acc, inv_mass, out=acc)
+        target += acc.T
+
+    def gather_diff(source: np.ndarray) -> np.ndarray:
+        """source[j] - source[i] as (3, P)."""
+        np.copyto(state_t, source.T)
+        for a in range(3):
+            # mode "clip": with "raise" (the default) take buffers its output; the rows are valid
+            np.take(state_t[a], j, out=d[a], mode="clip")
+            np.take(state_t[a], i, out=t1, mode="clip")
+            d[a] -= t1
+        return d
+
+    def dot(u: np.ndarray, v3: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """(u0 v0 + u1 v1) + u2 v2: :func:`animsim.vec.dot3`'s order, the same bits."""
+        np.multiply(u[0], v3[0], out=out)
+        np.multiply(u[1], v3[1], out=t2)
+        out += t2
+        np.multiply(u[2], v3[2], out=t2)
+        out += t2
+        return out
+
+    # unit normals from i to j (a zero distance points up, as in the numba kernel)
+    n = buf.get("n", (3, p))
+    gather_diff(x)
+    dist = np.sqrt(dot(d, d, np.empty(p)))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        np.divide(d, dist, out=n)
+    pos = dist > 0
+    if not pos.all():
+        n[0, ~pos], n[1, ~pos], n[2, ~pos] = 0.0, 1.0, 0.0
+    # impacts first, sequentially (bounce_sweeps), when anything bounces at all
+    jb = None
+    if restitution > 0:
+        # resting: slower than twice what the step's forces added to a sphere touching either
+        # one (in a pile every grain gains g dt, though two grains falling together close at
+        # none and one on the floor is held at rest) ...
+        dv = v - v_old
+        added = np.sqrt((dv[:, 0] * dv[:, 0] + dv[:, 1] * dv[:, 1]) + dv[:, 2] * dv[:, 2])
+        pair_added = np.maximum(added[i], added[j])
+        near = np.zeros(n_rows)
+        np.maximum.at(near, i, pair_added)
+        np.maximum.at(near, j, pair_added)
+        # ... and an impact only where the bounce, e times the approach, would be faster than that
+        limit = (RESTING_STEPS * np.maximum(near[i], near[j]) + BOUNCE_FLOOR) / restitution
+        jb = bounce_sweeps_numpy(i, j, np.ascontiguousarray(n.T), w, limit, restitution, v, inv_mass)
+    # then the Jacobi passes: no pair left approaching (the target speed is 0)
+    lam = np.zeros(p)
+    new = np.empty(p)
+    vn = np.empty(p)
+    dl = np.empty(p)
+    for _ in range(iterations):
+        dot(gather_diff(v), n, vn)
+        np.subtract(0.0, vn, out=dl)
+        dl /= w
+        dl *= relax
+        np.add(lam, dl, out=new)
+        np.maximum(new, 0.0, out=new)
+        np.subtract(new, lam, out=dl)
+        lam, new = new, lam
+        if not dl.any():  # nothing changed: neither would any later pass
+            break
+        np.multiply(n, dl, out=q)
+        scatter_add(v)  # +J n on j, -J n on i: momentum kept
+    if friction > 0:
+        # one pass, so averaged but not over-relaxed: a grain's contacts stop at most its sliding
+        share = np.minimum(1.0 / np.maximum(count[i], count[j]), 1.0)
+        dvel = gather_diff(v)
+        dot(dvel, n, vn)
+        vt = dvel - vn * n
+        speed = np.sqrt(dot(vt, vt, np.empty(p)))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            # Coulomb's bound on the whole normal impulse: the impact's and the resting one
+            jt = np.minimum(speed / w * share, friction * (lam if jb is None else lam + jb)) / speed
+        # pairs at no sliding speed add nothing (a 0.0 weight leaves every sum's bits alone);
+        # the numba kernel adds +jt vt on i and -jt vt on j: the scatter of -(jt vt)
+        jt = np.where(speed > 0, jt, 0.0)
+        np.negative(jt * vt, out=q)
+        scatter_add(v)
+    reach = radius[i] + radius[j]
+    over = np.empty(p)
+    c = np.empty(p)
+    for _ in range(iterations):
+        gather_diff(x)
+        np.sqrt(dot(d, d, dist), out=dist)
+        np.subtract(reach, dist, out=over)
+        # the numba kernel skips a pair with over <= 0 (so a NaN one is not skipped); a skipped
+        # pair's weight 0.0 leaves every sum's bits alone
+        with np.errstate(divide="ignore", invalid="ignore"):
+            np.divide(over, w, out=c)
+            c *= relax
+            c[over <= 0] = 0.0
+            if not c.any():  # no overlap left to remove
+                break
+            np.divide(d, dist, out=d)
+        pos = dist > 0
+        if not pos.all():
+            d[0, ~pos], d[1, ~pos], d[2, ~pos] = 0.0, 1.0, 0.0
+        np.multiply(d, c, out=q)
+        scatter_add(x)  # the pair's centre of mass stays
+    return True

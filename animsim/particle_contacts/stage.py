@@ -1,0 +1,256 @@
+"""Particle contacts as a step stage: the Verlet list kept, rebuilt when stale, and each step's
+passes on NumPy (:mod:`animsim.particle_contacts.resolve`) or numba (:mod:`animsim.particle_contacts.kernels`)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from animsim.console import format_bytes
+from animsim.elements import StepStage
+from animsim.errors import SimulationError
+from animsim.particle_contacts.constants import (
+    BOUNCE_FLOOR,
+    BOUNCE_SWEEPS,
+    CONTACT_PAIR_BYTES,
+    ITERATIONS,
+    RELAX,
+    RESTING_STEPS,
+    SKIN,
+    SKIN_USE,
+)
+from animsim.particle_contacts.kernels import numba_kernels
+from animsim.particle_contacts.neighbours import EMPTY, candidates_numpy, count_pairs_numpy
+from animsim.particle_contacts.resolve import Buffers, dot3_into, gather_diff, resolve_pairs_numpy
+from animsim.vec import dot3
+
+
+class ParticleContacts(StepStage):
+    """Particle-particle contacts as a step stage.
+
+    radius: (N,) per-row radii.  active: (N,) rows that take part (not bodies).
+    exclude: sorted keys of spring-joined pairs (:func:`spring_exclusions`).
+    """
+
+    injects = False
+    no_closed_form = "particle contacts"
+
+    def __init__(
+        self,
+        radius: np.ndarray,
+        restitution: float,
+        friction: float,
+        inv_mass: np.ndarray,
+        active: np.ndarray,
+        exclude: np.ndarray,
+        backend: str = "numpy",
+        iterations: int = ITERATIONS,
+    ):
+        self.radius = np.ascontiguousarray(radius, dtype=np.float64)
+        self.restitution = float(restitution)
+        self.friction = float(friction)
+        self.inv_mass = inv_mass
+        self.active = np.asarray(active, dtype=bool)
+        self.exclude = np.ascontiguousarray(exclude, dtype=np.int64)
+        self.iterations = int(iterations)
+        self.backend = backend
+        self.dissipative = restitution < 1 or friction > 0
+        self._kernels = numba_kernels() if backend == "numba" else None
+        self.pairs_last = 0
+        #: the most candidate pairs the list may hold (bound_memory: the memory budget's
+        #: share after the rest of the run; -1 when nothing bounds it)
+        self.max_pairs = -1
+        #: how often the candidate list was built (a run's statistics, for tests and benchmarks)
+        self.rebuilds = 0
+        #: colliders (animsim.colliders.Colliders) and impulse planes (animsim.collisions) to push
+        #: out of after the contacts moved particles
+        self.colliders = None
+        self.planes = None
+        self._buffers = Buffers()
+        self._forget()
+        finder = (
+            "a uniform grid (counting sort by cell)" if backend == "numba" else "a k-d tree (scipy cKDTree)"
+        )
+        self.label = (
+            f"particle contacts: {int(self.active.sum())} particle(s) as spheres "
+            f"(radius {self.radius[self.active].min():.3g}-{self.radius[self.active].max():.3g} m), "
+            f"restitution {restitution:g}, friction {friction:g}, neighbours by {finder} "
+            f"kept in a Verlet list, {iterations} Jacobi passes; "
+            f"{self.exclude.size} spring-joined pair(s) left out"
+            if self.active.any()
+            else "particle contacts: no particle takes part"
+        )
+
+    def stability_note(self, dt: float) -> str:
+        r = float(self.radius[self.active].min()) if self.active.any() else 0.0
+        return (
+            f"particle contacts: impulses at the end of each step, no stiffness; found only at step "
+            f"ends, so two particles closing faster than 2 r / dt = {2 * r / dt:.3g} m/s can pass "
+            f"through each other"
+        )
+
+    def _forget(self) -> None:
+        self._ci = self._cj = EMPTY
+        self._reach2: np.ndarray = np.zeros(0)
+        self._x_built: np.ndarray | None = None
+        self._active_built: np.ndarray | None = None
+        self._skin = 0.0
+
+    def reset(self, state) -> None:
+        """A run starts: the candidate list of another run is not reused (it would be valid, but
+        a run should not depend on what ran before it, even in how long it takes)."""
+        self._forget()
+
+    def apply(
+        self, state, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, dt: float | None = None
+    ) -> bool:
+        changed = self._apply(state, x_old, v_old, t0, t1)
+        if changed and self.colliders is not None:
+            # the overlap removal may push a particle into a collider: never leave it there
+            self.colliders.project(state, t0, t1)
+        if changed and self.planes is not None:
+            self.planes.project_rows(
+                state.particle_position, state.particle_velocity, np.flatnonzero(self.active)
+            )
+        return changed
+
+    def _list_is_stale(self, x: np.ndarray, active: np.ndarray) -> bool:
+        """True when two particles may have closed by more than the skin since the list was built."""
+        if self._x_built is None or self._x_built.shape != x.shape:
+            return True
+        if not np.array_equal(active, self._active_built):
+            return True
+        if self._kernels is not None:
+            spread = self._kernels.spread(x, self._x_built, active)
+        else:
+            d = self._buffers.get("shift", x.shape)
+            np.subtract(x, self._x_built, out=d)
+            if not self._all_active:
+                d = d[active]
+            if d.shape[0] == 0:
+                return False
+            hi, lo = d.max(axis=0), d.min(axis=0)
+            half = 0.5 * (hi - lo)
+            if 2.0 * float(np.sqrt(half @ half)) <= SKIN_USE * self._skin:
+                return False  # even the corners of the displacements' box are near enough
+            d -= 0.5 * (hi + lo)
+            spread = float(np.sqrt(dot3(d, d).max()))
+        # every displacement lies within ``spread`` of one common shift c (the centre of
+        # their box), so any two particles have closed by at most |d_i - c| + |d_j - c| <= 2 spread
+        return not (2.0 * spread <= SKIN_USE * self._skin)
+
+    def bound_memory(self, budget: int) -> None:
+        """The candidate list may hold ``budget`` bytes (CONTACT_PAIR_BYTES a pair)."""
+        self.max_pairs = max(int(budget) // CONTACT_PAIR_BYTES, 0)
+
+    def _too_many(self, found: int, t: float) -> SimulationError:
+        more = "at least " if self._kernels is not None else ""
+        return SimulationError(
+            f"particle contacts at t = {t:.6g} s: {more}{found} pairs of particles lie within "
+            f"2 x radius + skin of each other (births or a pile squeezed together since the "
+            f"start), more than the memory budget leaves room for ({self.max_pairs} pairs, "
+            f"{format_bytes(self.max_pairs * CONTACT_PAIR_BYTES)}); lower the radius or the "
+            "number of particles, or raise the budget with --max-memory"
+        )
+
+    def _rebuild(self, x: np.ndarray, active: np.ndarray, t: float = 0.0) -> None:
+        rmax = float(self.radius[active].max()) if active.any() else 0.0
+        self._skin = SKIN * 2.0 * rmax
+        reach = 2.0 * rmax + self._skin
+        if self._kernels is not None:
+            ci, cj = self._kernels.candidates(x, active, self.exclude, reach, self.max_pairs)
+            found = ci.size
+        else:
+            found = count_pairs_numpy(x, active, reach) if self.max_pairs >= 0 else 0
+            if found <= self.max_pairs or self.max_pairs < 0:
+                ci, cj = candidates_numpy(x, active, self.exclude, reach)
+        if 0 <= self.max_pairs < found:
+            raise self._too_many(found, t)
+        self._ci, self._cj = ci, cj
+        r = self.radius[ci] + self.radius[cj]
+        self._reach2 = r * r
+        if self._x_built is None or self._x_built.shape != x.shape:
+            self._x_built = np.empty_like(x)
+        np.copyto(self._x_built, x)
+        self._active_built = active.copy()
+        self._all_active = bool(active.all())
+        self.rebuilds += 1
+
+    def _apply(self, state, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float) -> bool:
+        dt = t1 - t0
+        if dt <= 0:
+            return False
+        x, v = state.particle_position, state.particle_velocity
+        # the state's live masses: emitter pools switch theirs on at birth
+        inv_mass = getattr(state, "particle_inv_mass", self.inv_mass)
+        if not inv_mass.flags.writeable:  # the model's own (fixed) masses: one writable copy
+            if getattr(self, "_inv_copy", None) is None:
+                self._inv_copy = np.array(inv_mass)
+            inv_mass = self._inv_copy
+        active = self.active if state.particle_alive is None else self.active & state.particle_alive
+        if self._list_is_stale(x, active):
+            self._rebuild(x, active, t0)
+        ci, cj = self._ci, self._cj
+        if ci.size == 0:
+            self.pairs_last = 0
+            return False
+        if self._kernels is not None:
+            p = ci.size
+            b = self._buffers
+            n_rows = x.shape[0]
+            found, changed = self._kernels.step(
+                ci,
+                cj,
+                self._reach2,
+                x,
+                v,
+                x_old,
+                v_old,
+                inv_mass,
+                self.radius,
+                self.restitution,
+                self.friction,
+                dt,
+                self.iterations,
+                RELAX,
+                b.get("pi", (p,), np.int64),
+                b.get("pj", (p,), np.int64),
+                b.get("w", (p,)),
+                b.get("rel", (p,)),
+                b.get("nrm", (p, 3)),
+                b.get("tgt", (p,)),
+                b.get("lam", (p,)),
+                b.get("jb", (p,)),
+                b.get("due", (p,), np.bool_),
+                b.get("dv", (n_rows, 3)),
+                b.get("count", (n_rows,), np.int64),
+                RESTING_STEPS,
+                BOUNCE_FLOOR,
+                BOUNCE_SWEEPS,
+            )
+            self.pairs_last = int(found)
+            return bool(changed)
+        # the candidates that overlap now (the numba kernel's test)
+        b = self._buffers
+        p = ci.size
+        d3 = gather_diff(x, ci, cj, b.get("d3", (p, 3)), b.get("t3", (p, 3)))
+        d2 = dot3_into(d3, d3, b.get("s1", (p,)), b.get("s2", (p,)))
+        keep = d2 < self._reach2
+        i, j = ci[keep], cj[keep]
+        self.pairs_last = len(i)
+        if len(i) == 0:
+            return False
+        return resolve_pairs_numpy(
+            i,
+            j,
+            x,
+            v,
+            x_old,
+            v_old,
+            inv_mass,
+            self.radius,
+            self.restitution,
+            self.friction,
+            dt,
+            self.iterations,
+            b,
+        )
