@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
@@ -23,9 +23,6 @@ from animsim.collisions.response import (
     scale_rows,
 )
 from animsim.vec import add_scaled, dot3, put_rows, sub_scaled
-
-if TYPE_CHECKING:
-    from animsim.collisions.stage import PlaneColliders
 
 
 @dataclass(frozen=True)
@@ -74,6 +71,14 @@ def candidates(x: np.ndarray, pl: ImpulsePlane) -> np.ndarray:
     return np.flatnonzero(d <= 0)
 
 
+class Settler(Protocol):
+    """What settles gathered rows on every plane after a collision (the planes' stage does:
+    :class:`animsim.collisions.stage.PlaneColliders`); named by what it does, so this module
+    does not import the stage that imports it."""
+
+    def project_gathered(self, x: np.ndarray, v: np.ndarray, scratch: Blocks | None = None) -> None: ...
+
+
 class Blocks:
     """Reused buffers for one block of contacts, and the rule on them.
 
@@ -100,13 +105,13 @@ class Blocks:
         dt: float | np.ndarray,
         inv_mass: np.ndarray,
         idx: np.ndarray,
-        project: PlaneColliders | None,
+        project: Settler | None,
         kappa: float,
     ) -> np.ndarray:
         """Collide candidate rows ``idx`` (at most the block) with one plane, writing them back.
 
         Returns the rows that touched the plane. With ``project`` (a single plane)
-        the rows are settled (:meth:`PlaneColliders.project_gathered`) before the write-back.
+        the rows are settled (:meth:`animsim.collisions.stage.PlaneColliders.project_gathered`) before the write-back.
         ``kappa``: the method's energy shift (:func:`kept_bounce_speed`).
         """
         m = idx.size
@@ -123,7 +128,7 @@ class Blocks:
         v: np.ndarray,
         dt: float,
         inv_mass: np.ndarray,
-        project: PlaneColliders | None,
+        project: Settler | None,
         kappa: float,
     ) -> np.ndarray:
         """:meth:`collide` on candidate rows already gathered, ``rows`` = (x, v, x_old, v_old)
@@ -144,7 +149,7 @@ class Blocks:
         v: np.ndarray,
         dt: float | np.ndarray,
         inv_mass: np.ndarray,
-        project: PlaneColliders | None,
+        project: Settler | None,
         kappa: float,
         gathered: bool = False,
     ) -> np.ndarray:
