@@ -36,6 +36,7 @@ from animsim.bodies import quaternion as quat
 from animsim.bodies.contact_detection import local_sdf, shape_arrays
 from animsim.bodies.shapes import BodyShape
 from animsim.elements import StepStage
+from animsim.system import State
 
 #: an approach slower than this many steps of the relative acceleration rests (no bounce)
 RESTING_STEPS = 2.0
@@ -131,7 +132,7 @@ class ParticleBodyContacts(StepStage):
         return tuple(np.concatenate(p) for p in zip(*parts, strict=True))  # type: ignore[return-value]
 
     def apply(
-        self, state: Any, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, dt: float
+        self, state: State, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, dt: float
     ) -> bool:
         found = self._contacts(state)
         if found is None:

@@ -32,6 +32,7 @@ from animsim.colliders.numpy_rule import resolve_numpy
 from animsim.colliders.shapes import KIND_NAMES, PARAMS, Shape, shape_bounds
 from animsim.collisions.response import energy_shift
 from animsim.elements import StepStage
+from animsim.system import State
 
 
 @dataclass
@@ -120,7 +121,7 @@ class Colliders(StepStage):
             off[m] = pos[self.moving[m]] - self.params[m, 1:4]
         return off
 
-    def reset(self, state) -> None:
+    def reset(self, state: State) -> None:
         """Nothing to reset: colliders keep no state between steps."""
 
     def surface_points(self, t: float, per_shape: int = 600) -> np.ndarray:
@@ -148,7 +149,7 @@ class Colliders(StepStage):
 
     def apply(
         self,
-        state,
+        state: State,
         x_old: np.ndarray,
         v_old: np.ndarray,
         t0: float,

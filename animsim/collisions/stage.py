@@ -32,6 +32,7 @@ from animsim.collisions.response import energy_shift
 from animsim.elements import BuildContext, StepStage, register
 from animsim.forces.penalty import PenaltyPlane
 from animsim.scene import models as m
+from animsim.system import State
 from animsim.vec import put_rows, take_rows
 
 #: penalty stiffness when a penalty plane names none, N/m
@@ -167,7 +168,7 @@ class PlaneColliders(StepStage):
     def kappa(self) -> float:
         return energy_shift(self.follow_weight)
 
-    def reset(self, state: Any) -> None:
+    def reset(self, state: State) -> None:
         self.inv_mass = state.particle_inv_mass
 
     def collide_subset(
@@ -190,7 +191,7 @@ class PlaneColliders(StepStage):
     _newborn_ones: np.ndarray = np.ones(0)  # inverse masses of the newborns: all movable
 
     def apply(
-        self, state: Any, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, dt: float
+        self, state: State, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, dt: float
     ) -> bool:
         x, v = state.particle_position, state.particle_velocity
         if self.point_rows is not None:

@@ -21,6 +21,7 @@ from animsim.particle_contacts.constants import (
 from animsim.particle_contacts.kernels import numba_kernels
 from animsim.particle_contacts.neighbours import EMPTY, candidates_numpy, count_pairs_numpy
 from animsim.particle_contacts.resolve import Buffers, dot3_into, gather_diff, resolve_pairs_numpy
+from animsim.system import State
 from animsim.vec import dot3
 
 
@@ -95,13 +96,19 @@ class ParticleContacts(StepStage):
         self._active_built: np.ndarray | None = None
         self._skin = 0.0
 
-    def reset(self, state) -> None:
+    def reset(self, state: State) -> None:
         """A run starts: the candidate list of another run is not reused (it would be valid, but
         a run should not depend on what ran before it, even in how long it takes)."""
         self._forget()
 
     def apply(
-        self, state, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, dt: float | None = None
+        self,
+        state: State,
+        x_old: np.ndarray,
+        v_old: np.ndarray,
+        t0: float,
+        t1: float,
+        dt: float | None = None,
     ) -> bool:
         changed = self._apply(state, x_old, v_old, t0, t1)
         if changed and self.colliders is not None:
@@ -175,7 +182,7 @@ class ParticleContacts(StepStage):
         self._all_active = bool(active.all())
         self.rebuilds += 1
 
-    def _apply(self, state, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float) -> bool:
+    def _apply(self, state: State, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float) -> bool:
         dt = t1 - t0
         if dt <= 0:
             return False
