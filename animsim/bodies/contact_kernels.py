@@ -434,12 +434,26 @@ def _solve_list_loop(
     # impacts between bodies first, one contact at a time (solve's _impact_pass)
     for i in range(count):
         struck[i] = False
+    # one point only (solve's _impact_pass): a contact whose two bodies touch at other points too
+    # is left out; keys as solve's: a (max b + 1) + b, a distinct negative for the others
+    top = 0
+    for i in range(count):
+        top = max(top, b[i])
+    keys = np.empty(count, dtype=np.int64)
+    for i in range(count):
+        keys[i] = a[i] * (top + 1) + b[i] if b[i] >= 0 else -1 - i
+    srt = np.argsort(keys)
+    single = np.ones(count, dtype=np.bool_)
+    for m in range(1, count):
+        if keys[srt[m]] == keys[srt[m - 1]]:
+            single[srt[m]] = False
+            single[srt[m - 1]] = False
     for sweep in range(IMPACT_SWEEPS):
         hit = False
         for m in range(count):
             i = m if sweep % 2 == 0 else count - 1 - m
             ai, bi = a[i], b[i]
-            if bi < 0 or not restitution[i] > 0.0 or not inv_kn[i] > 0.0:
+            if bi < 0 or not single[i] or not restitution[i] > 0.0 or not inv_kn[i] > 0.0:
                 continue
             nx, ny, nz = n[i, 0], n[i, 1], n[i, 2]
             vn = (v[ai, 0] * nx + v[ai, 1] * ny) + v[ai, 2] * nz

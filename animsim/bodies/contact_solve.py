@@ -355,7 +355,8 @@ def _impact_pass(
     """Impacts between bodies, one contact at a time, before the simultaneous solve; in place on
     vT, wT (3, B); returns which contacts were struck (C,), in the solver's order.
 
-    A contact between two bodies with restitution that approaches faster than resting
+    A contact between two bodies with restitution, their only point of contact, that
+    approaches faster than resting
     (``limit``), touching or closing its gap within the step, takes Newton's impulse
     ``J = -(1 + e) v_n / K`` (K the effective mass along n; Baraff 1997, section 8), and the
     contacts are swept forward and backward in turn until none is struck (at most ``sweeps``):
@@ -369,7 +370,12 @@ def _impact_pass(
     """
     count = a.size
     struck = np.zeros(count, dtype=bool)
-    live = np.flatnonzero(has_b & (restitution > 0.0) & (inv_kn > 0.0))
+    # one point only: a face or an edge held at several points is left to the simultaneous
+    # solve, where its points share the impact (struck one by one, a box landing flat on a box
+    # would be set spinning)
+    key = np.where(has_b, a * (bb.max(initial=0) + 1) + bb, -1 - np.arange(count))
+    _, where, points = np.unique(key, return_inverse=True, return_counts=True)
+    live = np.flatnonzero(has_b & (points[where] == 1) & (restitution > 0.0) & (inv_kn > 0.0))
     if live.size == 0:
         return struck
     levels = batch[live]
