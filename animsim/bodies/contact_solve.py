@@ -12,6 +12,8 @@ the bit. The model as a whole is described in :mod:`animsim.bodies.contacts`.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from animsim.bodies import quaternion as quat
@@ -133,6 +135,86 @@ def _slot_batches(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return batch
 
 
+@dataclass(frozen=True)
+class _ContactRows:
+    """The contacts in the solver's order (batch after batch, :func:`batches`) with what the
+    solve needs of each, computed once per step. Vectors are (3, C), inertias (6, C) rows."""
+
+    coupled: bool  # some contact joins two bodies
+    order: np.ndarray  # the solver's order: position -> index in the contact list
+    level: np.ndarray  # the batch of each contact, in the solver's order
+    cuts: np.ndarray  # batch k is rows cuts[k]:cuts[k + 1]
+    a: np.ndarray
+    b: np.ndarray
+    has_b: np.ndarray
+    bb: np.ndarray  # b, with 0 where there is none
+    n: np.ndarray
+    ra: np.ndarray
+    rb: np.ndarray
+    restitution: np.ndarray
+    friction: np.ndarray
+    depth: np.ndarray
+    ma: np.ndarray
+    mb: np.ndarray
+    rna: np.ndarray
+    rnb: np.ndarray
+    gna: np.ndarray
+    gnb: np.ndarray
+    inv_kn: np.ndarray
+    k_t: np.ndarray
+    m_t: np.ndarray
+    ga: list[np.ndarray]
+    gb: list[np.ndarray]
+
+
+# one batch of the sweep: its rows, their bodies a, which rows have a body b (within the
+# batch), those bodies b, and those rows' positions in the solver's order
+_Group = tuple[slice, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+def _contact_rows(c: Contacts, q: np.ndarray, inv_mass: np.ndarray, inv_inertia: np.ndarray) -> _ContactRows:
+    """Sort the contacts into batches and compute their effective masses (see :class:`_ContactRows`)."""
+    coupled = bool((c.b >= 0).any())
+    batch = batches(c.a, c.b) if coupled else _slot_batches(c.a, c.b)
+    order = np.argsort(batch, kind="stable")
+    cuts = np.searchsorted(batch[order], np.arange(int(batch.max()) + 2))
+    a, b = c.a[order], c.b[order]
+    has_b = b >= 0
+    bb = np.where(has_b, b, 0)
+    n, ra, rb = c.n[order].T, c.ra[order].T, c.rb[order].T
+    restitution, friction, depth = c.restitution[order], c.friction[order], c.depth[order]
+    # per contact, once per step: the world inverse inertias, the angular response to a unit
+    # normal impulse g = I^-1 (r x n), and the effective mass along n (Baraff 1997, sec. 8):
+    # 1/K = 1/m_a + (r_a x n) . I_a^-1 (r_a x n) (+ the same for b)
+    m_body = inv_world_inertia(q, inv_inertia)
+    ma = inv_mass[a]
+    mat_a = m_body[:, a]
+    rna = _cross3(ra, n)
+    gna = _sym_matvec(mat_a, rna)
+    kn = ma + _dot3(rna, gna)
+    mb = np.where(has_b, inv_mass[bb], 0.0)
+    mat_b = np.where(has_b, m_body[:, bb], 0.0)
+    rnb = _cross3(rb, n)
+    gnb = _sym_matvec(mat_b, rnb)
+    if coupled:
+        kn = np.where(has_b, (ma + mb) + (_dot3(rna, gna) + _dot3(rnb, gnb)), kn)
+    # two immovable things (a pinned body on a floor) exchange no impulse
+    inv_kn = np.where(kn > 0, 1.0 / np.where(kn > 0, kn, 1.0), 0.0)
+    # tangential response: along a unit direction e the effective mass is 1/(m_t + e . K e) with
+    # K = [r]x^T I^-1 [r]x (the angular part, r x e = [r]x e), summed over both bodies
+    k_t, ga = _arm_inertia(mat_a, ra)
+    m_t = ma
+    gb = ga
+    if coupled:
+        k_b, gb = _arm_inertia(mat_b, rb)
+        k_t = np.where(has_b, k_t + k_b, k_t)
+        m_t = np.where(has_b, ma + mb, ma)
+    return _ContactRows(
+        coupled, order, batch[order], cuts, a, b, has_b, bb, n, ra, rb, restitution, friction, depth,
+        ma, mb, rna, rnb, gna, gnb, inv_kn, k_t, m_t, ga, gb,
+    )  # fmt: skip
+
+
 def solve(
     contacts: Contacts,
     v: np.ndarray,
@@ -171,164 +253,210 @@ def solve(
     e_out = np.zeros(count)
     if count == 0:
         return e_out, np.zeros(0, dtype=bool), np.zeros(0), np.zeros((0, 3))
-    coupled = bool((c.b >= 0).any())
-    batch = batches(c.a, c.b) if coupled else _slot_batches(c.a, c.b)
-    order = np.argsort(batch, kind="stable")
-    cuts = np.searchsorted(batch[order], np.arange(int(batch.max()) + 2))
-    a, b = c.a[order], c.b[order]
-    has_b = b >= 0
-    bb = np.where(has_b, b, 0)
-    n, ra, rb = c.n[order].T, c.ra[order].T, c.rb[order].T
-    restitution, friction, depth = c.restitution[order], c.friction[order], c.depth[order]
-    # per contact, once per step: the world inverse inertias, the angular response to a unit
-    # normal impulse g = I^-1 (r x n), and the effective mass along n (Baraff 1997, sec. 8):
-    # 1/K = 1/m_a + (r_a x n) . I_a^-1 (r_a x n) (+ the same for b)
-    m_body = inv_world_inertia(q, inv_inertia)
-    ma = inv_mass[a]
-    mat_a = m_body[:, a]
-    rna = _cross3(ra, n)
-    gna = _sym_matvec(mat_a, rna)
-    kn = ma + _dot3(rna, gna)
-    mb = np.where(has_b, inv_mass[bb], 0.0)
-    mat_b = np.where(has_b, m_body[:, bb], 0.0)
-    rnb = _cross3(rb, n)
-    gnb = _sym_matvec(mat_b, rnb)
-    if coupled:
-        kn = np.where(has_b, (ma + mb) + (_dot3(rna, gna) + _dot3(rnb, gnb)), kn)
-    # two immovable things (a pinned body on a floor) exchange no impulse
-    inv_kn = np.where(kn > 0, 1.0 / np.where(kn > 0, kn, 1.0), 0.0)
-    # tangential response: along a unit direction e the effective mass is 1/(m_t + e . K e) with
-    # K = [r]x^T I^-1 [r]x (the angular part, r x e = [r]x e), summed over both bodies
-    k_t, ga = _arm_inertia(mat_a, ra)
-    m_t = ma
-    gb = ga
-    if coupled:
-        k_b, gb = _arm_inertia(mat_b, rb)
-        k_t = np.where(has_b, k_t + k_b, k_t)
-        m_t = np.where(has_b, ma + mb, ma)
+    r = _contact_rows(c, q, inv_mass, inv_inertia)
     vT, wT = v.T.copy(), w.T.copy()
-    rest_b = np.where(has_b, resting_speed[bb], 0.0)
-    limit = resting_speed[a] + rest_b + RESTING_FLOOR
+    rest_b = np.where(r.has_b, resting_speed[r.bb], 0.0)
+    limit = resting_speed[r.a] + rest_b + RESTING_FLOOR
     struck = np.zeros(count, dtype=bool)
-    if coupled:
+    if r.coupled:
         struck = _impact_pass(
-            batch[order],
-            a,
-            bb,
-            has_b,
-            n,
-            rna,
-            rnb,
-            gna,
-            gnb,
-            ma,
-            mb,
-            inv_kn,
-            restitution,
-            depth,
+            r.level,
+            r.a,
+            r.bb,
+            r.has_b,
+            r.n,
+            r.rna,
+            r.rnb,
+            r.gna,
+            r.gnb,
+            r.ma,
+            r.mb,
+            r.inv_kn,
+            r.restitution,
+            r.depth,
             limit,
             dt,
             vT,
             wT,
         )
-    sv = None if surface is None else surface[order].T  # (3, C), in the solver's order
-    vel = vT[:, a] + _cross3(wT[:, a], ra)
-    if coupled:
-        vel = np.where(has_b, vel - (vT[:, bb] + _cross3(wT[:, bb], rb)), vel)
+    sv = None if surface is None else surface[r.order].T  # (3, C), in the solver's order
+    bounce, target = _bounce_targets(r, vT, wT, limit, sv, dv, dx, kh, dt)
+    e_used = np.where(bounce | struck, r.restitution, 0.0)
+    jn = np.zeros(count)
+    jt = np.zeros((3, count))
+    vT_rows, wT_rows = vT.T, wT.T  # (B, 3) views
+    if warm is not None:
+        jn = np.where(bounce | struck, 0.0, warm[0][r.order])
+        jt = np.where(bounce | struck, 0.0, warm[1][r.order].T)
+        _apply_warm(r.a, r.bb, r.has_b, r.ma, r.mb, r.n, r.gna, r.gnb, r.ga, r.gb, jn, jt, vT_rows, wT_rows)
+    groups = _groups(r)
+
+    for sweep in range(max(iterations, max_sweeps)):
+        change = 0.0
+        for g in groups:
+            change = max(change, _solve_batch(r, g, sv, target, jn, jt, vT, wT))
+        if sweep + 1 >= iterations and not change > SWEEP_TOLERANCE:
+            break
+    v[:] = vT.T
+    w[:] = wT.T
+    e_out[r.order] = e_used
+    hit_out = np.zeros(count, dtype=bool)
+    hit_out[r.order] = bounce | struck
+    jn_out = np.empty(count)
+    jn_out[r.order] = jn
+    jt_out = np.empty((count, 3))
+    jt_out[r.order] = jt.T
+    return e_out, hit_out, jn_out, jt_out
+
+
+def _bounce_targets(
+    r: _ContactRows,
+    vT: np.ndarray,
+    wT: np.ndarray,
+    limit: np.ndarray,
+    sv: np.ndarray | None,
+    dv: np.ndarray | None,
+    dx: np.ndarray | None,
+    kh: float,
+    dt: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Which contacts bounce (C,) and the normal speed each is solved toward (C,): minus e times
+    the approach for a bounce (at the time of impact, :func:`_impact_target`, given ``dv`` and
+    ``dx``), else the speed that closes a gap within the step (0 for a touching contact)."""
+    a, bb, has_b, n = r.a, r.bb, r.has_b, r.n
+    vel = vT[:, a] + _cross3(wT[:, a], r.ra)
+    if r.coupled:
+        vel = np.where(has_b, vel - (vT[:, bb] + _cross3(wT[:, bb], r.rb)), vel)
     if sv is not None:
         vel = vel - sv
     vn0 = _dot3(vel, n)
     # a speculative contact (a gap, depth < 0) never bounces: it may close its gap in the step
-    bounce = (vn0 < -limit) & (depth >= 0.0)
-    e_used = np.where(bounce | struck, restitution, 0.0)
-    target = np.where(bounce, -restitution * vn0, np.minimum(depth, 0.0) / dt)
+    bounce = (vn0 < -limit) & (r.depth >= 0.0)
+    target = np.where(bounce, -r.restitution * vn0, np.minimum(r.depth, 0.0) / dt)
     if dv is not None and dx is not None and bounce.any():
         # against a moving surface the approach over the step is relative to its move too
         target = np.where(
             bounce,
             _impact_target(
-                a, bb, has_b, n, depth, restitution, vn0, dv, dx, kh, dt, None if sv is None else sv * dt
+                a, bb, has_b, n, r.depth, r.restitution, vn0, dv, dx, kh, dt, None if sv is None else sv * dt
             ),
             target,
         )
-    jn = np.zeros(count)
-    jt = np.zeros((3, count))
-    vT_rows, wT_rows = vT.T, wT.T  # (B, 3) views
-    if warm is not None:
-        jn = np.where(bounce | struck, 0.0, warm[0][order])
-        jt = np.where(bounce | struck, 0.0, warm[1][order].T)
-        _apply_warm(a, bb, has_b, ma, mb, n, gna, gnb, ga, gb, jn, jt, vT_rows, wT_rows)
-    groups = []
-    for k in range(cuts.size - 1):
-        s = slice(int(cuts[k]), int(cuts[k + 1]))
-        hb = np.flatnonzero(has_b[s])
-        groups.append((s, a[s], hb, b[s][hb], cuts[k] + hb))
+    return bounce, target
 
-    for sweep in range(max(iterations, max_sweeps)):
-        change = 0.0
-        for s, ai, hb, bi, sb in groups:
-            ns, ras = n[:, s], ra[:, s]
-            va, wa = vT[:, ai], wT[:, ai]
-            # normal: push (never pull) toward the target approach speed
-            vn = _dot3(va, ns) + _dot3(wa, rna[:, s])
-            if hb.size:
-                vb, wb = vT[:, bi], wT[:, bi]
-                vn[hb] = vn[hb] - (_dot3(vb, n[:, sb]) + _dot3(wb, rnb[:, sb]))
-            if sv is not None:
-                vn = vn - _dot3(sv[:, s], ns)
-            new = np.maximum(jn[s] + (target[s] - vn) * inv_kn[s], 0.0)
-            dj = new - jn[s]
-            jn[s] = new
-            va += (ma[s] * dj) * ns
-            wa += dj * gna[:, s]
-            if hb.size:
-                vb -= (mb[sb] * dj[hb]) * n[:, sb]
-                wb -= dj[hb] * gnb[:, sb]
-            # Coulomb friction: stop the sliding, within mu * (normal impulse so far)
-            vel = va + _cross3(wa, ras)
-            if hb.size:
-                vel[:, hb] = vel[:, hb] - (vb + _cross3(wb, rb[:, sb]))
-            if sv is not None:
-                vel = vel - sv[:, s]
-            vt = vel - _dot3(vel, ns) * ns
-            # the impulse that stops the sliding: -vt / (m_t + e.K e), e = vt/|vt|, written
-            # without the square root as -vt |vt|^2 / (m_t |vt|^2 + vt.K vt)
-            s2 = _dot3(vt, vt)
-            den = m_t[s] * s2 + _dot3(vt, _sym_matvec(k_t[:, s], vt))
-            live = (s2 > 0.0) & (den > 0.0)
-            f = np.where(live, s2 / np.where(live, den, 1.0), 0.0)
-            jts = jt[:, s]
-            want = jts - f * vt
-            # ... within mu * (normal impulse so far)
-            cap = friction[s] * jn[s]
-            mag2 = _dot3(want, want)
-            over = mag2 > cap * cap
-            want = np.where(over, want * (cap / np.sqrt(np.where(over, mag2, 1.0))), want)
-            imp = want - jts
-            jt[:, s] = want
-            change = max(change, float(np.max(m_t[s] * np.maximum(np.abs(dj), np.abs(imp).max(axis=0)))))
-            va += ma[s] * imp
-            wa += (ga[0][:, s] * imp[0] + ga[1][:, s] * imp[1]) + ga[2][:, s] * imp[2]
-            vT[:, ai] = va
-            wT[:, ai] = wa
-            if hb.size:
-                ib = imp[:, hb]
-                vb -= mb[sb] * ib
-                wb -= (gb[0][:, sb] * ib[0] + gb[1][:, sb] * ib[1]) + gb[2][:, sb] * ib[2]
-                vT[:, bi] = vb
-                wT[:, bi] = wb
-        if sweep + 1 >= iterations and not change > SWEEP_TOLERANCE:
-            break
-    v[:] = vT.T
-    w[:] = wT.T
-    e_out[order] = e_used
-    hit_out = np.zeros(count, dtype=bool)
-    hit_out[order] = bounce | struck
-    jn_out = np.empty(count)
-    jn_out[order] = jn
-    jt_out = np.empty((count, 3))
-    jt_out[order] = jt.T
-    return e_out, hit_out, jn_out, jt_out
+
+def _groups(r: _ContactRows) -> list[_Group]:
+    """The batches of the sweep (see :data:`_Group`), in order."""
+    groups = []
+    for k in range(r.cuts.size - 1):
+        s = slice(int(r.cuts[k]), int(r.cuts[k + 1]))
+        hb = np.flatnonzero(r.has_b[s])
+        groups.append((s, r.a[s], hb, r.b[s][hb], r.cuts[k] + hb))
+    return groups
+
+
+def _solve_batch(
+    r: _ContactRows,
+    g: _Group,
+    sv: np.ndarray | None,
+    target: np.ndarray,
+    jn: np.ndarray,
+    jt: np.ndarray,
+    vT: np.ndarray,
+    wT: np.ndarray,
+) -> float:
+    """One batch of a sweep (no body twice in it), normal then friction; in place on the impulses
+    jn (C,), jt (3, C) and on vT, wT (3, B); returns the batch's largest change of velocity."""
+    s, ai, hb, bi, sb = g
+    va, wa = vT[:, ai], wT[:, ai]
+    vb, wb = vT[:, bi], wT[:, bi]  # empty when no contact of the batch has a body b
+    dj = _normal_impulse(r, g, sv, target, jn, va, wa, vb, wb)
+    imp = _friction_impulse(r, g, sv, jn, jt, va, wa, vb, wb)
+    change = float(np.max(r.m_t[s] * np.maximum(np.abs(dj), np.abs(imp).max(axis=0))))
+    ga, gb = r.ga, r.gb
+    va += r.ma[s] * imp
+    wa += (ga[0][:, s] * imp[0] + ga[1][:, s] * imp[1]) + ga[2][:, s] * imp[2]
+    vT[:, ai] = va
+    wT[:, ai] = wa
+    if hb.size:
+        ib = imp[:, hb]
+        vb -= r.mb[sb] * ib
+        wb -= (gb[0][:, sb] * ib[0] + gb[1][:, sb] * ib[1]) + gb[2][:, sb] * ib[2]
+        vT[:, bi] = vb
+        wT[:, bi] = wb
+    return change
+
+
+def _normal_impulse(
+    r: _ContactRows,
+    g: _Group,
+    sv: np.ndarray | None,
+    target: np.ndarray,
+    jn: np.ndarray,
+    va: np.ndarray,
+    wa: np.ndarray,
+    vb: np.ndarray,
+    wb: np.ndarray,
+) -> np.ndarray:
+    """The batch's normal impulses: updates jn and the batch's velocities va, wa, vb, wb (3, k) in
+    place; returns the change of each normal impulse."""
+    s, _, hb, _, sb = g
+    n, ns = r.n, r.n[:, s]
+    # normal: push (never pull) toward the target approach speed
+    vn = _dot3(va, ns) + _dot3(wa, r.rna[:, s])
+    if hb.size:
+        vn[hb] = vn[hb] - (_dot3(vb, n[:, sb]) + _dot3(wb, r.rnb[:, sb]))
+    if sv is not None:
+        vn = vn - _dot3(sv[:, s], ns)
+    new = np.maximum(jn[s] + (target[s] - vn) * r.inv_kn[s], 0.0)
+    dj: np.ndarray = new - jn[s]
+    jn[s] = new
+    va += (r.ma[s] * dj) * ns
+    wa += dj * r.gna[:, s]
+    if hb.size:
+        vb -= (r.mb[sb] * dj[hb]) * n[:, sb]
+        wb -= dj[hb] * r.gnb[:, sb]
+    return dj
+
+
+def _friction_impulse(
+    r: _ContactRows,
+    g: _Group,
+    sv: np.ndarray | None,
+    jn: np.ndarray,
+    jt: np.ndarray,
+    va: np.ndarray,
+    wa: np.ndarray,
+    vb: np.ndarray,
+    wb: np.ndarray,
+) -> np.ndarray:
+    """The batch's friction impulses (3, k) from the velocities after its normal impulses; updates
+    jt in place and returns the change, which the caller applies."""
+    s, _, hb, _, sb = g
+    ns = r.n[:, s]
+    # Coulomb friction: stop the sliding, within mu * (normal impulse so far)
+    vel = va + _cross3(wa, r.ra[:, s])
+    if hb.size:
+        vel[:, hb] = vel[:, hb] - (vb + _cross3(wb, r.rb[:, sb]))
+    if sv is not None:
+        vel = vel - sv[:, s]
+    vt = vel - _dot3(vel, ns) * ns
+    # the impulse that stops the sliding: -vt / (m_t + e.K e), e = vt/|vt|, written
+    # without the square root as -vt |vt|^2 / (m_t |vt|^2 + vt.K vt)
+    s2 = _dot3(vt, vt)
+    den = r.m_t[s] * s2 + _dot3(vt, _sym_matvec(r.k_t[:, s], vt))
+    live = (s2 > 0.0) & (den > 0.0)
+    f = np.where(live, s2 / np.where(live, den, 1.0), 0.0)
+    jts = jt[:, s]
+    want = jts - f * vt
+    # ... within mu * (normal impulse so far)
+    cap = r.friction[s] * jn[s]
+    mag2 = _dot3(want, want)
+    over = mag2 > cap * cap
+    want = np.where(over, want * (cap / np.sqrt(np.where(over, mag2, 1.0))), want)
+    imp: np.ndarray = want - jts
+    jt[:, s] = want
+    return imp
 
 
 def _impact_pass(

@@ -201,39 +201,72 @@ class BodyContacts(StepStage):
         resting = RESTING_FACTOR * np.linalg.norm(dv, axis=1)
         pairs = self.find_pairs(x, q)
         if not self.use_numba:
-            offsets = velocities = None
-            if self.collider_offsets is not None:  # keyframed colliders: where they are now, how fast
-                before, offsets = self.collider_offsets(t0), self.collider_offsets(t1)
-                velocities = (offsets - before) / dt
-            contacts, surface = self.find(x, q, pairs, offsets, velocities)
-            if contacts.count == 0:
-                return False
-            c = contacts
-            jn0, jt0, local = self.warm.guess(c.a, c.b, c.plane, c.n, c.ra, q)
-            v_pre, w_pre = v.copy(), w.copy()
-            e_used, impact, jn, jt = solve(
-                contacts,
-                v,
-                w,
-                q,
-                self.inv_mass,
-                self.inv_inertia,
-                resting,
-                self.iterations,
-                dv,
-                dx,
-                energy_shift(self.follow_weight) * dt,
-                dt,
-                surface,
-                (jn0, jt0),
-                self._sweep_limit(c, jn0),
-            )
-            self.warm.keep(c.a, c.b, c.plane, c.n, local, jn, jt)
-            h = self.follow_weight * dt
-            left = follow_impulses(c, impact, x, q, v - v_pre, w - w_pre, h) if h > 0.0 else c.depth
-            push = projection.pushes(c.depth, left, e_used)
-            projection.project(c.a, c.b, c.n, push, c.plane, x, self.inv_mass)
-            return True
+            return self._apply_numpy(x, v, q, w, dv, dx, resting, pairs, t0, t1, dt)
+        return self._apply_numba(x, v, q, w, dv, dx, resting, pairs, dt)
+
+    def _apply_numpy(
+        self,
+        x: np.ndarray,
+        v: np.ndarray,
+        q: np.ndarray,
+        w: np.ndarray,
+        dv: np.ndarray,
+        dx: np.ndarray,
+        resting: np.ndarray,
+        pairs: Contacts,
+        t0: float,
+        t1: float,
+        dt: float,
+    ) -> bool:
+        """:meth:`apply` on NumPy: find the contacts, solve them (:func:`solve`), follow the
+        impulses and project; in place on x, v, q, w."""
+        offsets = velocities = None
+        if self.collider_offsets is not None:  # keyframed colliders: where they are now, how fast
+            before, offsets = self.collider_offsets(t0), self.collider_offsets(t1)
+            velocities = (offsets - before) / dt
+        contacts, surface = self.find(x, q, pairs, offsets, velocities)
+        if contacts.count == 0:
+            return False
+        c = contacts
+        jn0, jt0, local = self.warm.guess(c.a, c.b, c.plane, c.n, c.ra, q)
+        v_pre, w_pre = v.copy(), w.copy()
+        e_used, impact, jn, jt = solve(
+            contacts,
+            v,
+            w,
+            q,
+            self.inv_mass,
+            self.inv_inertia,
+            resting,
+            self.iterations,
+            dv,
+            dx,
+            energy_shift(self.follow_weight) * dt,
+            dt,
+            surface,
+            (jn0, jt0),
+            self._sweep_limit(c, jn0),
+        )
+        self.warm.keep(c.a, c.b, c.plane, c.n, local, jn, jt)
+        h = self.follow_weight * dt
+        left = follow_impulses(c, impact, x, q, v - v_pre, w - w_pre, h) if h > 0.0 else c.depth
+        push = projection.pushes(c.depth, left, e_used)
+        projection.project(c.a, c.b, c.n, push, c.plane, x, self.inv_mass)
+        return True
+
+    def _apply_numba(
+        self,
+        x: np.ndarray,
+        v: np.ndarray,
+        q: np.ndarray,
+        w: np.ndarray,
+        dv: np.ndarray,
+        dx: np.ndarray,
+        resting: np.ndarray,
+        pairs: Contacts,
+        dt: float,
+    ) -> bool:
+        """:meth:`apply` on numba; in place on x, v, q, w."""
         # numba: plane contacts found body by body, then the whole list (pairs after the planes,
         # as on the NumPy path) solved in list order by one kernel call
         detect, solver = numba_kernels()

@@ -109,6 +109,12 @@ def render(
             progress=progress,
             backend=checked_backend(backend),
         )
+    _report(source, result, quiet, fps)
+
+
+def _report(source: Path, result: Any, quiet: bool, fps: float) -> None:
+    """What :func:`render` says of its result (an :class:`animsim.render.RenderResult`), and its
+    exit on an interruption or a failure."""
     outs = " and ".join(str(p) for p in result.outputs)
     if result.status == "interrupted":
         if result.outputs:

@@ -84,6 +84,62 @@ def bounce_sweeps_numpy(
     return jb
 
 
+class _PairScratch:
+    """The working arrays of one step's pairs (kept in :class:`Buffers`) and the fixed-order
+    gathers, sums and scatters of the passes on them."""
+
+    def __init__(self, i: np.ndarray, j: np.ndarray, inv_mass: np.ndarray, n_rows: int, buf: Buffers) -> None:
+        p = i.size
+        self.i, self.j, self.inv_mass = i, j, inv_mass
+        # One coordinate at a time (rows of (3, P) arrays): NumPy's gathers and products run on
+        # contiguous memory. The sums per particle are np.add.at over interleaved bins
+        # [i0, j0, i1, j1, ...] with weights [-q0, +q0, -q1, ...]: add.at adds in index order,
+        # unbuffered, from 0.0, as the numba kernel's loops do (and np.bincount, slower here).
+        bins = buf.get("bins", (p, 2), np.int64)
+        bins[:, 0] = i
+        bins[:, 1] = j
+        self.bins_flat = bins.reshape(-1)
+        self.weights = buf.get("weights", (3, p, 2))
+        self.q = buf.get("q", (3, p))  # what each pair adds to j (and takes from i), per coordinate
+        self.acc = buf.get("acc", (3, n_rows))
+        self.state_t = buf.get("state_t", (3, n_rows))
+        self.d = buf.get("d", (3, p))
+        self.t1 = buf.get("t1", (p,))
+        self.t2 = buf.get("t2", (p,))
+
+    def scatter_add(self, target: np.ndarray) -> None:
+        """target += (sum in pair order of -q on i, +q on j) * inverse mass, for all rows."""
+        weights, q, acc = self.weights, self.q, self.acc
+        for a in range(3):
+            weights[a, :, 1] = q[a]
+            np.negative(q[a], out=weights[a, :, 0])
+            acc[a].fill(0.0)
+            np.add.at(acc[a], self.bins_flat, weights[a].reshape(-1))
+        np.multiply(acc, self.inv_mass, out=acc)
+        target += acc.T
+
+    def gather_diff(self, source: np.ndarray) -> np.ndarray:
+        """source[j] - source[i] as (3, P)."""
+        state_t, d, t1 = self.state_t, self.d, self.t1
+        np.copyto(state_t, source.T)
+        for a in range(3):
+            # mode "clip": with "raise" (the default) take buffers its output; the rows are valid
+            np.take(state_t[a], self.j, out=d[a], mode="clip")
+            np.take(state_t[a], self.i, out=t1, mode="clip")
+            d[a] -= t1
+        return d
+
+    def dot(self, u: np.ndarray, v3: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """(u0 v0 + u1 v1) + u2 v2: :func:`animsim.vec.dot3`'s order, the same bits."""
+        t2 = self.t2
+        np.multiply(u[0], v3[0], out=out)
+        np.multiply(u[1], v3[1], out=t2)
+        out += t2
+        np.multiply(u[2], v3[2], out=t2)
+        out += t2
+        return out
+
+
 def resolve_pairs_numpy(
     i: np.ndarray,
     j: np.ndarray,
@@ -119,82 +175,73 @@ def resolve_pairs_numpy(
     w = inv_mass[i] + inv_mass[j]
     count = np.bincount(i, minlength=n_rows) + np.bincount(j, minlength=n_rows)
     relax = np.minimum(RELAX / np.maximum(count[i], count[j]), 1.0)
-    # One coordinate at a time (rows of (3, P) arrays): NumPy's gathers and products run on
-    # contiguous memory. The sums per particle are np.add.at over interleaved bins
-    # [i0, j0, i1, j1, ...] with weights [-q0, +q0, -q1, ...]: add.at adds in index order,
-    # unbuffered, from 0.0, as the numba kernel's loops do (and np.bincount, slower here).
-    bins = buf.get("bins", (p, 2), np.int64)
-    bins[:, 0] = i
-    bins[:, 1] = j
-    bins_flat = bins.reshape(-1)
-    weights = buf.get("weights", (3, p, 2))
-    q = buf.get("q", (3, p))  # what each pair adds to j (and takes from i), per coordinate
-    acc = buf.get("acc", (3, n_rows))
-    state_t = buf.get("state_t", (3, n_rows))
-    d = buf.get("d", (3, p))
-    t1 = buf.get("t1", (p,))
-    t2 = buf.get("t2", (p,))
+    s = _PairScratch(i, j, inv_mass, n_rows, buf)
+    n = _pair_normals(s, x, buf)
+    # impacts first, sequentially (bounce_sweeps), when anything bounces at all
+    jb = None
+    if restitution > 0:
+        jb = _impacts(i, j, n, w, restitution, v, v_old, inv_mass, n_rows)
+    lam = _velocity_passes(s, v, n, w, relax, iterations)
+    if friction > 0:
+        _friction_pass(s, v, n, w, count, friction, lam, jb)
+    _overlap_passes(s, x, radius, w, relax, iterations)
+    return True
 
-    def scatter_add(target: np.ndarray) -> None:
-        """target += (sum in pair order of -q on i, +q on j) * inverse mass, for all rows."""
-        for a in range(3):
-            weights[a, :, 1] = q[a]
-            np.negative(q[a], out=weights[a, :, 0])
-            acc[a].fill(0.0)
-            np.add.at(acc[a], bins_flat, weights[a].reshape(-1))
-        np.multiply(acc, inv_mass, out=acc)
-        target += acc.T
 
-    def gather_diff(source: np.ndarray) -> np.ndarray:
-        """source[j] - source[i] as (3, P)."""
-        np.copyto(state_t, source.T)
-        for a in range(3):
-            # mode "clip": with "raise" (the default) take buffers its output; the rows are valid
-            np.take(state_t[a], j, out=d[a], mode="clip")
-            np.take(state_t[a], i, out=t1, mode="clip")
-            d[a] -= t1
-        return d
-
-    def dot(u: np.ndarray, v3: np.ndarray, out: np.ndarray) -> np.ndarray:
-        """(u0 v0 + u1 v1) + u2 v2: :func:`animsim.vec.dot3`'s order, the same bits."""
-        np.multiply(u[0], v3[0], out=out)
-        np.multiply(u[1], v3[1], out=t2)
-        out += t2
-        np.multiply(u[2], v3[2], out=t2)
-        out += t2
-        return out
-
+def _pair_normals(s: _PairScratch, x: np.ndarray, buf: Buffers) -> np.ndarray:
+    """The unit normals from i to j, (3, P)."""
+    p = s.i.size
+    d = s.d
     # unit normals from i to j (a zero distance points up, as in the numba kernel)
     n = buf.get("n", (3, p))
-    gather_diff(x)
-    dist = np.sqrt(dot(d, d, np.empty(p)))
+    s.gather_diff(x)
+    dist = np.sqrt(s.dot(d, d, np.empty(p)))
     with np.errstate(divide="ignore", invalid="ignore"):
         np.divide(d, dist, out=n)
     pos = dist > 0
     if not pos.all():
         n[0, ~pos], n[1, ~pos], n[2, ~pos] = 0.0, 1.0, 0.0
-    # impacts first, sequentially (bounce_sweeps), when anything bounces at all
-    jb = None
-    if restitution > 0:
-        # resting: slower than twice what the step's forces added to a sphere touching either
-        # one (in a pile every grain gains g dt, though two grains falling together close at
-        # none and one on the floor is held at rest) ...
-        dv = v - v_old
-        added = np.sqrt((dv[:, 0] * dv[:, 0] + dv[:, 1] * dv[:, 1]) + dv[:, 2] * dv[:, 2])
-        pair_added = np.maximum(added[i], added[j])
-        near = np.zeros(n_rows)
-        np.maximum.at(near, i, pair_added)
-        np.maximum.at(near, j, pair_added)
-        # ... and an impact only where the bounce, e times the approach, would be faster than that
-        limit = (RESTING_STEPS * np.maximum(near[i], near[j]) + BOUNCE_FLOOR) / restitution
-        jb = bounce_sweeps_numpy(i, j, np.ascontiguousarray(n.T), w, limit, restitution, v, inv_mass)
+    return n
+
+
+def _impacts(
+    i: np.ndarray,
+    j: np.ndarray,
+    n: np.ndarray,
+    w: np.ndarray,
+    restitution: float,
+    v: np.ndarray,
+    v_old: np.ndarray,
+    inv_mass: np.ndarray,
+    n_rows: int,
+) -> np.ndarray:
+    """The impacts of the step (:func:`bounce_sweeps_numpy`), in place on v; returns their impulses."""
+    # resting: slower than twice what the step's forces added to a sphere touching either
+    # one (in a pile every grain gains g dt, though two grains falling together close at
+    # none and one on the floor is held at rest) ...
+    dv = v - v_old
+    added = np.sqrt((dv[:, 0] * dv[:, 0] + dv[:, 1] * dv[:, 1]) + dv[:, 2] * dv[:, 2])
+    pair_added = np.maximum(added[i], added[j])
+    near = np.zeros(n_rows)
+    np.maximum.at(near, i, pair_added)
+    np.maximum.at(near, j, pair_added)
+    # ... and an impact only where the bounce, e times the approach, would be faster than that
+    limit = (RESTING_STEPS * np.maximum(near[i], near[j]) + BOUNCE_FLOOR) / restitution
+    return bounce_sweeps_numpy(i, j, np.ascontiguousarray(n.T), w, limit, restitution, v, inv_mass)
+
+
+def _velocity_passes(
+    s: _PairScratch, v: np.ndarray, n: np.ndarray, w: np.ndarray, relax: np.ndarray, iterations: int
+) -> np.ndarray:
+    """The Jacobi passes on the normal speeds, in place on v; returns each pair's normal impulse."""
+    p = s.i.size
     # then the Jacobi passes: no pair left approaching (the target speed is 0)
     lam = np.zeros(p)
     new = np.empty(p)
     vn = np.empty(p)
     dl = np.empty(p)
     for _ in range(iterations):
-        dot(gather_diff(v), n, vn)
+        s.dot(s.gather_diff(v), n, vn)
         np.subtract(0.0, vn, out=dl)
         dl /= w
         dl *= relax
@@ -204,29 +251,54 @@ def resolve_pairs_numpy(
         lam, new = new, lam
         if not dl.any():  # nothing changed: neither would any later pass
             break
-        np.multiply(n, dl, out=q)
-        scatter_add(v)  # +J n on j, -J n on i: momentum kept
-    if friction > 0:
-        # one pass, so averaged but not over-relaxed: a grain's contacts stop at most its sliding
-        share = np.minimum(1.0 / np.maximum(count[i], count[j]), 1.0)
-        dvel = gather_diff(v)
-        dot(dvel, n, vn)
-        vt = dvel - vn * n
-        speed = np.sqrt(dot(vt, vt, np.empty(p)))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            # Coulomb's bound on the whole normal impulse: the impact's and the resting one
-            jt = np.minimum(speed / w * share, friction * (lam if jb is None else lam + jb)) / speed
-        # pairs at no sliding speed add nothing (a 0.0 weight leaves every sum's bits alone);
-        # the numba kernel adds +jt vt on i and -jt vt on j: the scatter of -(jt vt)
-        jt = np.where(speed > 0, jt, 0.0)
-        np.negative(jt * vt, out=q)
-        scatter_add(v)
+        np.multiply(n, dl, out=s.q)
+        s.scatter_add(v)  # +J n on j, -J n on i: momentum kept
+    return lam
+
+
+def _friction_pass(
+    s: _PairScratch,
+    v: np.ndarray,
+    n: np.ndarray,
+    w: np.ndarray,
+    count: np.ndarray,
+    friction: float,
+    lam: np.ndarray,
+    jb: np.ndarray | None,
+) -> None:
+    """Coulomb friction on the sliding speeds, in place on v."""
+    i, j = s.i, s.j
+    p = i.size
+    vn = np.empty(p)
+    # one pass, so averaged but not over-relaxed: a grain's contacts stop at most its sliding
+    share = np.minimum(1.0 / np.maximum(count[i], count[j]), 1.0)
+    dvel = s.gather_diff(v)
+    s.dot(dvel, n, vn)
+    vt = dvel - vn * n
+    speed = np.sqrt(s.dot(vt, vt, np.empty(p)))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # Coulomb's bound on the whole normal impulse: the impact's and the resting one
+        jt = np.minimum(speed / w * share, friction * (lam if jb is None else lam + jb)) / speed
+    # pairs at no sliding speed add nothing (a 0.0 weight leaves every sum's bits alone);
+    # the numba kernel adds +jt vt on i and -jt vt on j: the scatter of -(jt vt)
+    jt = np.where(speed > 0, jt, 0.0)
+    np.negative(jt * vt, out=s.q)
+    s.scatter_add(v)
+
+
+def _overlap_passes(
+    s: _PairScratch, x: np.ndarray, radius: np.ndarray, w: np.ndarray, relax: np.ndarray, iterations: int
+) -> None:
+    """The Jacobi passes that remove the overlaps, in place on x."""
+    i, j, d = s.i, s.j, s.d
+    p = i.size
+    dist = np.empty(p)
     reach = radius[i] + radius[j]
     over = np.empty(p)
     c = np.empty(p)
     for _ in range(iterations):
-        gather_diff(x)
-        np.sqrt(dot(d, d, dist), out=dist)
+        s.gather_diff(x)
+        np.sqrt(s.dot(d, d, dist), out=dist)
         np.subtract(reach, dist, out=over)
         # the numba kernel skips a pair with over <= 0 (so a NaN one is not skipped); a skipped
         # pair's weight 0.0 leaves every sum's bits alone
@@ -240,6 +312,5 @@ def resolve_pairs_numpy(
         pos = dist > 0
         if not pos.all():
             d[0, ~pos], d[1, ~pos], d[2, ~pos] = 0.0, 1.0, 0.0
-        np.multiply(d, c, out=q)
-        scatter_add(x)  # the pair's centre of mass stays
-    return True
+        np.multiply(d, c, out=s.q)
+        s.scatter_add(x)  # the pair's centre of mass stays

@@ -221,7 +221,6 @@ def probe(
     Every method runs once before it is timed, so numba's compiling (reported as
     ``compile_seconds``, never estimated) and NumPy's warm-up are not counted.
     """
-
     budget = PROBE_SECONDS if seconds is None else seconds
     began = time.perf_counter()
     scene = scene.model_copy(update={"integrator": scene.integrator_name})
@@ -244,59 +243,20 @@ def probe(
         compiled = record_at(probe_scene, name, integ, dt, np.array([0.0, short]), backend)
         setups.append(time.perf_counter() - t0)
         chosen = compiled.backend if compiled.backend != "numpy" else chosen
-        with np.errstate(all="ignore"):
-            # One stretch, to compile: all of its time counts as compiling, since
-            # some kernels compile on their first call, inside the loop's time.
-            t0 = time.perf_counter()
-            warm = run(compiled, [], notice=notice, stop=lambda: True)
-            compile_seconds += max(time.perf_counter() - t0, float(warm.meta.get("compile_time", 0.0)))
-            # The fastest of at least two runs: a kernel that compiles on its first
-            # call later on (the first birth, the first contact) lands in the first.
-            until = time.perf_counter() + PROBE_METHOD_SECONDS
-            runs: list[tuple[float, int]] = []
-            while len(runs) < 2 or time.perf_counter() < until:
-                deadline = time.perf_counter() + PROBE_METHOD_SECONDS
-                t0 = time.perf_counter()
-                result = run(compiled, [], stop=lambda d=deadline: time.perf_counter() > d)
-                overheads.append(max(0.0, time.perf_counter() - t0 - result.wall_time))
-                runs.append((result.wall_time, max(result.steps_taken, 1)))
+        compiling, runs = _time_method(compiled, notice, overheads)
+        compile_seconds += compiling
         per_step[integ] = min(wall / steps for wall, steps in runs)
         wall, steps = runs[0]
         compile_seconds += max(0.0, wall - per_step[integ] * steps)  # what the first run paid extra
 
-    # One method through as much of the scene as the probe's time allows. A run
-    # that reaches the end quickly is repeated and the fastest kept: on a busy
-    # machine a run of a few milliseconds can lose a whole time slice.
     full = compile_scene(with_overrides(scene, integrator=method), name, backend=backend)
-    # Recording frames can take code paths the bare runs above did not (some
-    # compile on their first call): one stretch first, counted as compiling.
-    t0 = time.perf_counter()
-    with np.errstate(all="ignore"):
-        run(full, [MemorySink()], stop=lambda: True)
-    compile_seconds += time.perf_counter() - t0
-    curve_start = time.perf_counter()
-    deadline = curve_start + budget
-    best: tuple[np.ndarray, np.ndarray] | None = None
-    while True:
-        t, w, finished = _curve(full, deadline, run, MemorySink)
-        if best is None or (len(t) == len(best[0]) and w[-1] < best[1][-1]):
-            best = (t, w)
-        if not finished or time.perf_counter() > curve_start + budget / 3 or len(t) < 2:
-            break
-    t, w = best
+    compiling, t, w = _scene_curve(full, budget)
+    compile_seconds += compiling
     if len(t) < 2 or t[-1] <= 0:  # nothing ran (a zero-step scene): the short probe's rate stands in
         t = np.array([0.0, short])
         w = np.array([0.0, per_step[method] * first_steps])
 
-    dop = None
-    if kind == "DOP853":
-        dop = dop853_rate(base, PROBE_REFERENCE_SECONDS)
-        # a reference of minutes is timed longer: DOP853's pace settles over seconds as its
-        # step shrinks to the scene's stiffness (a few per cent of what it predicts, at most
-        # LONG_REFERENCE_PROBE s)
-        whole = scene.duration * dop[1] / max(dop[0], 1e-300)
-        if whole > LONG_REFERENCE:
-            dop = dop853_rate(base, min(LONG_REFERENCE_PROBE, LONG_REFERENCE_SHARE * whole))
+    dop = _dop853_pace(base, scene.duration) if kind == "DOP853" else None
     return Probe(
         backend=chosen,
         method=method,
@@ -315,6 +275,67 @@ def probe(
         # the median: the first runs of a method may still load what later ones find ready
         overhead=statistics.median(overheads) if overheads else 0.0,
     )
+
+
+def _time_method(
+    compiled: Compiled, notice: Callable[[str], None] | None, overheads: list[float]
+) -> tuple[float, list[tuple[float, int]]]:
+    """One run to compile, then timed runs of ``compiled`` (each up to PROBE_METHOD_SECONDS);
+    returns the seconds of the compiling run and (wall time, steps) of the timed ones, and
+    appends what each timed run spent outside its loop to ``overheads``."""
+    with np.errstate(all="ignore"):
+        # One stretch, to compile: all of its time counts as compiling, since
+        # some kernels compile on their first call, inside the loop's time.
+        t0 = time.perf_counter()
+        warm = run(compiled, [], notice=notice, stop=lambda: True)
+        compiling = max(time.perf_counter() - t0, float(warm.meta.get("compile_time", 0.0)))
+        # The fastest of at least two runs: a kernel that compiles on its first
+        # call later on (the first birth, the first contact) lands in the first.
+        until = time.perf_counter() + PROBE_METHOD_SECONDS
+        runs: list[tuple[float, int]] = []
+        while len(runs) < 2 or time.perf_counter() < until:
+            deadline = time.perf_counter() + PROBE_METHOD_SECONDS
+            t0 = time.perf_counter()
+            result = run(compiled, [], stop=lambda d=deadline: time.perf_counter() > d)
+            overheads.append(max(0.0, time.perf_counter() - t0 - result.wall_time))
+            runs.append((result.wall_time, max(result.steps_taken, 1)))
+    return compiling, runs
+
+
+def _scene_curve(full: Compiled, budget: float) -> tuple[float, np.ndarray, np.ndarray]:
+    """(seconds spent compiling, simulated times, loop wall times) of ``full`` run for about
+    ``budget`` seconds (:func:`_curve`)."""
+    # One method through as much of the scene as the probe's time allows. A run
+    # that reaches the end quickly is repeated and the fastest kept: on a busy
+    # machine a run of a few milliseconds can lose a whole time slice.
+    # Recording frames can take code paths the bare runs above did not (some
+    # compile on their first call): one stretch first, counted as compiling.
+    t0 = time.perf_counter()
+    with np.errstate(all="ignore"):
+        run(full, [MemorySink()], stop=lambda: True)
+    compiling = time.perf_counter() - t0
+    curve_start = time.perf_counter()
+    deadline = curve_start + budget
+    best: tuple[np.ndarray, np.ndarray] | None = None
+    while True:
+        t, w, finished = _curve(full, deadline, run, MemorySink)
+        if best is None or (len(t) == len(best[0]) and w[-1] < best[1][-1]):
+            best = (t, w)
+        if not finished or time.perf_counter() > curve_start + budget / 3 or len(t) < 2:
+            break
+    return compiling, best[0], best[1]
+
+
+def _dop853_pace(base: Compiled, duration: float) -> tuple[float, float]:
+    """(simulated s reached, wall s) of the DOP853 reference's first solve (:func:`dop853_rate`)."""
+    dop = dop853_rate(base, PROBE_REFERENCE_SECONDS)
+    # a reference of minutes is timed longer: DOP853's pace settles over seconds as its
+    # step shrinks to the scene's stiffness (a few per cent of what it predicts, at most
+    # LONG_REFERENCE_PROBE s)
+    whole = duration * dop[1] / max(dop[0], 1e-300)
+    if whole > LONG_REFERENCE:
+        dop = dop853_rate(base, min(LONG_REFERENCE_PROBE, LONG_REFERENCE_SHARE * whole))
+    return dop
 
 
 def estimate_from(

@@ -148,63 +148,17 @@ def compare(
     notes.extend(time_notes)
     base = record_at(scene, name, integrators[0], dts[-1], times)
 
-    ref: Reference | None = None
-    ref_start = time.perf_counter()
-    if reference in ("auto", "analytic"):
-        try:
-            ref = analytic_reference(base, times)
-        except NoClosedForm as exc:
-            if reference == "analytic":
-                raise no_closed_form(name, exc) from None
-            notes.append(f"no closed form: {exc}; the reference is a converged run")
-    if ref is None and smooth(base):
-        try:
-            with np.errstate(all="ignore"):
-                ref = dop853_reference(base, times)
-        except ReferenceFailed as exc:
-            notes.append(f"{exc}; falling back to RK4 with dt halved")
-    ref_seconds = time.perf_counter() - ref_start
+    ref, ref_seconds = _closed_or_smooth_reference(base, name, times, reference, notes)
 
     cases = [(scene, name, integ, dt, times, repeat, backend) for integ in integrators for dt in dts]
-    if jobs == 1 and scheduler is None:
-        runs: list[_Run] = []
-        for case in cases:
-            if progress is not None:
-                progress(f"{case[2]} dt={case[3]:g}")
-            runs.append(_measure(*case))
-    else:
-        # Rows in parallel (local processes or Dask): the same rows, noisier
-        # seconds, since the runs share the cores they are timed on.
-        def tick(done: int, total: int) -> None:
-            if progress is not None:
-                progress(f"{done}/{total} runs")
-
-        runs = map_cases(_measure_case, cases, jobs=jobs, scheduler=scheduler, progress=tick)
-        for r, case in zip(runs, cases, strict=True):
-            r.compiled = record_at(*case[:4], times, backend)  # compiling is cheap; shipping it back is not
+    runs = _measure_all(cases, times, jobs, scheduler, progress, backend)
 
     moving = None if base.emitters is not None else ~base.system.particle_pinned
     if ref is None:
-        ok = [r for r in runs if r.status == STATUS_OK]
-
-        def smallest(candidate: Trajectory) -> float:
-            errs = [errors(r.trajectory, candidate, moving)[0] for r in ok]
-            floor = roundoff_floor(candidate, max((r.steps for r in ok), default=1))
-            real = [e for e in errs if math.isfinite(e) and e > floor]
-            return min(real, default=floor)
-
-        def distance(a: Trajectory, b: Trajectory) -> float:
-            return errors(a, b, moving)[0]
-
-        if progress is not None:
-            progress("reference (RK4, halving dt)")
-        # On the rows' backend: numba's RK4 is the same method, several times faster.
-        floor = {} if fine_min_steps is None else {"min_steps": fine_min_steps}
-        ref_start = time.perf_counter()
-        ref = rk4_reference(
-            scene, name, times, dts[-1], smallest, distance, backend, **floor, roundoff=roundoff_floor
+        ref, seconds = _converged_reference(
+            scene, name, times, dts[-1], runs, moving, progress, backend, fine_min_steps
         )
-        ref_seconds += time.perf_counter() - ref_start
+        ref_seconds += seconds
     notes.extend(ref.notes)
 
     conservative = base.conservative
@@ -225,6 +179,96 @@ def compare(
     result = Comparison(name, ref, rows, orders, times, repeat, conservative, notes)
     result.reference_seconds = ref_seconds
     return result
+
+
+def _closed_or_smooth_reference(
+    base: Compiled, name: str, times: np.ndarray, reference: str, notes: list[str]
+) -> tuple[Reference | None, float]:
+    """The closed form (``reference`` "auto" or "analytic") or else, on a smooth scene, a DOP853
+    run; None when neither applies (then a converged RK4 run is the reference). Appends to
+    ``notes`` why one was passed over; returns the seconds it took too."""
+    ref: Reference | None = None
+    ref_start = time.perf_counter()
+    if reference in ("auto", "analytic"):
+        try:
+            ref = analytic_reference(base, times)
+        except NoClosedForm as exc:
+            if reference == "analytic":
+                raise no_closed_form(name, exc) from None
+            notes.append(f"no closed form: {exc}; the reference is a converged run")
+    if ref is None and smooth(base):
+        try:
+            with np.errstate(all="ignore"):
+                ref = dop853_reference(base, times)
+        except ReferenceFailed as exc:
+            notes.append(f"{exc}; falling back to RK4 with dt halved")
+    return ref, time.perf_counter() - ref_start
+
+
+# one row to measure: the arguments of _measure (scene, name, integrator, dt, times, repeat, backend)
+_Case = tuple[m.Scene, str, str, float, np.ndarray, int, str]
+
+
+def _measure_all(
+    cases: list[_Case],
+    times: np.ndarray,
+    jobs: int,
+    scheduler: Any,
+    progress: Callable[[str], None] | None,
+    backend: str,
+) -> list[_Run]:
+    """Measure every case, one after the other or in parallel (see :func:`compare`)."""
+    if jobs == 1 and scheduler is None:
+        runs: list[_Run] = []
+        for case in cases:
+            if progress is not None:
+                progress(f"{case[2]} dt={case[3]:g}")
+            runs.append(_measure(*case))
+        return runs
+
+    # Rows in parallel (local processes or Dask): the same rows, noisier
+    # seconds, since the runs share the cores they are timed on.
+    def tick(done: int, total: int) -> None:
+        if progress is not None:
+            progress(f"{done}/{total} runs")
+
+    runs = map_cases(_measure_case, cases, jobs=jobs, scheduler=scheduler, progress=tick)
+    for r, case in zip(runs, cases, strict=True):
+        r.compiled = record_at(*case[:4], times, backend)  # compiling is cheap; shipping it back is not
+    return runs
+
+
+def _converged_reference(
+    scene: m.Scene,
+    name: str,
+    times: np.ndarray,
+    dt: float,
+    runs: list[_Run],
+    moving: np.ndarray | None,
+    progress: Callable[[str], None] | None,
+    backend: str,
+    fine_min_steps: int | None,
+) -> tuple[Reference, float]:
+    """RK4 with dt halved until it converges (:func:`rk4_reference`), from the rows' smallest
+    ``dt``; returns it and the seconds it took."""
+    ok = [r for r in runs if r.status == STATUS_OK]
+
+    def smallest(candidate: Trajectory) -> float:
+        errs = [errors(r.trajectory, candidate, moving)[0] for r in ok]
+        floor = roundoff_floor(candidate, max((r.steps for r in ok), default=1))
+        real = [e for e in errs if math.isfinite(e) and e > floor]
+        return min(real, default=floor)
+
+    def distance(a: Trajectory, b: Trajectory) -> float:
+        return errors(a, b, moving)[0]
+
+    if progress is not None:
+        progress("reference (RK4, halving dt)")
+    # On the rows' backend: numba's RK4 is the same method, several times faster.
+    floor = {} if fine_min_steps is None else {"min_steps": fine_min_steps}
+    ref_start = time.perf_counter()
+    ref = rk4_reference(scene, name, times, dt, smallest, distance, backend, **floor, roundoff=roundoff_floor)
+    return ref, time.perf_counter() - ref_start
 
 
 def _measure(
