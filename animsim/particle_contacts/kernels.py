@@ -3,8 +3,8 @@ run by NumPy too), the grid search of the Verlet list and one step's contact pas
 
 The kernels and every helper they call live in this one module: numba's disk cache checks
 only the file of the function it cached, so a helper in another file could go stale in the
-cache after an edit. ``contact_step`` is one function of about 200 lines for the same reason
-as the NumPy passes are one: the passes share the per-pair buffers it fills once.
+cache after an edit. ``contact_step`` runs the step's passes, one helper each; they share the
+per-pair buffers ``pair_setup`` fills once.
 """
 
 from __future__ import annotations
@@ -272,6 +272,235 @@ def candidates(x, active, exclude, reach, limit):  # pragma: no cover - compiled
     return out_i, out_j
 
 
+# The step kernel's pieces, in the order contact_step runs them; the per-pair buffers they
+# share are filled once by ``pair_setup``.
+@numba_helper
+def overlapping(ci, cj, reach2, x, inv_mass, pi, pj):  # pragma: no cover - compiled
+    """The candidates that overlap: returns (how many, how many of them are between
+    particles not both fixed); those pairs into ``pi``, ``pj``."""
+    found = 0
+    p = 0
+    for k in range(ci.shape[0]):
+        i = ci[k]
+        j = cj[k]
+        t0 = x[j, 0] - x[i, 0]
+        t1 = x[j, 1] - x[i, 1]
+        t2 = x[j, 2] - x[i, 2]
+        if not (t0 * t0 + t1 * t1 + t2 * t2 < reach2[k]):
+            continue
+        found += 1
+        if inv_mass[i] + inv_mass[j] > 0:
+            pi[p] = i
+            pj[p] = j
+            p += 1
+    return found, p
+
+
+@numba_helper
+def pair_setup(
+    pi, pj, p, x, v, v_old, inv_mass, e, relax_factor, w, rel, nrm, tgt, lam, count
+):  # pragma: no cover - compiled
+    """Per pair: ``w`` the summed inverse masses, ``rel`` the relaxation (averaged over the
+    contacts per particle, ``count``), ``nrm`` the unit line of centres, ``tgt`` the faster
+    change of velocity of its two spheres this step (when e > 0), ``lam`` 0."""
+    count[:] = 0
+    for k in range(p):
+        count[pi[k]] += 1
+        count[pj[k]] += 1
+    for k in range(p):
+        i = pi[k]
+        j = pj[k]
+        w[k] = inv_mass[i] + inv_mass[j]
+        rel[k] = min(relax_factor / max(count[i], count[j]), 1.0)
+        d2 = 0.0
+        for a in range(3):
+            t = x[j, a] - x[i, a]
+            nrm[k, a] = t
+            d2 += t * t
+        dist = np.sqrt(d2)
+        if dist > 0:
+            for a in range(3):
+                nrm[k, a] /= dist
+        else:
+            nrm[k, 0], nrm[k, 1], nrm[k, 2] = 0.0, 1.0, 0.0
+        if e > 0:  # the impact pass's limit (resolve_pairs_numpy's)
+            si = 0.0
+            sj = 0.0
+            for a in range(3):
+                t = v[i, a] - v_old[i, a]
+                si += t * t
+                t = v[j, a] - v_old[j, a]
+                sj += t * t
+            tgt[k] = max(np.sqrt(si), np.sqrt(sj))
+        lam[k] = 0.0
+
+
+@numba_helper
+def bounce_limits(pi, pj, p, tgt, dv, e, resting_steps, bounce_floor):  # pragma: no cover - compiled
+    """``tgt``: each pair's impact limit, from the largest change of velocity among the pairs
+    touching either sphere (``dv[:, 0]`` as scratch)."""
+    for r in range(dv.shape[0]):
+        dv[r, 0] = 0.0
+    for k in range(p):
+        dv[pi[k], 0] = max(dv[pi[k], 0], tgt[k])
+        dv[pj[k], 0] = max(dv[pj[k], 0], tgt[k])
+    for k in range(p):
+        tgt[k] = (resting_steps * max(dv[pi[k], 0], dv[pj[k], 0]) + bounce_floor) / e
+
+
+@numba_helper
+def add_scaled(out, dv, inv_mass):  # pragma: no cover - compiled
+    """out += dv / m, row by row."""
+    for r in range(out.shape[0]):
+        w_r = inv_mass[r]
+        for a in range(3):
+            out[r, a] += dv[r, a] * w_r
+
+
+@numba_helper
+def velocity_passes(pi, pj, p, nrm, w, rel, lam, v, dv, inv_mass, iterations):  # pragma: no cover - compiled
+    """The Jacobi passes on velocity: each scatters pair by pair into dv (every particle's sum
+    in pair order, from 0.0), then adds dv / m; a pass that changed nothing adds nothing."""
+    for _ in range(iterations):
+        dv[:] = 0.0
+        moved = False
+        for k in range(p):
+            i = pi[k]
+            j = pj[k]
+            vn = 0.0
+            for a in range(3):
+                vn += (v[j, a] - v[i, a]) * nrm[k, a]
+            dl = (0.0 - vn) / w[k] * rel[k]
+            new = max(lam[k] + dl, 0.0)
+            dl = new - lam[k]
+            lam[k] = new
+            if dl != 0.0:
+                moved = True
+            for a in range(3):
+                dv[i, a] -= dl * nrm[k, a]
+                dv[j, a] += dl * nrm[k, a]
+        if not moved:
+            break
+        add_scaled(v, dv, inv_mass)
+
+
+@numba_helper
+def friction_pass(pi, pj, p, nrm, w, count, lam, jb, mu, v, dv, inv_mass):  # pragma: no cover - compiled
+    """One Jacobi pass of friction: each pair's sliding stopped, its share at most mu times
+    its normal impulses (``lam`` + ``jb``)."""
+    dv[:] = 0.0
+    for k in range(p):
+        i = pi[k]
+        j = pj[k]
+        vn = 0.0
+        for a in range(3):
+            vn += (v[j, a] - v[i, a]) * nrm[k, a]
+        t0 = v[j, 0] - v[i, 0] - vn * nrm[k, 0]
+        t1 = v[j, 1] - v[i, 1] - vn * nrm[k, 1]
+        t2 = v[j, 2] - v[i, 2] - vn * nrm[k, 2]
+        speed = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+        if speed > 0:  # else it adds nothing
+            share = min(1.0 / max(count[i], count[j]), 1.0)
+            jt = min(speed / w[k] * share, mu * (lam[k] + jb[k])) / speed
+            dv[i, 0] += jt * t0
+            dv[i, 1] += jt * t1
+            dv[i, 2] += jt * t2
+            dv[j, 0] -= jt * t0
+            dv[j, 1] -= jt * t1
+            dv[j, 2] -= jt * t2
+    add_scaled(v, dv, inv_mass)
+
+
+@numba_helper
+def position_passes(pi, pj, p, x, radius, w, rel, dv, inv_mass, iterations):  # pragma: no cover - compiled
+    """The Jacobi passes on position: each pair's overlap pushed apart along its current line
+    of centres, as :func:`velocity_passes` does velocities."""
+    for _ in range(iterations):
+        dv[:] = 0.0
+        moved = False
+        for k in range(p):
+            i = pi[k]
+            j = pj[k]
+            d0 = x[j, 0] - x[i, 0]
+            d1 = x[j, 1] - x[i, 1]
+            d2 = x[j, 2] - x[i, 2]
+            dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            over = radius[i] + radius[j] - dist
+            if over <= 0:
+                continue
+            if dist > 0:
+                d0, d1, d2 = d0 / dist, d1 / dist, d2 / dist
+            else:
+                d0, d1, d2 = 0.0, 1.0, 0.0
+            c = over / w[k] * rel[k]
+            if c != 0.0:
+                moved = True
+            dv[i, 0] -= c * d0
+            dv[i, 1] -= c * d1
+            dv[i, 2] -= c * d2
+            dv[j, 0] += c * d0
+            dv[j, 1] += c * d1
+            dv[j, 2] += c * d2
+        if not moved:
+            break
+        add_scaled(x, dv, inv_mass)
+
+
+@numba_helper
+def contact_step(
+    ci,
+    cj,
+    reach2,
+    x,
+    v,
+    x_old,
+    v_old,
+    inv_mass,
+    radius,
+    e,
+    mu,
+    dt,
+    iterations,
+    relax_factor,
+    pi,
+    pj,
+    w,
+    rel,
+    nrm,
+    tgt,
+    lam,
+    jb,
+    due,
+    dv,
+    count,
+    resting_steps,
+    bounce_floor,
+    bounce_limit,
+):  # pragma: no cover - compiled
+    """Keep the candidates that overlap, then the passes of :func:`resolve_pairs_numpy`.
+
+    ``pi`` .. ``jb``: buffers of at least the candidates' length; ``dv`` (N, 3)
+    and ``count`` (N,): per particle. Returns (overlapping pairs, whether any
+    pair was resolved).
+    """
+    found, p = overlapping(ci, cj, reach2, x, inv_mass, pi, pj)
+    if p == 0:
+        return found, False
+    pair_setup(pi, pj, p, x, v, v_old, inv_mass, e, relax_factor, w, rel, nrm, tgt, lam, count)
+    # impacts first, sequentially (see bounce_sweeps), when anything bounces at all
+    if e > 0:
+        bounce_limits(pi, pj, p, tgt, dv, e, resting_steps, bounce_floor)
+        bounce_sweeps(pi, pj, nrm, w, tgt, e, v, inv_mass, jb, due, p, bounce_limit)
+    else:
+        for k in range(p):
+            jb[k] = 0.0
+    velocity_passes(pi, pj, p, nrm, w, rel, lam, v, dv, inv_mass, iterations)
+    if mu > 0:
+        friction_pass(pi, pj, p, nrm, w, count, lam, jb, mu, v, dv, inv_mass)
+    position_passes(pi, pj, p, x, radius, w, rel, dv, inv_mass, iterations)
+    return found, True
+
+
 def numba_kernels() -> NumbaKernels:
     """The numba kernels (compiled, or loaded from numba's disk cache, on first use)."""
     global _KERNELS
@@ -325,191 +554,6 @@ def numba_kernels() -> NumbaKernels:
                 e2 = (x[i, 2] - x_built[i, 2]) - c2
                 s = max(s, e0 * e0 + e1 * e1 + e2 * e2)
         return np.sqrt(s)
-
-    @numba.njit(cache=True)
-    def contact_step(
-        ci,
-        cj,
-        reach2,
-        x,
-        v,
-        x_old,
-        v_old,
-        inv_mass,
-        radius,
-        e,
-        mu,
-        dt,
-        iterations,
-        relax_factor,
-        pi,
-        pj,
-        w,
-        rel,
-        nrm,
-        tgt,
-        lam,
-        jb,
-        due,
-        dv,
-        count,
-        resting_steps,
-        bounce_floor,
-        bounce_limit,
-    ):  # pragma: no cover - compiled
-        """Keep the candidates that overlap, then the passes of :func:`resolve_pairs_numpy`.
-
-        ``pi`` .. ``jb``: buffers of at least the candidates' length; ``dv`` (N, 3)
-        and ``count`` (N,): per particle. Returns (overlapping pairs, whether any
-        pair was resolved).
-        """
-        n_rows = x.shape[0]
-        found = 0
-        p = 0
-        for k in range(ci.shape[0]):
-            i = ci[k]
-            j = cj[k]
-            t0 = x[j, 0] - x[i, 0]
-            t1 = x[j, 1] - x[i, 1]
-            t2 = x[j, 2] - x[i, 2]
-            if not (t0 * t0 + t1 * t1 + t2 * t2 < reach2[k]):
-                continue
-            found += 1
-            if inv_mass[i] + inv_mass[j] > 0:
-                pi[p] = i
-                pj[p] = j
-                p += 1
-        if p == 0:
-            return found, False
-        # contacts per particle (the relaxation's averaging)
-        count[:] = 0
-        for k in range(p):
-            count[pi[k]] += 1
-            count[pj[k]] += 1
-        for k in range(p):
-            i = pi[k]
-            j = pj[k]
-            w[k] = inv_mass[i] + inv_mass[j]
-            rel[k] = min(relax_factor / max(count[i], count[j]), 1.0)
-            d2 = 0.0
-            for a in range(3):
-                t = x[j, a] - x[i, a]
-                nrm[k, a] = t
-                d2 += t * t
-            dist = np.sqrt(d2)
-            if dist > 0:
-                for a in range(3):
-                    nrm[k, a] /= dist
-            else:
-                nrm[k, 0], nrm[k, 1], nrm[k, 2] = 0.0, 1.0, 0.0
-            if e > 0:  # the impact pass's limit (resolve_pairs_numpy's)
-                si = 0.0
-                sj = 0.0
-                for a in range(3):
-                    t = v[i, a] - v_old[i, a]
-                    si += t * t
-                    t = v[j, a] - v_old[j, a]
-                    sj += t * t
-                tgt[k] = max(np.sqrt(si), np.sqrt(sj))
-            lam[k] = 0.0
-        if e > 0:  # the largest of those touching each sphere (dv[:, 0] as scratch), then the limit
-            for r in range(n_rows):
-                dv[r, 0] = 0.0
-            for k in range(p):
-                dv[pi[k], 0] = max(dv[pi[k], 0], tgt[k])
-                dv[pj[k], 0] = max(dv[pj[k], 0], tgt[k])
-            for k in range(p):
-                tgt[k] = (resting_steps * max(dv[pi[k], 0], dv[pj[k], 0]) + bounce_floor) / e
-        # impacts first, sequentially (see bounce_sweeps), when anything bounces at all
-        if e > 0:
-            bounce_sweeps(pi, pj, nrm, w, tgt, e, v, inv_mass, jb, due, p, bounce_limit)
-        else:
-            for k in range(p):
-                jb[k] = 0.0
-        # each pass scatters pair by pair into dv (every particle's sum in pair order, from
-        # 0.0), then adds dv / m; a pass that changed nothing adds nothing
-        for _ in range(iterations):
-            dv[:] = 0.0
-            moved = False
-            for k in range(p):
-                i = pi[k]
-                j = pj[k]
-                vn = 0.0
-                for a in range(3):
-                    vn += (v[j, a] - v[i, a]) * nrm[k, a]
-                dl = (0.0 - vn) / w[k] * rel[k]
-                new = max(lam[k] + dl, 0.0)
-                dl = new - lam[k]
-                lam[k] = new
-                if dl != 0.0:
-                    moved = True
-                for a in range(3):
-                    dv[i, a] -= dl * nrm[k, a]
-                    dv[j, a] += dl * nrm[k, a]
-            if not moved:
-                break
-            for r in range(n_rows):
-                w_r = inv_mass[r]
-                for a in range(3):
-                    v[r, a] += dv[r, a] * w_r
-        if mu > 0:
-            dv[:] = 0.0
-            for k in range(p):
-                i = pi[k]
-                j = pj[k]
-                vn = 0.0
-                for a in range(3):
-                    vn += (v[j, a] - v[i, a]) * nrm[k, a]
-                t0 = v[j, 0] - v[i, 0] - vn * nrm[k, 0]
-                t1 = v[j, 1] - v[i, 1] - vn * nrm[k, 1]
-                t2 = v[j, 2] - v[i, 2] - vn * nrm[k, 2]
-                speed = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
-                if speed > 0:  # else it adds nothing
-                    share = min(1.0 / max(count[i], count[j]), 1.0)
-                    jt = min(speed / w[k] * share, mu * (lam[k] + jb[k])) / speed
-                    dv[i, 0] += jt * t0
-                    dv[i, 1] += jt * t1
-                    dv[i, 2] += jt * t2
-                    dv[j, 0] -= jt * t0
-                    dv[j, 1] -= jt * t1
-                    dv[j, 2] -= jt * t2
-            for r in range(n_rows):
-                w_r = inv_mass[r]
-                for a in range(3):
-                    v[r, a] += dv[r, a] * w_r
-        for _ in range(iterations):
-            dv[:] = 0.0
-            moved = False
-            for k in range(p):
-                i = pi[k]
-                j = pj[k]
-                d0 = x[j, 0] - x[i, 0]
-                d1 = x[j, 1] - x[i, 1]
-                d2 = x[j, 2] - x[i, 2]
-                dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-                over = radius[i] + radius[j] - dist
-                if over <= 0:
-                    continue
-                if dist > 0:
-                    d0, d1, d2 = d0 / dist, d1 / dist, d2 / dist
-                else:
-                    d0, d1, d2 = 0.0, 1.0, 0.0
-                c = over / w[k] * rel[k]
-                if c != 0.0:
-                    moved = True
-                dv[i, 0] -= c * d0
-                dv[i, 1] -= c * d1
-                dv[i, 2] -= c * d2
-                dv[j, 0] += c * d0
-                dv[j, 1] += c * d1
-                dv[j, 2] += c * d2
-            if not moved:
-                break
-            for r in range(n_rows):
-                w_r = inv_mass[r]
-                for a in range(3):
-                    x[r, a] += dv[r, a] * w_r
-        return found, True
 
     _KERNELS = NumbaKernels(candidates, contact_step, find_pairs, spread)
     return _KERNELS
