@@ -127,26 +127,14 @@ def excluded(keys, key):  # pragma: no cover - compiled
 
 
 @numba_helper
-def candidates(x, active, exclude, reach, limit):  # pragma: no cover - compiled
-    """Pairs (i, j), i < j, of active rows with |x_j - x_i|^2 <= reach^2, sorted by (i, j).
-
-    ``limit`` >= 0: more than ``limit`` pairs is too many (the memory budget's share):
-    the search stops at the first ``limit + 1`` and returns them unsorted, so the
-    caller sees the excess without the list growing past it (-1: no limit).
-
-    Cells ``reach`` wide: a dense grid over the particles' box when it has not
-    many more cells than particles (grains in a box), else a spatial hash.
-    Rows are counting-sorted by cell; each one looks at the later rows of its
-    own cell and at the rows of the 13 cells after its own (half of the 26
-    around it: every pair of cells once), and the pairs found are put in
-    (i, j) order by a counting sort on i.
-    """
-    n = x.shape[0]
+def active_box(x, active):  # pragma: no cover - compiled
+    """The box of the active rows (lo, hi), how many they are, and whether every coordinate
+    of theirs is finite (a dense grid needs that)."""
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     m = 0
-    dense = True  # a dense grid needs every coordinate finite
-    for i in range(n):
+    dense = True
+    for i in range(x.shape[0]):
         if active[i]:
             m += 1
             for a in range(3):
@@ -154,9 +142,13 @@ def candidates(x, active, exclude, reach, limit):  # pragma: no cover - compiled
                     dense = False
                 lo[a] = min(lo[a], x[i, a])
                 hi[a] = max(hi[a], x[i, a])
-    if m < 2 or not reach > 0:
-        return np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64)
-    inv = 1.0 / reach
+    return lo, hi, m, dense
+
+
+@numba_helper
+def grid_shape(lo, hi, inv, m, dense):  # pragma: no cover - compiled
+    """The dense grid's cells per axis, and whether to use it: every span finite and not
+    many more cells than the ``m`` rows."""
     dims = np.ones(3, dtype=np.int64)
     total = 1.0
     for a in range(3):
@@ -170,16 +162,14 @@ def candidates(x, active, exclude, reach, limit):  # pragma: no cover - compiled
         total *= dims[a]
     if total > 8.0 * m + 4096:
         dense = False
-    cc = np.zeros((n, 3), dtype=np.int64)
-    key = np.zeros(n, dtype=np.int64)
-    if dense:
-        size = dims[0] * dims[1] * dims[2]
-    else:
-        size = 1
-        while size < 2 * n:
-            size *= 2
-    start = np.zeros(size + 1, dtype=np.int64)
-    for i in range(n):
+    return dims, dense
+
+
+@numba_helper
+def fill_cells(x, active, lo, inv, dims, dense, size, cc, key, start):  # pragma: no cover - compiled
+    """Each active row's cell ``cc`` and its key (the dense grid's index, or its hash into
+    ``size`` buckets), counted into ``start[key + 1]``."""
+    for i in range(x.shape[0]):
         if active[i]:
             if dense:
                 for a in range(3):
@@ -192,21 +182,37 @@ def candidates(x, active, exclude, reach, limit):  # pragma: no cover - compiled
                     cc[i, a] = np.int64(f) if abs(f) < 1e15 else np.int64(1) << 62
                 key[i] = cell_hash(cc[i, 0], cc[i, 1], cc[i, 2], size)
             start[key[i] + 1] += 1
+
+
+@numba_helper
+def cell_order(x, active, cc, key, start, m, size):  # pragma: no cover - compiled
+    """``start``: where each key's rows begin (counts summed); returns the active rows in
+    key order (ascending within a key) and copies of their positions and cells in that order
+    (the scan reads memory in sequence)."""
     for k in range(size):
         start[k + 1] += start[k]
     fill = start[:-1].copy()
     order = np.empty(m, dtype=np.int64)
-    for i in range(n):  # ascending rows within a cell
+    for i in range(x.shape[0]):  # ascending rows within a cell
         if active[i]:
             order[fill[key[i]]] = i
             fill[key[i]] += 1
-    # copies in cell order: the scan below reads memory in sequence
     xs = np.empty((m, 3))
     cs = np.empty((m, 3), dtype=np.int64)
     for k in range(m):
         for a in range(3):
             xs[k, a] = x[order[k], a]
             cs[k, a] = cc[order[k], a]
+    return order, xs, cs
+
+
+@numba_helper
+def near_pairs(
+    order, xs, cs, start, dims, dense, size, reach, exclude, n, limit
+):  # pragma: no cover - compiled
+    """The pairs within ``reach``, in scan order: returns (i's, j's, how many, complete);
+    not complete: more than ``limit`` (>= 0), the first ``limit + 1`` found."""
+    m = order.shape[0]
     r2 = reach * reach
     raw_i = np.empty(max(16, 8 * m), dtype=np.int64)
     raw_j = np.empty(max(16, 8 * m), dtype=np.int64)
@@ -237,7 +243,7 @@ def candidates(x, active, exclude, reach, limit):  # pragma: no cover - compiled
                 if exclude.shape[0] and excluded(exclude, i * n + j):
                     continue
                 if npairs == limit + 1 and limit >= 0:
-                    return raw_i[:npairs].copy(), raw_j[:npairs].copy()
+                    return raw_i, raw_j, npairs, False
                 if npairs == raw_i.shape[0]:
                     gi = np.empty(2 * npairs, dtype=np.int64)
                     gj = np.empty(2 * npairs, dtype=np.int64)
@@ -247,7 +253,13 @@ def candidates(x, active, exclude, reach, limit):  # pragma: no cover - compiled
                 raw_i[npairs] = i
                 raw_j[npairs] = j
                 npairs += 1
-    # (i, j) order: a counting sort by i, then each i's handful of j by insertion
+    return raw_i, raw_j, npairs, True
+
+
+@numba_helper
+def sort_pairs(raw_i, raw_j, npairs, n):  # pragma: no cover - compiled
+    """The first ``npairs`` pairs in (i, j) order: a counting sort by i, then each i's
+    handful of j by insertion."""
     ptr = np.zeros(n + 1, dtype=np.int64)
     for k in range(npairs):
         ptr[raw_i[k] + 1] += 1
@@ -270,6 +282,46 @@ def candidates(x, active, exclude, reach, limit):  # pragma: no cover - compiled
                 b2 -= 1
             out_j[b2 + 1] = t
     return out_i, out_j
+
+
+@numba_helper
+def candidates(x, active, exclude, reach, limit):  # pragma: no cover - compiled
+    """Pairs (i, j), i < j, of active rows with |x_j - x_i|^2 <= reach^2, sorted by (i, j).
+
+    ``limit`` >= 0: more than ``limit`` pairs is too many (the memory budget's share):
+    the search stops at the first ``limit + 1`` and returns them unsorted, so the
+    caller sees the excess without the list growing past it (-1: no limit).
+
+    Cells ``reach`` wide: a dense grid over the particles' box when it has not
+    many more cells than particles (grains in a box), else a spatial hash.
+    Rows are counting-sorted by cell; each one looks at the later rows of its
+    own cell and at the rows of the 13 cells after its own (half of the 26
+    around it: every pair of cells once), and the pairs found are put in
+    (i, j) order by a counting sort on i.
+    """
+    n = x.shape[0]
+    lo, hi, m, dense = active_box(x, active)
+    if m < 2 or not reach > 0:
+        return np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64)
+    inv = 1.0 / reach
+    dims, dense = grid_shape(lo, hi, inv, m, dense)
+    cc = np.zeros((n, 3), dtype=np.int64)
+    key = np.zeros(n, dtype=np.int64)
+    if dense:
+        size = dims[0] * dims[1] * dims[2]
+    else:
+        size = 1
+        while size < 2 * n:
+            size *= 2
+    start = np.zeros(size + 1, dtype=np.int64)
+    fill_cells(x, active, lo, inv, dims, dense, size, cc, key, start)
+    order, xs, cs = cell_order(x, active, cc, key, start, m, size)
+    raw_i, raw_j, npairs, complete = near_pairs(
+        order, xs, cs, start, dims, dense, size, reach, exclude, n, limit
+    )
+    if not complete:
+        return raw_i[:npairs].copy(), raw_j[:npairs].copy()
+    return sort_pairs(raw_i, raw_j, npairs, n)
 
 
 # The step kernel's pieces, in the order contact_step runs them; the per-pair buffers they
