@@ -3,6 +3,8 @@ order as the NumPy versions, so the backends agree to the bit): the candidate pa
 and prune, the contacts between bodies, the plane contacts body by body, and the list solver
 (sequential impulses after Baraff 1997, section 8, and Catto 2005, then the bodies moved by
 the impulses). Each ``_..._loop`` is plain Python over arrays; a ``numba_*`` factory compiles it.
+The list solver's pieces are ``@numba_helper`` functions of this module, compiled before it
+(they live here: numba's disk cache checks only the file of the function it cached).
 
 Their NumPy versions: :mod:`animsim.bodies.contact_detection` (:func:`candidate_pairs`,
 :func:`pair_contacts`, :func:`plane_contacts`) and :mod:`animsim.bodies.contact_solve`
