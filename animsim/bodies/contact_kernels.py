@@ -3,6 +3,8 @@ order as the NumPy versions, so the backends agree to the bit): the candidate pa
 and prune, the contacts between bodies, the plane contacts body by body, and the list solver
 (sequential impulses after Baraff 1997, section 8, and Catto 2005, then the bodies moved by
 the impulses). Each ``_..._loop`` is plain Python over arrays; a ``numba_*`` factory compiles it.
+The list solver's pieces are ``@numba_helper`` functions of this module, compiled before it
+(they live here: numba's disk cache checks only the file of the function it cached).
 
 Their NumPy versions: :mod:`animsim.bodies.contact_detection` (:func:`candidate_pairs`,
 :func:`pair_contacts`, :func:`plane_contacts`) and :mod:`animsim.bodies.contact_solve`
@@ -29,7 +31,7 @@ from animsim.bodies.contact_constants import (
 )
 from animsim.bodies.quaternion import rotate_scalar
 from animsim.collisions import kept_end_speed
-from animsim.elements import compile_helpers
+from animsim.elements import compile_helpers, numba_helper, numba_inline_helper
 
 
 def _sweep_pairs_loop(x: np.ndarray, bound: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -281,6 +283,572 @@ def _detect_planes_loop(
     return c
 
 
+@numba_inline_helper
+def _world_inverse_inertia(
+    q: np.ndarray, inv_inertia: np.ndarray, body: int, mat: np.ndarray, i: int, o: int
+) -> None:
+    """I^-1 in world axes, R diag(I^-1) R^T of ``body``: its 6 entries into ``mat[i, o:o + 6]``."""
+    qw, qx, qy, qz = q[body, 0], q[body, 1], q[body, 2], q[body, 3]
+    r00 = 1 - 2 * (qy * qy + qz * qz)
+    r01 = 2 * (qx * qy - qw * qz)
+    r02 = 2 * (qx * qz + qw * qy)
+    r10 = 2 * (qx * qy + qw * qz)
+    r11 = 1 - 2 * (qx * qx + qz * qz)
+    r12 = 2 * (qy * qz - qw * qx)
+    r20 = 2 * (qx * qz - qw * qy)
+    r21 = 2 * (qy * qz + qw * qx)
+    r22 = 1 - 2 * (qx * qx + qy * qy)
+    i0, i1, i2 = inv_inertia[body, 0], inv_inertia[body, 1], inv_inertia[body, 2]
+    mat[i, o + 0] = r00 * i0 * r00 + r01 * i1 * r01 + r02 * i2 * r02
+    mat[i, o + 1] = r00 * i0 * r10 + r01 * i1 * r11 + r02 * i2 * r12
+    mat[i, o + 2] = r00 * i0 * r20 + r01 * i1 * r21 + r02 * i2 * r22
+    mat[i, o + 3] = r10 * i0 * r10 + r11 * i1 * r11 + r12 * i2 * r12
+    mat[i, o + 4] = r10 * i0 * r20 + r11 * i1 * r21 + r12 * i2 * r22
+    mat[i, o + 5] = r20 * i0 * r20 + r21 * i1 * r21 + r22 * i2 * r22
+
+
+@numba_inline_helper
+def _arm_inertia(
+    i: int,
+    side: int,
+    rx: float,
+    ry: float,
+    rz: float,
+    mat: np.ndarray,
+    gm: np.ndarray,
+    kt6: np.ndarray,
+    cols: np.ndarray,
+    mc: np.ndarray,
+) -> None:
+    """G = I^-1 [r]x of one end column by column into ``gm``, K = [r]x^T I^-1 [r]x into ``kt6``
+    (the first end sets it, the second adds to it). K_ij = c_i . M c_j, c_j the columns of [r]x
+    (as _arm_inertia)."""
+    o = 6 * side
+    cols[0, 0], cols[0, 1], cols[0, 2] = 0.0, rz, -ry
+    cols[1, 0], cols[1, 1], cols[1, 2] = -rz, 0.0, rx
+    cols[2, 0], cols[2, 1], cols[2, 2] = ry, -rx, 0.0
+    m0, m1, m2 = mat[i, o + 0], mat[i, o + 1], mat[i, o + 2]
+    m3, m4, m5 = mat[i, o + 3], mat[i, o + 4], mat[i, o + 5]
+    for j in range(3):
+        cx, cy, cz = cols[j, 0], cols[j, 1], cols[j, 2]
+        mc[j, 0] = (m0 * cx + m1 * cy) + m2 * cz
+        mc[j, 1] = (m1 * cx + m3 * cy) + m4 * cz
+        mc[j, 2] = (m2 * cx + m4 * cy) + m5 * cz
+        gm[i, 9 * side + 3 * j + 0] = mc[j, 0]
+        gm[i, 9 * side + 3 * j + 1] = mc[j, 1]
+        gm[i, 9 * side + 3 * j + 2] = mc[j, 2]
+    kk = 0
+    for ci in range(3):
+        for cj in range(ci, 3):
+            val = (cols[ci, 0] * mc[cj, 0] + cols[ci, 1] * mc[cj, 1]) + cols[ci, 2] * mc[cj, 2]
+            if side == 0:
+                kt6[i, kk] = val
+            else:
+                kt6[i, kk] = kt6[i, kk] + val
+            kk += 1
+
+
+@numba_helper
+def _contact_inertia(
+    i: int,
+    a: np.ndarray,
+    b: np.ndarray,
+    ra: np.ndarray,
+    rb: np.ndarray,
+    q: np.ndarray,
+    inv_inertia: np.ndarray,
+    mat: np.ndarray,
+    gm: np.ndarray,
+    kt6: np.ndarray,
+    cols: np.ndarray,
+    mc: np.ndarray,
+) -> None:
+    """Contact ``i``'s world inverse inertias (``mat``) and arm inertias (``gm``, ``kt6``), end a
+    then end b (zeros for a plane's missing end)."""
+    for side in range(2):
+        body = a[i] if side == 0 else b[i]
+        o = 6 * side
+        if body < 0:
+            for k in range(6):
+                mat[i, o + k] = 0.0
+            continue
+        _world_inverse_inertia(q, inv_inertia, body, mat, i, o)
+        if side == 0:
+            rx, ry, rz = ra[i, 0], ra[i, 1], ra[i, 2]
+        else:
+            rx, ry, rz = rb[i, 0], rb[i, 1], rb[i, 2]
+        _arm_inertia(i, side, rx, ry, rz, mat, gm, kt6, cols, mc)
+
+
+@numba_inline_helper
+def _arm_normal(
+    i: int, o: int, rx: float, ry: float, rz: float, n: np.ndarray, mat: np.ndarray, g: np.ndarray
+) -> float:
+    """u = r x n and I^-1 u of one end into ``g[i, o:o + 6]``; returns u . I^-1 u."""
+    nx, ny, nz = n[i, 0], n[i, 1], n[i, 2]
+    m0, m1, m2, m3, m4, m5 = (
+        mat[i, o],
+        mat[i, o + 1],
+        mat[i, o + 2],
+        mat[i, o + 3],
+        mat[i, o + 4],
+        mat[i, o + 5],
+    )
+    ux, uy, uz = ry * nz - rz * ny, rz * nx - rx * nz, rx * ny - ry * nx
+    gx = (m0 * ux + m1 * uy) + m2 * uz
+    gy = (m1 * ux + m3 * uy) + m4 * uz
+    gz = (m2 * ux + m4 * uy) + m5 * uz
+    g[i, o], g[i, o + 1], g[i, o + 2], g[i, o + 3], g[i, o + 4], g[i, o + 5] = ux, uy, uz, gx, gy, gz
+    return (ux * gx + uy * gy) + uz * gz
+
+
+@numba_helper
+def _contact_masses(
+    i: int,
+    a: np.ndarray,
+    b: np.ndarray,
+    ra: np.ndarray,
+    rb: np.ndarray,
+    n: np.ndarray,
+    inv_mass: np.ndarray,
+    resting_speed: np.ndarray,
+    dv: np.ndarray,
+    dx: np.ndarray,
+    mat: np.ndarray,
+    g: np.ndarray,
+    inv_kn: np.ndarray,
+    ma: np.ndarray,
+    mb: np.ndarray,
+    mt: np.ndarray,
+    limit: np.ndarray,
+    dvn_all: np.ndarray,
+    dxn_all: np.ndarray,
+) -> None:
+    """Contact ``i``'s effective masses (``inv_kn``, ``ma``, ``mb``, ``mt``), its resting speed
+    (``limit``) and what the step's forces added along n and moved along n (``dvn_all``,
+    ``dxn_all``)."""
+    ai, bi = a[i], b[i]
+    nx, ny, nz = n[i, 0], n[i, 1], n[i, 2]
+    da = _arm_normal(i, 0, ra[i, 0], ra[i, 1], ra[i, 2], n, mat, g)
+    ma[i] = inv_mass[ai]
+    rest = resting_speed[ai]
+    dvx, dvy, dvz = dv[ai, 0], dv[ai, 1], dv[ai, 2]
+    dxx, dxy, dxz = dx[ai, 0], dx[ai, 1], dx[ai, 2]
+    if bi >= 0:
+        db = _arm_normal(i, 6, rb[i, 0], rb[i, 1], rb[i, 2], n, mat, g)
+        mb[i] = inv_mass[bi]
+        kn = (ma[i] + mb[i]) + (da + db)
+        mt[i] = ma[i] + mb[i]
+        rest = rest + resting_speed[bi]
+        dvx, dvy, dvz = dvx - dv[bi, 0], dvy - dv[bi, 1], dvz - dv[bi, 2]
+        dxx, dxy, dxz = dxx - dx[bi, 0], dxy - dx[bi, 1], dxz - dx[bi, 2]
+    else:
+        for k in range(6, 12):
+            g[i, k] = 0.0
+        mb[i] = 0.0
+        kn = ma[i] + da
+        mt[i] = ma[i]
+        rest = rest + 0.0
+    inv_kn[i] = 1.0 / kn if kn > 0.0 else 0.0
+    limit[i] = rest + RESTING_FLOOR
+    dvn_all[i] = (dvx * nx + dvy * ny) + dvz * nz
+    dxn_all[i] = (dxx * nx + dxy * ny) + dxz * nz
+
+
+@numba_inline_helper
+def _normal_speed(
+    i: int, ai: int, bi: int, n: np.ndarray, g: np.ndarray, v: np.ndarray, w: np.ndarray
+) -> float:
+    """Contact ``i``'s approach speed along n, a's minus b's (b < 0: a plane, at rest)."""
+    nx, ny, nz = n[i, 0], n[i, 1], n[i, 2]
+    vn = (v[ai, 0] * nx + v[ai, 1] * ny) + v[ai, 2] * nz
+    vn = vn + ((w[ai, 0] * g[i, 0] + w[ai, 1] * g[i, 1]) + w[ai, 2] * g[i, 2])
+    if bi >= 0:
+        vnb = (v[bi, 0] * nx + v[bi, 1] * ny) + v[bi, 2] * nz
+        vnb = vnb + ((w[bi, 0] * g[i, 6] + w[bi, 1] * g[i, 7]) + w[bi, 2] * g[i, 8])
+        vn = vn - vnb
+    return vn
+
+
+@numba_inline_helper
+def _relative_velocity(
+    i: int, ai: int, bi: int, ra: np.ndarray, rb: np.ndarray, v: np.ndarray, w: np.ndarray
+) -> tuple[float, float, float]:
+    """Contact ``i``'s velocity at the contact point, a's minus b's (b < 0: a plane, at rest)."""
+    ax, ay, az = ra[i, 0], ra[i, 1], ra[i, 2]
+    vx = v[ai, 0] + (w[ai, 1] * az - w[ai, 2] * ay)
+    vy = v[ai, 1] + (w[ai, 2] * ax - w[ai, 0] * az)
+    vz = v[ai, 2] + (w[ai, 0] * ay - w[ai, 1] * ax)
+    if bi >= 0:
+        bx, by, bz = rb[i, 0], rb[i, 1], rb[i, 2]
+        vx = vx - (v[bi, 0] + (w[bi, 1] * bz - w[bi, 2] * by))
+        vy = vy - (v[bi, 1] + (w[bi, 2] * bx - w[bi, 0] * bz))
+        vz = vz - (v[bi, 2] + (w[bi, 0] * by - w[bi, 1] * bx))
+    return vx, vy, vz
+
+
+@numba_inline_helper
+def _push_normal(
+    i: int,
+    ai: int,
+    bi: int,
+    dj: float,
+    ma: np.ndarray,
+    mb: np.ndarray,
+    n: np.ndarray,
+    g: np.ndarray,
+    v: np.ndarray,
+    w: np.ndarray,
+) -> None:
+    """The normal impulse ``dj`` of contact ``i`` applied to a, its opposite to b."""
+    s = ma[i] * dj
+    v[ai, 0] += s * n[i, 0]
+    v[ai, 1] += s * n[i, 1]
+    v[ai, 2] += s * n[i, 2]
+    w[ai, 0] += dj * g[i, 3]
+    w[ai, 1] += dj * g[i, 4]
+    w[ai, 2] += dj * g[i, 5]
+    if bi >= 0:
+        s = mb[i] * dj
+        v[bi, 0] -= s * n[i, 0]
+        v[bi, 1] -= s * n[i, 1]
+        v[bi, 2] -= s * n[i, 2]
+        w[bi, 0] -= dj * g[i, 9]
+        w[bi, 1] -= dj * g[i, 10]
+        w[bi, 2] -= dj * g[i, 11]
+
+
+@numba_inline_helper
+def _push_friction(
+    i: int,
+    ai: int,
+    bi: int,
+    ix: float,
+    iy: float,
+    iz: float,
+    ma: np.ndarray,
+    mb: np.ndarray,
+    gm: np.ndarray,
+    v: np.ndarray,
+    w: np.ndarray,
+) -> None:
+    """The friction impulse (ix, iy, iz) of contact ``i`` applied to a, its opposite to b:
+    w += I^-1 (r x imp) = sum_j G_j imp_j."""
+    v[ai, 0] += ma[i] * ix
+    v[ai, 1] += ma[i] * iy
+    v[ai, 2] += ma[i] * iz
+    for k in range(3):
+        w[ai, k] += (gm[i, k] * ix + gm[i, 3 + k] * iy) + gm[i, 6 + k] * iz
+    if bi >= 0:
+        v[bi, 0] -= mb[i] * ix
+        v[bi, 1] -= mb[i] * iy
+        v[bi, 2] -= mb[i] * iz
+        for k in range(3):
+            w[bi, k] -= (gm[i, 9 + k] * ix + gm[i, 12 + k] * iy) + gm[i, 15 + k] * iz
+
+
+@numba_helper
+def _single_points(count: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Per contact: its two bodies touch at no other point of the list (keys as solve's
+    _impact_pass: a (max b + 1) + b, a distinct negative for a contact with no second body)."""
+    top = 0
+    for i in range(count):
+        top = max(top, b[i])
+    keys = np.empty(count, dtype=np.int64)
+    for i in range(count):
+        keys[i] = a[i] * (top + 1) + b[i] if b[i] >= 0 else -1 - i
+    srt = np.argsort(keys)
+    single = np.ones(count, dtype=np.bool_)
+    for m in range(1, count):
+        if keys[srt[m]] == keys[srt[m - 1]]:
+            single[srt[m]] = False
+            single[srt[m - 1]] = False
+    return single
+
+
+@numba_helper
+def _impact_pass(
+    count: int,
+    a: np.ndarray,
+    b: np.ndarray,
+    n: np.ndarray,
+    depth: np.ndarray,
+    restitution: np.ndarray,
+    dt: float,
+    v: np.ndarray,
+    w: np.ndarray,
+    g: np.ndarray,
+    ma: np.ndarray,
+    mb: np.ndarray,
+    inv_kn: np.ndarray,
+    limit: np.ndarray,
+    struck: np.ndarray,
+) -> None:
+    """Impacts between bodies first, one contact at a time, sweeping back and forth until none
+    is left (solve's _impact_pass); marks the contacts struck in ``struck``. Only a contact
+    that is its two bodies' one point of contact takes part (a face or an edge held at several
+    points is left to the simultaneous solve)."""
+    for i in range(count):
+        struck[i] = False
+    single = _single_points(count, a, b)
+    for sweep in range(IMPACT_SWEEPS):
+        hit = False
+        for m in range(count):
+            i = m if sweep % 2 == 0 else count - 1 - m
+            ai, bi = a[i], b[i]
+            if bi < 0 or not single[i] or not restitution[i] > 0.0 or not inv_kn[i] > 0.0:
+                continue
+            vn = _normal_speed(i, ai, bi, n, g, v, w)
+            if not (vn < -limit[i] and (depth[i] >= 0.0 or depth[i] - vn * dt >= 0.0)):
+                continue
+            hit = True
+            struck[i] = True
+            dj = -(1.0 + restitution[i]) * vn * inv_kn[i]
+            _push_normal(i, ai, bi, dj, ma, mb, n, g, v, w)
+        if not hit:
+            break
+
+
+@numba_inline_helper
+def _impact_target(vn0: float, depth: float, dvn: float, dxn: float, e: float, kh: float, dt: float) -> float:
+    """The speed along n an impact leaves with, from the time of impact inside the step (as
+    _impact_target)."""
+    d0 = -dxn - depth
+    span = d0 + depth
+    s = d0 / span if span > 0 else 0.0
+    s = min(max(s, 0.0), 1.0)
+    vn_imp = vn0 - (1.0 - s) * dvn
+    tgt = max(-e * vn_imp + (1.0 - s) * dvn, 0.0)
+    if kh != 0.0 and e > 0.0:
+        kept = kept_end_speed(vn0 - dvn, max(d0, 0.0), dvn / dt, e * depth, e, kh)
+        if kept > 0.0:
+            tgt = kept
+    return tgt
+
+
+@numba_helper
+def _bounce_targets(
+    count: int,
+    a: np.ndarray,
+    b: np.ndarray,
+    ra: np.ndarray,
+    rb: np.ndarray,
+    n: np.ndarray,
+    depth: np.ndarray,
+    restitution: np.ndarray,
+    v: np.ndarray,
+    w: np.ndarray,
+    limit: np.ndarray,
+    struck: np.ndarray,
+    dvn_all: np.ndarray,
+    dxn_all: np.ndarray,
+    kh: float,
+    dt: float,
+    e_used: np.ndarray,
+    impact: np.ndarray,
+    tgt: np.ndarray,
+) -> None:
+    """Each contact's target speed along n (``tgt``), the restitution it used (``e_used``) and
+    whether it is an impact (``impact``)."""
+    for i in range(count):
+        nx, ny, nz = n[i, 0], n[i, 1], n[i, 2]
+        vx, vy, vz = _relative_velocity(i, a[i], b[i], ra, rb, v, w)
+        vn0 = (vx * nx + vy * ny) + vz * nz
+        if vn0 < -limit[i] and depth[i] >= 0.0:
+            e = restitution[i]
+            e_used[i] = e
+            impact[i] = True
+            tgt[i] = _impact_target(vn0, depth[i], dvn_all[i], dxn_all[i], e, kh, dt)
+        else:
+            e_used[i] = restitution[i] if struck[i] else 0.0
+            impact[i] = struck[i]
+            tgt[i] = min(depth[i], 0.0) / dt  # a speculative contact may close its gap
+
+
+@numba_helper
+def _warm_start(
+    count: int,
+    a: np.ndarray,
+    b: np.ndarray,
+    n: np.ndarray,
+    v: np.ndarray,
+    w: np.ndarray,
+    g: np.ndarray,
+    gm: np.ndarray,
+    ma: np.ndarray,
+    mb: np.ndarray,
+    impact: np.ndarray,
+    jn: np.ndarray,
+    jt: np.ndarray,
+) -> None:
+    """Warm start (solve's _apply_warm): the impulses each contact starts from (none on an
+    impact), normal impulse on a, on b, then friction on a, on b."""
+    for i in range(count):
+        if impact[i]:
+            jn[i] = 0.0
+            jt[i, 0], jt[i, 1], jt[i, 2] = 0.0, 0.0, 0.0
+        dj = jn[i]
+        ix, iy, iz = jt[i, 0], jt[i, 1], jt[i, 2]
+        if dj == 0.0 and ix == 0.0 and iy == 0.0 and iz == 0.0:
+            continue
+        _push_normal(i, a[i], b[i], dj, ma, mb, n, g, v, w)
+        _push_friction(i, a[i], b[i], ix, iy, iz, ma, mb, gm, v, w)
+
+
+@numba_inline_helper
+def _friction_total(
+    i: int,
+    vx: float,
+    vy: float,
+    vz: float,
+    n: np.ndarray,
+    kt6: np.ndarray,
+    mt: np.ndarray,
+    friction: np.ndarray,
+    jn: np.ndarray,
+    jt: np.ndarray,
+) -> tuple[float, float, float]:
+    """Contact ``i``'s new total friction impulse: its old one plus what stops the sliding
+    velocity (vx, vy, vz minus its part along n), held inside the cone of ``friction`` times the
+    normal impulse."""
+    nx, ny, nz = n[i, 0], n[i, 1], n[i, 2]
+    vn = (vx * nx + vy * ny) + vz * nz
+    tx, ty, tz = vx - vn * nx, vy - vn * ny, vz - vn * nz
+    s2 = (tx * tx + ty * ty) + tz * tz
+    wx, wy, wz = jt[i, 0], jt[i, 1], jt[i, 2]
+    if s2 > 0.0:
+        k0, k1, k2, k3, k4, k5 = kt6[i, 0], kt6[i, 1], kt6[i, 2], kt6[i, 3], kt6[i, 4], kt6[i, 5]
+        qf = (tx * ((k0 * tx + k1 * ty) + k2 * tz) + ty * ((k1 * tx + k3 * ty) + k4 * tz)) + tz * (
+            (k2 * tx + k4 * ty) + k5 * tz
+        )
+        den = mt[i] * s2 + qf
+        if den > 0.0:
+            f = s2 / den
+            wx, wy, wz = wx - f * tx, wy - f * ty, wz - f * tz
+    capj = friction[i] * jn[i]
+    mag2 = (wx * wx + wy * wy) + wz * wz
+    if mag2 > capj * capj:
+        s = capj / np.sqrt(mag2)
+        wx, wy, wz = wx * s, wy * s, wz * s
+    return wx, wy, wz
+
+
+@numba_helper
+def _sweep(
+    count: int,
+    a: np.ndarray,
+    b: np.ndarray,
+    ra: np.ndarray,
+    rb: np.ndarray,
+    n: np.ndarray,
+    friction: np.ndarray,
+    v: np.ndarray,
+    w: np.ndarray,
+    g: np.ndarray,
+    gm: np.ndarray,
+    kt6: np.ndarray,
+    inv_kn: np.ndarray,
+    ma: np.ndarray,
+    mb: np.ndarray,
+    mt: np.ndarray,
+    tgt: np.ndarray,
+    jn: np.ndarray,
+    jt: np.ndarray,
+) -> float:
+    """One sweep of the sequential impulses: each contact's normal impulse toward its target,
+    then its friction. Returns the largest change (mass times impulse) of the sweep."""
+    change = 0.0
+    for i in range(count):
+        ai, bi = a[i], b[i]
+        vn = _normal_speed(i, ai, bi, n, g, v, w)
+        new = jn[i] + (tgt[i] - vn) * inv_kn[i]
+        if new < 0.0:
+            new = 0.0
+        dj = new - jn[i]
+        jn[i] = new
+        _push_normal(i, ai, bi, dj, ma, mb, n, g, v, w)
+        # friction
+        vx, vy, vz = _relative_velocity(i, ai, bi, ra, rb, v, w)
+        wx, wy, wz = _friction_total(i, vx, vy, vz, n, kt6, mt, friction, jn, jt)
+        ix, iy, iz = wx - jt[i, 0], wy - jt[i, 1], wz - jt[i, 2]
+        jt[i, 0], jt[i, 1], jt[i, 2] = wx, wy, wz
+        big = max(abs(dj), max(abs(ix), max(abs(iy), abs(iz))))
+        change = max(change, mt[i] * big)
+        _push_friction(i, ai, bi, ix, iy, iz, ma, mb, gm, v, w)
+    return change
+
+
+@numba_inline_helper
+def _arm_move(i: int, body: int, r: np.ndarray, n: np.ndarray, sx: np.ndarray, sw: np.ndarray) -> float:
+    """How far the point ``r[i]`` of ``body`` moved along contact ``i``'s n (sx + sw x r)."""
+    px = sx[body, 0] + (sw[body, 1] * r[i, 2] - sw[body, 2] * r[i, 1])
+    py = sx[body, 1] + (sw[body, 2] * r[i, 0] - sw[body, 0] * r[i, 2])
+    pz = sx[body, 2] + (sw[body, 0] * r[i, 1] - sw[body, 1] * r[i, 0])
+    return (px * n[i, 0] + py * n[i, 1]) + pz * n[i, 2]
+
+
+@numba_inline_helper
+def _turn(q: np.ndarray, bi: int, wx: float, wy: float, wz: float) -> None:
+    """``q[bi]`` turned by the small rotation (wx, wy, wz), renormalised."""
+    qw, qx, qy, qz = q[bi, 0], q[bi, 1], q[bi, 2], q[bi, 3]
+    q0 = qw + 0.5 * ((-wx * qx - wy * qy) - wz * qz)
+    q1 = qx + 0.5 * ((wx * qw + wy * qz) - wz * qy)
+    q2 = qy + 0.5 * ((-wx * qz + wy * qw) + wz * qx)
+    q3 = qz + 0.5 * ((wx * qy - wy * qx) + wz * qw)
+    norm = np.sqrt(((q0 * q0 + q1 * q1) + q2 * q2) + q3 * q3)
+    q[bi, 0], q[bi, 1], q[bi, 2], q[bi, 3] = q0 / norm, q1 / norm, q2 / norm, q3 / norm
+
+
+@numba_helper
+def _follow_impulses(
+    count: int,
+    a: np.ndarray,
+    b: np.ndarray,
+    ra: np.ndarray,
+    rb: np.ndarray,
+    n: np.ndarray,
+    depth: np.ndarray,
+    impact: np.ndarray,
+    x: np.ndarray,
+    q: np.ndarray,
+    v: np.ndarray,
+    w: np.ndarray,
+    v0: np.ndarray,
+    w0: np.ndarray,
+    h: float,
+    depth_out: np.ndarray,
+) -> None:
+    """The bodies moved as the impulses moved them (follow_impulses; when h > 0): each body not
+    in an impact by h times its change of velocity, the depths left into ``depth_out``."""
+    for i in range(count):
+        depth_out[i] = depth[i]
+    if h > 0.0:
+        nb = x.shape[0]
+        bounced = np.zeros(nb, dtype=np.bool_)
+        for i in range(count):
+            if impact[i]:
+                bounced[a[i]] = True
+                if b[i] >= 0:
+                    bounced[b[i]] = True
+        sx = np.zeros((nb, 3))
+        sw = np.zeros((nb, 3))
+        for bi in range(nb):
+            if not bounced[bi]:
+                for k in range(3):
+                    sx[bi, k] = h * (v[bi, k] - v0[bi, k])
+                    sw[bi, k] = h * (w[bi, k] - w0[bi, k])
+        for i in range(count):
+            mv = _arm_move(i, a[i], ra, n, sx, sw)
+            if b[i] >= 0:
+                mv = mv - _arm_move(i, b[i], rb, n, sx, sw)
+            depth_out[i] = depth[i] - mv
+        for bi in range(nb):
+            for k in range(3):
+                x[bi, k] += sx[bi, k]
+            if not bounced[bi] and (sw[bi, 0] != 0.0 or sw[bi, 1] != 0.0 or sw[bi, 2] != 0.0):
+                _turn(q, bi, sw[bi, 0], sw[bi, 1], sw[bi, 2])
+
+
 def _solve_list_loop(
     count: int,
     a: np.ndarray,
@@ -329,341 +897,23 @@ def _solve_list_loop(
     gm = np.zeros((count, 18))  # G = I^-1 [r]x of each end, column by column (solve's ga, gb)
     mt = np.empty(count)
     limit = np.empty(count)  # the resting speed: slower approaches never bounce
-    dvn_all = np.empty(count)  # what the step's forces added along n, and its move along n
-    dxn_all = np.empty(count)
+    dvn = np.empty(count)  # what the step's forces added along n, and its move along n
+    dxn = np.empty(count)
     struck = np.empty(count, dtype=np.bool_)  # impacts of the impact pass
     cols = np.empty((3, 3))
     mc = np.empty((3, 3))
     for i in range(count):
-        for side in range(2):
-            body = a[i] if side == 0 else b[i]
-            o = 6 * side
-            if body < 0:
-                for k in range(6):
-                    mat[i, o + k] = 0.0
-                continue
-            qw, qx, qy, qz = q[body, 0], q[body, 1], q[body, 2], q[body, 3]
-            r00 = 1 - 2 * (qy * qy + qz * qz)
-            r01 = 2 * (qx * qy - qw * qz)
-            r02 = 2 * (qx * qz + qw * qy)
-            r10 = 2 * (qx * qy + qw * qz)
-            r11 = 1 - 2 * (qx * qx + qz * qz)
-            r12 = 2 * (qy * qz - qw * qx)
-            r20 = 2 * (qx * qz - qw * qy)
-            r21 = 2 * (qy * qz + qw * qx)
-            r22 = 1 - 2 * (qx * qx + qy * qy)
-            i0, i1, i2 = inv_inertia[body, 0], inv_inertia[body, 1], inv_inertia[body, 2]
-            mat[i, o + 0] = r00 * i0 * r00 + r01 * i1 * r01 + r02 * i2 * r02
-            mat[i, o + 1] = r00 * i0 * r10 + r01 * i1 * r11 + r02 * i2 * r12
-            mat[i, o + 2] = r00 * i0 * r20 + r01 * i1 * r21 + r02 * i2 * r22
-            mat[i, o + 3] = r10 * i0 * r10 + r11 * i1 * r11 + r12 * i2 * r12
-            mat[i, o + 4] = r10 * i0 * r20 + r11 * i1 * r21 + r12 * i2 * r22
-            mat[i, o + 5] = r20 * i0 * r20 + r21 * i1 * r21 + r22 * i2 * r22
-            # K_ij = c_i . M c_j, c_j the columns of [r]x (as _arm_inertia)
-            if side == 0:
-                rx, ry, rz = ra[i, 0], ra[i, 1], ra[i, 2]
-            else:
-                rx, ry, rz = rb[i, 0], rb[i, 1], rb[i, 2]
-            cols[0, 0], cols[0, 1], cols[0, 2] = 0.0, rz, -ry
-            cols[1, 0], cols[1, 1], cols[1, 2] = -rz, 0.0, rx
-            cols[2, 0], cols[2, 1], cols[2, 2] = ry, -rx, 0.0
-            m0, m1, m2 = mat[i, o + 0], mat[i, o + 1], mat[i, o + 2]
-            m3, m4, m5 = mat[i, o + 3], mat[i, o + 4], mat[i, o + 5]
-            for j in range(3):
-                cx, cy, cz = cols[j, 0], cols[j, 1], cols[j, 2]
-                mc[j, 0] = (m0 * cx + m1 * cy) + m2 * cz
-                mc[j, 1] = (m1 * cx + m3 * cy) + m4 * cz
-                mc[j, 2] = (m2 * cx + m4 * cy) + m5 * cz
-                gm[i, 9 * side + 3 * j + 0] = mc[j, 0]
-                gm[i, 9 * side + 3 * j + 1] = mc[j, 1]
-                gm[i, 9 * side + 3 * j + 2] = mc[j, 2]
-            kk = 0
-            for ci in range(3):
-                for cj in range(ci, 3):
-                    val = (cols[ci, 0] * mc[cj, 0] + cols[ci, 1] * mc[cj, 1]) + cols[ci, 2] * mc[cj, 2]
-                    if side == 0:
-                        kt6[i, kk] = val
-                    else:
-                        kt6[i, kk] = kt6[i, kk] + val
-                    kk += 1
-        ai, bi = a[i], b[i]
-        nx, ny, nz = n[i, 0], n[i, 1], n[i, 2]
-        ax, ay, az = ra[i, 0], ra[i, 1], ra[i, 2]
-        bx, by, bz = rb[i, 0], rb[i, 1], rb[i, 2]
-        m0, m1, m2, m3, m4, m5 = mat[i, 0], mat[i, 1], mat[i, 2], mat[i, 3], mat[i, 4], mat[i, 5]
-        ux, uy, uz = ay * nz - az * ny, az * nx - ax * nz, ax * ny - ay * nx
-        gx = (m0 * ux + m1 * uy) + m2 * uz
-        gy = (m1 * ux + m3 * uy) + m4 * uz
-        gz = (m2 * ux + m4 * uy) + m5 * uz
-        g[i, 0], g[i, 1], g[i, 2], g[i, 3], g[i, 4], g[i, 5] = ux, uy, uz, gx, gy, gz
-        ma[i] = inv_mass[ai]
-        da = (ux * gx + uy * gy) + uz * gz
-        vx = v[ai, 0] + (w[ai, 1] * az - w[ai, 2] * ay)
-        vy = v[ai, 1] + (w[ai, 2] * ax - w[ai, 0] * az)
-        vz = v[ai, 2] + (w[ai, 0] * ay - w[ai, 1] * ax)
-        rest = resting_speed[ai]
-        dvx, dvy, dvz = dv[ai, 0], dv[ai, 1], dv[ai, 2]
-        dxx, dxy, dxz = dx[ai, 0], dx[ai, 1], dx[ai, 2]
-        if bi >= 0:
-            m0, m1, m2, m3, m4, m5 = mat[i, 6], mat[i, 7], mat[i, 8], mat[i, 9], mat[i, 10], mat[i, 11]
-            ux, uy, uz = by * nz - bz * ny, bz * nx - bx * nz, bx * ny - by * nx
-            gx = (m0 * ux + m1 * uy) + m2 * uz
-            gy = (m1 * ux + m3 * uy) + m4 * uz
-            gz = (m2 * ux + m4 * uy) + m5 * uz
-            g[i, 6], g[i, 7], g[i, 8], g[i, 9], g[i, 10], g[i, 11] = ux, uy, uz, gx, gy, gz
-            mb[i] = inv_mass[bi]
-            kn = (ma[i] + mb[i]) + (da + ((ux * gx + uy * gy) + uz * gz))
-            mt[i] = ma[i] + mb[i]
-            vx = vx - (v[bi, 0] + (w[bi, 1] * bz - w[bi, 2] * by))
-            vy = vy - (v[bi, 1] + (w[bi, 2] * bx - w[bi, 0] * bz))
-            vz = vz - (v[bi, 2] + (w[bi, 0] * by - w[bi, 1] * bx))
-            rest = rest + resting_speed[bi]
-            dvx, dvy, dvz = dvx - dv[bi, 0], dvy - dv[bi, 1], dvz - dv[bi, 2]
-            dxx, dxy, dxz = dxx - dx[bi, 0], dxy - dx[bi, 1], dxz - dx[bi, 2]
-        else:
-            for k in range(6, 12):
-                g[i, k] = 0.0
-            mb[i] = 0.0
-            kn = ma[i] + da
-            mt[i] = ma[i]
-            rest = rest + 0.0
-        inv_kn[i] = 1.0 / kn if kn > 0.0 else 0.0
-        limit[i] = rest + RESTING_FLOOR
-        dvn_all[i] = (dvx * nx + dvy * ny) + dvz * nz
-        dxn_all[i] = (dxx * nx + dxy * ny) + dxz * nz
-    # impacts between bodies first, one contact at a time (solve's _impact_pass)
-    for i in range(count):
-        struck[i] = False
-    # one point only (solve's _impact_pass): a contact whose two bodies touch at other points too
-    # is left out; keys as solve's: a (max b + 1) + b, a distinct negative for the others
-    top = 0
-    for i in range(count):
-        top = max(top, b[i])
-    keys = np.empty(count, dtype=np.int64)
-    for i in range(count):
-        keys[i] = a[i] * (top + 1) + b[i] if b[i] >= 0 else -1 - i
-    srt = np.argsort(keys)
-    single = np.ones(count, dtype=np.bool_)
-    for m in range(1, count):
-        if keys[srt[m]] == keys[srt[m - 1]]:
-            single[srt[m]] = False
-            single[srt[m - 1]] = False
-    for sweep in range(IMPACT_SWEEPS):
-        hit = False
-        for m in range(count):
-            i = m if sweep % 2 == 0 else count - 1 - m
-            ai, bi = a[i], b[i]
-            if bi < 0 or not single[i] or not restitution[i] > 0.0 or not inv_kn[i] > 0.0:
-                continue
-            nx, ny, nz = n[i, 0], n[i, 1], n[i, 2]
-            vn = (v[ai, 0] * nx + v[ai, 1] * ny) + v[ai, 2] * nz
-            vn = vn + ((w[ai, 0] * g[i, 0] + w[ai, 1] * g[i, 1]) + w[ai, 2] * g[i, 2])
-            vnb = (v[bi, 0] * nx + v[bi, 1] * ny) + v[bi, 2] * nz
-            vnb = vnb + ((w[bi, 0] * g[i, 6] + w[bi, 1] * g[i, 7]) + w[bi, 2] * g[i, 8])
-            vn = vn - vnb
-            if not (vn < -limit[i] and (depth[i] >= 0.0 or depth[i] - vn * dt >= 0.0)):
-                continue
-            hit = True
-            struck[i] = True
-            dj = -(1.0 + restitution[i]) * vn * inv_kn[i]
-            s = ma[i] * dj
-            v[ai, 0] += s * nx
-            v[ai, 1] += s * ny
-            v[ai, 2] += s * nz
-            w[ai, 0] += dj * g[i, 3]
-            w[ai, 1] += dj * g[i, 4]
-            w[ai, 2] += dj * g[i, 5]
-            s = mb[i] * dj
-            v[bi, 0] -= s * nx
-            v[bi, 1] -= s * ny
-            v[bi, 2] -= s * nz
-            w[bi, 0] -= dj * g[i, 9]
-            w[bi, 1] -= dj * g[i, 10]
-            w[bi, 2] -= dj * g[i, 11]
-        if not hit:
-            break
-    for i in range(count):
-        ai, bi = a[i], b[i]
-        nx, ny, nz = n[i, 0], n[i, 1], n[i, 2]
-        ax, ay, az = ra[i, 0], ra[i, 1], ra[i, 2]
-        vx = v[ai, 0] + (w[ai, 1] * az - w[ai, 2] * ay)
-        vy = v[ai, 1] + (w[ai, 2] * ax - w[ai, 0] * az)
-        vz = v[ai, 2] + (w[ai, 0] * ay - w[ai, 1] * ax)
-        if bi >= 0:
-            bx, by, bz = rb[i, 0], rb[i, 1], rb[i, 2]
-            vx = vx - (v[bi, 0] + (w[bi, 1] * bz - w[bi, 2] * by))
-            vy = vy - (v[bi, 1] + (w[bi, 2] * bx - w[bi, 0] * bz))
-            vz = vz - (v[bi, 2] + (w[bi, 0] * by - w[bi, 1] * bx))
-        vn0 = (vx * nx + vy * ny) + vz * nz
-        if vn0 < -limit[i] and depth[i] >= 0.0:
-            e = restitution[i]
-            e_used[i] = e
-            impact[i] = True
-            # time of impact inside the step (as _impact_target)
-            dvn = dvn_all[i]
-            dxn = dxn_all[i]
-            d0 = -dxn - depth[i]
-            span = d0 + depth[i]
-            s = d0 / span if span > 0 else 0.0
-            s = min(max(s, 0.0), 1.0)
-            vn_imp = vn0 - (1.0 - s) * dvn
-            tgt[i] = max(-e * vn_imp + (1.0 - s) * dvn, 0.0)
-            if kh != 0.0 and e > 0.0:
-                kept = kept_end_speed(vn0 - dvn, max(d0, 0.0), dvn / dt, e * depth[i], e, kh)
-                if kept > 0.0:
-                    tgt[i] = kept
-        else:
-            e_used[i] = restitution[i] if struck[i] else 0.0
-            impact[i] = struck[i]
-            tgt[i] = min(depth[i], 0.0) / dt  # a speculative contact may close its gap
-    # warm start (solve's _apply_warm): normal impulse on a, on b, then friction on a, on b
-    for i in range(count):
-        if impact[i]:
-            jn[i] = 0.0
-            jt[i, 0], jt[i, 1], jt[i, 2] = 0.0, 0.0, 0.0
-        ai, bi = a[i], b[i]
-        dj = jn[i]
-        ix, iy, iz = jt[i, 0], jt[i, 1], jt[i, 2]
-        if dj == 0.0 and ix == 0.0 and iy == 0.0 and iz == 0.0:
-            continue
-        s = ma[i] * dj
-        for k in range(3):
-            v[ai, k] += s * n[i, k]
-            w[ai, k] += dj * g[i, 3 + k]
-        if bi >= 0:
-            s = mb[i] * dj
-            for k in range(3):
-                v[bi, k] -= s * n[i, k]
-                w[bi, k] -= dj * g[i, 9 + k]
-        v[ai, 0] += ma[i] * ix
-        v[ai, 1] += ma[i] * iy
-        v[ai, 2] += ma[i] * iz
-        for k in range(3):
-            w[ai, k] += (gm[i, k] * ix + gm[i, 3 + k] * iy) + gm[i, 6 + k] * iz
-        if bi >= 0:
-            v[bi, 0] -= mb[i] * ix
-            v[bi, 1] -= mb[i] * iy
-            v[bi, 2] -= mb[i] * iz
-            for k in range(3):
-                w[bi, k] -= (gm[i, 9 + k] * ix + gm[i, 12 + k] * iy) + gm[i, 15 + k] * iz
+        _contact_inertia(i, a, b, ra, rb, q, inv_inertia, mat, gm, kt6, cols, mc)
+        _contact_masses(
+            i, a, b, ra, rb, n, inv_mass, resting_speed, dv, dx, mat, g, inv_kn, ma, mb, mt, limit, dvn, dxn
+        )
+    _impact_pass(count, a, b, n, depth, restitution, dt, v, w, g, ma, mb, inv_kn, limit, struck)
+    _bounce_targets(
+        count, a, b, ra, rb, n, depth, restitution, v, w, limit, struck, dvn, dxn, kh, dt, e_used, impact, tgt
+    )
+    _warm_start(count, a, b, n, v, w, g, gm, ma, mb, impact, jn, jt)
     for sweep in range(max(iterations, max_sweeps)):
-        change = 0.0
-        for i in range(count):
-            ai, bi = a[i], b[i]
-            nx, ny, nz = n[i, 0], n[i, 1], n[i, 2]
-            ax, ay, az = ra[i, 0], ra[i, 1], ra[i, 2]
-            im_a, im_b = ma[i], mb[i]
-            vn = (v[ai, 0] * nx + v[ai, 1] * ny) + v[ai, 2] * nz
-            vn = vn + ((w[ai, 0] * g[i, 0] + w[ai, 1] * g[i, 1]) + w[ai, 2] * g[i, 2])
-            if bi >= 0:
-                vnb = (v[bi, 0] * nx + v[bi, 1] * ny) + v[bi, 2] * nz
-                vnb = vnb + ((w[bi, 0] * g[i, 6] + w[bi, 1] * g[i, 7]) + w[bi, 2] * g[i, 8])
-                vn = vn - vnb
-            new = jn[i] + (tgt[i] - vn) * inv_kn[i]
-            if new < 0.0:
-                new = 0.0
-            dj = new - jn[i]
-            jn[i] = new
-            s = im_a * dj
-            v[ai, 0] += s * nx
-            v[ai, 1] += s * ny
-            v[ai, 2] += s * nz
-            w[ai, 0] += dj * g[i, 3]
-            w[ai, 1] += dj * g[i, 4]
-            w[ai, 2] += dj * g[i, 5]
-            if bi >= 0:
-                s = im_b * dj
-                v[bi, 0] -= s * nx
-                v[bi, 1] -= s * ny
-                v[bi, 2] -= s * nz
-                w[bi, 0] -= dj * g[i, 9]
-                w[bi, 1] -= dj * g[i, 10]
-                w[bi, 2] -= dj * g[i, 11]
-            # friction
-            vx = v[ai, 0] + (w[ai, 1] * az - w[ai, 2] * ay)
-            vy = v[ai, 1] + (w[ai, 2] * ax - w[ai, 0] * az)
-            vz = v[ai, 2] + (w[ai, 0] * ay - w[ai, 1] * ax)
-            if bi >= 0:
-                bx, by, bz = rb[i, 0], rb[i, 1], rb[i, 2]
-                vx = vx - (v[bi, 0] + (w[bi, 1] * bz - w[bi, 2] * by))
-                vy = vy - (v[bi, 1] + (w[bi, 2] * bx - w[bi, 0] * bz))
-                vz = vz - (v[bi, 2] + (w[bi, 0] * by - w[bi, 1] * bx))
-            vn = (vx * nx + vy * ny) + vz * nz
-            tx, ty, tz = vx - vn * nx, vy - vn * ny, vz - vn * nz
-            s2 = (tx * tx + ty * ty) + tz * tz
-            wx, wy, wz = jt[i, 0], jt[i, 1], jt[i, 2]
-            if s2 > 0.0:
-                k0, k1, k2, k3, k4, k5 = kt6[i, 0], kt6[i, 1], kt6[i, 2], kt6[i, 3], kt6[i, 4], kt6[i, 5]
-                qf = (tx * ((k0 * tx + k1 * ty) + k2 * tz) + ty * ((k1 * tx + k3 * ty) + k4 * tz)) + tz * (
-                    (k2 * tx + k4 * ty) + k5 * tz
-                )
-                den = mt[i] * s2 + qf
-                if den > 0.0:
-                    f = s2 / den
-                    wx, wy, wz = wx - f * tx, wy - f * ty, wz - f * tz
-            capj = friction[i] * jn[i]
-            mag2 = (wx * wx + wy * wy) + wz * wz
-            if mag2 > capj * capj:
-                s = capj / np.sqrt(mag2)
-                wx, wy, wz = wx * s, wy * s, wz * s
-            ix, iy, iz = wx - jt[i, 0], wy - jt[i, 1], wz - jt[i, 2]
-            jt[i, 0], jt[i, 1], jt[i, 2] = wx, wy, wz
-            big = max(abs(dj), max(abs(ix), max(abs(iy), abs(iz))))
-            change = max(change, mt[i] * big)
-            v[ai, 0] += im_a * ix
-            v[ai, 1] += im_a * iy
-            v[ai, 2] += im_a * iz
-            for k in range(3):  # w += I^-1 (r x imp) = sum_j G_j imp_j
-                w[ai, k] += (gm[i, k] * ix + gm[i, 3 + k] * iy) + gm[i, 6 + k] * iz
-            if bi >= 0:
-                bx, by, bz = rb[i, 0], rb[i, 1], rb[i, 2]
-                v[bi, 0] -= im_b * ix
-                v[bi, 1] -= im_b * iy
-                v[bi, 2] -= im_b * iz
-                for k in range(3):
-                    w[bi, k] -= (gm[i, 9 + k] * ix + gm[i, 12 + k] * iy) + gm[i, 15 + k] * iz
+        change = _sweep(count, a, b, ra, rb, n, friction, v, w, g, gm, kt6, inv_kn, ma, mb, mt, tgt, jn, jt)
         if sweep + 1 >= iterations and not change > SWEEP_TOLERANCE:
             break
-    # the bodies moved as the impulses moved them (follow_impulses)
-    for i in range(count):
-        depth_out[i] = depth[i]
-    if h > 0.0:
-        nb = x.shape[0]
-        bounced = np.zeros(nb, dtype=np.bool_)
-        for i in range(count):
-            if impact[i]:
-                bounced[a[i]] = True
-                if b[i] >= 0:
-                    bounced[b[i]] = True
-        sx = np.zeros((nb, 3))
-        sw = np.zeros((nb, 3))
-        for bi in range(nb):
-            if not bounced[bi]:
-                for k in range(3):
-                    sx[bi, k] = h * (v[bi, k] - v0[bi, k])
-                    sw[bi, k] = h * (w[bi, k] - w0[bi, k])
-        for i in range(count):
-            ai = a[i]
-            px = sx[ai, 0] + (sw[ai, 1] * ra[i, 2] - sw[ai, 2] * ra[i, 1])
-            py = sx[ai, 1] + (sw[ai, 2] * ra[i, 0] - sw[ai, 0] * ra[i, 2])
-            pz = sx[ai, 2] + (sw[ai, 0] * ra[i, 1] - sw[ai, 1] * ra[i, 0])
-            mv = (px * n[i, 0] + py * n[i, 1]) + pz * n[i, 2]
-            bi = b[i]
-            if bi >= 0:
-                px = sx[bi, 0] + (sw[bi, 1] * rb[i, 2] - sw[bi, 2] * rb[i, 1])
-                py = sx[bi, 1] + (sw[bi, 2] * rb[i, 0] - sw[bi, 0] * rb[i, 2])
-                pz = sx[bi, 2] + (sw[bi, 0] * rb[i, 1] - sw[bi, 1] * rb[i, 0])
-                mv = mv - ((px * n[i, 0] + py * n[i, 1]) + pz * n[i, 2])
-            depth_out[i] = depth[i] - mv
-        for bi in range(nb):
-            for k in range(3):
-                x[bi, k] += sx[bi, k]
-            if not bounced[bi] and (sw[bi, 0] != 0.0 or sw[bi, 1] != 0.0 or sw[bi, 2] != 0.0):
-                wx, wy, wz = sw[bi, 0], sw[bi, 1], sw[bi, 2]
-                qw, qx, qy, qz = q[bi, 0], q[bi, 1], q[bi, 2], q[bi, 3]
-                q0 = qw + 0.5 * ((-wx * qx - wy * qy) - wz * qz)
-                q1 = qx + 0.5 * ((wx * qw + wy * qz) - wz * qy)
-                q2 = qy + 0.5 * ((-wx * qz + wy * qw) + wz * qx)
-                q3 = qz + 0.5 * ((wx * qy - wy * qx) + wz * qw)
-                norm = np.sqrt(((q0 * q0 + q1 * q1) + q2 * q2) + q3 * q3)
-                q[bi, 0], q[bi, 1], q[bi, 2], q[bi, 3] = q0 / norm, q1 / norm, q2 / norm, q3 / norm
+    _follow_impulses(count, a, b, ra, rb, n, depth, impact, x, q, v, w, v0, w0, h, depth_out)

@@ -3,8 +3,8 @@ run by NumPy too), the grid search of the Verlet list and one step's contact pas
 
 The kernels and every helper they call live in this one module: numba's disk cache checks
 only the file of the function it cached, so a helper in another file could go stale in the
-cache after an edit. ``contact_step`` is one function of about 200 lines for the same reason
-as the NumPy passes are one: the passes share the per-pair buffers it fills once.
+cache after an edit. ``contact_step`` runs the step's passes, one helper each; they share the
+per-pair buffers ``pair_setup`` fills once.
 """
 
 from __future__ import annotations
@@ -127,26 +127,14 @@ def excluded(keys, key):  # pragma: no cover - compiled
 
 
 @numba_helper
-def candidates(x, active, exclude, reach, limit):  # pragma: no cover - compiled
-    """Pairs (i, j), i < j, of active rows with |x_j - x_i|^2 <= reach^2, sorted by (i, j).
-
-    ``limit`` >= 0: more than ``limit`` pairs is too many (the memory budget's share):
-    the search stops at the first ``limit + 1`` and returns them unsorted, so the
-    caller sees the excess without the list growing past it (-1: no limit).
-
-    Cells ``reach`` wide: a dense grid over the particles' box when it has not
-    many more cells than particles (grains in a box), else a spatial hash.
-    Rows are counting-sorted by cell; each one looks at the later rows of its
-    own cell and at the rows of the 13 cells after its own (half of the 26
-    around it: every pair of cells once), and the pairs found are put in
-    (i, j) order by a counting sort on i.
-    """
-    n = x.shape[0]
+def active_box(x, active):  # pragma: no cover - compiled
+    """The box of the active rows (lo, hi), how many they are, and whether every coordinate
+    of theirs is finite (a dense grid needs that)."""
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     m = 0
-    dense = True  # a dense grid needs every coordinate finite
-    for i in range(n):
+    dense = True
+    for i in range(x.shape[0]):
         if active[i]:
             m += 1
             for a in range(3):
@@ -154,9 +142,13 @@ def candidates(x, active, exclude, reach, limit):  # pragma: no cover - compiled
                     dense = False
                 lo[a] = min(lo[a], x[i, a])
                 hi[a] = max(hi[a], x[i, a])
-    if m < 2 or not reach > 0:
-        return np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64)
-    inv = 1.0 / reach
+    return lo, hi, m, dense
+
+
+@numba_helper
+def grid_shape(lo, hi, inv, m, dense):  # pragma: no cover - compiled
+    """The dense grid's cells per axis, and whether to use it: every span finite and not
+    many more cells than the ``m`` rows."""
     dims = np.ones(3, dtype=np.int64)
     total = 1.0
     for a in range(3):
@@ -170,16 +162,14 @@ def candidates(x, active, exclude, reach, limit):  # pragma: no cover - compiled
         total *= dims[a]
     if total > 8.0 * m + 4096:
         dense = False
-    cc = np.zeros((n, 3), dtype=np.int64)
-    key = np.zeros(n, dtype=np.int64)
-    if dense:
-        size = dims[0] * dims[1] * dims[2]
-    else:
-        size = 1
-        while size < 2 * n:
-            size *= 2
-    start = np.zeros(size + 1, dtype=np.int64)
-    for i in range(n):
+    return dims, dense
+
+
+@numba_helper
+def fill_cells(x, active, lo, inv, dims, dense, size, cc, key, start):  # pragma: no cover - compiled
+    """Each active row's cell ``cc`` and its key (the dense grid's index, or its hash into
+    ``size`` buckets), counted into ``start[key + 1]``."""
+    for i in range(x.shape[0]):
         if active[i]:
             if dense:
                 for a in range(3):
@@ -192,21 +182,37 @@ def candidates(x, active, exclude, reach, limit):  # pragma: no cover - compiled
                     cc[i, a] = np.int64(f) if abs(f) < 1e15 else np.int64(1) << 62
                 key[i] = cell_hash(cc[i, 0], cc[i, 1], cc[i, 2], size)
             start[key[i] + 1] += 1
+
+
+@numba_helper
+def cell_order(x, active, cc, key, start, m, size):  # pragma: no cover - compiled
+    """``start``: where each key's rows begin (counts summed); returns the active rows in
+    key order (ascending within a key) and copies of their positions and cells in that order
+    (the scan reads memory in sequence)."""
     for k in range(size):
         start[k + 1] += start[k]
     fill = start[:-1].copy()
     order = np.empty(m, dtype=np.int64)
-    for i in range(n):  # ascending rows within a cell
+    for i in range(x.shape[0]):  # ascending rows within a cell
         if active[i]:
             order[fill[key[i]]] = i
             fill[key[i]] += 1
-    # copies in cell order: the scan below reads memory in sequence
     xs = np.empty((m, 3))
     cs = np.empty((m, 3), dtype=np.int64)
     for k in range(m):
         for a in range(3):
             xs[k, a] = x[order[k], a]
             cs[k, a] = cc[order[k], a]
+    return order, xs, cs
+
+
+@numba_helper
+def near_pairs(
+    order, xs, cs, start, dims, dense, size, reach, exclude, n, limit
+):  # pragma: no cover - compiled
+    """The pairs within ``reach``, in scan order: returns (i's, j's, how many, complete);
+    not complete: more than ``limit`` (>= 0), the first ``limit + 1`` found."""
+    m = order.shape[0]
     r2 = reach * reach
     raw_i = np.empty(max(16, 8 * m), dtype=np.int64)
     raw_j = np.empty(max(16, 8 * m), dtype=np.int64)
@@ -237,7 +243,7 @@ def candidates(x, active, exclude, reach, limit):  # pragma: no cover - compiled
                 if exclude.shape[0] and excluded(exclude, i * n + j):
                     continue
                 if npairs == limit + 1 and limit >= 0:
-                    return raw_i[:npairs].copy(), raw_j[:npairs].copy()
+                    return raw_i, raw_j, npairs, False
                 if npairs == raw_i.shape[0]:
                     gi = np.empty(2 * npairs, dtype=np.int64)
                     gj = np.empty(2 * npairs, dtype=np.int64)
@@ -247,7 +253,13 @@ def candidates(x, active, exclude, reach, limit):  # pragma: no cover - compiled
                 raw_i[npairs] = i
                 raw_j[npairs] = j
                 npairs += 1
-    # (i, j) order: a counting sort by i, then each i's handful of j by insertion
+    return raw_i, raw_j, npairs, True
+
+
+@numba_helper
+def sort_pairs(raw_i, raw_j, npairs, n):  # pragma: no cover - compiled
+    """The first ``npairs`` pairs in (i, j) order: a counting sort by i, then each i's
+    handful of j by insertion."""
     ptr = np.zeros(n + 1, dtype=np.int64)
     for k in range(npairs):
         ptr[raw_i[k] + 1] += 1
@@ -270,6 +282,275 @@ def candidates(x, active, exclude, reach, limit):  # pragma: no cover - compiled
                 b2 -= 1
             out_j[b2 + 1] = t
     return out_i, out_j
+
+
+@numba_helper
+def candidates(x, active, exclude, reach, limit):  # pragma: no cover - compiled
+    """Pairs (i, j), i < j, of active rows with |x_j - x_i|^2 <= reach^2, sorted by (i, j).
+
+    ``limit`` >= 0: more than ``limit`` pairs is too many (the memory budget's share):
+    the search stops at the first ``limit + 1`` and returns them unsorted, so the
+    caller sees the excess without the list growing past it (-1: no limit).
+
+    Cells ``reach`` wide: a dense grid over the particles' box when it has not
+    many more cells than particles (grains in a box), else a spatial hash.
+    Rows are counting-sorted by cell; each one looks at the later rows of its
+    own cell and at the rows of the 13 cells after its own (half of the 26
+    around it: every pair of cells once), and the pairs found are put in
+    (i, j) order by a counting sort on i.
+    """
+    n = x.shape[0]
+    lo, hi, m, dense = active_box(x, active)
+    if m < 2 or not reach > 0:
+        return np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64)
+    inv = 1.0 / reach
+    dims, dense = grid_shape(lo, hi, inv, m, dense)
+    cc = np.zeros((n, 3), dtype=np.int64)
+    key = np.zeros(n, dtype=np.int64)
+    if dense:
+        size = dims[0] * dims[1] * dims[2]
+    else:
+        size = 1
+        while size < 2 * n:
+            size *= 2
+    start = np.zeros(size + 1, dtype=np.int64)
+    fill_cells(x, active, lo, inv, dims, dense, size, cc, key, start)
+    order, xs, cs = cell_order(x, active, cc, key, start, m, size)
+    raw_i, raw_j, npairs, complete = near_pairs(
+        order, xs, cs, start, dims, dense, size, reach, exclude, n, limit
+    )
+    if not complete:
+        return raw_i[:npairs].copy(), raw_j[:npairs].copy()
+    return sort_pairs(raw_i, raw_j, npairs, n)
+
+
+# The step kernel's pieces, in the order contact_step runs them; the per-pair buffers they
+# share are filled once by ``pair_setup``.
+@numba_helper
+def overlapping(ci, cj, reach2, x, inv_mass, pi, pj):  # pragma: no cover - compiled
+    """The candidates that overlap: returns (how many, how many of them are between
+    particles not both fixed); those pairs into ``pi``, ``pj``."""
+    found = 0
+    p = 0
+    for k in range(ci.shape[0]):
+        i = ci[k]
+        j = cj[k]
+        t0 = x[j, 0] - x[i, 0]
+        t1 = x[j, 1] - x[i, 1]
+        t2 = x[j, 2] - x[i, 2]
+        if not (t0 * t0 + t1 * t1 + t2 * t2 < reach2[k]):
+            continue
+        found += 1
+        if inv_mass[i] + inv_mass[j] > 0:
+            pi[p] = i
+            pj[p] = j
+            p += 1
+    return found, p
+
+
+@numba_helper
+def pair_setup(
+    pi, pj, p, x, v, v_old, inv_mass, e, relax_factor, w, rel, nrm, tgt, lam, count
+):  # pragma: no cover - compiled
+    """Per pair: ``w`` the summed inverse masses, ``rel`` the relaxation (averaged over the
+    contacts per particle, ``count``), ``nrm`` the unit line of centres, ``tgt`` the faster
+    change of velocity of its two spheres this step (when e > 0), ``lam`` 0."""
+    count[:] = 0
+    for k in range(p):
+        count[pi[k]] += 1
+        count[pj[k]] += 1
+    for k in range(p):
+        i = pi[k]
+        j = pj[k]
+        w[k] = inv_mass[i] + inv_mass[j]
+        rel[k] = min(relax_factor / max(count[i], count[j]), 1.0)
+        d2 = 0.0
+        for a in range(3):
+            t = x[j, a] - x[i, a]
+            nrm[k, a] = t
+            d2 += t * t
+        dist = np.sqrt(d2)
+        if dist > 0:
+            for a in range(3):
+                nrm[k, a] /= dist
+        else:
+            nrm[k, 0], nrm[k, 1], nrm[k, 2] = 0.0, 1.0, 0.0
+        if e > 0:  # the impact pass's limit (resolve_pairs_numpy's)
+            si = 0.0
+            sj = 0.0
+            for a in range(3):
+                t = v[i, a] - v_old[i, a]
+                si += t * t
+                t = v[j, a] - v_old[j, a]
+                sj += t * t
+            tgt[k] = max(np.sqrt(si), np.sqrt(sj))
+        lam[k] = 0.0
+
+
+@numba_helper
+def bounce_limits(pi, pj, p, tgt, dv, e, resting_steps, bounce_floor):  # pragma: no cover - compiled
+    """``tgt``: each pair's impact limit, from the largest change of velocity among the pairs
+    touching either sphere (``dv[:, 0]`` as scratch)."""
+    for r in range(dv.shape[0]):
+        dv[r, 0] = 0.0
+    for k in range(p):
+        dv[pi[k], 0] = max(dv[pi[k], 0], tgt[k])
+        dv[pj[k], 0] = max(dv[pj[k], 0], tgt[k])
+    for k in range(p):
+        tgt[k] = (resting_steps * max(dv[pi[k], 0], dv[pj[k], 0]) + bounce_floor) / e
+
+
+@numba_helper
+def add_scaled(out, dv, inv_mass):  # pragma: no cover - compiled
+    """out += dv / m, row by row."""
+    for r in range(out.shape[0]):
+        w_r = inv_mass[r]
+        for a in range(3):
+            out[r, a] += dv[r, a] * w_r
+
+
+@numba_helper
+def velocity_passes(pi, pj, p, nrm, w, rel, lam, v, dv, inv_mass, iterations):  # pragma: no cover - compiled
+    """The Jacobi passes on velocity: each scatters pair by pair into dv (every particle's sum
+    in pair order, from 0.0), then adds dv / m; a pass that changed nothing adds nothing."""
+    for _ in range(iterations):
+        dv[:] = 0.0
+        moved = False
+        for k in range(p):
+            i = pi[k]
+            j = pj[k]
+            vn = 0.0
+            for a in range(3):
+                vn += (v[j, a] - v[i, a]) * nrm[k, a]
+            dl = (0.0 - vn) / w[k] * rel[k]
+            new = max(lam[k] + dl, 0.0)
+            dl = new - lam[k]
+            lam[k] = new
+            if dl != 0.0:
+                moved = True
+            for a in range(3):
+                dv[i, a] -= dl * nrm[k, a]
+                dv[j, a] += dl * nrm[k, a]
+        if not moved:
+            break
+        add_scaled(v, dv, inv_mass)
+
+
+@numba_helper
+def friction_pass(pi, pj, p, nrm, w, count, lam, jb, mu, v, dv, inv_mass):  # pragma: no cover - compiled
+    """One Jacobi pass of friction: each pair's sliding stopped, its share at most mu times
+    its normal impulses (``lam`` + ``jb``)."""
+    dv[:] = 0.0
+    for k in range(p):
+        i = pi[k]
+        j = pj[k]
+        vn = 0.0
+        for a in range(3):
+            vn += (v[j, a] - v[i, a]) * nrm[k, a]
+        t0 = v[j, 0] - v[i, 0] - vn * nrm[k, 0]
+        t1 = v[j, 1] - v[i, 1] - vn * nrm[k, 1]
+        t2 = v[j, 2] - v[i, 2] - vn * nrm[k, 2]
+        speed = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+        if speed > 0:  # else it adds nothing
+            share = min(1.0 / max(count[i], count[j]), 1.0)
+            jt = min(speed / w[k] * share, mu * (lam[k] + jb[k])) / speed
+            dv[i, 0] += jt * t0
+            dv[i, 1] += jt * t1
+            dv[i, 2] += jt * t2
+            dv[j, 0] -= jt * t0
+            dv[j, 1] -= jt * t1
+            dv[j, 2] -= jt * t2
+    add_scaled(v, dv, inv_mass)
+
+
+@numba_helper
+def position_passes(pi, pj, p, x, radius, w, rel, dv, inv_mass, iterations):  # pragma: no cover - compiled
+    """The Jacobi passes on position: each pair's overlap pushed apart along its current line
+    of centres, as :func:`velocity_passes` does velocities."""
+    for _ in range(iterations):
+        dv[:] = 0.0
+        moved = False
+        for k in range(p):
+            i = pi[k]
+            j = pj[k]
+            d0 = x[j, 0] - x[i, 0]
+            d1 = x[j, 1] - x[i, 1]
+            d2 = x[j, 2] - x[i, 2]
+            dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            over = radius[i] + radius[j] - dist
+            if over <= 0:
+                continue
+            if dist > 0:
+                d0, d1, d2 = d0 / dist, d1 / dist, d2 / dist
+            else:
+                d0, d1, d2 = 0.0, 1.0, 0.0
+            c = over / w[k] * rel[k]
+            if c != 0.0:
+                moved = True
+            dv[i, 0] -= c * d0
+            dv[i, 1] -= c * d1
+            dv[i, 2] -= c * d2
+            dv[j, 0] += c * d0
+            dv[j, 1] += c * d1
+            dv[j, 2] += c * d2
+        if not moved:
+            break
+        add_scaled(x, dv, inv_mass)
+
+
+@numba_helper
+def contact_step(
+    ci,
+    cj,
+    reach2,
+    x,
+    v,
+    x_old,
+    v_old,
+    inv_mass,
+    radius,
+    e,
+    mu,
+    dt,
+    iterations,
+    relax_factor,
+    pi,
+    pj,
+    w,
+    rel,
+    nrm,
+    tgt,
+    lam,
+    jb,
+    due,
+    dv,
+    count,
+    resting_steps,
+    bounce_floor,
+    bounce_limit,
+):  # pragma: no cover - compiled
+    """Keep the candidates that overlap, then the passes of :func:`resolve_pairs_numpy`.
+
+    ``pi`` .. ``jb``: buffers of at least the candidates' length; ``dv`` (N, 3)
+    and ``count`` (N,): per particle. Returns (overlapping pairs, whether any
+    pair was resolved).
+    """
+    found, p = overlapping(ci, cj, reach2, x, inv_mass, pi, pj)
+    if p == 0:
+        return found, False
+    pair_setup(pi, pj, p, x, v, v_old, inv_mass, e, relax_factor, w, rel, nrm, tgt, lam, count)
+    # impacts first, sequentially (see bounce_sweeps), when anything bounces at all
+    if e > 0:
+        bounce_limits(pi, pj, p, tgt, dv, e, resting_steps, bounce_floor)
+        bounce_sweeps(pi, pj, nrm, w, tgt, e, v, inv_mass, jb, due, p, bounce_limit)
+    else:
+        for k in range(p):
+            jb[k] = 0.0
+    velocity_passes(pi, pj, p, nrm, w, rel, lam, v, dv, inv_mass, iterations)
+    if mu > 0:
+        friction_pass(pi, pj, p, nrm, w, count, lam, jb, mu, v, dv, inv_mass)
+    position_passes(pi, pj, p, x, radius, w, rel, dv, inv_mass, iterations)
+    return found, True
 
 
 def numba_kernels() -> NumbaKernels:
@@ -325,191 +606,6 @@ def numba_kernels() -> NumbaKernels:
                 e2 = (x[i, 2] - x_built[i, 2]) - c2
                 s = max(s, e0 * e0 + e1 * e1 + e2 * e2)
         return np.sqrt(s)
-
-    @numba.njit(cache=True)
-    def contact_step(
-        ci,
-        cj,
-        reach2,
-        x,
-        v,
-        x_old,
-        v_old,
-        inv_mass,
-        radius,
-        e,
-        mu,
-        dt,
-        iterations,
-        relax_factor,
-        pi,
-        pj,
-        w,
-        rel,
-        nrm,
-        tgt,
-        lam,
-        jb,
-        due,
-        dv,
-        count,
-        resting_steps,
-        bounce_floor,
-        bounce_limit,
-    ):  # pragma: no cover - compiled
-        """Keep the candidates that overlap, then the passes of :func:`resolve_pairs_numpy`.
-
-        ``pi`` .. ``jb``: buffers of at least the candidates' length; ``dv`` (N, 3)
-        and ``count`` (N,): per particle. Returns (overlapping pairs, whether any
-        pair was resolved).
-        """
-        n_rows = x.shape[0]
-        found = 0
-        p = 0
-        for k in range(ci.shape[0]):
-            i = ci[k]
-            j = cj[k]
-            t0 = x[j, 0] - x[i, 0]
-            t1 = x[j, 1] - x[i, 1]
-            t2 = x[j, 2] - x[i, 2]
-            if not (t0 * t0 + t1 * t1 + t2 * t2 < reach2[k]):
-                continue
-            found += 1
-            if inv_mass[i] + inv_mass[j] > 0:
-                pi[p] = i
-                pj[p] = j
-                p += 1
-        if p == 0:
-            return found, False
-        # contacts per particle (the relaxation's averaging)
-        count[:] = 0
-        for k in range(p):
-            count[pi[k]] += 1
-            count[pj[k]] += 1
-        for k in range(p):
-            i = pi[k]
-            j = pj[k]
-            w[k] = inv_mass[i] + inv_mass[j]
-            rel[k] = min(relax_factor / max(count[i], count[j]), 1.0)
-            d2 = 0.0
-            for a in range(3):
-                t = x[j, a] - x[i, a]
-                nrm[k, a] = t
-                d2 += t * t
-            dist = np.sqrt(d2)
-            if dist > 0:
-                for a in range(3):
-                    nrm[k, a] /= dist
-            else:
-                nrm[k, 0], nrm[k, 1], nrm[k, 2] = 0.0, 1.0, 0.0
-            if e > 0:  # the impact pass's limit (resolve_pairs_numpy's)
-                si = 0.0
-                sj = 0.0
-                for a in range(3):
-                    t = v[i, a] - v_old[i, a]
-                    si += t * t
-                    t = v[j, a] - v_old[j, a]
-                    sj += t * t
-                tgt[k] = max(np.sqrt(si), np.sqrt(sj))
-            lam[k] = 0.0
-        if e > 0:  # the largest of those touching each sphere (dv[:, 0] as scratch), then the limit
-            for r in range(n_rows):
-                dv[r, 0] = 0.0
-            for k in range(p):
-                dv[pi[k], 0] = max(dv[pi[k], 0], tgt[k])
-                dv[pj[k], 0] = max(dv[pj[k], 0], tgt[k])
-            for k in range(p):
-                tgt[k] = (resting_steps * max(dv[pi[k], 0], dv[pj[k], 0]) + bounce_floor) / e
-        # impacts first, sequentially (see bounce_sweeps), when anything bounces at all
-        if e > 0:
-            bounce_sweeps(pi, pj, nrm, w, tgt, e, v, inv_mass, jb, due, p, bounce_limit)
-        else:
-            for k in range(p):
-                jb[k] = 0.0
-        # each pass scatters pair by pair into dv (every particle's sum in pair order, from
-        # 0.0), then adds dv / m; a pass that changed nothing adds nothing
-        for _ in range(iterations):
-            dv[:] = 0.0
-            moved = False
-            for k in range(p):
-                i = pi[k]
-                j = pj[k]
-                vn = 0.0
-                for a in range(3):
-                    vn += (v[j, a] - v[i, a]) * nrm[k, a]
-                dl = (0.0 - vn) / w[k] * rel[k]
-                new = max(lam[k] + dl, 0.0)
-                dl = new - lam[k]
-                lam[k] = new
-                if dl != 0.0:
-                    moved = True
-                for a in range(3):
-                    dv[i, a] -= dl * nrm[k, a]
-                    dv[j, a] += dl * nrm[k, a]
-            if not moved:
-                break
-            for r in range(n_rows):
-                w_r = inv_mass[r]
-                for a in range(3):
-                    v[r, a] += dv[r, a] * w_r
-        if mu > 0:
-            dv[:] = 0.0
-            for k in range(p):
-                i = pi[k]
-                j = pj[k]
-                vn = 0.0
-                for a in range(3):
-                    vn += (v[j, a] - v[i, a]) * nrm[k, a]
-                t0 = v[j, 0] - v[i, 0] - vn * nrm[k, 0]
-                t1 = v[j, 1] - v[i, 1] - vn * nrm[k, 1]
-                t2 = v[j, 2] - v[i, 2] - vn * nrm[k, 2]
-                speed = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
-                if speed > 0:  # else it adds nothing
-                    share = min(1.0 / max(count[i], count[j]), 1.0)
-                    jt = min(speed / w[k] * share, mu * (lam[k] + jb[k])) / speed
-                    dv[i, 0] += jt * t0
-                    dv[i, 1] += jt * t1
-                    dv[i, 2] += jt * t2
-                    dv[j, 0] -= jt * t0
-                    dv[j, 1] -= jt * t1
-                    dv[j, 2] -= jt * t2
-            for r in range(n_rows):
-                w_r = inv_mass[r]
-                for a in range(3):
-                    v[r, a] += dv[r, a] * w_r
-        for _ in range(iterations):
-            dv[:] = 0.0
-            moved = False
-            for k in range(p):
-                i = pi[k]
-                j = pj[k]
-                d0 = x[j, 0] - x[i, 0]
-                d1 = x[j, 1] - x[i, 1]
-                d2 = x[j, 2] - x[i, 2]
-                dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-                over = radius[i] + radius[j] - dist
-                if over <= 0:
-                    continue
-                if dist > 0:
-                    d0, d1, d2 = d0 / dist, d1 / dist, d2 / dist
-                else:
-                    d0, d1, d2 = 0.0, 1.0, 0.0
-                c = over / w[k] * rel[k]
-                if c != 0.0:
-                    moved = True
-                dv[i, 0] -= c * d0
-                dv[i, 1] -= c * d1
-                dv[i, 2] -= c * d2
-                dv[j, 0] += c * d0
-                dv[j, 1] += c * d1
-                dv[j, 2] += c * d2
-            if not moved:
-                break
-            for r in range(n_rows):
-                w_r = inv_mass[r]
-                for a in range(3):
-                    x[r, a] += dv[r, a] * w_r
-        return found, True
 
     _KERNELS = NumbaKernels(candidates, contact_step, find_pairs, spread)
     return _KERNELS
