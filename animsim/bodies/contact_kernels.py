@@ -8,7 +8,7 @@ The list solver's pieces are ``@numba_helper`` functions of this module, compile
 
 Their NumPy versions: :mod:`animsim.bodies.contact_detection` (:func:`candidate_pairs`,
 :func:`pair_contacts`, :func:`plane_contacts`) and :mod:`animsim.bodies.contact_solve`
-(:func:`solve`, :func:`follow_impulses`). The model as a whole is described in
+(:func:`solve`) and :mod:`animsim.bodies.contact_follow` (:func:`follow_impulses`). The model as a whole is described in
 :mod:`animsim.bodies.contacts`.
 """
 

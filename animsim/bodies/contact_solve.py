@@ -1,10 +1,11 @@
 """The contact solver of rigid bodies: sequential impulses on the contact list, with
 restitution, resting contacts and Coulomb friction, warm starting, the time of impact inside
-the step, and the move of the bodies by the impulses (:func:`follow_impulses`).
+the step; the move of the bodies by the impulses is :func:`animsim.bodies.contact_follow.follow_impulses`.
 
 Baraff 1997, "Rigid Body Simulation", section 8 (colliding contact; the effective mass along
 the normal), solved as sequential impulses (Catto 2005): the contacts one after the other,
-``iterations`` times, on NumPy in batches in which no body appears twice (:func:`batches`), a
+``iterations`` times, on NumPy in batches in which no body appears twice
+(:func:`animsim.bodies.contact_batches.batches`), a
 batch being one vectorised update whose result is the sequential one. Every sum is written in
 the order of the numba twin (:mod:`animsim.bodies.contact_kernels`), so the backends agree to
 the bit. The model as a whole is described in :mod:`animsim.bodies.contacts`.
@@ -16,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from animsim.bodies import quaternion as quat
+from animsim.bodies.contact_batches import batches, slot_batches
 from animsim.bodies.contact_constants import (
     IMPACT_SWEEPS,
     ITERATIONS,
@@ -99,42 +100,6 @@ def inv_world_inertia(q: np.ndarray, inv_inertia: np.ndarray) -> np.ndarray:
     )
 
 
-def batches(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """A batch number per contact such that no body appears twice in a batch and contacts keep their
-    order within each body: greedy, in list order (vectorised per round)."""
-    c = a.size
-    batch = np.full(c, -1, dtype=np.int64)
-    remaining = np.arange(c)
-    level = 0
-    while remaining.size:
-        ra, rb = a[remaining], b[remaining]
-        # static "bodies" (-1) never conflict: give each its own key
-        rb_key = np.where(rb >= 0, rb, -1 - np.arange(rb.size))
-        keys = np.stack([ra, rb_key], axis=1).ravel()
-        _, first, inv = np.unique(keys, return_index=True, return_inverse=True)
-        is_first = first[inv.reshape(-1)] == np.arange(keys.size)
-        # a contact whose two ends are one body (a test's random pairs) conflicts with nothing else
-        take = is_first[0::2] & (is_first[1::2] | (rb_key == ra))
-        if not take.any():  # cannot happen with the rule above; never loop forever
-            take[0] = True
-        batch[remaining[take]] = level
-        remaining = remaining[~take]
-        level += 1
-    return batch
-
-
-def _slot_batches(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """:func:`batches` for lists in which no contact joins two bodies (planes, colliders): the
-    batch of a contact is how many contacts of its body come before it (one sort, no rounds)."""
-    order = np.argsort(a, kind="stable")
-    sa = a[order]
-    start = np.flatnonzero(np.r_[True, sa[1:] != sa[:-1]])
-    rank = np.arange(a.size) - np.repeat(start, np.diff(np.r_[start, a.size]))
-    batch = np.empty(a.size, dtype=np.int64)
-    batch[order] = rank
-    return batch
-
-
 @dataclass(frozen=True)
 class _ContactRows:
     """The contacts in the solver's order (batch after batch, :func:`batches`) with what the
@@ -175,7 +140,7 @@ _Group = tuple[slice, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 def _contact_rows(c: Contacts, q: np.ndarray, inv_mass: np.ndarray, inv_inertia: np.ndarray) -> _ContactRows:
     """Sort the contacts into batches and compute their effective masses (see :class:`_ContactRows`)."""
     coupled = bool((c.b >= 0).any())
-    batch = batches(c.a, c.b) if coupled else _slot_batches(c.a, c.b)
+    batch = batches(c.a, c.b) if coupled else slot_batches(c.a, c.b)
     order = np.argsort(batch, kind="stable")
     cuts = np.searchsorted(batch[order], np.arange(int(batch.max()) + 2))
     a, b = c.a[order], c.b[order]
@@ -611,60 +576,3 @@ def _impact_target(
         return target
     kept = kept_end_speed(vn0 - dvn, np.maximum(d0, 0.0), dvn / dt, restitution * depth, restitution, kh)
     return np.where((restitution > 0.0) & (kept > 0.0), kept, target)
-
-
-def follow_impulses(
-    contacts: Contacts,
-    impact: np.ndarray,
-    x: np.ndarray,
-    q: np.ndarray,
-    dvel: np.ndarray,
-    domega: np.ndarray,
-    h: float,
-) -> np.ndarray:
-    """Move bodies as the contact impulses of this step would have moved them; returns the depths
-    that are left (C,). In place on x (B,3) and q (B,4).
-
-    A resting or sliding contact's impulse stands for a force that acted during the whole
-    step, so it moves the body as the step's forces did: a constant acceleration a over a
-    step of dt moves a body by c dt^2 a (c = 1 for symplectic Euler, x1 = x0 + dt v1; 1/2 for
-    Runge-Kutta and Verlet), so the velocity change dv of the impulses moves it by h dv,
-    h = c dt, and turns it by h domega. Without this the step's own push down a slope
-    (dt^2 g sin(theta) along it) stays in the position while friction takes it out of the
-    velocity, and a box held by static friction creeps. A body with a bouncing contact
-    is left alone: its impulse is an impact at one instant, placed by the time of impact
-    (``_impact_target`` and the (1 + e) projection). What the move took out of each
-    contact's penetration (the contact point's move along n, linear in the move) is taken
-    off its depth; a depth that turns negative (the body started the step short of the
-    surface and is moved back there) lets the projection bring it down onto the surface,
-    so a body never hovers where its last step started.
-    """
-    c = contacts
-    nb = x.shape[0]
-    bounced = np.zeros(nb, dtype=bool)
-    bounced[c.a[impact]] = True
-    hb = c.b[impact]
-    bounced[hb[hb >= 0]] = True
-    sx = np.where(bounced[:, None], 0.0, h * dvel)
-    sw = np.where(bounced[:, None], 0.0, h * domega)
-    a, ra, rb, n = c.a, c.ra, c.rb, c.n
-    has_b = c.b >= 0
-    bb = np.where(has_b, c.b, 0)
-    move = _point_move(sx[a], sw[a], ra, n)
-    if has_b.any():
-        move = np.where(has_b, move - _point_move(sx[bb], sw[bb], rb, n), move)
-    depth = c.depth - move
-    x += sx
-    turn = np.flatnonzero(~bounced & (sw != 0.0).any(axis=1))
-    if turn.size:
-        qt = q[turn]
-        q[turn] = quat.normalise(qt + quat.derivative(qt, sw[turn]))
-    return depth
-
-
-def _point_move(sx: np.ndarray, sw: np.ndarray, r: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """n . (sx + sw x r) per row, summed as the numba twin sums it."""
-    px = sx[:, 0] + (sw[:, 1] * r[:, 2] - sw[:, 2] * r[:, 1])
-    py = sx[:, 1] + (sw[:, 2] * r[:, 0] - sw[:, 0] * r[:, 2])
-    pz = sx[:, 2] + (sw[:, 0] * r[:, 1] - sw[:, 1] * r[:, 0])
-    return (px * n[:, 0] + py * n[:, 1]) + pz * n[:, 2]

@@ -67,8 +67,9 @@ from animsim.bodies.contact_detection import (
     sdf_contacts,
     shape_arrays,
 )
+from animsim.bodies.contact_follow import follow_impulses
 from animsim.bodies.contact_kernels import numba_candidate_pairs, numba_kernels, numba_pair_contacts
-from animsim.bodies.contact_solve import follow_impulses, solve
+from animsim.bodies.contact_solve import solve
 from animsim.bodies.shapes import BodyShape, contact_table
 from animsim.bodies.warm import WarmStart
 from animsim.collisions import energy_shift

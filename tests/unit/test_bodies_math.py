@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from animsim.bodies import quaternion as quat
+from animsim.bodies.contact_batches import batches
 from animsim.bodies.contact_constants import SHAPE_BOX, SHAPE_CAPSULE, SHAPE_SPHERE
 from animsim.bodies.contact_detection import candidate_pairs, local_sdf
-from animsim.bodies.contact_solve import batches
 from animsim.bodies.shapes import Box, Capsule, Sphere, contact_table, mesh, outline
 
 RNG = np.random.default_rng(1234)
