@@ -4,12 +4,15 @@ and prune, the contacts between bodies, the plane contacts body by body, and the
 (sequential impulses after Baraff 1997, section 8, and Catto 2005, then the bodies moved by
 the impulses). Each ``_..._loop`` is plain Python over arrays; a ``numba_*`` factory compiles it.
 The list solver's pieces are ``@numba_helper`` functions of this module, compiled before it
-(they live here: numba's disk cache checks only the file of the function it cached).
+(they live here: numba's disk cache checks only the file of the function it cached, so a
+helper in another file could be left stale in the cache after an edit). That is why this
+module is longer than the house's 600 lines: every kernel of the rigid-body contacts and
+every piece they call share it.
 
 Their NumPy versions: :mod:`animsim.bodies.contact_detection` (:func:`candidate_pairs`,
 :func:`pair_contacts`, :func:`plane_contacts`) and :mod:`animsim.bodies.contact_solve`
-(:func:`solve`) and :mod:`animsim.bodies.contact_follow` (:func:`follow_impulses`). The model as a whole is described in
-:mod:`animsim.bodies.contacts`.
+(:func:`solve`) and :mod:`animsim.bodies.contact_follow` (:func:`follow_impulses`). The model
+as a whole is described in :mod:`animsim.bodies.contacts`.
 """
 
 from __future__ import annotations
