@@ -222,28 +222,7 @@ def solve(
     vT, wT = v.T.copy(), w.T.copy()
     rest_b = np.where(r.has_b, resting_speed[r.bb], 0.0)
     limit = resting_speed[r.a] + rest_b + RESTING_FLOOR
-    struck = np.zeros(count, dtype=bool)
-    if r.coupled:
-        struck = _impact_pass(
-            r.level,
-            r.a,
-            r.bb,
-            r.has_b,
-            r.n,
-            r.rna,
-            r.rnb,
-            r.gna,
-            r.gnb,
-            r.ma,
-            r.mb,
-            r.inv_kn,
-            r.restitution,
-            r.depth,
-            limit,
-            dt,
-            vT,
-            wT,
-        )
+    struck = _impact_pass(r, limit, dt, vT, wT)
     sv = None if surface is None else surface[r.order].T  # (3, C), in the solver's order
     bounce, target = _bounce_targets(r, vT, wT, limit, sv, dv, dx, kh, dt)
     e_used = np.where(bounce | struck, r.restitution, 0.0)
@@ -425,20 +404,7 @@ def _friction_impulse(
 
 
 def _impact_pass(
-    batch: np.ndarray,
-    a: np.ndarray,
-    bb: np.ndarray,
-    has_b: np.ndarray,
-    n: np.ndarray,
-    rna: np.ndarray,
-    rnb: np.ndarray,
-    gna: np.ndarray,
-    gnb: np.ndarray,
-    ma: np.ndarray,
-    mb: np.ndarray,
-    inv_kn: np.ndarray,
-    restitution: np.ndarray,
-    depth: np.ndarray,
+    r: _ContactRows,
     limit: np.ndarray,
     dt: float,
     vT: np.ndarray,
@@ -448,9 +414,8 @@ def _impact_pass(
     """Impacts between bodies, one contact at a time, before the simultaneous solve; in place on
     vT, wT (3, B); returns which contacts were struck (C,), in the solver's order.
 
-    A contact between two bodies with restitution, their only point of contact, that
-    approaches faster than resting
-    (``limit``), touching or closing its gap within the step, takes Newton's impulse
+    A contact between two bodies with restitution, their only point of contact, that approaches
+    faster than resting (``limit``), touching or closing its gap within the step, takes Newton's impulse
     ``J = -(1 + e) v_n / K`` (K the effective mass along n; Baraff 1997, section 8), and the
     contacts are swept forward and backward in turn until none is struck (at most ``sweeps``):
     the collision pass of Guendelman, Bridson and Fedkiw, SIGGRAPH 2003 (section 6). A blow is
@@ -461,37 +426,40 @@ def _impact_pass(
     The numba twin walks the list contact by contact; here a sweep takes the solver's batches
     (no body twice in one) in order, or in reverse order backward, which is the same sequence.
     """
-    count = a.size
+    count = r.a.size
     struck = np.zeros(count, dtype=bool)
+    if not r.coupled:
+        return struck
+    a, bb, n, depth, inv_kn = r.a, r.bb, r.n, r.depth, r.inv_kn
     # one point only: a face or an edge held at several points is left to the simultaneous
     # solve, where its points share the impact (struck one by one, a box landing flat on a box
     # would be set spinning)
-    key = np.where(has_b, a * (bb.max(initial=0) + 1) + bb, -1 - np.arange(count))
+    key = np.where(r.has_b, a * (bb.max(initial=0) + 1) + bb, -1 - np.arange(count))
     _, where, points = np.unique(key, return_inverse=True, return_counts=True)
-    live = np.flatnonzero(has_b & (points[where] == 1) & (restitution > 0.0) & (inv_kn > 0.0))
+    live = np.flatnonzero(r.has_b & (points[where] == 1) & (r.restitution > 0.0) & (inv_kn > 0.0))
     if live.size == 0:
         return struck
-    levels = batch[live]
+    levels = r.level[live]
     cuts = np.flatnonzero(np.r_[True, levels[1:] != levels[:-1]])  # live is in solver order
     groups = np.split(live, cuts[1:])
-    e1 = 1.0 + restitution
+    e1 = 1.0 + r.restitution
     for sweep in range(sweeps):
         hit = False
         for s in groups if sweep % 2 == 0 else groups[::-1]:
             ai, bi = a[s], bb[s]
             ns = n[:, s]
-            vn = _dot3(vT[:, ai], ns) + _dot3(wT[:, ai], rna[:, s])
-            vn = vn - (_dot3(vT[:, bi], ns) + _dot3(wT[:, bi], rnb[:, s]))
+            vn = _dot3(vT[:, ai], ns) + _dot3(wT[:, ai], r.rna[:, s])
+            vn = vn - (_dot3(vT[:, bi], ns) + _dot3(wT[:, bi], r.rnb[:, s]))
             go = (vn < -limit[s]) & ((depth[s] >= 0.0) | (depth[s] - vn * dt >= 0.0))
             if not go.any():
                 continue
             hit = True
             struck[s[go]] = True
             j = np.where(go, -e1[s] * vn * inv_kn[s], 0.0)
-            vT[:, ai] += (ma[s] * j) * ns
-            wT[:, ai] += j * gna[:, s]
-            vT[:, bi] -= (mb[s] * j) * ns
-            wT[:, bi] -= j * gnb[:, s]
+            vT[:, ai] += (r.ma[s] * j) * ns
+            wT[:, ai] += j * r.gna[:, s]
+            vT[:, bi] -= (r.mb[s] * j) * ns
+            wT[:, bi] -= j * r.gnb[:, s]
         if not hit:
             break
     return struck

@@ -13,7 +13,13 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from animsim.elements import compile_helpers, numba_helper
+from animsim.elements import compile_helpers, numba_helper, numba_inline_helper
+
+
+@numba_inline_helper
+def normal_speed(v, i, j, n0, n1, n2):  # pragma: no cover - compiled too
+    """How fast sphere j moves away from sphere i along the unit normal n (negative: closing)."""
+    return (v[j, 0] - v[i, 0]) * n0 + (v[j, 1] - v[i, 1]) * n1 + (v[j, 2] - v[i, 2]) * n2
 
 
 @numba_helper
@@ -27,7 +33,7 @@ def bounce_pair(i, j, n0, n1, n2, w, limit, e, v, inv_mass):  # pragma: no cover
     what the step's forces added to a sphere touching either); a slower one is resting contact, left
     to the Jacobi passes (a grain settling into a pile does not bounce by a hair).
     """
-    vn = (v[j, 0] - v[i, 0]) * n0 + (v[j, 1] - v[i, 1]) * n1 + (v[j, 2] - v[i, 2]) * n2
+    vn = normal_speed(v, i, j, n0, n1, n2)
     if not -vn > limit:
         return 0.0
     jn = -(1.0 + e) * vn / w
@@ -49,12 +55,7 @@ def approaching(pi, pj, nrm, limit, v, due, p):  # pragma: no cover - compiled
     for k in range(p):
         i = pi[k]
         j = pj[k]
-        vn = (
-            (v[j, 0] - v[i, 0]) * nrm[k, 0]
-            + (v[j, 1] - v[i, 1]) * nrm[k, 1]
-            + (v[j, 2] - v[i, 2]) * nrm[k, 2]
-        )
-        due[k] = -vn > limit[k]
+        due[k] = -normal_speed(v, i, j, nrm[k, 0], nrm[k, 1], nrm[k, 2]) > limit[k]
         if due[k]:
             count += 1
     return count
@@ -350,10 +351,10 @@ def overlapping(ci, cj, reach2, x, inv_mass, pi, pj):  # pragma: no cover - comp
 
 @numba_helper
 def pair_setup(
-    pi, pj, p, x, v, v_old, inv_mass, e, relax_factor, w, rel, nrm, tgt, lam, count
+    pi, pj, p, x, v, v_old, inv_mass, e, relax_factor, w, rel, nrm, limit, lam, count
 ):  # pragma: no cover - compiled
     """Per pair: ``w`` the summed inverse masses, ``rel`` the relaxation (averaged over the
-    contacts per particle, ``count``), ``nrm`` the unit line of centres, ``tgt`` the faster
+    contacts per particle, ``count``), ``nrm`` the unit line of centres, ``limit`` the faster
     change of velocity of its two spheres this step (when e > 0), ``lam`` 0."""
     count[:] = 0
     for k in range(p):
@@ -383,21 +384,21 @@ def pair_setup(
                 si += t * t
                 t = v[j, a] - v_old[j, a]
                 sj += t * t
-            tgt[k] = max(np.sqrt(si), np.sqrt(sj))
+            limit[k] = max(np.sqrt(si), np.sqrt(sj))
         lam[k] = 0.0
 
 
 @numba_helper
-def bounce_limits(pi, pj, p, tgt, dv, e, resting_steps, bounce_floor):  # pragma: no cover - compiled
-    """``tgt``: each pair's impact limit, from the largest change of velocity among the pairs
+def bounce_limits(pi, pj, p, limit, dv, e, resting_steps, bounce_floor):  # pragma: no cover - compiled
+    """``limit``: each pair's impact limit (in place of its larger change of velocity), from the largest change of velocity among the pairs
     touching either sphere (``dv[:, 0]`` as scratch)."""
     for r in range(dv.shape[0]):
         dv[r, 0] = 0.0
     for k in range(p):
-        dv[pi[k], 0] = max(dv[pi[k], 0], tgt[k])
-        dv[pj[k], 0] = max(dv[pj[k], 0], tgt[k])
+        dv[pi[k], 0] = max(dv[pi[k], 0], limit[k])
+        dv[pj[k], 0] = max(dv[pj[k], 0], limit[k])
     for k in range(p):
-        tgt[k] = (resting_steps * max(dv[pi[k], 0], dv[pj[k], 0]) + bounce_floor) / e
+        limit[k] = (resting_steps * max(dv[pi[k], 0], dv[pj[k], 0]) + bounce_floor) / e
 
 
 @numba_helper
@@ -505,13 +506,11 @@ def contact_step(
     reach2,
     x,
     v,
-    x_old,
     v_old,
     inv_mass,
     radius,
     e,
     mu,
-    dt,
     iterations,
     relax_factor,
     pi,
@@ -519,7 +518,7 @@ def contact_step(
     w,
     rel,
     nrm,
-    tgt,
+    limit,
     lam,
     jb,
     due,
@@ -538,11 +537,11 @@ def contact_step(
     found, p = overlapping(ci, cj, reach2, x, inv_mass, pi, pj)
     if p == 0:
         return found, False
-    pair_setup(pi, pj, p, x, v, v_old, inv_mass, e, relax_factor, w, rel, nrm, tgt, lam, count)
+    pair_setup(pi, pj, p, x, v, v_old, inv_mass, e, relax_factor, w, rel, nrm, limit, lam, count)
     # impacts first, sequentially (see bounce_sweeps), when anything bounces at all
     if e > 0:
-        bounce_limits(pi, pj, p, tgt, dv, e, resting_steps, bounce_floor)
-        bounce_sweeps(pi, pj, nrm, w, tgt, e, v, inv_mass, jb, due, p, bounce_limit)
+        bounce_limits(pi, pj, p, limit, dv, e, resting_steps, bounce_floor)
+        bounce_sweeps(pi, pj, nrm, w, limit, e, v, inv_mass, jb, due, p, bounce_limit)
     else:
         for k in range(p):
             jb[k] = 0.0

@@ -145,13 +145,11 @@ def resolve_pairs_numpy(
     j: np.ndarray,
     x: np.ndarray,
     v: np.ndarray,
-    x_old: np.ndarray,
     v_old: np.ndarray,
     inv_mass: np.ndarray,
     radius: np.ndarray,
     restitution: float,
     friction: float,
-    dt: float,
     iterations: int = ITERATIONS,
     buffers: Buffers | None = None,
 ) -> bool:

@@ -110,7 +110,7 @@ class ParticleContacts(StepStage):
         t1: float,
         dt: float | None = None,
     ) -> bool:
-        changed = self._apply(state, x_old, v_old, t0, t1)
+        changed = self._apply(state, v_old, t0, t1)
         if changed and self.colliders is not None:
             # the overlap removal may push a particle into a collider: never leave it there
             self.colliders.project(state, t0, t1)
@@ -182,7 +182,7 @@ class ParticleContacts(StepStage):
         self._all_active = bool(active.all())
         self.rebuilds += 1
 
-    def _apply(self, state: State, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float) -> bool:
+    def _apply(self, state: State, v_old: np.ndarray, t0: float, t1: float) -> bool:
         dt = t1 - t0
         if dt <= 0:
             return False
@@ -210,13 +210,11 @@ class ParticleContacts(StepStage):
                 self._reach2,
                 x,
                 v,
-                x_old,
                 v_old,
                 inv_mass,
                 self.radius,
                 self.restitution,
                 self.friction,
-                dt,
                 self.iterations,
                 RELAX,
                 b.get("pi", (p,), np.int64),
@@ -224,7 +222,7 @@ class ParticleContacts(StepStage):
                 b.get("w", (p,)),
                 b.get("rel", (p,)),
                 b.get("nrm", (p, 3)),
-                b.get("tgt", (p,)),
+                b.get("limit", (p,)),
                 b.get("lam", (p,)),
                 b.get("jb", (p,)),
                 b.get("due", (p,), np.bool_),
@@ -251,13 +249,11 @@ class ParticleContacts(StepStage):
             j,
             x,
             v,
-            x_old,
             v_old,
             inv_mass,
             self.radius,
             self.restitution,
             self.friction,
-            dt,
             self.iterations,
             b,
         )
