@@ -30,7 +30,7 @@ from animsim.compile_rows import (
     particle_arrays,
 )
 from animsim.dynamics import Dynamics
-from animsim.elements import BuildContext, ForceElement, StepStage, build_elements
+from animsim.elements import BuildContext, ForceElement, PlaneProjector, StepStage, build_elements
 from animsim.emitters import Emitters
 from animsim.errors import UsageError
 from animsim.forces.grid_springs import build_spring_term
@@ -292,12 +292,12 @@ def add_solids(
     particles: Particles,
     post_step: list[StepStage],
     left_out: list[str],
-) -> tuple[contact_stages.Built, list[StepStage], StepStage | None]:
+) -> tuple[contact_stages.Built, list[StepStage], PlaneProjector | None]:
     """Keyframes, solid colliders, particle contacts and tearing (animsim.contact_stages)
     around the planes' stages: (what was built, every stage so far, the planes' stage)."""
     solids = contact_stages.build(scene, ctx.system, ctx.backend, springs_term, particles.position)
     post_step = [*solids.front, *post_step, *solids.back]
-    planes_stage = next((st for st in post_step if st.holds_planes), None)
+    planes_stage = next((p for st in post_step if (p := st.impulse_planes()) is not None), None)
     if solids.contacts is not None:  # contacts push out of planes too, after the colliders
         solids.contacts.planes = planes_stage  # type: ignore[assignment]  # unannotated there (None until set)
     if solids.colliders is not None:  # moving colliders meet particles where the planes keep them
@@ -313,7 +313,7 @@ def add_bodies(
     particles: Particles,
     dynamics: Dynamics,
     solids: contact_stages.Built,
-    planes_stage: StepStage | None,
+    planes_stage: PlaneProjector | None,
     post_step: list[StepStage],
     left_out: list[str],
 ) -> list[str]:

@@ -43,7 +43,7 @@ import functools
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, ClassVar, Literal, TypeAlias, TypedDict, TypeVar, cast
+from typing import TYPE_CHECKING, ClassVar, Literal, Protocol, TypeAlias, TypedDict, TypeVar, cast
 
 import numpy as np
 
@@ -201,6 +201,17 @@ class ForceElement:
         """Called once per run with the live state (elements that read state arrays keep them)."""
 
 
+class PlaneProjector(Protocol):
+    """The impulse planes' stage as the stages that push particles use it: they keep what
+    they moved in front of the planes (animsim.collisions.PlaneColliders)."""
+
+    def apply(
+        self, state: State, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, dt: float
+    ) -> bool: ...
+
+    def project_rows(self, x: np.ndarray, v: np.ndarray, idx: np.ndarray) -> None: ...
+
+
 class StepStage:
     """Base of stages that run after each integrator step."""
 
@@ -237,6 +248,10 @@ class StepStage:
 
     def reset(self, state: State) -> None:
         """Called at the start of every run (and replay) with the run's state."""
+
+    def impulse_planes(self) -> PlaneProjector | None:
+        """This stage as the impulse planes (``holds_planes``), or None."""
+        return None
 
     def explain_lines(self) -> list[str]:
         """What ``explain`` lists for it (one line, its label, unless it has several parts)."""

@@ -6,8 +6,9 @@ This is the only module of the package that reads the pydantic scene models.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Protocol
 
 import numpy as np
 
@@ -18,7 +19,39 @@ from animsim.bodies.contacts import BodyContacts
 from animsim.bodies.dynamics import BodyDynamics
 from animsim.bodies.particles import ParticleBodyContacts
 from animsim.bodies.springs import BodySprings
+from animsim.elements import PlaneProjector, StepStage
 from animsim.scene import models as m
+from animsim.system import System
+
+
+class SolidShape(Protocol):
+    """What the bodies read of a collider shape (animsim.colliders.Shape)."""
+
+    @property
+    def restitution(self) -> float: ...
+
+    @property
+    def friction(self) -> float: ...
+
+    @property
+    def thickness(self) -> float: ...
+
+    def signed_distance(
+        self, x: np.ndarray, offset: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]: ...
+
+
+class SolidColliders(Protocol):
+    """What the bodies read of the scene's colliders stage (animsim.colliders.Colliders), a
+    sibling package the bodies may not import."""
+
+    @property
+    def shapes(self) -> Sequence[SolidShape]: ...
+
+    @property
+    def injects(self) -> bool: ...
+
+    def offsets(self, t: float) -> np.ndarray: ...
 
 
 def has_body_end(spring: m.Spring) -> bool:
@@ -86,15 +119,15 @@ def body_rows(scene: m.Scene) -> BodyRows:
 
 def build_body_elements(
     scene: m.Scene,
-    system: Any,
+    system: System,
     index_of: dict[str, int],
     x0: np.ndarray,
     q0: np.ndarray,
     backend: str,
-    solid: Any = None,
+    solid: SolidColliders | None = None,
     radius: np.ndarray | None = None,
-    planes_stage: Any = None,
-) -> tuple[BodyDynamics, list[Any], list[str], list[str]]:
+    planes_stage: PlaneProjector | None = None,
+) -> tuple[BodyDynamics, list[StepStage], list[str], list[str]]:
     """(rotational dynamics, post-step stages, labels for explain, left-out notes for explain).
 
     ``solid``: the scene's colliders stage (animsim.colliders.Colliders), whose shapes and
@@ -116,7 +149,7 @@ def build_body_elements(
         + (", ..." if system.body_count > 4 else "")
         + "); omega' = I_w^-1 (tau - omega x I_w omega), q' = 1/2 (0, omega) q, q renormalised each step"
     )
-    stages: list[Any] = []
+    stages: list[StepStage] = []
     planes = list(scene.planes)
     solids = list(solid.shapes) if solid is not None else []
     if planes or solids or system.body_count > 1:
@@ -174,16 +207,15 @@ def build_body_elements(
     return dyn, stages, labels, left_out
 
 
-def counts_text(compiled: Any) -> str:
+def counts_text(system: System, body_dynamics: BodyDynamics | None) -> str:
     """ "N particles, M bodies, K springs" for a run's summary: body centres are rows of the particle
     arrays but not particles, and springs to bodies are springs; a part the scene lacks is left out
     unless it is the particles of a scene without bodies."""
-    system = compiled.system
     bodies = system.body_count
     particles = system.particle_count - bodies
     to_bodies = 0
-    if bodies and compiled.dynamics.bodies is not None:
-        terms = compiled.dynamics.bodies.terms
+    if bodies and body_dynamics is not None:
+        terms = body_dynamics.terms
         to_bodies = sum(int(t.rows_a.size) for t in terms if isinstance(t, BodySprings))
     springs = system.spring_count + to_bodies
     parts = []
@@ -196,7 +228,7 @@ def counts_text(compiled: Any) -> str:
 
 
 def _body_springs(
-    scene: m.Scene, system: Any, index_of: dict[str, int], body_index: dict[str, int]
+    scene: m.Scene, system: System, index_of: dict[str, int], body_index: dict[str, int]
 ) -> BodySprings | None:
     specs = [sp for sp in scene.springs if has_body_end(sp)]
     if not specs:

@@ -28,14 +28,13 @@ faster than (r + t/2) / dt against a body t thick can pass through it (``check``
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 
 from animsim.bodies import quaternion as quat
 from animsim.bodies.contact_detection import local_sdf, shape_arrays
 from animsim.bodies.shapes import BodyShape
-from animsim.elements import StepStage
+from animsim.elements import PlaneProjector, StepStage
 from animsim.system import State
 
 #: an approach slower than this many steps of the relative acceleration rests (no bounce)
@@ -76,7 +75,7 @@ class ParticleBodyContacts(StepStage):
         #: a bounce below restitution 1, or friction, takes energy out (the watchdog's verdict)
         self.dissipative = bool((self.restitution < 1.0).any() or (self.friction > 0.0).any())
         #: the impulse planes (compile sets it): a particle pushed out of a body stays in front of them
-        self.planes: Any = None
+        self.planes: PlaneProjector | None = None
         self.label = (
             f"particle-body contacts: every particle against {self.count} rigid bod"
             f"{'y' if self.count == 1 else 'ies'}; impulses with the body's restitution and Coulomb "
@@ -93,7 +92,7 @@ class ParticleBodyContacts(StepStage):
         )
 
     def _contacts(
-        self, state: Any
+        self, state: State
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
         """(particle rows, bodies, normals (K,3), arms from the body centre (K,3), depths) of the
         particles inside a body's shape, in (body, row) order; None when there are none."""

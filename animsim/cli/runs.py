@@ -108,7 +108,7 @@ def _summary(compiled: Any, result: Any, wrote: str | None) -> None:
 
     stream_err = wrote is None  # trajectory went to stdout: keep stdout clean
     lines = [
-        f"{compiled.name}: {counts_text(compiled)}, {steps_text(compiled, result)} with {compiled.integrator_name}",
+        f"{compiled.name}: {counts_text(compiled.system, compiled.dynamics.bodies)}, {steps_text(compiled, result)} with {compiled.integrator_name}",
         f"  wall time {result.wall_time:.3f} s, {result.frames} frames, {result.force_evals} force evaluations",
         f"  energy {result.energy_start:.6g} J -> {result.energy_end:.6g} J, status {result.status}, "
         + _drift_of(compiled, result).text(),

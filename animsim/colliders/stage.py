@@ -23,7 +23,6 @@ Particles are points here unless they have a radius (``radius``, or
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -31,7 +30,7 @@ from animsim.colliders.kernels import numba_kernel, stage_kernel
 from animsim.colliders.numpy_rule import resolve_numpy
 from animsim.colliders.shapes import KIND_NAMES, PARAMS, Shape, shape_bounds
 from animsim.collisions.response import energy_shift
-from animsim.elements import StepStage
+from animsim.elements import PlaneProjector, StepStage
 from animsim.system import State
 
 
@@ -61,7 +60,7 @@ class Colliders(StepStage):
     follow_weight: float | None = 1.0
     #: the scene's impulse planes (compile sets it): a moving collider meets the particles
     #: where the planes keep them, not where the step left them behind a plane
-    planes_first: Any = None
+    planes_first: PlaneProjector | None = None
 
     def __init__(
         self,

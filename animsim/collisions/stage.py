@@ -278,6 +278,9 @@ class PlaneColliders(StepStage):
             self._block_buffers = Blocks(rows)
         return self._block_buffers
 
+    def impulse_planes(self) -> PlaneColliders:
+        return self
+
     def project_rows(self, x: np.ndarray, v: np.ndarray, idx: np.ndarray) -> None:
         """Put any of rows ``idx`` behind a plane onto it and stop its inward motion (after the
         hits of :meth:`resolve`, and for the stages that push particles: particle contacts,
