@@ -25,6 +25,7 @@ from animsim.elements import StepStage
 from animsim.export.meta import run_facts
 from animsim.guard import Failure, Guard
 from animsim.measures.drift import annotate
+from animsim.measures.watchdog import WatchBooks
 from animsim.record import FrameSink
 from animsim.run_frames import Held, arrays_frame, emit, emit_arrays, flush, frame_copy
 from animsim.startup import resume_collector
@@ -413,7 +414,7 @@ class _Loop:
 
 #: what a replay restores besides the state: the watchdog's books (Guard.snapshot) and each
 #: replayed stage with its own bookkeeping (whatever that stage's snapshot returns)
-_Books = tuple[Any, list[tuple[StepStage, Any]]]
+_Books = tuple[WatchBooks | None, list[tuple[StepStage, object]]]
 
 
 def _snapshot(compiled: Compiled, guard: Guard) -> _Books:

@@ -15,7 +15,7 @@ import numpy as np
 
 from animsim.compile import Compiled
 from animsim.measures import stability
-from animsim.measures.watchdog import EnergyWatch
+from animsim.measures.watchdog import EnergyWatch, WatchBooks
 from animsim.system import State
 
 
@@ -71,11 +71,11 @@ class Guard:
         """After a step of a run with births: book the newborns as a check would (cheap)."""
         self.watch.book_births(state)
 
-    def snapshot(self) -> Any:
+    def snapshot(self) -> WatchBooks | None:
         """The watchdog's books at a checked state, for a replay from it."""
         return self.watch.snapshot()
 
-    def restore(self, snap: Any) -> None:
+    def restore(self, snap: WatchBooks | None) -> None:
         self.watch.restore(snap)
 
     def check(self, state: State) -> Failure | None:

@@ -100,6 +100,11 @@ def _newborn_rows(  # numba
     return n
 
 
+#: the books a replay restores: energy booked at births, the reference positions, the
+#: released terms' references, which slots were alive (EnergyWatch.snapshot)
+WatchBooks = tuple[float, np.ndarray, list[np.ndarray], np.ndarray]
+
+
 class EnergyWatch:
     """Per-run energy bookkeeping for the watchdog (see the module docstring).
 
@@ -271,7 +276,7 @@ class EnergyWatch:
         if n:
             self._book_newborns(idx[:n], xb[:n], vb[:n], mb[:n])
 
-    def snapshot(self) -> tuple[Any, ...] | None:
+    def snapshot(self) -> WatchBooks | None:
         """The books a replay from a checked state restores (None: they never change)."""
         if self.alive_prev is None:
             return None
@@ -280,7 +285,7 @@ class EnergyWatch:
         x_ref, alive_prev, *u_ref = self._kept
         return self.born_energy, x_ref, u_ref, alive_prev
 
-    def restore(self, snap: tuple[Any, ...] | None) -> None:
+    def restore(self, snap: WatchBooks | None) -> None:
         if snap is None:
             return
         self.born_energy = snap[0]
