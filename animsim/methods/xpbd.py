@@ -67,7 +67,7 @@ register(
         listed=False,
         takes_substeps=True,
         takes_adaptive=False,
-        spring_constraints="animsim.integrators.xpbd:spring_energy_term",
+        spring_constraints="animsim.integrators.xpbd_constraints:spring_energy_term",
         aliases=("pbd", "position_based"),
     )
 )
