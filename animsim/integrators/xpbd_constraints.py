@@ -177,7 +177,8 @@ class ConstraintGroups:
             ends = self._flat_ab[k]
             xab = xf.take(ends).reshape(2, 3, -1)
             d = xab[0] - xab[1]
-            length = np.sqrt(np.einsum("ij,ij->j", d, d))
+            sq = np.einsum("ij,ij->j", d, d)
+            length = np.sqrt(sq)
             if length.all():
                 inv = 1.0 / length
             else:  # coincident ends: no direction, no move
@@ -185,8 +186,9 @@ class ConstraintGroups:
             c_ab, d_ab = stacked[k]
             f = c_ab * (length - self._rest[k])  # (ca C, -cb C)
             if self.damped[k]:
-                moved = d - d_old[:, sl]  # (x_a - p_a) - (x_b - p_b)
-                gdot = np.einsum("ij,ij->j", d, moved)
+                # d.moved = d.d - d.d_old, moved = (x_a - p_a) - (x_b - p_b): one product less;
+                # its cancellation costs eps |d|^2 against a term that only damps
+                gdot = sq - np.einsum("ij,ij->j", d, d_old[:, sl])
                 gdot *= inv
                 f += d_ab * gdot
             f *= inv
