@@ -198,10 +198,9 @@ class ConstraintGroups:
 
 def _flat(x: np.ndarray) -> np.ndarray:
     """``x`` (n, 3) seen as one flat array: a view, so stores through it land in ``x``."""
-    flat = x.reshape(-1)
-    if not np.shares_memory(flat, x):
-        raise ValueError("xpbd works on C-ordered position arrays")  # a copy would lose the stores
-    return flat
+    if not x.flags.c_contiguous:  # reshape would copy, and the stores would be lost
+        raise ValueError("xpbd works on C-ordered position arrays")
+    return x.reshape(-1)
 
 
 class Tethers:
