@@ -15,9 +15,10 @@ from animsim.methods import Method, register
 
 #: substeps per step when the scene names none: a cheap start at one step per frame. They buy
 #: accuracy, not stability (none is needed): where ks (w_a + w_b) h^2 is well below 1 the
-#: error falls linearly with h = dt / substeps; on the very stiff cloth of
-#: benchmarks/xpbd_cloth.py ten leave the sag 211 % off the force-based reference and 2560
-#: bring it within 2 % (benchmarks/RESULTS.md)
+#: error falls linearly with h = dt / substeps; on the very stiff cloths of
+#: benchmarks/xpbd_cloth.py ten leave the sag 211 % (swinging) and 6470 % (hanging, settled)
+#: off the force-based reference, and 2560 bring the first within 2 % and the second to 11 %
+#: (benchmarks/RESULTS.md)
 DEFAULT_SUBSTEPS = 10
 
 
@@ -67,7 +68,7 @@ register(
         listed=False,
         takes_substeps=True,
         takes_adaptive=False,
-        spring_constraints="animsim.integrators.xpbd:spring_energy_term",
+        spring_constraints="animsim.integrators.xpbd_constraints:spring_energy_term",
         aliases=("pbd", "position_based"),
     )
 )

@@ -288,3 +288,49 @@ def test_numba_kernels_give_numpys_positions_to_1e_12(tear, more):
     scale = np.abs(out[0]).max(axis=(1, 2))
     per_frame = np.abs(out[0] - out[1]).max(axis=(1, 2)) / scale
     assert per_frame.max() < 1e-12
+
+
+def test_a_cloth_takes_as_few_colours_as_its_busiest_particle_has_springs():
+    # 12 springs meet at an inner particle of a cloth with structural, shear and bend springs,
+    # and springs that share a particle cannot share a colour: 12 is the fewest possible
+    from animsim.compile import compile_scene
+    from animsim.scene.loader import load_scene_text
+
+    text = PARITY.format(tear="", more="")
+    compiled = compile_scene(load_scene_text(text).scene, "c", backend="numpy")
+    index = compiled.system.spring_index
+    degree = np.bincount(index.ravel()).max()
+    assert degree == 12
+    assert len(compiled.integrator.groups.slices) == degree
+
+
+COINCIDENT = """
+duration: 0.1
+dt: 0.01
+integrator: {{method: xpbd, substeps: 4}}
+record: {{every: 1}}
+particles:
+  - {{id: a, mass: 1.0, position: [0, 0, 0]}}
+  - {{id: b, mass: 1.0, position: [0, 0, 0]}}
+  - {{id: c, mass: 1.0, position: [1, 0, 0]}}
+springs:
+  - {{between: [a, b], ks: 100, kd: 1, rest: 0.5}}
+  - {{between: [b, c], ks: 100, kd: 1, rest: 1.0}}
+"""
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_a_spring_between_coincident_particles_has_no_direction_and_moves_nothing(backend):
+    # a-b start on one point: the constraint has no gradient there, so it must not move them
+    # (nor fill them with NaN); b-c is at rest, so nothing moves at all without gravity
+    from animsim.compile import compile_scene
+    from animsim.engine import run
+    from animsim.record import MemorySink
+    from animsim.scene.loader import load_scene_text
+
+    compiled = compile_scene(load_scene_text(COINCIDENT.format()).scene, "c", backend=backend)
+    sink = MemorySink()
+    assert run(compiled, [sink]).status == STATUS_OK
+    x = sink.positions()
+    assert np.isfinite(x).all()
+    assert np.abs(x - x[0]).max() == 0.0
