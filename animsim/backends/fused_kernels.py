@@ -27,10 +27,14 @@ The plain and the blocked step loops share the integrators' updates and the stag
 every array passed field by field: as plain calls these helpers made a one-particle
 scene's step about a fifth slower (measured); inlined, the loops compile to the machine
 code of the updates written out (to within a few instructions and the registers chosen)
-and run as fast. What still makes the chunk kernels long is their argument lists: every
-array and table is an argument of its own, as the host passes them (one flat tuple, to
-:class:`animsim.backends.kernel_calls.FastCall`), so a signature takes 25 to 50 lines
-and a call of one kernel from another about 30.
+and run as fast. Every array and table is an argument of its own, as the host passes them
+(one flat tuple, to :class:`animsim.backends.kernel_calls.FastCall`); the signatures and the
+calls of one kernel from another are written a group to a line (state and clock, method and
+tableau, elements, stages, work arrays), not one name to a line. Passed as nested tuples
+instead, the groups cost each run about half a millisecond more, for the same compiled
+code: the host types a run's first call's arguments, and numba types a heterogeneous tuple
+by building a union of its members' types (measured: the one-particle scene of
+``benchmarks.cpu_goals tiny numba``, 20,000 steps, 3.1 against 3.6 ms a run).
 
 Imported only when numba is in use.
 """
@@ -207,34 +211,13 @@ def _stages_changed(xo, vo, x, v, dt, inv_mass, stage_fns, stage_fps, stage_ips)
 
 @njit(cache=True, _nrt=COUNTED)
 def fused_chunk(
-    x,
-    v,
-    times,
-    dts,
-    method,
-    tab_c,
-    tab_a,
-    tab_b,
-    kernels,
-    fps,
-    ips,
-    mass,
-    inv_mass,
-    pinned,
-    stage_fns,
-    stage_fps,
-    stage_ips,
-    kx,
-    kv,
-    xs,
-    vs,
-    a0,
-    a1,
-    xo,
-    vo,
-    a0_valid,
-    has_stage,
-):
+    x, v, times, dts,
+    method, tab_c, tab_a, tab_b,
+    kernels, fps, ips, mass, inv_mass, pinned,
+    stage_fns, stage_fps, stage_ips,
+    kx, kv, xs, vs, a0, a1, xo, vo,
+    a0_valid, has_stage,
+):  # fmt: skip
     """Advance len(dts) steps of dts from times[0]; stop after the first non-finite step.
 
     ``times`` are the clock's step start times (the loop's clock, not a running sum).
@@ -425,54 +408,17 @@ def quick_check_pieces(
 
 @njit(cache=True, _nrt=COUNTED)
 def checked_chunk(
-    x,
-    v,
-    times,
-    dts,
-    method,
-    tab_c,
-    tab_a,
-    tab_b,
-    kernels,
-    fps,
-    ips,
-    mass,
-    inv_mass,
-    pinned,
-    stage_fns,
-    stage_fps,
-    stage_ips,
-    kx,
-    kv,
-    xs,
-    vs,
-    a0,
-    a1,
-    xo,
-    vo,
-    a0_valid,
-    has_stage,
-    k0,
-    checked,
-    stride,
-    last,
-    energy,
-    elastic,
-    efps,
-    eips,
-    releasing,
-    rfps,
-    rips,
-    u_refs,
-    x_ref,
-    no_u,
-    books,
-    x_good,
-    v_good,
-    rec,
-    shot_x,
-    shot_v,
-):
+    x, v, times, dts,
+    method, tab_c, tab_a, tab_b,
+    kernels, fps, ips, mass, inv_mass, pinned,
+    stage_fns, stage_fps, stage_ips,
+    kx, kv, xs, vs, a0, a1, xo, vo,
+    a0_valid, has_stage,
+    k0, checked, stride, last,
+    energy, elastic, efps, eips, releasing, rfps, rips, u_refs, x_ref, no_u, books,
+    x_good, v_good,
+    rec, shot_x, shot_v,
+):  # fmt: skip
     """fused_chunk over len(dts) steps from clock position ``k0`` with the watchdog's checks
     inside: at every position ``checked`` + j ``stride`` and at ``last`` (the clock's end),
     as the loop would check, the energy test (``energy``: it is on) runs and a passing state
@@ -500,34 +446,13 @@ def checked_chunk(
         if r < rec.shape[0] and rec[r] - k0 < e:
             e = rec[r] - k0
         taken, ev, ch, a0_valid, bad = fused_chunk(
-            x,
-            v,
-            times[j:],
-            dts[j:e],
-            method,
-            tab_c,
-            tab_a,
-            tab_b,
-            kernels,
-            fps,
-            ips,
-            mass,
-            inv_mass,
-            pinned,
-            stage_fns,
-            stage_fps,
-            stage_ips,
-            kx,
-            kv,
-            xs,
-            vs,
-            a0,
-            a1,
-            xo,
-            vo,
-            a0_valid,
-            has_stage,
-        )
+            x, v, times[j:], dts[j:e],
+            method, tab_c, tab_a, tab_b,
+            kernels, fps, ips, mass, inv_mass, pinned,
+            stage_fns, stage_fps, stage_ips,
+            kx, kv, xs, vs, a0, a1, xo, vo,
+            a0_valid, has_stage,
+        )  # fmt: skip
         evals += ev
         changed += ch
         j += taken
@@ -566,35 +491,37 @@ def _acc_block(x, v, t, out, kernels, fps, ips, mass, inv_mass, pinned):
             out[i, 2] = 0.0
 
 
+@njit(cache=True, inline="always", _nrt=COUNTED)
+def _symplectic_euler_flat(x, v, a, xo, vo, dt, keep):
+    """:func:`_symplectic_euler` on a block's rows as one flat run (the same operations).
+    ``keep``: the step's start is kept in xo, vo for the stage, in the update's own pass
+    (the kernels write only ``a``, so x and v are still the start here)."""
+    m = x.shape[0]
+    xf = x.reshape(3 * m)
+    vf = v.reshape(3 * m)
+    af = a.reshape(3 * m)
+    if keep:
+        xof = xo.reshape(3 * m)
+        vof = vo.reshape(3 * m)
+        for i in range(3 * m):
+            xof[i] = xf[i]
+            vof[i] = vf[i]
+            vf[i] += af[i] * dt
+            xf[i] += vf[i] * dt
+    else:
+        for i in range(3 * m):
+            vf[i] += af[i] * dt
+            xf[i] += vf[i] * dt
+
+
 @njit(cache=True, _nrt=COUNTED)
 def _block_steps(
-    x,
-    v,
-    a0,
-    t_all,
-    dts,
-    s0,
-    s1,
-    fresh,
-    method,
-    tab_c,
-    tab_a,
-    tab_b,
-    kernels,
-    fps,
-    ips,
-    mass,
-    inv_mass,
-    pinned,
-    stage_fns,
-    stage_fps,
-    stage_ips,
-    has_stage,
-    changed,
-    scratch,
-    kx,
-    kv,
-):
+    x, v, a0, t_all, dts, s0, s1, fresh,
+    method, tab_c, tab_a, tab_b,
+    kernels, fps, ips, mass, inv_mass, pinned,
+    stage_fns, stage_fps, stage_ips, has_stage, changed,
+    scratch, kx, kv,
+):  # fmt: skip
     """Steps s0..s1-1 of one block of rows (x, v, a0, mass, ... are the block's slices).
 
     The arithmetic of each row is fused_chunk's, operation for operation. ``fresh``:
@@ -619,23 +546,7 @@ def _block_steps(
             _copy(vo, v)
         if method == SYMPLECTIC_EULER:
             _acc_block(x, v, t, acc, kernels, fps, ips, mass, inv_mass, pinned)
-            xf = x.reshape(3 * m)
-            vf = v.reshape(3 * m)
-            af = acc.reshape(3 * m)
-            if has_stage:
-                # the step's start kept for the stage in the update's own pass (the kernels
-                # write only acc, so x and v are still the start here)
-                xof = xo.reshape(3 * m)
-                vof = vo.reshape(3 * m)
-                for i in range(3 * m):
-                    xof[i] = xf[i]
-                    vof[i] = vf[i]
-                    vf[i] += af[i] * dt
-                    xf[i] += vf[i] * dt
-            else:
-                for i in range(3 * m):
-                    vf[i] += af[i] * dt
-                    xf[i] += vf[i] * dt
+            _symplectic_euler_flat(x, v, acc, xo, vo, dt, has_stage)
         elif method == EULER_AVERAGE:
             _acc_block(x, v, t, acc, kernels, fps, ips, mass, inv_mass, pinned)
             _euler_average(x, v, acc, dt)
@@ -664,37 +575,13 @@ def _block_steps(
 
 @njit(cache=True)
 def _one_block(
-    b,
-    block,
-    x,
-    v,
-    a0,
-    x_save,
-    v_save,
-    a0_save,
-    restore,
-    save,
-    times,
-    dts,
-    s0,
-    s1,
-    fresh,
-    method,
-    tab_c,
-    tab_a,
-    tab_b,
-    kernels,
-    fps,
-    ips,
-    mass,
-    inv_mass,
-    pinned,
-    stage_fns,
-    stage_fps,
-    stage_ips,
-    has_stage,
-    changed,
-):
+    b, block,
+    x, v, a0, x_save, v_save, a0_save, restore, save,
+    times, dts, s0, s1, fresh,
+    method, tab_c, tab_a, tab_b,
+    kernels, fps, ips, mass, inv_mass, pinned,
+    stage_fns, stage_fps, stage_ips, has_stage, changed,
+):  # fmt: skip
     """Block ``b`` (rows b * block onward) through steps s0..s1-1, with work arrays of its
     own (so blocks may run on different threads at once). ``save``: keep its rows first, so
     it can be put back; ``restore``: put its kept rows back first. Returns _block_steps'."""
@@ -716,33 +603,12 @@ def _one_block(
     kx = np.empty((stages, m, 3))
     kv = np.empty((stages, m, 3))
     return _block_steps(
-        x[lo:hi],
-        v[lo:hi],
-        a0[lo:hi],
-        times,
-        dts,
-        s0,
-        s1,
-        fresh,
-        method,
-        tab_c,
-        tab_a,
-        tab_b,
-        kernels,
-        fps,
-        ips,
-        mass[lo:hi],
-        inv_mass[lo:hi],
-        pinned[lo:hi],
-        stage_fns,
-        stage_fps,
-        stage_ips,
-        has_stage,
-        changed[b],
-        scratch,
-        kx,
-        kv,
-    )
+        x[lo:hi], v[lo:hi], a0[lo:hi], times, dts, s0, s1, fresh,
+        method, tab_c, tab_a, tab_b,
+        kernels, fps, ips, mass[lo:hi], inv_mass[lo:hi], pinned[lo:hi],
+        stage_fns, stage_fps, stage_ips, has_stage, changed[b],
+        scratch, kx, kv,
+    )  # fmt: skip
 
 
 @njit(cache=True, inline="always")
@@ -785,31 +651,13 @@ def _span_counts(method, stages, s0, limit, changed, a0_valid):
 
 
 def _blocked_chunk(
-    x,
-    v,
-    times,
-    dts,
-    method,
-    tab_c,
-    tab_a,
-    tab_b,
-    kernels,
-    fps,
-    ips,
-    mass,
-    inv_mass,
-    pinned,
-    stage_fns,
-    stage_fps,
-    stage_ips,
-    a0,
-    x_save,
-    v_save,
-    a0_save,
-    a0_valid,
-    has_stage,
-    block,
-):
+    x, v, times, dts,
+    method, tab_c, tab_a, tab_b,
+    kernels, fps, ips, mass, inv_mass, pinned,
+    stage_fns, stage_fps, stage_ips,
+    a0, x_save, v_save, a0_save,
+    a0_valid, has_stage, block,
+):  # fmt: skip
     """fused_chunk for pointwise scenes (every force and stage reads only its own row), with
     the same results to the bit, the same counts and the same first non-finite step.
 
@@ -845,37 +693,13 @@ def _blocked_chunk(
         fresh = not a0_valid
         for b in prange(nblocks):
             r, f = _one_block(
-                b,
-                block,
-                x,
-                v,
-                a0,
-                x_save,
-                v_save,
-                a0_save,
-                False,
-                save,
-                times,
-                dts,
-                s0,
-                s1,
-                fresh,
-                method,
-                tab_c,
-                tab_a,
-                tab_b,
-                kernels,
-                fps,
-                ips,
-                mass,
-                inv_mass,
-                pinned,
-                stage_fns,
-                stage_fps,
-                stage_ips,
-                has_stage,
-                changed,
-            )
+                b, block,
+                x, v, a0, x_save, v_save, a0_save, False, save,
+                times, dts, s0, s1, fresh,
+                method, tab_c, tab_a, tab_b,
+                kernels, fps, ips, mass, inv_mass, pinned,
+                stage_fns, stage_fps, stage_ips, has_stage, changed,
+            )  # fmt: skip
             ran[b] = r
             bad[b] = f
         failed, limit = _first_failure(bad, ran, s0, s1)
@@ -883,37 +707,13 @@ def _blocked_chunk(
             for b in prange(nblocks):
                 if s0 + ran[b] > limit:
                     _one_block(
-                        b,
-                        block,
-                        x,
-                        v,
-                        a0,
-                        x_save,
-                        v_save,
-                        a0_save,
-                        True,
-                        False,
-                        times,
-                        dts,
-                        s0,
-                        limit,
-                        fresh,
-                        method,
-                        tab_c,
-                        tab_a,
-                        tab_b,
-                        kernels,
-                        fps,
-                        ips,
-                        mass,
-                        inv_mass,
-                        pinned,
-                        stage_fns,
-                        stage_fps,
-                        stage_ips,
-                        has_stage,
-                        changed,
-                    )
+                        b, block,
+                        x, v, a0, x_save, v_save, a0_save, True, False,
+                        times, dts, s0, limit, fresh,
+                        method, tab_c, tab_a, tab_b,
+                        kernels, fps, ips, mass, inv_mass, pinned,
+                        stage_fns, stage_fps, stage_ips, has_stage, changed,
+                    )  # fmt: skip
         ev, ch, a0_valid = _span_counts(method, stages, s0, limit, changed, a0_valid)
         evals += ev
         changed_steps += ch

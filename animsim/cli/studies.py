@@ -27,6 +27,14 @@ class ReferenceKind(StrEnum):
     fine = "fine"
 
 
+#: the Dask option of sweep and compare (compare adds a word on its timings)
+SCHEDULER_HELP = (
+    "Dask scheduler address, or 'local' for a LocalCluster (--jobs workers); "
+    # \\[ keeps rich markup from eating the extra's name.
+    'needs pip install "animsim\\[dask]".'
+)
+
+
 @limit_options
 def sweep(
     scene: SceneArg,
@@ -59,15 +67,7 @@ def sweep(
         str | None, typer.Option("--y", help="Column to plot; default error with --reference, else drift.")
     ] = None,
     jobs: Annotated[int, typer.Option("--jobs", "-j", help="Local worker processes.", min=1)] = 1,
-    scheduler: Annotated[
-        str | None,
-        typer.Option(
-            "--scheduler",
-            help="Dask scheduler address, or 'local' for a LocalCluster (--jobs workers); "
-            # \\[ keeps rich markup from eating the extra's name.
-            'needs pip install "animsim\\[dask]".',
-        ),
-    ] = None,
+    scheduler: Annotated[str | None, typer.Option("--scheduler", help=SCHEDULER_HELP)] = None,
     duration: Annotated[
         float | None, typer.Option(help="Override the duration (s) of every case (a short sweep first).")
     ] = None,
@@ -145,97 +145,107 @@ def _stdout_console():
 # --- compare ------------------------------------------------------------------------------
 
 
+# compare's options, declared once here so that its signature reads in a few lines
+CompareIntegratorsOpt = Annotated[
+    str | None,
+    typer.Option(
+        help="Comma-separated methods, e.g. euler,midpoint,rk4; default every fixed-step method.",
+        autocompletion=complete_integrators,
+    ),
+]
+CompareDtOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--dt",
+        help="Comma-separated step sizes (s); default 2 dt, dt, dt/2 and dt/4 of the scene's dt "
+        "(dt/8 instead of 2 dt when 2 dt is longer than the duration), without dt/4 when the four "
+        "do not fit --budget.",
+    ),
+]
+CompareDurationOpt = Annotated[
+    float | None,
+    typer.Option(
+        "--duration",
+        help="Compare over the first S seconds of the scene; default all of it, or as much as fits --budget.",
+    ),
+]
+BudgetOpt = Annotated[
+    float,
+    typer.Option(
+        "--budget",
+        metavar="SECONDS",
+        min=0,
+        help="How long compare may take (the probe included, numba compiling not), estimated from "
+        "a short timed probe of the scene: what you do not name (--integrators, --dt, --duration) "
+        "is cut until the estimate fits (an RK4 reference's extra steps, then dt/4, then the window "
+        "down to half the scene, then the methods, then the window again), and what was cut is "
+        "printed. Options you name are run as given; the estimate says when they will take "
+        "longer. 0: no budget.",
+    ),
+]
+CompareReferenceOpt = Annotated[
+    ReferenceKind,
+    typer.Option(
+        help="What 'exact' is: analytic (a closed form; exit 2 if the scene has none), fine (a converged "
+        "run: DOP853 for smooth scenes, else RK4 with dt halved until it stops changing), or auto "
+        "(analytic when possible); the one used is printed."
+    ),
+]
+RepeatOpt = Annotated[
+    int,
+    typer.Option(
+        help="Timed runs per row after its accuracy run (the median is reported); more runs, steadier "
+        "timings. 0 times the accuracy run itself, recording included: cheaper, less exact.",
+        min=0,
+    ),
+]
+CompareOutputOpt = Annotated[Path | None, typer.Option("-o", "--output", help="Write the table as CSV.")]
+ComparePlotOpt = Annotated[
+    Path | None,
+    typer.Option(help="Work-precision and convergence diagrams; .png, .svg or .pdf."),
+]
+FailOnUnstableOpt = Annotated[
+    bool, typer.Option("--fail-on-unstable", help="Exit 1 if any run was unstable.")
+]
+CompareJobsOpt = Annotated[
+    int,
+    typer.Option(
+        "--jobs",
+        "-j",
+        min=1,
+        help="Worker processes for the rows. Default 1 (serial): timings need a quiet machine, "
+        "and parallel rows share the cores they are timed on; the errors are the same either way.",
+    ),
+]
+CompareSchedulerOpt = Annotated[
+    str | None,
+    typer.Option("--scheduler", help=SCHEDULER_HELP + " Same caveat on timings as --jobs."),
+]
+CompareBackendOpt = Annotated[
+    str,
+    typer.Option(
+        "--backend",
+        help="auto (default: numba when installed and it can run the scene, else numpy), numpy or numba "
+        '(needs pip install -e ".\\[fast]"). Rows and any RK4 reference run on it; DOP853 on numpy.',
+    ),
+]
+
+
 @limit_options
 def compare(
     scene: SceneArg,
-    integrators: Annotated[
-        str | None,
-        typer.Option(
-            help="Comma-separated methods, e.g. euler,midpoint,rk4; default every fixed-step method.",
-            autocompletion=complete_integrators,
-        ),
-    ] = None,
-    dt: Annotated[
-        str | None,
-        typer.Option(
-            "--dt",
-            help="Comma-separated step sizes (s); default 2 dt, dt, dt/2 and dt/4 of the scene's dt "
-            "(dt/8 instead of 2 dt when 2 dt is longer than the duration), without dt/4 when the four "
-            "do not fit --budget.",
-        ),
-    ] = None,
-    duration: Annotated[
-        float | None,
-        typer.Option(
-            "--duration",
-            help="Compare over the first S seconds of the scene; default all of it, or as much as "
-            "fits --budget.",
-        ),
-    ] = None,
-    budget: Annotated[
-        float,
-        typer.Option(
-            "--budget",
-            metavar="SECONDS",
-            min=0,
-            help="How long compare may take (the probe included, numba compiling not), estimated from "
-            "a short timed probe of the scene: what you do not name (--integrators, --dt, --duration) "
-            "is cut until the estimate fits (an RK4 reference's extra steps, then dt/4, then the window "
-            "down to half the scene, then the methods, then the window again), and what was cut is "
-            "printed. Options you name are run as given; the estimate says when they will take "
-            "longer. 0: no budget.",
-        ),
-    ] = 20.0,  # animsim.analysis.compare.DEFAULT_BUDGET (a test keeps them equal)
-    reference: Annotated[
-        ReferenceKind,
-        typer.Option(
-            help="What 'exact' is: analytic (a closed form; exit 2 if the scene has none), fine (a converged "
-            "run: DOP853 for smooth scenes, else RK4 with dt halved until it stops changing), or auto "
-            "(analytic when possible); the one used is printed."
-        ),
-    ] = ReferenceKind.auto,
-    repeat: Annotated[
-        int,
-        typer.Option(
-            help="Timed runs per row after its accuracy run (the median is reported); more runs, steadier "
-            "timings. 0 times the accuracy run itself, recording included: cheaper, less exact.",
-            min=0,
-        ),
-    ] = 1,
-    output: Annotated[Path | None, typer.Option("-o", "--output", help="Write the table as CSV.")] = None,
-    plot: Annotated[
-        Path | None,
-        typer.Option(help="Work-precision and convergence diagrams; .png, .svg or .pdf."),
-    ] = None,
-    fail_on_unstable: Annotated[
-        bool, typer.Option("--fail-on-unstable", help="Exit 1 if any run was unstable.")
-    ] = False,
-    jobs: Annotated[
-        int,
-        typer.Option(
-            "--jobs",
-            "-j",
-            min=1,
-            help="Worker processes for the rows. Default 1 (serial): timings need a quiet machine, "
-            "and parallel rows share the cores they are timed on; the errors are the same either way.",
-        ),
-    ] = 1,
-    scheduler: Annotated[
-        str | None,
-        typer.Option(
-            "--scheduler",
-            help="Dask scheduler address, or 'local' for a LocalCluster (--jobs workers); "
-            'needs pip install "animsim\\[dask]". Same caveat on timings as --jobs.',
-        ),
-    ] = None,
-    backend: Annotated[
-        str,
-        typer.Option(
-            "--backend",
-            help="auto (default: numba when installed and it can run the scene, else numpy), numpy or numba "
-            '(needs pip install -e ".\\[fast]"). Rows and any RK4 reference run on it; DOP853 on numpy.',
-        ),
-    ] = "auto",
+    integrators: CompareIntegratorsOpt = None,
+    dt: CompareDtOpt = None,
+    duration: CompareDurationOpt = None,
+    budget: BudgetOpt = 20.0,  # animsim.analysis.compare.DEFAULT_BUDGET (a test keeps them equal)
+    reference: CompareReferenceOpt = ReferenceKind.auto,
+    repeat: RepeatOpt = 1,
+    output: CompareOutputOpt = None,
+    plot: ComparePlotOpt = None,
+    fail_on_unstable: FailOnUnstableOpt = False,
+    jobs: CompareJobsOpt = 1,
+    scheduler: CompareSchedulerOpt = None,
+    backend: CompareBackendOpt = "auto",
     *,
     limits: Any = None,
 ) -> None:

@@ -61,27 +61,10 @@ def render_command(
             check_output(out, source)
     from_file = isinstance(source, str | Path) and is_trajectory(Path(source))
     if integrators is not None:
-        if from_file or isinstance(source, Trajectory):
-            raise UsageError(
-                "--integrators simulates the scene once per method: give the scene, not a trajectory"
-            )
-        if integrator is not None:
-            raise UsageError("give --integrator or --integrators, not both")
-
-        names = integrator_names(integrators)
-        sc, name, _, _ = prepared(
-            source,  # type: ignore[arg-type]
-            limits,
-            dt=dt,
-            duration=duration,
-            consumer="render",
-        )
-        sc = sc.model_copy(update={"record": m.Record(fps=fps)})
-        result = render_side_by_side(
-            compile_each(sc, name, names, backend), gif_path, mp4_path, opts, stop=stop
-        )
-        result.panels = list(names)
-        return result
+        return _side_by_side(
+            source, integrators, integrator, gif_path, mp4_path, opts, from_file,
+            limits=limits, dt=dt, duration=duration, backend=backend, stop=stop,
+        )  # fmt: skip
     if isinstance(source, Trajectory):
         return render_trajectory(source.frames_long, gif_path, mp4_path, opts, compiled=source.compiled)
     compiled = None
@@ -111,3 +94,40 @@ def render_command(
     total = compiled.record_steps.size
     tick = None if progress is None else (lambda done: progress(done, total))
     return render_scene(compiled, gif_path, mp4_path, opts, progress=tick, stop=stop)
+
+
+def _side_by_side(
+    source: str | Path | Scene | Trajectory,
+    integrators: str | Sequence[str],
+    integrator: str | None,
+    gif_path: Path | None,
+    mp4_path: Path | None,
+    opts: RenderOptions,
+    from_file: bool,
+    *,
+    limits: Any,
+    dt: float | None,
+    duration: float | None,
+    backend: str,
+    stop: Callable[[], bool] | None,
+) -> Any:
+    """``render --integrators``: the scene simulated once per method, drawn side by side."""
+    if from_file or isinstance(source, Trajectory):
+        raise UsageError(
+            "--integrators simulates the scene once per method: give the scene, not a trajectory"
+        )
+    if integrator is not None:
+        raise UsageError("give --integrator or --integrators, not both")
+
+    names = integrator_names(integrators)
+    sc, name, _, _ = prepared(
+        source,  # type: ignore[arg-type]
+        limits,
+        dt=dt,
+        duration=duration,
+        consumer="render",
+    )
+    sc = sc.model_copy(update={"record": m.Record(fps=opts.fps)})
+    result = render_side_by_side(compile_each(sc, name, names, backend), gif_path, mp4_path, opts, stop=stop)
+    result.panels = list(names)
+    return result

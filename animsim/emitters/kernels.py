@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from animsim.elements import compile_helpers, numba_helper
+from animsim.elements import compile_helpers, numba_helper, numba_inline_helper
 
 
 @numba_helper
@@ -147,6 +147,34 @@ def _pool_births(
     skipped, as in a lazy priority queue. ``dying``, ``keep`` and ``taken``
     receive the dead slots (ascending), the kept-events mask and the slots taken.
     """
+    nd = _due_deaths(t1, q, qs, bounds, sizes, alive, slot_serial, dying)
+    _kept_events(ev_time, alive_count, capacity, slot_death, dying[:nd], keep)
+    if nd:
+        _pool_kill(dying[:nd], alive, m, inv_m, v, slot_death, free, sizes, scratch)
+    n = _take_slots(
+        ev_time, ev_life, ev_pos, ev_vel, mass, inv_mass, born, keep,
+        x, v, alive, m, inv_m, slot_birth, slot_death, slot_lifetime, slot_serial, slot_table,
+        free, sizes, taken,
+    )  # fmt: skip
+    if n:
+        _queue_newborns(n, taken, alive, slot_death, slot_serial, q, qs, bounds, sizes)
+    return nd, n
+
+
+@numba_inline_helper
+def _due_deaths(
+    t1: float,
+    q: np.ndarray,
+    qs: np.ndarray,
+    bounds: np.ndarray,
+    sizes: np.ndarray,
+    alive: np.ndarray,
+    slot_serial: np.ndarray,
+    dying: np.ndarray,
+) -> int:
+    """The slots the death queue says die by t1, ascending (as a scan finds them), into
+    ``dying``; how many. Each run's head moves past the entries read; an entry whose slot
+    died otherwise or was taken again (its serial differs) is skipped."""
     nd = 0
     for r in range(sizes[3]):
         h, end = bounds[r, 1], bounds[r, 2]
@@ -159,27 +187,49 @@ def _pool_births(
         bounds[r, 1] = h
     if nd:
         dying[:nd] = np.sort(dying[:nd])  # ascending slots, as a scan finds them
+    return nd
+
+
+@numba_inline_helper
+def _kept_events(
+    ev_time: np.ndarray,
+    alive_count: int,
+    capacity: int,
+    slot_death: np.ndarray,
+    dying: np.ndarray,
+    keep: np.ndarray,
+) -> None:
+    """keep[i]: whether event i finds room in the pool, by Pool._accepted's closed form
+    (``dying``: the slots that die by the step's end, freeing room at their death times)."""
     k = ev_time.shape[0]
     if alive_count + k <= capacity:
         for i in range(k):
             keep[i] = True
-    else:
-        # kept_i = i + min(0, min_{j<=i} f_j - j), f_j = cap - A0 + D(b_j) (Pool._accepted)
-        deaths = np.sort(slot_death[dying[:nd]])
-        low = 0
-        prev = 0
-        for i in range(k):
-            f = capacity - alive_count + np.searchsorted(deaths, ev_time[i], side="right")
-            if i == 0 or f - (i + 1) < low:
-                low = f - (i + 1)
-            kept = (i + 1) + min(0, low)
-            keep[i] = kept - prev > 0
-            prev = kept
-    if nd:
-        _pool_kill(dying[:nd], alive, m, inv_m, v, slot_death, free, sizes, scratch)
+        return
+    # kept_i = i + min(0, min_{j<=i} f_j - j), f_j = cap - A0 + D(b_j) (Pool._accepted)
+    deaths = np.sort(slot_death[dying])
+    low = 0
+    prev = 0
+    for i in range(k):
+        f = capacity - alive_count + np.searchsorted(deaths, ev_time[i], side="right")
+        if i == 0 or f - (i + 1) < low:
+            low = f - (i + 1)
+        kept = (i + 1) + min(0, low)
+        keep[i] = kept - prev > 0
+        prev = kept
+
+
+@numba_inline_helper
+def _take_slots(
+    ev_time, ev_life, ev_pos, ev_vel, mass, inv_mass, born, keep,
+    x, v, alive, m, inv_m, slot_birth, slot_death, slot_lifetime, slot_serial, slot_table,
+    free, sizes, taken,
+):  # fmt: skip
+    """The kept events born into the lowest free slots, in order (``taken``: the slots);
+    how many."""
     n = 0
     head = sizes[2]
-    for i in range(k):
+    for i in range(ev_time.shape[0]):
         if not keep[i]:
             continue
         s = free[head + n]
@@ -198,23 +248,37 @@ def _pool_births(
         n += 1
     sizes[1] -= n
     sizes[2] = head + n
-    if n:
-        # the newborns' deaths as a new run, sorted by time (room made by compacting first)
-        runs_full = sizes[3] == bounds.shape[0]
-        if sizes[4] + n > q.shape[0] or runs_full:
-            _queue_compact(q, qs, bounds, sizes, alive, slot_serial, runs_full)
-        order = np.argsort(slot_death[taken[:n]], kind="mergesort")
-        e = sizes[4]
-        for j in range(n):
-            s = taken[order[j]]
-            q[e + j, 0] = slot_death[s]
-            qs[e + j, 0] = s
-            qs[e + j, 1] = slot_serial[s]
-        r = sizes[3]
-        bounds[r, 0], bounds[r, 1], bounds[r, 2] = e, e, e + n
-        sizes[3] = r + 1
-        sizes[4] = e + n
-    return nd, n
+    return n
+
+
+@numba_inline_helper
+def _queue_newborns(
+    n: int,
+    taken: np.ndarray,
+    alive: np.ndarray,
+    slot_death: np.ndarray,
+    slot_serial: np.ndarray,
+    q: np.ndarray,
+    qs: np.ndarray,
+    bounds: np.ndarray,
+    sizes: np.ndarray,
+) -> None:
+    """The ``n`` newborns' deaths as a new run of the death queue, sorted by time (room made
+    by compacting the queue first when it is full)."""
+    runs_full = sizes[3] == bounds.shape[0]
+    if sizes[4] + n > q.shape[0] or runs_full:
+        _queue_compact(q, qs, bounds, sizes, alive, slot_serial, runs_full)
+    order = np.argsort(slot_death[taken[:n]], kind="mergesort")
+    e = sizes[4]
+    for j in range(n):
+        s = taken[order[j]]
+        q[e + j, 0] = slot_death[s]
+        qs[e + j, 0] = s
+        qs[e + j, 1] = slot_serial[s]
+    r = sizes[3]
+    bounds[r, 0], bounds[r, 1], bounds[r, 2] = e, e, e + n
+    sizes[3] = r + 1
+    sizes[4] = e + n
 
 
 @numba_helper

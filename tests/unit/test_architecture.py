@@ -21,7 +21,7 @@ CLI = PACKAGE / "cli"
 STEPPING = [
     PACKAGE / "engine.py",
     PACKAGE / "run_frames.py",
-    PACKAGE / "steppers.py",
+    *sorted((PACKAGE / "steppers").glob("*.py")),
     PACKAGE / "system.py",
     *sorted((PACKAGE / "backends").glob("*.py")),
     *sorted((PACKAGE / "integrators").glob("*.py")),

@@ -20,7 +20,8 @@ from animsim.compile import compile_scene
 from animsim.engine import STATUS_OK, STATUS_UNSTABLE, Guard, run
 from animsim.record import MemorySink
 from animsim.scene.loader import load_scene_text
-from animsim.steppers import CHECK_STRIDE, Fused
+from animsim.steppers import Fused
+from animsim.steppers.base import CHECK_STRIDE
 
 pytest.importorskip("numba")
 

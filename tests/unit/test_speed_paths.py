@@ -17,7 +17,7 @@ from animsim.compile import compile_scene
 from animsim.dynamics import Dynamics
 from animsim.engine import STATUS_OK, run
 from animsim.forces.springs import Springs
-from animsim.integrators import implicit
+from animsim.integrators import implicit, implicit_linear
 from animsim.scene.loader import load_scene_text
 from animsim.system import State
 
@@ -113,9 +113,9 @@ def test_stiff_implicit_switches_to_factors_and_agrees_with_conjugate_gradients(
     without it banded Cholesky, or SuperLU when the band is too wide) gives the state Jacobi
     CG run to convergence gives."""
     if kind != "cholmod":
-        monkeypatch.setattr(implicit, "SPARSE_CHOLESKY", False)  # as without cvxopt
+        monkeypatch.setattr(implicit_linear, "SPARSE_CHOLESKY", False)  # as without cvxopt
     if kind == "superlu":
-        monkeypatch.setattr(implicit, "BANDED_MAX_WORK", 0.0)
+        monkeypatch.setattr(implicit_linear, "BANDED_MAX_WORK", 0.0)
     compiled, result = _stiff(8, 1 / 30, 6)
     assert result.status == STATUS_OK
     assert compiled.integrator.factorizations >= 1
@@ -142,12 +142,12 @@ def test_banded_cholesky_solves_the_system(dtype, tol):
     b = sp.random(n, n, density=0.05, random_state=2)
     a = (b @ b.T + sp.identity(n) * 5).tocsr()
     a.sum_duplicates()
-    plan = implicit._Assembly(a, None, np.ones(n, dtype=bool), np.ones(n))
+    plan = implicit_linear.Assembly(a, None, np.ones(n, dtype=bool), np.ones(n))
     assert np.array_equal(plan.matrix.indices, a.indices)  # a holds its diagonal: the same pattern
     rhs = rng.normal(size=n)
     want = spla.spsolve(a.tocsc(), rhs)
     for _ in range(2):  # the second factorisation reuses (and first clears) the band buffer
-        got = implicit._BandedCholesky(a.data, plan.band(), dtype).solve(rhs)
+        got = implicit_linear.BandedCholesky(a.data, plan.band(), dtype).solve(rhs)
         assert np.allclose(got, want, rtol=tol, atol=tol)
 
 
@@ -156,7 +156,7 @@ def test_stiff_implicit_steps_meet_the_cg_tolerance_on_one_fixed_pattern(monkeyp
     """Every step's dv solves its system to CG_RTOL (the factors only precondition, CHOLMOD's
     or single-precision banded ones), on one sparsity pattern for the whole run (a flat
     cloth's zero entries do not change it)."""
-    monkeypatch.setattr(implicit, "SPARSE_CHOLESKY", sparse)
+    monkeypatch.setattr(implicit_linear, "SPARSE_CHOLESKY", sparse)
     residuals: list[float] = []
     plans: set[int] = set()
     solve = implicit.ImplicitEuler._solve
@@ -187,7 +187,7 @@ def _spd_with_pinned_rows(n: int, pinned: np.ndarray, seed: int):
     k = (b @ b.T).tocsr()
     k.sum_duplicates()
     free = ~pinned
-    plan = implicit._Assembly(-k, None, free, np.full(n, 0.5))
+    plan = implicit_linear.Assembly(-k, None, free, np.full(n, 0.5))
     return plan, plan.fill(-k, None, 1.0)
 
 
@@ -229,12 +229,12 @@ def test_sparse_cholesky_solves_the_system_and_refuses_an_indefinite_one(monkeyp
 
 
 def test_the_integrator_says_which_factors_it_uses(monkeypatch):
-    monkeypatch.setattr(implicit, "SPARSE_CHOLESKY", False)
-    assert "banded Cholesky" in implicit.factor_description()
-    assert implicit.sparse_cholesky_module() is None
-    monkeypatch.setattr(implicit, "SPARSE_CHOLESKY", True)
-    assert ("CHOLMOD" in implicit.factor_description()) == HAS_CVXOPT
-    assert (implicit.sparse_cholesky_module() is not None) == HAS_CVXOPT
+    monkeypatch.setattr(implicit_linear, "SPARSE_CHOLESKY", False)
+    assert "banded Cholesky" in implicit_linear.factor_description()
+    assert implicit_linear.sparse_cholesky_module() is None
+    monkeypatch.setattr(implicit_linear, "SPARSE_CHOLESKY", True)
+    assert ("CHOLMOD" in implicit_linear.factor_description()) == HAS_CVXOPT
+    assert (implicit_linear.sparse_cholesky_module() is not None) == HAS_CVXOPT
 
 
 @pytest.mark.skipif(not HAS_NUMBA, reason="numba is not installed")
@@ -308,7 +308,7 @@ def test_assembled_matrix_is_the_scaled_sum_of_the_jacobians(name):
     free = np.repeat(compiled.system.particle_inv_mass > 0, 3)
     m_dof = np.repeat(compiled.system.particle_mass, 3)
     kx, kv = integ.jacobians(x, v)
-    plan = implicit._Assembly(kx, kv, free, m_dof)
+    plan = implicit_linear.Assembly(kx, kv, free, m_dof)
     assert (plan.slots[0] is None and plan.slots[1] is None) == (name == "springs")
     dt = 0.01
     got = plan.fill(kx, kv, dt).toarray()
@@ -335,7 +335,7 @@ def test_cg_converges_gives_up_on_poor_factors_and_survives_a_breakdown():
     integ._dv = np.zeros(n)
     a = sp.diags(np.linspace(1.0, 1e6, n)).tocsr()
     rhs = np.random.default_rng(4).normal(size=n)
-    dv, info = integ._cg(a, rhs, implicit._Jacobi(a.diagonal()), 5)
+    dv, info = integ._cg(a, rhs, implicit_linear.Jacobi(a.diagonal()), 5)
     assert info == 0 and np.linalg.norm(a @ dv - rhs) < implicit.CG_RTOL * np.linalg.norm(rhs)
     # no preconditioning on a condition number of 1e6: the probe gives up after a few
     # iterations instead of spending the whole allowance

@@ -11,7 +11,7 @@ from animsim.compile import compile_scene, with_overrides
 from animsim.engine import REPLAY_COPY_EVERY, STATUS_OK, STATUS_UNSTABLE, Guard, run
 from animsim.record import MemorySink
 from animsim.scene.loader import load_scene_text
-from animsim.steppers import CHECK_STRIDE
+from animsim.steppers.base import CHECK_STRIDE
 from tests.conftest import simulate_text
 
 STIFF = """
@@ -275,7 +275,7 @@ def test_an_emitter_run_checked_every_stride_fails_where_one_checked_every_step_
     of a run checked at every step. The lower floor fails after step 64, so its replay starts
     from a state kept some checks before the last passing one."""
     import animsim.engine as engine
-    import animsim.steppers as steppers
+    import animsim.steppers.base as stepper_base
 
     copy_every = 64  # a copy a few checks apart, so the lower floor's replay starts before one
     monkeypatch.setattr(engine, "REPLAY_COPY_EVERY", copy_every)
@@ -283,7 +283,7 @@ def test_an_emitter_run_checked_every_stride_fails_where_one_checked_every_step_
     text += STIFF_FLOOR.replace("-0.3", floor)
     strided_sink = MemorySink()
     strided = run(compiled_from(text), [strided_sink])
-    monkeypatch.setattr(steppers, "CHECK_STRIDE", 1)
+    monkeypatch.setattr(stepper_base, "CHECK_STRIDE", 1)  # where the steppers read it
     every_sink = MemorySink()
     every = run(compiled_from(text), [every_sink])
     assert strided.status == every.status == STATUS_UNSTABLE
