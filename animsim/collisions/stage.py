@@ -262,7 +262,7 @@ class PlaneColliders(StepStage):
     def block_session(self, state: Any, dt: float) -> _Capture:
         """The plane applied a block of rows at a time inside the integrator's step (its
         ``before``/``after`` around each block's update, then ``finish``); only where
-        :meth:`meets_blocks` (``steppers.block_stage``)."""
+        :meth:`meets_blocks` (``animsim.backends.block_stage``)."""
         if self._capture is None:
             self._capture = _Capture(CAPTURE_ROWS)
         self.inv_mass = state.particle_inv_mass
