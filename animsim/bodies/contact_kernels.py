@@ -834,7 +834,7 @@ def _shock_pass(
     jn: np.ndarray,
     jt: np.ndarray,
 ) -> None:
-    """Twin of :func:`animsim.bodies.contact_shock.shock_pass`: level by level from the ground up,
+    """Twin of :func:`animsim.bodies.contact_shock.shock_pass`: level by level from level 1 up,
     that level's contacts (no impacts; in list order) swept with the bodies below held still.
     ``body``: (q, inverse masses, inverse inertias); ``forces``: (resting speeds, dv, dx) as
     the solve's."""
@@ -845,7 +845,7 @@ def _shock_pass(
     top = -1
     for i in range(count):
         up[i] = level[a[i]] if b[i] < 0 else max(level[a[i]], level[b[i]])
-        if impact[i] or up[i] >= nb:
+        if impact[i] or up[i] == 0 or up[i] >= nb:
             up[i] = -1
         top = max(top, up[i])
     im = np.empty(nb)

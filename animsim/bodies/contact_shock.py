@@ -13,14 +13,20 @@ ten boxes walks (the top box moved 10 cm in a minute). Guendelman, Bridson and F
 (:mod:`animsim.bodies.projection`); Erleben ("Velocity-based shock propagation for multibody
 dynamics animation", ACM TOG 26(2), 2007) does the same for velocities, which is what is done
 here: the bodies get their level (their distance in contacts from the ground,
-:func:`animsim.bodies.projection.levels`), and from the ground up the contacts of each level
-are swept again with every body of a lower level held still (its mass taken as infinite). The
-box on the floor then ends the step at rest on the floor, the box on it at rest on it, and so
-on: the residue of the sweeps no longer builds up the stack. What the pass adds is the
-residue the sweeps left (1e-9 m/s on a standing stack), given to the upper body only.
+:func:`animsim.bodies.projection.levels`), and from the first level above the ground up the
+contacts of each level are swept again with every body of a lower level held still (its mass
+taken as infinite). The box on the bottom box then ends the step at rest on it, the box on
+that one at rest on it, and so on: the residue of the sweeps no longer builds up the stack.
+Level 0 (bodies on the floor, a collider or a pinned body, and contacts between two of them)
+is left as the sweeps left it: nothing below it moves, so the pass would only be more of the
+same sweeps (1,000 bodies lying apart on a floor took a fifth longer a step with it). What
+the pass adds is the residue the sweeps left (1e-9 m/s on a standing stack), given to the
+upper body only.
 
 Impacts are left alone (their impulse is a bounce between the two bodies), and so are bodies
-that touch nothing fixed, through others or directly (their level is the body count).
+that touch nothing fixed, through others or directly (their level is the body count). A ten-box
+stack measured with and without level 0 in the pass: its top box moved 1.5e-9 and 2e-8 m in a
+minute.
 """
 
 from __future__ import annotations
@@ -53,7 +59,7 @@ def shock_pass(
     v: np.ndarray,
     w: np.ndarray,
 ) -> None:
-    """Sweep the contacts level by level from the ground up, the bodies below each level held
+    """Sweep the contacts level by level from level 1 up, the bodies below each level held
     still (module docstring). In place on v, w (B, 3) and on the impulses jn (C,), jt (C, 3)
     the solve ended with; ``hit`` (C,) the impacts, ``level`` (B,) the bodies' levels.
 
@@ -61,7 +67,7 @@ def shock_pass(
     the numba twin, walking them one by one, does the same operations."""
     c = contacts
     up = contact_levels(c.a, c.b, level)
-    live = ~hit & (up < level.size)
+    live = ~hit & (up > 0) & (up < level.size)
     if not live.any():
         return
     vT, wT = v.T.copy(), w.T.copy()

@@ -309,9 +309,9 @@ def _sweeps(
     impulses, each corner of a box first pressed onto a floor slides out as the box turns, and
     friction stopping it there sets up a squeeze of the floor friction that the other corners'
     pushes never undo (measured: a ten-box stack ended its first step with two of its floor
-    corners at the friction cone, and they stayed there for the minute it stood). Finding the normal impulses first and the friction after (the
-    staggered projections of Kaufman, Sueda, James and Pai, SIGGRAPH Asia 2008, one round of
-    them) leaves the friction the little that is needed."""
+    corners at the friction cone and kept them there). Finding the normal impulses first and
+    the friction after (the staggered projections of Kaufman, Sueda, James and Pai, SIGGRAPH
+    Asia 2008, one round of them) leaves the friction the little that is needed."""
     sweep = 0
     for sweep in range(max(least, most)):
         change = 0.0

@@ -22,7 +22,7 @@ Model (after each integrator step, as a step stage):
    one), on numba by a kernel that walks the list. Both write every sum in the
    same order, so the backends agree to the bit.
 3. **Shock propagation** (Erleben 2007; :mod:`animsim.bodies.contact_shock`): after the
-   sweeps, the contacts are swept again level by level from the ground up, the bodies below
+   sweeps, the contacts are swept again level by level from level 1 up, the bodies below
    each level held still, so a stack ends each step at rest on itself.
 4. **Projection.** Each body is moved out of each plane by its deepest
    penetration there, and out of other bodies along the normal (split between

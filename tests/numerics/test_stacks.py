@@ -122,7 +122,7 @@ def test_five_boxes_stacked_stand_for_a_minute() -> None:
 
 @needs_numba
 def test_ten_boxes_stacked_stand_for_a_minute() -> None:
-    # measured 1.5e-9 m for the top box (10 cm before the levels were settled on each other)
+    # measured 2e-8 m for the top box (10 cm before the levels were settled on each other)
     moved = _moved(_stack(10, 60.0), "numba")
     assert moved.max() < 1e-3, moved
 
