@@ -46,7 +46,7 @@ TINY_STEPS = 20_000
 TINY_RECORD_EVERY = 100
 IO_GRID = 64  # 64 x 64 = 4096 rows per frame
 IO_FRAMES = 25
-WORKLOADS = ("cloth", "particles", "fountain", "bodies", "contacts", "stiff", "tiny", "io", "render")
+WORKLOADS = ("cloth", "particles", "fountain", "bodies", "piled", "contacts", "stiff", "tiny", "io", "render")
 
 
 @dataclass
@@ -636,6 +636,33 @@ def bench_bodies(settings: Settings) -> Table:
     return table
 
 
+def bench_piled(settings: Settings) -> Table:
+    """Rigid bodies piled: 1,000 boxes at rest on each other (benchmarks/bodies.py --piled)."""
+    from benchmarks import bodies as B
+
+    table = Table(
+        "Rigid bodies: 1,000 boxes piled on a floor, 100 columns of ten at rest on each other "
+        f"(symplectic Euler, dt = {B.DT * 1000:g} ms; goal: 1,000 steps/s on numba)",
+        "steps/s",
+        1.0,
+    )
+    if not numba_ok(table.notes):
+        return table
+    steps = 200 if settings is QUICK else 500
+    runs = [B.steps_per_second("numba", steps, piled=True) for _ in range(2)]
+    best_cpu = max(cpu for _, cpu in runs)
+    c = Contender("animsim numba", lambda: None, 1, f"best {best_cpu:,.0f} steps per CPU second")
+    c.rates = [wall for wall, _ in runs]
+    add_rows(table, "piled 1000", [c], None)
+    table.notes.append(
+        f"each sample times {steps} steps after a {B.WARMUP:g} s warm-up (the first step finds the "
+        "columns' impulses from nothing, the rest start warm); the columns stand still throughout. "
+        "NumPy is not timed here (measured by hand: about 0.5 s of CPU a step)"
+    )
+    print("  piled done", flush=True)
+    return table
+
+
 def bench_contacts(settings: Settings) -> Table:
     """Particle contacts: about 100,000 grains poured into a box (benchmarks/contacts.py)."""
     from benchmarks import contacts as K
@@ -890,6 +917,7 @@ def main(argv: list[str] | None = None) -> int:
         "render": bench_render,
         "fountain": bench_fountain,
         "bodies": bench_bodies,
+        "piled": bench_piled,
         "contacts": bench_contacts,
         "stiff": bench_stiff,
     }

@@ -41,6 +41,12 @@ EDGE_ABSOLUTE = 0.01
 FACE_ABSOLUTE = 1e-3
 #: cross products of edges shorter than this are (nearly) parallel edges: not an axis
 PARALLEL = 1e-6
+#: the reference face's side planes are moved out by this times the smaller box's smallest half
+#: extent before clipping: a box lying on a box of the same size has its incident face's edges
+#: on those planes to a rounding error, and an edge straddling a plane by 1e-17 m was cut at a
+#: point anywhere along it (0 / 0), so the contact gained points that moved from step to step
+#: and could not start warm from the last step's impulses (a ten-box stack walked)
+CLIP_SLACK = 1e-9
 #: the most contacts of one pair (a square clipped by four lines has at most eight corners)
 MAX_POINTS = 8
 #: points of the contact face up to this times the smaller box's smallest half extent apart are
@@ -211,13 +217,14 @@ def _face_contacts(
                 su * hi[u] * axes_i[u, m] + sv * hi[v] * axes_i[v, m]
             )
     count = 4
-    # the reference face's four side planes
+    slack = CLIP_SLACK * min(min(min(hr[0], hr[1]), hr[2]), min(min(hi[0], hi[1]), hi[2]))
+    # the reference face's four side planes (moved out by the slack)
     for side in range(2):
         k = (i + 1 + side) % 3
         ax, ay, az = axes_r[k, 0], axes_r[k, 1], axes_r[k, 2]
         centre = (xr[0] * ax + xr[1] * ay) + xr[2] * az
-        count = _clip(poly, count, ax, ay, az, centre + hr[k], work)
-        count = _clip(work, count, -ax, -ay, -az, -centre + hr[k], poly)
+        count = _clip(poly, count, ax, ay, az, (centre + hr[k]) + slack, work)
+        count = _clip(work, count, -ax, -ay, -az, (-centre + hr[k]) + slack, poly)
         if count == 0:
             return 0
     face = (xr[0] * nx + xr[1] * ny) + xr[2] * nz + hr[i]

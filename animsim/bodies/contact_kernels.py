@@ -30,6 +30,7 @@ from animsim.bodies.contact_constants import (
     RESTING_FLOOR,
     SHAPE_BOX,
     SHAPE_CAPSULE,
+    SHOCK_SWEEPS,
     SWEEP_TOLERANCE,
 )
 from animsim.bodies.quaternion import rotate_scalar
@@ -781,6 +782,106 @@ def _sweep(
     return change
 
 
+@numba_helper
+def _sweeps(
+    count: int,
+    a: np.ndarray,
+    b: np.ndarray,
+    ra: np.ndarray,
+    rb: np.ndarray,
+    n: np.ndarray,
+    friction: np.ndarray,
+    v: np.ndarray,
+    w: np.ndarray,
+    g: np.ndarray,
+    gm: np.ndarray,
+    kt6: np.ndarray,
+    inv_kn: np.ndarray,
+    ma: np.ndarray,
+    mb: np.ndarray,
+    mt: np.ndarray,
+    tgt: np.ndarray,
+    jn: np.ndarray,
+    jt: np.ndarray,
+    least: int,
+    most: int,
+) -> None:
+    """Sweeps, at least ``least``, then until one changes no velocity by more than
+    SWEEP_TOLERANCE, at most ``most`` (solve's _sweeps)."""
+    for sweep in range(max(least, most)):
+        change = _sweep(count, a, b, ra, rb, n, friction, v, w, g, gm, kt6, inv_kn, ma, mb, mt, tgt, jn, jt)
+        if sweep + 1 >= least and not change > SWEEP_TOLERANCE:
+            break
+
+
+@numba_helper
+def _shock_pass(
+    count: int,
+    a: np.ndarray,
+    b: np.ndarray,
+    ra: np.ndarray,
+    rb: np.ndarray,
+    n: np.ndarray,
+    depth: np.ndarray,
+    friction: np.ndarray,
+    v: np.ndarray,
+    w: np.ndarray,
+    body: tuple[np.ndarray, np.ndarray, np.ndarray],
+    forces: tuple[np.ndarray, np.ndarray, np.ndarray],
+    dt: float,
+    impact: np.ndarray,
+    level: np.ndarray,
+    jn: np.ndarray,
+    jt: np.ndarray,
+) -> None:
+    """Twin of :func:`animsim.bodies.contact_shock.shock_pass`: level by level from level 1 up,
+    that level's contacts (no impacts; in list order) swept with the bodies below held still.
+    ``body``: (q, inverse masses, inverse inertias); ``forces``: (resting speeds, dv, dx) as
+    the solve's."""
+    q, inv_mass, inv_inertia = body
+    rest, dv, dx = forces
+    nb = inv_mass.shape[0]
+    up = np.empty(count, dtype=np.int64)
+    top = -1
+    for i in range(count):
+        up[i] = level[a[i]] if b[i] < 0 else max(level[a[i]], level[b[i]])
+        if impact[i] or up[i] == 0 or up[i] >= nb:
+            up[i] = -1
+        top = max(top, up[i])
+    im = np.empty(nb)
+    ii = np.empty((nb, 3))
+    for lv in range(top + 1):
+        sel = np.flatnonzero(up == lv)
+        k = sel.size
+        if k == 0:
+            continue
+        for bi in range(nb):
+            still = level[bi] < lv
+            im[bi] = 0.0 if still else inv_mass[bi]
+            for m in range(3):
+                ii[bi, m] = 0.0 if still else inv_inertia[bi, m]
+        sa, sb, sra, srb, sn = a[sel], b[sel], ra[sel], rb[sel], n[sel]
+        sjn, sjt = jn[sel], jt[sel]
+        mat, g, gm, kt6 = np.empty((k, 12)), np.empty((k, 12)), np.zeros((k, 18)), np.zeros((k, 6))
+        inv_kn, ma, mb, mt, tgt = np.empty(k), np.empty(k), np.empty(k), np.empty(k), np.empty(k)
+        limit, dvn, dxn = np.empty(k), np.empty(k), np.empty(k)
+        cols, mc = np.empty((3, 3)), np.empty((3, 3))
+        for i in range(k):
+            _contact_inertia(i, sa, sb, sra, srb, q, ii, mat, gm, kt6, cols, mc)
+            _contact_masses(
+                i, sa, sb, sra, srb, sn, im, rest, dv, dx, mat, g, inv_kn, ma, mb, mt, limit, dvn, dxn
+            )
+            tgt[i] = min(depth[sel[i]], 0.0) / dt  # resting or speculative (as _bounce_targets)
+        fr = friction[sel]
+        _sweeps(
+            k, sa, sb, sra, srb, sn, fr, v, w, g, gm, kt6, inv_kn, ma, mb, mt, tgt, sjn, sjt, 1, SHOCK_SWEEPS
+        )
+        for i in range(k):
+            jn[sel[i]] = sjn[i]
+            for m in range(3):
+                jt[sel[i], m] = sjt[i, m]
+
+
 @numba_inline_helper
 def _arm_move(i: int, body: int, r: np.ndarray, n: np.ndarray, sx: np.ndarray, sw: np.ndarray) -> float:
     """How far the point ``r[i]`` of ``body`` moved along contact ``i``'s n (sx + sw x r)."""
@@ -882,12 +983,15 @@ def _solve_list_loop(
     jn: np.ndarray,
     jt: np.ndarray,
     max_sweeps: int,
+    cold: bool,
+    level: np.ndarray,
 ) -> None:
-    """Twin of :func:`solve` then :func:`follow_impulses` (when h > 0): the first ``count``
-    contacts one after the other, ``iterations`` times; then the bodies moved as the impulses
-    moved them (the depths left into ``depth_out``). ``jn`` (C,), ``jt`` (C, 3): the impulses to
-    start from (warm starting; applied first, contact by contact, except on impacts), in place
-    the impulses each contact ended with."""
+    """Twin of :func:`solve`, :func:`shock_pass` then :func:`follow_impulses` (when h > 0): the
+    first ``count`` contacts one after the other, ``iterations`` times (first without friction
+    when ``cold``); the levels of a stack settled from the ground up (``level`` the bodies');
+    then the bodies moved as the impulses moved them (the depths left into ``depth_out``).
+    ``jn`` (C,), ``jt`` (C, 3): the impulses to start from (warm starting; applied first,
+    contact by contact, except on impacts), in place the impulses each contact ended with."""
     v0 = v.copy()
     w0 = w.copy()
     mat = np.empty((count, 12))  # per contact: I_a^-1 (6), I_b^-1 (6)
@@ -915,8 +1019,11 @@ def _solve_list_loop(
         count, a, b, ra, rb, n, depth, restitution, v, w, limit, struck, dvn, dxn, kh, dt, e_used, impact, tgt
     )
     _warm_start(count, a, b, n, v, w, g, gm, ma, mb, impact, jn, jt)
-    for sweep in range(max(iterations, max_sweeps)):
-        change = _sweep(count, a, b, ra, rb, n, friction, v, w, g, gm, kt6, inv_kn, ma, mb, mt, tgt, jn, jt)
-        if sweep + 1 >= iterations and not change > SWEEP_TOLERANCE:
-            break
+    least, most = iterations, max_sweeps
+    if cold:  # as solve: the normal impulses first, without friction
+        fr = np.zeros(count)
+        _sweeps(count, a, b, ra, rb, n, fr, v, w, g, gm, kt6, inv_kn, ma, mb, mt, tgt, jn, jt, least, most)
+    _sweeps(count, a, b, ra, rb, n, friction, v, w, g, gm, kt6, inv_kn, ma, mb, mt, tgt, jn, jt, least, most)
+    body, forces = (q, inv_mass, inv_inertia), (resting_speed, dv, dx)
+    _shock_pass(count, a, b, ra, rb, n, depth, friction, v, w, body, forces, dt, impact, level, jn, jt)
     _follow_impulses(count, a, b, ra, rb, n, depth, impact, x, q, v, w, v0, w0, h, depth_out)

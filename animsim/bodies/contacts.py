@@ -21,7 +21,10 @@ Model (after each integrator step, as a step stage):
    twice (a batch is one vectorised update, and the result is the sequential
    one), on numba by a kernel that walks the list. Both write every sum in the
    same order, so the backends agree to the bit.
-3. **Projection.** Each body is moved out of each plane by its deepest
+3. **Shock propagation** (Erleben 2007; :mod:`animsim.bodies.contact_shock`): after the
+   sweeps, the contacts are swept again level by level from level 1 up, the bodies below
+   each level held still, so a stack ends each step at rest on itself.
+4. **Projection.** Each body is moved out of each plane by its deepest
    penetration there, and out of other bodies along the normal (split between
    two free bodies by their inverse masses); a
    bouncing contact is moved out by (1 + e) times the depth, the distance the
@@ -69,6 +72,7 @@ from animsim.bodies.contact_detection import (
 )
 from animsim.bodies.contact_follow import follow_impulses
 from animsim.bodies.contact_kernels import numba_candidate_pairs, numba_kernels, numba_pair_contacts
+from animsim.bodies.contact_shock import shock_pass
 from animsim.bodies.contact_solve import solve
 from animsim.bodies.shapes import BodyShape, contact_table
 from animsim.bodies.warm import WarmStart
@@ -148,7 +152,8 @@ class BodyContacts(StepStage):
             f"body contacts: {self.count} {'/'.join(kinds)} bodies against {', '.join(parts)}; "
             f"impulses with restitution and Coulomb friction, {iterations} to {MAX_SWEEPS} sweeps ({COLD_SWEEPS} from rest; until a sweep "
             f"changes no velocity by {SWEEP_TOLERANCE:g} m/s), resting below "
-            f"{RESTING_FACTOR:g}x the speed forces add per step, positions projected out from the ground up (shock propagation)"
+            f"{RESTING_FACTOR:g}x the speed forces add per step, velocities settled and positions projected "
+            "out from the ground up (shock propagation)"
         )
 
     def stability_note(self, dt: float) -> str | None:
@@ -231,6 +236,7 @@ class BodyContacts(StepStage):
         c = contacts
         jn0, jt0, local = self.warm.guess(c.a, c.b, c.plane, c.n, c.ra, q)
         v_pre, w_pre = v.copy(), w.copy()
+        sweeps, cold = self._sweep_limit(c, jn0)
         e_used, impact, jn, jt = solve(
             contacts,
             v,
@@ -246,8 +252,11 @@ class BodyContacts(StepStage):
             dt,
             surface,
             (jn0, jt0),
-            self._sweep_limit(c, jn0),
+            sweeps,
+            cold,
         )
+        level = projection.levels(c.a, c.b, self.inv_mass)
+        shock_pass(c, impact, level, q, self.inv_mass, self.inv_inertia, surface, dt, jn, jt, v, w)
         self.warm.keep(c.a, c.b, c.plane, c.n, local, jn, jt)
         h = self.follow_weight * dt
         left = follow_impulses(c, impact, x, q, v - v_pre, w - w_pre, h) if h > 0.0 else c.depth
@@ -304,6 +313,7 @@ class BodyContacts(StepStage):
         impact = np.empty(count, dtype=np.bool_)
         depth_left = np.empty(count)
         jn, jt, local = self.warm.guess(c.a, c.b, c.plane, c.n, c.ra, q)
+        sweeps, cold = self._sweep_limit(c, jn)
         solver(
             count,
             *arrays,
@@ -325,7 +335,9 @@ class BodyContacts(StepStage):
             dt,
             jn,
             jt,
-            self._sweep_limit(c, jn),
+            sweeps,
+            cold,
+            projection.levels(c.a, c.b, self.inv_mass),
         )
         self.warm.keep(c.a, c.b, c.plane, c.n, local, jn, jt)
         push = projection.pushes(c.depth, depth_left, e_used)
@@ -333,13 +345,14 @@ class BodyContacts(StepStage):
         return True
 
     @staticmethod
-    def _sweep_limit(c: Contacts, start: np.ndarray) -> int:
-        """COLD_SWEEPS when bodies touch each other and none of their contacts has an impulse to
-        start from (a stack set down), else MAX_SWEEPS. Not per contact: a corner that carries
-        no load, or a speculative contact, starts from zero in every step of a standing stack."""
+    def _sweep_limit(c: Contacts, start: np.ndarray) -> tuple[int, bool]:
+        """(COLD_SWEEPS, True) when bodies touch each other and none of their contacts has an
+        impulse to start from (a stack set down: the solve finds its normal impulses first, then
+        the friction), else (MAX_SWEEPS, False). Not per contact: a corner that carries no load,
+        or a speculative contact, starts from zero in every step of a standing stack."""
         between = c.b >= 0
         cold = bool(between.any()) and not bool((start[between] != 0.0).any())
-        return COLD_SWEEPS if cold else MAX_SWEEPS
+        return (COLD_SWEEPS, True) if cold else (MAX_SWEEPS, False)
 
     def _plane_buffers(self) -> tuple[np.ndarray, ...]:
         """Output arrays of the numba plane detection (capacity: every sphere behind every plane)."""
