@@ -67,8 +67,9 @@ def settle(
     restitution: float = 0.1,
     friction: float = 0.4,
     wall_friction: float = 0.5,
-) -> dict[str, float]:
-    """Drop ``n`` grains of radius ``r`` into a box and run ``seconds``; returns the measures."""
+) -> tuple[dict[str, float], np.ndarray, np.ndarray]:
+    """Drop ``n`` grains of radius ``r`` into a box and run ``seconds``; returns the measures
+    and the final positions and velocities."""
     side = side if side is not None else 2.3 * r * (np.sqrt(n / 12.0) + 1.0)
     x = lattice(n, r, side, seed)
     v = np.zeros((n, 3))
@@ -98,7 +99,7 @@ def settle(
     dist = np.linalg.norm(x[pairs[:, 1]] - x[pairs[:, 0]], axis=1)
     overlap = float((2 * r - dist).max()) if len(dist) else 0.0
     drift = np.linalg.norm(x - x_then, axis=1)
-    return {
+    measures = {
         "grains": n,
         "layers": float((x[:, 1].max() - x[:, 1].min()) / (2 * r)),
         "max_speed": float(speed.max()),
@@ -109,6 +110,7 @@ def settle(
         "max_drift_last_0.2s": float(drift.max()),
         "wall_s": wall,
     }
+    return measures, x, v
 
 
 def main() -> None:
@@ -119,7 +121,7 @@ def main() -> None:
     parser.add_argument("--backend", choices=["numpy", "numba"], default="numba")
     parser.add_argument("--seed", type=int, default=1)
     args = parser.parse_args()
-    out = settle(args.grains, args.radius, args.seconds, args.backend, seed=args.seed)
+    out, _, _ = settle(args.grains, args.radius, args.seconds, args.backend, seed=args.seed)
     print(f"{args.backend}: " + ", ".join(f"{k} {v:.3g}" for k, v in out.items()))
 
 

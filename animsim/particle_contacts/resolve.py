@@ -212,19 +212,22 @@ def resolve_pairs_numpy(
     relax = np.minimum(RELAX / np.maximum(count[i], count[j]), 1.0)
     s = _PairScratch(i, j, wr, inv_mass, n_rows, buf)
     n = _pair_normals(s, x, buf)
+    near = _step_change(i, j, v, v_old, n_rows)
     # impacts first, sequentially (bounce_sweeps), when anything bounces at all
     jb = np.zeros(p)
     if restitution > 0:
-        jb = _impacts(i, j, n, w, restitution, v, v_old, inv_mass, n_rows)
+        # resting: slower than twice what the step's forces added to a sphere touching either
+        # one (in a pile every grain gains g dt, though two grains falling together close at
+        # none and one on the floor is held at rest); an impact only where the bounce, e
+        # times the approach, would be faster than that
+        limit = (RESTING_STEPS * np.maximum(near[i], near[j]) + BOUNCE_FLOOR) / restitution
+        jb = bounce_sweeps_numpy(i, j, np.ascontiguousarray(n.T), w, limit, restitution, v, inv_mass)
     v0 = v.copy()
     lam, ft = _warm_start(s, v, n, pk, kept, jb, friction, walls)
     _resting_passes(
         s, v, n, w, relax, lam, ft, jb, friction, walls, kept, np.minimum(RELAX / count[wr], 1.0), iterations
     )
-    # the step's positions as if the resting impulses had acted before it (follow)
-    np.subtract(v, v0, out=v0)
-    v0 *= dt
-    x += v0
+    _follow(x, v, v0, RESTING_STEPS * near, dt)
     _overlap_passes(s, x, radius, w, relax, iterations)
     kept.lam[pk] = lam
     kept.ft[pk] = ft.T
@@ -248,30 +251,16 @@ def _pair_normals(s: _PairScratch, x: np.ndarray, buf: Buffers) -> np.ndarray:
     return n
 
 
-def _impacts(
-    i: np.ndarray,
-    j: np.ndarray,
-    n: np.ndarray,
-    w: np.ndarray,
-    restitution: float,
-    v: np.ndarray,
-    v_old: np.ndarray,
-    inv_mass: np.ndarray,
-    n_rows: int,
-) -> np.ndarray:
-    """The impacts of the step (:func:`bounce_sweeps_numpy`), in place on v; returns their impulses."""
-    # resting: slower than twice what the step's forces added to a sphere touching either
-    # one (in a pile every grain gains g dt, though two grains falling together close at
-    # none and one on the floor is held at rest) ...
+def _step_change(i: np.ndarray, j: np.ndarray, v: np.ndarray, v_old: np.ndarray, n_rows: int) -> np.ndarray:
+    """:func:`animsim.particle_contacts.step_kernels.step_change`: per row, the largest change
+    of velocity the step made to it or to a sphere touching it."""
     dv = v - v_old
     added = np.sqrt((dv[:, 0] * dv[:, 0] + dv[:, 1] * dv[:, 1]) + dv[:, 2] * dv[:, 2])
     pair_added = np.maximum(added[i], added[j])
     near = np.zeros(n_rows)
     np.maximum.at(near, i, pair_added)
     np.maximum.at(near, j, pair_added)
-    # ... and an impact only where the bounce, e times the approach, would be faster than that
-    limit = (RESTING_STEPS * np.maximum(near[i], near[j]) + BOUNCE_FLOOR) / restitution
-    return bounce_sweeps_numpy(i, j, np.ascontiguousarray(n.T), w, limit, restitution, v, inv_mass)
+    return near
 
 
 def _cone(f: np.ndarray, cap: np.ndarray) -> np.ndarray:
@@ -366,6 +355,17 @@ def _resting_passes(
         s.qw += dfw
         s.scatter_add(v, walls=True)  # +J n on j, -J n on i: momentum kept
     kept.wft[:] = wft.T
+
+
+def _follow(x: np.ndarray, v: np.ndarray, v0: np.ndarray, allow: np.ndarray, dt: float) -> None:
+    """:func:`animsim.particle_contacts.step_kernels.follow`, in place on x (and v0)."""
+    d = np.subtract(v, v0, out=v0)
+    m = np.sqrt((d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]) + d[:, 2] * d[:, 2])
+    cut = m > allow
+    s = np.full(m.shape, dt)
+    s[cut] = dt * (allow[cut] / m[cut])
+    d *= s[:, None]
+    x += d
 
 
 def _overlap_passes(

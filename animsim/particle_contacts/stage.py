@@ -280,7 +280,8 @@ class ParticleContacts(StepStage):
             b.get("lam", (p,)), b.get("ft", (p, 3)), b.get("jb", (p,)), b.get("due", (p,), np.bool_),
             self._lam_c, self._ft_c, self._stamp_c, self._stamp,
             walls.rows, walls.normal, walls.velocity, walls.friction, b.get("wrel", (nw,)), wlam, wft,
-            b.get("dv", (n_rows, 3)), b.get("v0", (n_rows, 3)), b.get("count", (n_rows,), np.int64),
+            b.get("dv", (n_rows, 3)), b.get("v0", (n_rows, 3)), b.get("added", (n_rows,)), b.get("near", (n_rows,)),
+            b.get("count", (n_rows,), np.int64),
             RESTING_STEPS, BOUNCE_FLOOR, BOUNCE_SWEEPS,
         )  # fmt: skip
         return int(found), bool(changed)

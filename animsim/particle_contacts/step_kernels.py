@@ -117,12 +117,11 @@ def overlapping(ci, cj, reach2, touch2, x, inv_mass, pi, pj, pk):  # pragma: no 
 
 @numba_helper
 def pair_setup(
-    pi, pj, p, wr, x, v, v_old, inv_mass, e, relax_factor, w, rel, wrel, nrm, limit, count
+    pi, pj, p, wr, x, inv_mass, relax_factor, w, rel, wrel, nrm, count
 ):  # pragma: no cover - compiled
     """Per pair: ``w`` the summed inverse masses, ``rel`` the relaxation (averaged over the
-    contacts per particle, ``count``, the walls' among them; ``wrel`` a wall contact's),
-    ``nrm`` the unit line of centres, ``limit`` the faster change of velocity of its two
-    spheres this step (when e > 0)."""
+    contacts per particle, ``count``, the walls' among them; ``wrel`` a wall contact's) and
+    ``nrm`` the unit line of centres."""
     count[:] = 0
     for k in range(p):
         count[pi[k]] += 1
@@ -147,28 +146,31 @@ def pair_setup(
                 nrm[k, a] /= dist
         else:
             nrm[k, 0], nrm[k, 1], nrm[k, 2] = 0.0, 1.0, 0.0
-        if e > 0:  # the impact pass's limit (resolve_pairs_numpy's)
-            si = 0.0
-            sj = 0.0
-            for a in range(3):
-                t = v[i, a] - v_old[i, a]
-                si += t * t
-                t = v[j, a] - v_old[j, a]
-                sj += t * t
-            limit[k] = max(np.sqrt(si), np.sqrt(sj))
 
 
 @numba_helper
-def bounce_limits(pi, pj, p, limit, dv, e, resting_steps, bounce_floor):  # pragma: no cover - compiled
-    """``limit``: each pair's impact limit (in place of its larger change of velocity), from the largest change of velocity among the pairs
-    touching either sphere (``dv[:, 0]`` as scratch)."""
-    for r in range(dv.shape[0]):
-        dv[r, 0] = 0.0
+def step_change(pi, pj, p, v, v_old, added, near):  # pragma: no cover - compiled
+    """``near[r]``: the largest change of velocity the step made (before the contacts,
+    ``added[r] = |v - v_old|``) to row r or to a sphere touching it: what resting contact
+    may take off again (an impact is faster, :func:`bounce_limits`; :func:`follow`)."""
+    for r in range(v.shape[0]):
+        t0 = v[r, 0] - v_old[r, 0]
+        t1 = v[r, 1] - v_old[r, 1]
+        t2 = v[r, 2] - v_old[r, 2]
+        added[r] = np.sqrt((t0 * t0 + t1 * t1) + t2 * t2)
+        near[r] = 0.0
     for k in range(p):
-        dv[pi[k], 0] = max(dv[pi[k], 0], limit[k])
-        dv[pj[k], 0] = max(dv[pj[k], 0], limit[k])
+        both = max(added[pi[k]], added[pj[k]])
+        near[pi[k]] = max(near[pi[k]], both)
+        near[pj[k]] = max(near[pj[k]], both)
+
+
+@numba_helper
+def bounce_limits(pi, pj, p, limit, near, e, resting_steps, bounce_floor):  # pragma: no cover - compiled
+    """``limit``: each pair's impact limit, an approach whose bounce, ``e`` times it, would be
+    faster than ``resting_steps`` times the larger ``near`` of its spheres."""
     for k in range(p):
-        limit[k] = (resting_steps * max(dv[pi[k], 0], dv[pj[k], 0]) + bounce_floor) / e
+        limit[k] = (resting_steps * max(near[pi[k]], near[pj[k]]) + bounce_floor) / e
 
 
 @numba_helper
@@ -292,11 +294,22 @@ def resting_passes(
 
 
 @numba_helper
-def follow(x, v, v0, dt):  # pragma: no cover - compiled
-    """x += (v - v0) dt: the step's position as if the resting impulses had acted before it."""
+def follow(x, v, v0, near, resting_steps, dt):  # pragma: no cover - compiled
+    """x += (v - v0) dt, the step's position as if the resting impulses had acted before it, for
+    as much of the change as resting contact may make (``resting_steps * near``): what held a
+    resting grain against gravity moves it back by g dt^2, but a grain stopped from a fast
+    approach keeps its position (the overlap passes part it) instead of being put back where
+    it was."""
     for r in range(x.shape[0]):
-        for a in range(3):
-            x[r, a] += (v[r, a] - v0[r, a]) * dt
+        allow = resting_steps * near[r]
+        d0 = v[r, 0] - v0[r, 0]
+        d1 = v[r, 1] - v0[r, 1]
+        d2 = v[r, 2] - v0[r, 2]
+        m = np.sqrt((d0 * d0 + d1 * d1) + d2 * d2)
+        s = dt * (allow / m) if m > allow else dt
+        x[r, 0] += d0 * s
+        x[r, 1] += d1 * s
+        x[r, 2] += d2 * s
 
 
 @numba_helper
@@ -348,7 +361,7 @@ def remember(pk, p, lam, ft, lam_c, ft_c, stamp_c, stamp):  # pragma: no cover -
 def contact_step(
     ci, cj, reach2, touch2, x, v, v_old, inv_mass, radius, e, mu, iterations, relax_factor, dt,
     pi, pj, pk, w, rel, nrm, limit, lam, ft, jb, due, lam_c, ft_c, stamp_c, stamp,
-    wr, wn, wu, wmu, wrel, wlam, wft, dv, v0, count, resting_steps, bounce_floor, bounce_limit,
+    wr, wn, wu, wmu, wrel, wlam, wft, dv, v0, added, near, count, resting_steps, bounce_floor, bounce_limit,
 ):  # pragma: no cover - compiled  # fmt: skip
     """Keep the candidates that overlap, then the passes of :func:`resolve_pairs_numpy`.
 
@@ -356,16 +369,17 @@ def contact_step(
     ``stamp_c``: the candidates' impulses and the step they were kept at; ``wr`` ..
     ``wft``: the wall contacts (:class:`animsim.particle_contacts.walls.WallContacts`,
     their remembered impulses in ``wlam``, ``wft``, which end as this step's); ``dv``,
-    ``v0`` (N, 3) and ``count`` (N,): per particle. Returns (overlapping pairs, whether
+    ``v0`` (N, 3), ``added``, ``near`` and ``count`` (N,): per particle. Returns (overlapping pairs, whether
     any pair was resolved).
     """
     found, p = overlapping(ci, cj, reach2, touch2, x, inv_mass, pi, pj, pk)
     if p == 0:
         return found, False
-    pair_setup(pi, pj, p, wr, x, v, v_old, inv_mass, e, relax_factor, w, rel, wrel, nrm, limit, count)
+    pair_setup(pi, pj, p, wr, x, inv_mass, relax_factor, w, rel, wrel, nrm, count)
+    step_change(pi, pj, p, v, v_old, added, near)
     # impacts first, sequentially (see bounce_sweeps), when anything bounces at all
     if e > 0:
-        bounce_limits(pi, pj, p, limit, dv, e, resting_steps, bounce_floor)
+        bounce_limits(pi, pj, p, limit, near, e, resting_steps, bounce_floor)
         bounce_sweeps(pi, pj, nrm, w, limit, e, v, inv_mass, jb, due, p, bounce_limit)
     else:
         for k in range(p):
@@ -397,7 +411,7 @@ def contact_step(
     resting_passes(
         pi, pj, p, nrm, w, rel, lam, ft, jb, mu, wr, wn, wu, wmu, wrel, wlam, wft, v, dv, inv_mass, iterations
     )
-    follow(x, v, v0, dt)
+    follow(x, v, v0, near, resting_steps, dt)
     position_passes(pi, pj, p, x, radius, w, rel, dv, inv_mass, iterations)
     remember(pk, p, lam, ft, lam_c, ft_c, stamp_c, stamp)
     return found, True
