@@ -3,7 +3,10 @@ and what a candidate pair costs in memory (see :mod:`animsim.particle_contacts`)
 
 from __future__ import annotations
 
+#: passes of the resting solve (fewer than 10 let a warm-started pile oscillate)
 ITERATIONS = 12
+#: passes of the overlap removal (positions follow the resting solve, so little is left to part)
+OVERLAP_PASSES = 6
 RESTING_STEPS = 2.0
 #: over-relaxation of the averaged Jacobi passes (1: plain averaging)
 RELAX = 1.5

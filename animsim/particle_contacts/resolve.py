@@ -9,7 +9,14 @@ from typing import NamedTuple
 
 import numpy as np
 
-from animsim.particle_contacts.constants import BOUNCE_FLOOR, BOUNCE_SWEEPS, ITERATIONS, RELAX, RESTING_STEPS
+from animsim.particle_contacts.constants import (
+    BOUNCE_FLOOR,
+    BOUNCE_SWEEPS,
+    ITERATIONS,
+    OVERLAP_PASSES,
+    RELAX,
+    RESTING_STEPS,
+)
 from animsim.particle_contacts.step_kernels import bounce_pair
 from animsim.particle_contacts.walls import NO_WALLS, WallContacts
 
@@ -209,7 +216,9 @@ def resolve_pairs_numpy(
         + np.bincount(j, minlength=n_rows)
         + np.bincount(wr, minlength=n_rows)
     )
-    relax = np.minimum(RELAX / np.maximum(count[i], count[j]), 1.0)
+    # each contact's relaxation (averaged over the contacts per particle) over its summed
+    # inverse masses: a change of relative velocity or position times it is its share
+    relax = np.minimum(RELAX / np.maximum(count[i], count[j]), 1.0) / w
     s = _PairScratch(i, j, wr, inv_mass, n_rows, buf)
     n = _pair_normals(s, x, buf)
     near = _step_change(i, j, v, v_old, n_rows)
@@ -225,10 +234,21 @@ def resolve_pairs_numpy(
     v0 = v.copy()
     lam, ft = _warm_start(s, v, n, pk, kept, jb, friction, walls)
     _resting_passes(
-        s, v, n, w, relax, lam, ft, jb, friction, walls, kept, np.minimum(RELAX / count[wr], 1.0), iterations
+        s,
+        v,
+        n,
+        relax,
+        lam,
+        ft,
+        jb,
+        friction,
+        walls,
+        kept,
+        np.minimum(RELAX / count[wr], 1.0) / inv_mass[wr],
+        iterations,
     )
     _follow(x, v, v0, RESTING_STEPS * near, dt)
-    _overlap_passes(s, x, radius, w, relax, iterations)
+    _overlap_passes(s, x, radius, relax, OVERLAP_PASSES)
     kept.lam[pk] = lam
     kept.ft[pk] = ft.T
     kept.stamp[pk] = kept.now
@@ -327,7 +347,6 @@ def _resting_passes(
     s: _PairScratch,
     v: np.ndarray,
     n: np.ndarray,
-    w: np.ndarray,
     relax: np.ndarray,
     lam: np.ndarray,
     ft: np.ndarray,
@@ -341,11 +360,10 @@ def _resting_passes(
     """:func:`animsim.particle_contacts.step_kernels.resting_passes`, in place on v, lam, ft
     and the walls' ``kept.wlam``, ``kept.wft``."""
     wr, wn, wu = walls.rows, walls.normal.T, walls.velocity.T
-    w_wall = s.inv_mass[wr]
     wlam, wft = kept.wlam, np.ascontiguousarray(kept.wft.T)
     for _ in range(iterations):
-        lam_new, ft_new, dl, df = _updates(s.gather_diff(v), n, w, relax, lam, ft, friction, jb)
-        wlam_new, wft_new, dlw, dfw = _updates(v[wr].T - wu, wn, w_wall, wrel, wlam, wft, walls.friction, 0.0)
+        lam_new, ft_new, dl, df = _updates(s.gather_diff(v), n, relax, lam, ft, friction, jb)
+        wlam_new, wft_new, dlw, dfw = _updates(v[wr].T - wu, wn, wrel, wlam, wft, walls.friction, 0.0)
         lam[:], ft[:], wlam[:], wft[:] = lam_new, ft_new, wlam_new, wft_new
         if not (dl.any() or df.any() or dlw.any() or dfw.any()):  # neither would any later pass
             break
@@ -369,7 +387,7 @@ def _follow(x: np.ndarray, v: np.ndarray, v0: np.ndarray, allow: np.ndarray, dt:
 
 
 def _overlap_passes(
-    s: _PairScratch, x: np.ndarray, radius: np.ndarray, w: np.ndarray, relax: np.ndarray, iterations: int
+    s: _PairScratch, x: np.ndarray, radius: np.ndarray, relax: np.ndarray, iterations: int
 ) -> None:
     """The Jacobi passes that remove the overlaps, in place on x."""
     i, j, d = s.i, s.j, s.d
@@ -385,8 +403,7 @@ def _overlap_passes(
         # the numba kernel skips a pair with over <= 0 (so a NaN one is not skipped); a skipped
         # pair's weight 0.0 leaves every sum's bits alone
         with np.errstate(divide="ignore", invalid="ignore"):
-            np.divide(over, w, out=c)
-            c *= relax
+            np.multiply(over, relax, out=c)
             c[over <= 0] = 0.0
             if not c.any():  # no overlap left to remove
                 break

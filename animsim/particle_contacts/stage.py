@@ -13,6 +13,7 @@ from animsim.particle_contacts.constants import (
     BOUNCE_SWEEPS,
     CONTACT_PAIR_BYTES,
     ITERATIONS,
+    OVERLAP_PASSES,
     RELAX,
     RESTING_STEPS,
     SKIN,
@@ -274,7 +275,7 @@ class ParticleContacts(StepStage):
         n_rows = x.shape[0]
         found, changed = self._kernels.step(
             self._ci, self._cj, self._reach2, TOUCH2, x, v, v_old, inv_mass, self.radius,
-            self.restitution, self.friction, self.iterations, RELAX, dt,
+            self.restitution, self.friction, self.iterations, OVERLAP_PASSES, RELAX, dt,
             b.get("pi", (p,), np.int64), b.get("pj", (p,), np.int64), b.get("pk", (p,), np.int64),
             b.get("w", (p,)), b.get("rel", (p,)), b.get("nrm", (p, 3)), b.get("limit", (p,)),
             b.get("lam", (p,)), b.get("ft", (p, 3)), b.get("jb", (p,)), b.get("due", (p,), np.bool_),

@@ -120,8 +120,9 @@ def pair_setup(
     pi, pj, p, wr, x, inv_mass, relax_factor, w, rel, wrel, nrm, count
 ):  # pragma: no cover - compiled
     """Per pair: ``w`` the summed inverse masses, ``rel`` the relaxation (averaged over the
-    contacts per particle, ``count``, the walls' among them; ``wrel`` a wall contact's) and
-    ``nrm`` the unit line of centres."""
+    contacts per particle, ``count``, the walls' among them; ``wrel`` a wall contact's) over
+    ``w`` (what turns a change of relative velocity or position into the pair's share of it)
+    and ``nrm`` the unit line of centres."""
     count[:] = 0
     for k in range(p):
         count[pi[k]] += 1
@@ -129,12 +130,12 @@ def pair_setup(
     for k in range(wr.shape[0]):
         count[wr[k]] += 1
     for k in range(wr.shape[0]):
-        wrel[k] = min(relax_factor / count[wr[k]], 1.0)
+        wrel[k] = min(relax_factor / count[wr[k]], 1.0) / inv_mass[wr[k]]
     for k in range(p):
         i = pi[k]
         j = pj[k]
         w[k] = inv_mass[i] + inv_mass[j]
-        rel[k] = min(relax_factor / max(count[i], count[j]), 1.0)
+        rel[k] = min(relax_factor / max(count[i], count[j]), 1.0) / w[k]
         d2 = 0.0
         for a in range(3):
             t = x[j, a] - x[i, a]
@@ -234,24 +235,23 @@ def warm_start(
 
 
 @numba_inline_helper
-def contact_update(r0, r1, r2, n0, n1, n2, w, rel, lam, f0, f1, f2, cap_mu, extra):  # pragma: no cover
+def contact_update(r0, r1, r2, n0, n1, n2, rw, lam, f0, f1, f2, cap_mu, extra):  # pragma: no cover
     """One contact's Jacobi update from its relative velocity r (of the second body against the
-    first) and normal n: the accumulated normal impulse ``lam`` kept >= 0 and the friction
-    impulse f within ``cap_mu * (lam + extra)``; returns the new lam, f and their changes."""
+    first) and normal n (``rw``: its relaxation over its summed inverse masses): the accumulated
+    normal impulse ``lam`` kept >= 0 and the friction impulse f within ``cap_mu * (lam +
+    extra)``; returns the new lam, f and their changes."""
     vn = (r0 * n0 + r1 * n1) + r2 * n2
-    new = max(lam + (0.0 - vn) / w * rel, 0.0)
-    g0, g1, g2 = cone(
-        f0 - (r0 - vn * n0) / w * rel,
-        f1 - (r1 - vn * n1) / w * rel,
-        f2 - (r2 - vn * n2) / w * rel,
-        cap_mu * (new + extra),
-    )
+    new = max(lam - vn * rw, 0.0)
+    cap = cap_mu * (new + extra)
+    if cap == 0.0 and f0 == 0.0 and f1 == 0.0 and f2 == 0.0:  # no friction to give: none
+        return new, 0.0, 0.0, 0.0, new - lam, 0.0, 0.0, 0.0
+    g0, g1, g2 = cone(f0 - (r0 - vn * n0) * rw, f1 - (r1 - vn * n1) * rw, f2 - (r2 - vn * n2) * rw, cap)
     return new, g0, g1, g2, new - lam, g0 - f0, g1 - f1, g2 - f2
 
 
 @numba_helper
 def resting_passes(
-    pi, pj, p, nrm, w, rel, lam, ft, jb, mu, wr, wn, wu, wmu, wrel, wlam, wft, v, dv, inv_mass, iterations
+    pi, pj, p, nrm, rel, lam, ft, jb, mu, wr, wn, wu, wmu, wrel, wlam, wft, v, dv, inv_mass, iterations
 ):  # pragma: no cover - compiled
     """The Jacobi passes of the resting contacts (pairs, then walls): each scatters contact by
     contact into dv (every particle's sum in contact order, from 0.0), then adds dv / m; a
@@ -265,7 +265,7 @@ def resting_passes(
             n0, n1, n2 = nrm[k, 0], nrm[k, 1], nrm[k, 2]
             lam[k], ft[k, 0], ft[k, 1], ft[k, 2], dl, d0, d1, d2 = contact_update(
                 v[j, 0] - v[i, 0], v[j, 1] - v[i, 1], v[j, 2] - v[i, 2],
-                n0, n1, n2, w[k], rel[k], lam[k], ft[k, 0], ft[k, 1], ft[k, 2], mu, jb[k],
+                n0, n1, n2, rel[k], lam[k], ft[k, 0], ft[k, 1], ft[k, 2], mu, jb[k],
             )  # fmt: skip
             if dl != 0.0 or d0 != 0.0 or d1 != 0.0 or d2 != 0.0:
                 moved = True
@@ -281,7 +281,7 @@ def resting_passes(
             n0, n1, n2 = wn[k, 0], wn[k, 1], wn[k, 2]
             wlam[k], wft[k, 0], wft[k, 1], wft[k, 2], dl, d0, d1, d2 = contact_update(
                 v[r, 0] - wu[k, 0], v[r, 1] - wu[k, 1], v[r, 2] - wu[k, 2],
-                n0, n1, n2, inv_mass[r], wrel[k], wlam[k], wft[k, 0], wft[k, 1], wft[k, 2], wmu[k], 0.0,
+                n0, n1, n2, wrel[k], wlam[k], wft[k, 0], wft[k, 1], wft[k, 2], wmu[k], 0.0,
             )  # fmt: skip
             if dl != 0.0 or d0 != 0.0 or d1 != 0.0 or d2 != 0.0:
                 moved = True
@@ -313,7 +313,7 @@ def follow(x, v, v0, near, resting_steps, dt):  # pragma: no cover - compiled
 
 
 @numba_helper
-def position_passes(pi, pj, p, x, radius, w, rel, dv, inv_mass, iterations):  # pragma: no cover - compiled
+def position_passes(pi, pj, p, x, radius, rel, dv, inv_mass, iterations):  # pragma: no cover - compiled
     """The Jacobi passes on position: each pair's overlap pushed apart along its current line
     of centres, as :func:`resting_passes` does velocities."""
     for _ in range(iterations):
@@ -333,7 +333,7 @@ def position_passes(pi, pj, p, x, radius, w, rel, dv, inv_mass, iterations):  # 
                 d0, d1, d2 = d0 / dist, d1 / dist, d2 / dist
             else:
                 d0, d1, d2 = 0.0, 1.0, 0.0
-            c = over / w[k] * rel[k]
+            c = over * rel[k]
             if c != 0.0:
                 moved = True
             dv[i, 0] -= c * d0
@@ -359,7 +359,7 @@ def remember(pk, p, lam, ft, lam_c, ft_c, stamp_c, stamp):  # pragma: no cover -
 
 @numba_helper
 def contact_step(
-    ci, cj, reach2, touch2, x, v, v_old, inv_mass, radius, e, mu, iterations, relax_factor, dt,
+    ci, cj, reach2, touch2, x, v, v_old, inv_mass, radius, e, mu, iterations, overlap_passes, relax_factor, dt,
     pi, pj, pk, w, rel, nrm, limit, lam, ft, jb, due, lam_c, ft_c, stamp_c, stamp,
     wr, wn, wu, wmu, wrel, wlam, wft, dv, v0, added, near, count, resting_steps, bounce_floor, bounce_limit,
 ):  # pragma: no cover - compiled  # fmt: skip
@@ -409,10 +409,10 @@ def contact_step(
         inv_mass,
     )
     resting_passes(
-        pi, pj, p, nrm, w, rel, lam, ft, jb, mu, wr, wn, wu, wmu, wrel, wlam, wft, v, dv, inv_mass, iterations
+        pi, pj, p, nrm, rel, lam, ft, jb, mu, wr, wn, wu, wmu, wrel, wlam, wft, v, dv, inv_mass, iterations
     )
     follow(x, v, v0, near, resting_steps, dt)
-    position_passes(pi, pj, p, x, radius, w, rel, dv, inv_mass, iterations)
+    position_passes(pi, pj, p, x, radius, rel, dv, inv_mass, overlap_passes)
     remember(pk, p, lam, ft, lam_c, ft_c, stamp_c, stamp)
     return found, True
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from animsim.colliders import BOX, Colliders, Shape
-from animsim.particle_contacts import ITERATIONS, ParticleContacts, find_pairs_numpy, spring_exclusions
+from animsim.particle_contacts import OVERLAP_PASSES, ParticleContacts, find_pairs_numpy, spring_exclusions
 
 
 def _backends() -> list[str]:
@@ -158,7 +158,7 @@ def test_spring_neighbours_and_dead_or_pinned_rows(backend: str) -> None:
     # pushed by the pinned one: 0 and 2 touch too (exactly 2 r apart, within the slop), so 2's
     # pushes are averaged over its two contacts (a quarter of the overlap left after each of
     # the passes, relaxation 1.5 / 2)
-    np.testing.assert_allclose(x[1], [0.1 * 0.25**ITERATIONS, 0, 0], rtol=1e-9, atol=1e-14)
+    np.testing.assert_allclose(x[1], [0.1 * 0.25**OVERLAP_PASSES, 0, 0], rtol=1e-9, atol=1e-14)
     np.testing.assert_allclose(x[0], [0.0, 0, 0])  # untouched: its spring neighbour overlaps freely
     np.testing.assert_allclose(x[3:], [[5.0, 0, 0], [5.1, 0, 0]])
 
