@@ -326,20 +326,15 @@ def _warm_start(
 
 
 def _updates(
-    r: np.ndarray,
-    n: np.ndarray,
-    w: np.ndarray,
-    rel: np.ndarray,
-    lam: np.ndarray,
-    f: np.ndarray,
-    cap_mu,
-    extra,
+    r: np.ndarray, n: np.ndarray, rw: np.ndarray, lam: np.ndarray, f: np.ndarray, cap_mu, extra
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`animsim.particle_contacts.step_kernels.contact_update` for (3, K) relative
     velocities r: returns the new lam and f and their changes."""
     vn = (r[0] * n[0] + r[1] * n[1]) + r[2] * n[2]
-    new = np.maximum(lam + (0.0 - vn) / w * rel, 0.0)
-    g = _cone(f - (r - vn * n) / w * rel, cap_mu * (new + extra))
+    new = np.maximum(lam - vn * rw, 0.0)
+    cap = cap_mu * (new + extra)
+    g = _cone(f - (r - vn * n) * rw, cap)
+    g[:, (cap == 0.0) & ~f.any(axis=0)] = 0.0  # no friction to give: none
     return new, g, new - lam, g - f
 
 
