@@ -13,7 +13,9 @@ sum of their radii are found and resolved:
   of Deformable Objects", VMV 2003). The list stays valid while no two
   particles have closed by more than the skin, which the step checks from how
   far the particles moved since it was built (the spread of their
-  displacements, so a pile falling as one never rebuilds it). Each step keeps
+  displacements, so a pile falling as one never rebuilds it; with colliders or
+  planes also once a grain may have moved by the skin, as the walls' candidates,
+  :mod:`animsim.particle_contacts.walls`, do not fall with it). Each step keeps
   the candidates that overlap, by the same test on both backends, in (i, j)
   order: the pairs are the same whenever the list was built.
 * **Impacts**: pairs whose bounce would be faster than twice what the step's
