@@ -13,7 +13,9 @@ sum of their radii are found and resolved:
   of Deformable Objects", VMV 2003). The list stays valid while no two
   particles have closed by more than the skin, which the step checks from how
   far the particles moved since it was built (the spread of their
-  displacements, so a pile falling as one never rebuilds it). Each step keeps
+  displacements, so a pile falling as one never rebuilds it; with colliders or
+  planes also once a grain may have moved by the skin, as the walls' candidates,
+  :mod:`animsim.particle_contacts.walls`, do not fall with it). Each step keeps
   the candidates that overlap, by the same test on both backends, in (i, j)
   order: the pairs are the same whenever the list was built.
 * **Impacts**: pairs whose bounce would be faster than twice what the step's
@@ -26,21 +28,30 @@ sum of their radii are found and resolved:
   of Guendelman, Bridson and Fedkiw, SIGGRAPH 2003). Sequential impacts pass a
   blow on through touching spheres as a Newton's cradle does, and keep the energy
   at e = 1; a simultaneous solution would share it out and lose energy.
-* **Velocities**: then no pair may still approach: normal impulses solved by a
-  few Jacobi iterations with accumulated, clamped impulses (Catto, "Iterative
-  Dynamics with Temporal Coherence", GDC 2005). Each pair's correction is
-  scaled by ``RELAX`` over the larger contact count (at most 1) of its two
-  particles (averaged, over-relaxed Jacobi as in Macklin et al., "Unified
-  Particle Physics for Real-Time Applications", SIGGRAPH 2014), which keeps
-  piles from over-correcting and keeps every exchange equal and opposite:
-  momentum is conserved exactly. Coulomb friction then takes at most
-  ``friction * J`` off the pair's sliding velocity (J: the pair's impact and
-  resting impulses together), also equal and opposite, in one pass averaged
-  over the contact count but not over-relaxed (an over-relaxed stop overshoots
-  and sets a pile jittering).
+* **Velocities**: then no contact may still approach, grain pairs and the grains touching
+  colliders and planes (:mod:`animsim.particle_contacts.walls`, immovable bodies at the
+  collider's velocity) in one solve: normal impulses and Coulomb friction impulses (within
+  ``friction`` times the normal one, the impact's included), accumulated and clamped, by
+  Jacobi passes (Catto, "Iterative Dynamics with Temporal Coherence", GDC 2005). Each
+  contact's correction is scaled by ``RELAX`` over the larger contact count (at most 1) of
+  its two particles (averaged, over-relaxed Jacobi as in Macklin et al., "Unified Particle
+  Physics for Real-Time Applications", SIGGRAPH 2014), which keeps piles from
+  over-correcting and keeps every exchange equal and opposite: momentum is conserved
+  exactly. Every contact's impulses are kept for the next step under its candidate pair
+  (or its grain and wall) and applied again first (warm starting, Catto 2005): the passes
+  of successive steps continue one iteration, so a pile converges over steps to the
+  impulses that hold it, with its weight carried down to the floor. Fewer than 10 passes
+  a step let a warm-started pile oscillate; ``ITERATIONS`` has margin.
+* **Positions follow**: the step's positions move by ``dt`` times the resting passes'
+  change of velocity (symplectic Euler's position update with the contact impulse in the
+  velocity, as in the time-stepping of Stewart and Trinkle, IJNME 39, 1996), as far as
+  resting contact reaches (``RESTING_STEPS`` times the largest change of velocity the step
+  made to the grain or one touching it): a grain held against gravity does not sink by
+  ``g dt^2`` a step, and one stopped from a fast approach is not set back.
 * **Positions**: the overlap is removed along the line of centres, each
   particle moving in proportion to its inverse mass, so the pair's centre of
-  mass does not move (a few Jacobi passes, averaged as above).
+  mass does not move (a few Jacobi passes, averaged as above). Pairs within ``SLOP`` of
+  their contact distance still touch, so a resting contact keeps its impulses.
 
 A pass that changes nothing (every correction exactly zero, as for grains
 that touch and fall together) ends its iterations: the passes after it would
@@ -65,7 +76,7 @@ through each other within one step are not caught.
 
 from __future__ import annotations
 
-from animsim.particle_contacts.constants import CONTACT_PAIR_BYTES, ITERATIONS, SKIN
+from animsim.particle_contacts.constants import CONTACT_PAIR_BYTES, ITERATIONS, OVERLAP_PASSES, SKIN
 from animsim.particle_contacts.kernels import numba_kernels
 from animsim.particle_contacts.neighbours import (
     candidates_numpy,
@@ -79,6 +90,7 @@ from animsim.particle_contacts.stage import ParticleContacts
 __all__ = [
     "CONTACT_PAIR_BYTES",
     "ITERATIONS",
+    "OVERLAP_PASSES",
     "SKIN",
     "ParticleContacts",
     "candidates_numpy",

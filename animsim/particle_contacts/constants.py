@@ -3,10 +3,17 @@ and what a candidate pair costs in memory (see :mod:`animsim.particle_contacts`)
 
 from __future__ import annotations
 
-ITERATIONS = 6
+#: passes of the resting solve (fewer than 10 let a warm-started pile oscillate)
+ITERATIONS = 12
+#: passes of the overlap removal (positions follow the resting solve, so little is left to part)
+OVERLAP_PASSES = 6
 RESTING_STEPS = 2.0
 #: over-relaxation of the averaged Jacobi passes (1: plain averaging)
 RELAX = 1.5
+#: a gap that still counts as touching, as a fraction of the pair's contact distance (to a wall:
+#: of the grain's radius), so a resting contact whose overlap was removed stays a contact and
+#: keeps its impulses from step to step (the contact margin of Box2D's "linear slop", Catto, GDC 2005)
+SLOP = 0.01
 #: at most this many sweeps of the impact pass: a blow crosses one pair of touching spheres per
 #: sweep, so a row of up to 33 touching balls passes it on whole
 BOUNCE_SWEEPS = 32
@@ -18,9 +25,11 @@ SKIN = 0.3
 # One candidate pair of the contact list: its (i, j) index pair as built (16), the k-d
 # tree's or the grid's output before sorting (16), and the per-step arrays of a pair that
 # overlaps (gathered differences and normals, distances, normal speeds, impulses and the
-# Jacobi work arrays: about 20 float64), so a list where everything touches costs this much
-# (the pre-flight counts the list at the start with it; bound_memory bounds it later).
-CONTACT_PAIR_BYTES = 16 + 16 + 20 * 8
+# Jacobi work arrays: about 20 float64) and the impulses kept for the next step's warm start
+# (normal, friction vector, the step they were kept at, the pair's candidate: 6 more), so a
+# list where everything touches costs this much (the pre-flight counts the list at the start
+# with it; bound_memory bounds it later).
+CONTACT_PAIR_BYTES = 16 + 16 + 26 * 8
 #: the list is rebuilt once two particles may have closed by this fraction of the skin
 #: (the rest is margin for rounding in the distances)
 SKIN_USE = 0.9

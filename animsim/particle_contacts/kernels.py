@@ -1,10 +1,9 @@
-"""The numba kernels of particle contacts: the impact pass (:func:`bounce_pair`, written once and
-run by NumPy too), the grid search of the Verlet list and one step's contact passes.
+"""The numba kernels of particle contacts: the grid search of the Verlet list here, one step's
+contact passes in :mod:`animsim.particle_contacts.step_kernels`.
 
-The kernels and every helper they call live in this one module: numba's disk cache checks
-only the file of the function it cached, so a helper in another file could go stale in the
-cache after an edit. ``contact_step`` runs the step's passes, one helper each; they share the
-per-pair buffers ``pair_setup`` fills once.
+Each kernel and every helper it calls live in one module: numba's disk cache checks only the
+file of the function it cached, so a helper in another file could go stale in the cache after
+an edit.
 """
 
 from __future__ import annotations
@@ -13,79 +12,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from animsim.elements import compile_helpers, numba_helper, numba_inline_helper
-
-
-@numba_inline_helper
-def normal_speed(v, i, j, n0, n1, n2):  # pragma: no cover - compiled too
-    """How fast sphere j moves away from sphere i along the unit normal n (negative: closing)."""
-    return (v[j, 0] - v[i, 0]) * n0 + (v[j, 1] - v[i, 1]) * n1 + (v[j, 2] - v[i, 2]) * n2
-
-
-@numba_helper
-def bounce_pair(i, j, n0, n1, n2, w, limit, e, v, inv_mass):  # pragma: no cover - compiled too
-    """One impact between two spheres, in place on ``v``; returns the normal impulse (0.0: none).
-
-    Newton's law of restitution for a two-body impact along the line of centres
-    ``n`` (Goldstein, "Classical Mechanics", section 3.11): ``J = -(1 + e) v_n / w``
-    with ``w = 1/m_i + 1/m_j``, ``+J n`` on j and ``-J n`` on i. Only an approach
-    faster than ``limit`` is an impact (its bounce, e times it, would be faster than twice
-    what the step's forces added to a sphere touching either); a slower one is resting contact, left
-    to the Jacobi passes (a grain settling into a pile does not bounce by a hair).
-    """
-    vn = normal_speed(v, i, j, n0, n1, n2)
-    if not -vn > limit:
-        return 0.0
-    jn = -(1.0 + e) * vn / w
-    ci = inv_mass[i] * jn
-    cj = inv_mass[j] * jn
-    v[i, 0] -= ci * n0
-    v[i, 1] -= ci * n1
-    v[i, 2] -= ci * n2
-    v[j, 0] += cj * n0
-    v[j, 1] += cj * n1
-    v[j, 2] += cj * n2
-    return jn
-
-
-@numba_helper
-def approaching(pi, pj, nrm, limit, v, due, p):  # pragma: no cover - compiled
-    """due[k]: pair k approaches faster than its limit now; returns how many do."""
-    count = 0
-    for k in range(p):
-        i = pi[k]
-        j = pj[k]
-        due[k] = -normal_speed(v, i, j, nrm[k, 0], nrm[k, 1], nrm[k, 2]) > limit[k]
-        if due[k]:
-            count += 1
-    return count
-
-
-@numba_helper
-def bounce_sweeps(pi, pj, nrm, w, limit, e, v, inv_mass, jb, due, p, sweeps):  # pragma: no cover - compiled
-    """The impact pass; ``jb[k]``: pair k's impulses. Each sweep marks the pairs that approach
-    faster than resting, then strikes them one after the other in pair order
-    (:func:`bounce_pair`, which looks again: an earlier impact may have parted the pair),
-    until no pair approaches (at most ``sweeps``).
-
-    Sequential, not simultaneous: an impact is passed on through touching spheres one pair
-    per sweep, as in the collision pass of Guendelman, Bridson and Fedkiw, "Nonconvex rigid
-    bodies with stacking", SIGGRAPH 2003 (section 6). So a ball hitting a row of touching
-    equal balls stops and the last one leaves with its speed (Newton's cradle); a
-    simultaneous (Jacobi) solution shares the impulse and loses energy even at e = 1.
-    Marking first and striking only the marked is what lets NumPy run the same pass as
-    cheaply (:func:`bounce_sweeps_numpy`): its Python loop sees the impacts, not every pair.
-    """
-    for k in range(p):
-        jb[k] = 0.0
-    for _ in range(sweeps):
-        if approaching(pi, pj, nrm, limit, v, due, p) == 0:
-            return
-        for k in range(p):
-            if due[k]:
-                jb[k] += bounce_pair(
-                    pi[k], pj[k], nrm[k, 0], nrm[k, 1], nrm[k, 2], w[k], limit[k], e, v, inv_mass
-                )
+from animsim.elements import compile_helpers, numba_helper
+from animsim.particle_contacts.step_kernels import compiled_step
 
 
 class NumbaKernels(NamedTuple):
@@ -97,7 +25,8 @@ class NumbaKernels(NamedTuple):
     step: Any
     #: (x, radius, active, exclude, cell) -> (P, 2) overlapping pairs, as :func:`find_pairs_numpy`
     find_pairs: Any
-    #: (x, x_built, active) -> how far the displacements spread since the list was built
+    #: (x, x_built, active) -> (how far the displacements spread since the list was built,
+    #: a bound on the farthest displacement)
     spread: Any
 
 
@@ -325,233 +254,6 @@ def candidates(x, active, exclude, reach, limit):  # pragma: no cover - compiled
     return sort_pairs(raw_i, raw_j, npairs, n)
 
 
-# The step kernel's pieces, in the order contact_step runs them; the per-pair buffers they
-# share are filled once by ``pair_setup``.
-@numba_helper
-def overlapping(ci, cj, reach2, x, inv_mass, pi, pj):  # pragma: no cover - compiled
-    """The candidates that overlap: returns (how many, how many of them are between
-    particles not both fixed); those pairs into ``pi``, ``pj``."""
-    found = 0
-    p = 0
-    for k in range(ci.shape[0]):
-        i = ci[k]
-        j = cj[k]
-        t0 = x[j, 0] - x[i, 0]
-        t1 = x[j, 1] - x[i, 1]
-        t2 = x[j, 2] - x[i, 2]
-        if not (t0 * t0 + t1 * t1 + t2 * t2 < reach2[k]):
-            continue
-        found += 1
-        if inv_mass[i] + inv_mass[j] > 0:
-            pi[p] = i
-            pj[p] = j
-            p += 1
-    return found, p
-
-
-@numba_helper
-def pair_setup(
-    pi, pj, p, x, v, v_old, inv_mass, e, relax_factor, w, rel, nrm, limit, lam, count
-):  # pragma: no cover - compiled
-    """Per pair: ``w`` the summed inverse masses, ``rel`` the relaxation (averaged over the
-    contacts per particle, ``count``), ``nrm`` the unit line of centres, ``limit`` the faster
-    change of velocity of its two spheres this step (when e > 0), ``lam`` 0."""
-    count[:] = 0
-    for k in range(p):
-        count[pi[k]] += 1
-        count[pj[k]] += 1
-    for k in range(p):
-        i = pi[k]
-        j = pj[k]
-        w[k] = inv_mass[i] + inv_mass[j]
-        rel[k] = min(relax_factor / max(count[i], count[j]), 1.0)
-        d2 = 0.0
-        for a in range(3):
-            t = x[j, a] - x[i, a]
-            nrm[k, a] = t
-            d2 += t * t
-        dist = np.sqrt(d2)
-        if dist > 0:
-            for a in range(3):
-                nrm[k, a] /= dist
-        else:
-            nrm[k, 0], nrm[k, 1], nrm[k, 2] = 0.0, 1.0, 0.0
-        if e > 0:  # the impact pass's limit (resolve_pairs_numpy's)
-            si = 0.0
-            sj = 0.0
-            for a in range(3):
-                t = v[i, a] - v_old[i, a]
-                si += t * t
-                t = v[j, a] - v_old[j, a]
-                sj += t * t
-            limit[k] = max(np.sqrt(si), np.sqrt(sj))
-        lam[k] = 0.0
-
-
-@numba_helper
-def bounce_limits(pi, pj, p, limit, dv, e, resting_steps, bounce_floor):  # pragma: no cover - compiled
-    """``limit``: each pair's impact limit (in place of its larger change of velocity), from the largest change of velocity among the pairs
-    touching either sphere (``dv[:, 0]`` as scratch)."""
-    for r in range(dv.shape[0]):
-        dv[r, 0] = 0.0
-    for k in range(p):
-        dv[pi[k], 0] = max(dv[pi[k], 0], limit[k])
-        dv[pj[k], 0] = max(dv[pj[k], 0], limit[k])
-    for k in range(p):
-        limit[k] = (resting_steps * max(dv[pi[k], 0], dv[pj[k], 0]) + bounce_floor) / e
-
-
-@numba_helper
-def add_scaled(out, dv, inv_mass):  # pragma: no cover - compiled
-    """out += dv / m, row by row."""
-    for r in range(out.shape[0]):
-        w_r = inv_mass[r]
-        for a in range(3):
-            out[r, a] += dv[r, a] * w_r
-
-
-@numba_helper
-def velocity_passes(pi, pj, p, nrm, w, rel, lam, v, dv, inv_mass, iterations):  # pragma: no cover - compiled
-    """The Jacobi passes on velocity: each scatters pair by pair into dv (every particle's sum
-    in pair order, from 0.0), then adds dv / m; a pass that changed nothing adds nothing."""
-    for _ in range(iterations):
-        dv[:] = 0.0
-        moved = False
-        for k in range(p):
-            i = pi[k]
-            j = pj[k]
-            vn = 0.0
-            for a in range(3):
-                vn += (v[j, a] - v[i, a]) * nrm[k, a]
-            dl = (0.0 - vn) / w[k] * rel[k]
-            new = max(lam[k] + dl, 0.0)
-            dl = new - lam[k]
-            lam[k] = new
-            if dl != 0.0:
-                moved = True
-            for a in range(3):
-                dv[i, a] -= dl * nrm[k, a]
-                dv[j, a] += dl * nrm[k, a]
-        if not moved:
-            break
-        add_scaled(v, dv, inv_mass)
-
-
-@numba_helper
-def friction_pass(pi, pj, p, nrm, w, count, lam, jb, mu, v, dv, inv_mass):  # pragma: no cover - compiled
-    """One Jacobi pass of friction: each pair's sliding stopped, its share at most mu times
-    its normal impulses (``lam`` + ``jb``)."""
-    dv[:] = 0.0
-    for k in range(p):
-        i = pi[k]
-        j = pj[k]
-        vn = 0.0
-        for a in range(3):
-            vn += (v[j, a] - v[i, a]) * nrm[k, a]
-        t0 = v[j, 0] - v[i, 0] - vn * nrm[k, 0]
-        t1 = v[j, 1] - v[i, 1] - vn * nrm[k, 1]
-        t2 = v[j, 2] - v[i, 2] - vn * nrm[k, 2]
-        speed = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
-        if speed > 0:  # else it adds nothing
-            share = min(1.0 / max(count[i], count[j]), 1.0)
-            jt = min(speed / w[k] * share, mu * (lam[k] + jb[k])) / speed
-            dv[i, 0] += jt * t0
-            dv[i, 1] += jt * t1
-            dv[i, 2] += jt * t2
-            dv[j, 0] -= jt * t0
-            dv[j, 1] -= jt * t1
-            dv[j, 2] -= jt * t2
-    add_scaled(v, dv, inv_mass)
-
-
-@numba_helper
-def position_passes(pi, pj, p, x, radius, w, rel, dv, inv_mass, iterations):  # pragma: no cover - compiled
-    """The Jacobi passes on position: each pair's overlap pushed apart along its current line
-    of centres, as :func:`velocity_passes` does velocities."""
-    for _ in range(iterations):
-        dv[:] = 0.0
-        moved = False
-        for k in range(p):
-            i = pi[k]
-            j = pj[k]
-            d0 = x[j, 0] - x[i, 0]
-            d1 = x[j, 1] - x[i, 1]
-            d2 = x[j, 2] - x[i, 2]
-            dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-            over = radius[i] + radius[j] - dist
-            if over <= 0:
-                continue
-            if dist > 0:
-                d0, d1, d2 = d0 / dist, d1 / dist, d2 / dist
-            else:
-                d0, d1, d2 = 0.0, 1.0, 0.0
-            c = over / w[k] * rel[k]
-            if c != 0.0:
-                moved = True
-            dv[i, 0] -= c * d0
-            dv[i, 1] -= c * d1
-            dv[i, 2] -= c * d2
-            dv[j, 0] += c * d0
-            dv[j, 1] += c * d1
-            dv[j, 2] += c * d2
-        if not moved:
-            break
-        add_scaled(x, dv, inv_mass)
-
-
-@numba_helper
-def contact_step(
-    ci,
-    cj,
-    reach2,
-    x,
-    v,
-    v_old,
-    inv_mass,
-    radius,
-    e,
-    mu,
-    iterations,
-    relax_factor,
-    pi,
-    pj,
-    w,
-    rel,
-    nrm,
-    limit,
-    lam,
-    jb,
-    due,
-    dv,
-    count,
-    resting_steps,
-    bounce_floor,
-    bounce_limit,
-):  # pragma: no cover - compiled
-    """Keep the candidates that overlap, then the passes of :func:`resolve_pairs_numpy`.
-
-    ``pi`` .. ``jb``: buffers of at least the candidates' length; ``dv`` (N, 3)
-    and ``count`` (N,): per particle. Returns (overlapping pairs, whether any
-    pair was resolved).
-    """
-    found, p = overlapping(ci, cj, reach2, x, inv_mass, pi, pj)
-    if p == 0:
-        return found, False
-    pair_setup(pi, pj, p, x, v, v_old, inv_mass, e, relax_factor, w, rel, nrm, limit, lam, count)
-    # impacts first, sequentially (see bounce_sweeps), when anything bounces at all
-    if e > 0:
-        bounce_limits(pi, pj, p, limit, dv, e, resting_steps, bounce_floor)
-        bounce_sweeps(pi, pj, nrm, w, limit, e, v, inv_mass, jb, due, p, bounce_limit)
-    else:
-        for k in range(p):
-            jb[k] = 0.0
-    velocity_passes(pi, pj, p, nrm, w, rel, lam, v, dv, inv_mass, iterations)
-    if mu > 0:
-        friction_pass(pi, pj, p, nrm, w, count, lam, jb, mu, v, dv, inv_mass)
-    position_passes(pi, pj, p, x, radius, w, rel, dv, inv_mass, iterations)
-    return found, True
-
-
 def numba_kernels() -> NumbaKernels:
     """The numba kernels (compiled, or loaded from numba's disk cache, on first use)."""
     global _KERNELS
@@ -581,7 +283,8 @@ def numba_kernels() -> NumbaKernels:
 
     @numba.njit(cache=True)
     def spread(x, x_built, active):  # pragma: no cover - compiled
-        """The farthest active row's displacement from the centre of all their box (inf if not finite)."""
+        """(The farthest active row's displacement from the centre of all their box, the length of
+        the box's farthest corner from 0: no row moved farther); (inf, inf) if not finite."""
         lo = np.full(3, np.inf)
         hi = np.full(3, -np.inf)
         for i in range(x.shape[0]):
@@ -589,11 +292,11 @@ def numba_kernels() -> NumbaKernels:
                 for a in range(3):
                     d = x[i, a] - x_built[i, a]
                     if not np.isfinite(d):
-                        return np.inf
+                        return np.inf, np.inf
                     lo[a] = min(lo[a], d)
                     hi[a] = max(hi[a], d)
         if not hi[0] >= lo[0]:
-            return 0.0
+            return 0.0, 0.0
         c0 = 0.5 * (hi[0] + lo[0])
         c1 = 0.5 * (hi[1] + lo[1])
         c2 = 0.5 * (hi[2] + lo[2])
@@ -604,7 +307,10 @@ def numba_kernels() -> NumbaKernels:
                 e1 = (x[i, 1] - x_built[i, 1]) - c1
                 e2 = (x[i, 2] - x_built[i, 2]) - c2
                 s = max(s, e0 * e0 + e1 * e1 + e2 * e2)
-        return np.sqrt(s)
+        far = 0.0
+        for a in range(3):
+            far += max(-lo[a], hi[a]) ** 2
+        return np.sqrt(s), np.sqrt(far)
 
-    _KERNELS = NumbaKernels(candidates, contact_step, find_pairs, spread)
+    _KERNELS = NumbaKernels(candidates, compiled_step(), find_pairs, spread)
     return _KERNELS

@@ -1,12 +1,24 @@
-"""The NumPy contact passes of one step: impacts (:func:`bounce_sweeps_numpy`), then the Jacobi
-velocity, friction and position passes (:func:`resolve_pairs_numpy`), in the numba kernel's order."""
+"""The NumPy contact passes of one step: impacts (:func:`bounce_sweeps_numpy`), then the warm-started
+Jacobi passes of the resting contacts with the walls and the position passes
+(:func:`resolve_pairs_numpy`), in the numba kernel's order
+(:func:`animsim.particle_contacts.step_kernels.contact_step`)."""
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
-from animsim.particle_contacts.constants import BOUNCE_FLOOR, BOUNCE_SWEEPS, ITERATIONS, RELAX, RESTING_STEPS
-from animsim.particle_contacts.kernels import bounce_pair
+from animsim.particle_contacts.constants import (
+    BOUNCE_FLOOR,
+    BOUNCE_SWEEPS,
+    ITERATIONS,
+    OVERLAP_PASSES,
+    RELAX,
+    RESTING_STEPS,
+)
+from animsim.particle_contacts.step_kernels import bounce_pair
+from animsim.particle_contacts.walls import NO_WALLS, WallContacts
 
 
 class Buffers:
@@ -84,37 +96,60 @@ def bounce_sweeps_numpy(
     return jb
 
 
-class _PairScratch:
-    """The working arrays of one step's pairs (kept in :class:`Buffers`) and the fixed-order
-    gathers, sums and scatters of the passes on them."""
+class Kept(NamedTuple):
+    """The impulses kept between steps for the warm start: per candidate pair of the Verlet list
+    (``lam``, ``ft`` (C, 3) and the step ``stamp`` they were kept at), this step's stamp
+    ``now``, and the wall contacts' remembered impulses (``wlam``, ``wft``, in and out)."""
 
-    def __init__(self, i: np.ndarray, j: np.ndarray, inv_mass: np.ndarray, n_rows: int, buf: Buffers) -> None:
-        p = i.size
+    lam: np.ndarray
+    ft: np.ndarray
+    stamp: np.ndarray
+    now: int
+    wlam: np.ndarray
+    wft: np.ndarray
+
+
+class _PairScratch:
+    """The working arrays of one step's pairs and wall contacts (kept in :class:`Buffers`) and
+    the fixed-order gathers, sums and scatters of the passes on them."""
+
+    def __init__(
+        self, i: np.ndarray, j: np.ndarray, wr: np.ndarray, inv_mass: np.ndarray, n_rows: int, buf: Buffers
+    ) -> None:
+        p, nw = i.size, wr.size
         self.i, self.j, self.inv_mass = i, j, inv_mass
         # One coordinate at a time (rows of (3, P) arrays): NumPy's gathers and products run on
         # contiguous memory. The sums per particle are np.add.at over interleaved bins
-        # [i0, j0, i1, j1, ...] with weights [-q0, +q0, -q1, ...]: add.at adds in index order,
-        # unbuffered, from 0.0, as the numba kernel's loops do (and np.bincount, slower here).
-        bins = buf.get("bins", (p, 2), np.int64)
-        bins[:, 0] = i
-        bins[:, 1] = j
-        self.bins_flat = bins.reshape(-1)
-        self.weights = buf.get("weights", (3, p, 2))
+        # [i0, j0, i1, j1, ..., then the walls' rows] with weights [-q0, +q0, -q1, ..., qw0, ...]:
+        # add.at adds in index order, unbuffered, from 0.0, as the numba kernel's loops do (pairs,
+        # then walls; np.bincount is slower here).
+        bins = buf.get("bins", (2 * p + nw,), np.int64)
+        bins[0 : 2 * p : 2] = i
+        bins[1 : 2 * p : 2] = j
+        bins[2 * p :] = wr
+        self.bins_all, self.bins_pairs = bins, bins[: 2 * p]
+        self.weights = buf.get("weights", (3, 2 * p + nw))
         self.q = buf.get("q", (3, p))  # what each pair adds to j (and takes from i), per coordinate
+        self.qw = buf.get("qw", (3, nw))  # what each wall contact adds to its row
         self.acc = buf.get("acc", (3, n_rows))
         self.state_t = buf.get("state_t", (3, n_rows))
         self.d = buf.get("d", (3, p))
         self.t1 = buf.get("t1", (p,))
-        self.t2 = buf.get("t2", (p,))
+        self.t2 = buf.get("t2", (max(p, nw),))
 
-    def scatter_add(self, target: np.ndarray) -> None:
-        """target += (sum in pair order of -q on i, +q on j) * inverse mass, for all rows."""
+    def scatter_add(self, target: np.ndarray, walls: bool = False) -> None:
+        """target += (sum in contact order of -q on i, +q on j, then qw on the walls' rows) *
+        inverse mass, for all rows."""
+        p = self.i.size
         weights, q, acc = self.weights, self.q, self.acc
+        bins = self.bins_all if walls else self.bins_pairs
         for a in range(3):
-            weights[a, :, 1] = q[a]
-            np.negative(q[a], out=weights[a, :, 0])
+            weights[a, 1 : 2 * p : 2] = q[a]
+            np.negative(q[a], out=weights[a, 0 : 2 * p : 2])
+            if walls:
+                weights[a, 2 * p :] = self.qw[a]
             acc[a].fill(0.0)
-            np.add.at(acc[a], self.bins_flat, weights[a].reshape(-1))
+            np.add.at(acc[a], bins, weights[a, : bins.size])
         np.multiply(acc, self.inv_mass, out=acc)
         target += acc.T
 
@@ -131,7 +166,7 @@ class _PairScratch:
 
     def dot(self, u: np.ndarray, v3: np.ndarray, out: np.ndarray) -> np.ndarray:
         """(u0 v0 + u1 v1) + u2 v2: :func:`animsim.vec.dot3`'s order, the same bits."""
-        t2 = self.t2
+        t2 = self.t2[: out.size]
         np.multiply(u[0], v3[0], out=out)
         np.multiply(u[1], v3[1], out=t2)
         out += t2
@@ -143,6 +178,7 @@ class _PairScratch:
 def resolve_pairs_numpy(
     i: np.ndarray,
     j: np.ndarray,
+    pk: np.ndarray,
     x: np.ndarray,
     v: np.ndarray,
     v_old: np.ndarray,
@@ -150,39 +186,72 @@ def resolve_pairs_numpy(
     radius: np.ndarray,
     restitution: float,
     friction: float,
+    dt: float,
+    kept: Kept,
+    walls: WallContacts = NO_WALLS,
     iterations: int = ITERATIONS,
     buffers: Buffers | None = None,
 ) -> bool:
-    """Impulses and overlap removal for the pairs (i, j) (sorted by (i, j)), in place (NumPy kernel).
+    """Impulses and overlap removal for the pairs (i, j) (sorted by (i, j); ``pk``: their
+    candidates in the Verlet list) and the wall contacts, in place (NumPy kernel).
 
     Every operation is the numba kernel's, in its order and association
     (``(a - b) / w * r`` is not ``(a - b) * (r / w)`` in floating point), and
-    pair quantities reach the particles in pair order (one ``np.bincount`` over
-    interleaved bins ``[3 i0 + (0, 1, 2), 3 j0 + (0, 1, 2), 3 i1 + ...]``, which
-    adds its weights bin by bin in array order from 0.0, as the numba kernel's
-    per-particle sums do), so both backends give the same bits.
+    contact quantities reach the particles in contact order (``np.add.at`` over
+    interleaved bins, which adds its weights bin by bin in array order from 0.0, as the
+    numba kernel's per-particle sums do), so both backends give the same bits.
     """
     ok = inv_mass[i] + inv_mass[j] > 0
     if not ok.all():
-        i, j = i[ok], j[ok]
+        i, j, pk = i[ok], j[ok], pk[ok]
     p = i.size
     if p == 0:
         return False
     buf = Buffers() if buffers is None else buffers
     n_rows = len(x)
     w = inv_mass[i] + inv_mass[j]
-    count = np.bincount(i, minlength=n_rows) + np.bincount(j, minlength=n_rows)
-    relax = np.minimum(RELAX / np.maximum(count[i], count[j]), 1.0)
-    s = _PairScratch(i, j, inv_mass, n_rows, buf)
+    wr = walls.rows
+    count = (
+        np.bincount(i, minlength=n_rows)
+        + np.bincount(j, minlength=n_rows)
+        + np.bincount(wr, minlength=n_rows)
+    )
+    # each contact's relaxation (averaged over the contacts per particle) over its summed
+    # inverse masses: a change of relative velocity or position times it is its share
+    relax = np.minimum(RELAX / np.maximum(count[i], count[j]), 1.0) / w
+    s = _PairScratch(i, j, wr, inv_mass, n_rows, buf)
     n = _pair_normals(s, x, buf)
+    near = _step_change(i, j, v, v_old, n_rows)
     # impacts first, sequentially (bounce_sweeps), when anything bounces at all
-    jb = None
+    jb = np.zeros(p)
     if restitution > 0:
-        jb = _impacts(i, j, n, w, restitution, v, v_old, inv_mass, n_rows)
-    lam = _velocity_passes(s, v, n, w, relax, iterations)
-    if friction > 0:
-        _friction_pass(s, v, n, w, count, friction, lam, jb)
-    _overlap_passes(s, x, radius, w, relax, iterations)
+        # resting: slower than twice what the step's forces added to a sphere touching either
+        # one (in a pile every grain gains g dt, though two grains falling together close at
+        # none and one on the floor is held at rest); an impact only where the bounce, e
+        # times the approach, would be faster than that
+        limit = (RESTING_STEPS * np.maximum(near[i], near[j]) + BOUNCE_FLOOR) / restitution
+        jb = bounce_sweeps_numpy(i, j, np.ascontiguousarray(n.T), w, limit, restitution, v, inv_mass)
+    v0 = v.copy()
+    lam, ft = _warm_start(s, v, n, pk, kept, jb, friction, walls)
+    _resting_passes(
+        s,
+        v,
+        n,
+        relax,
+        lam,
+        ft,
+        jb,
+        friction,
+        walls,
+        kept,
+        np.minimum(RELAX / count[wr], 1.0) / inv_mass[wr],
+        iterations,
+    )
+    _follow(x, v, v0, RESTING_STEPS * near, dt)
+    _overlap_passes(s, x, radius, relax, OVERLAP_PASSES)
+    kept.lam[pk] = lam
+    kept.ft[pk] = ft.T
+    kept.stamp[pk] = kept.now
     return True
 
 
@@ -202,90 +271,118 @@ def _pair_normals(s: _PairScratch, x: np.ndarray, buf: Buffers) -> np.ndarray:
     return n
 
 
-def _impacts(
-    i: np.ndarray,
-    j: np.ndarray,
-    n: np.ndarray,
-    w: np.ndarray,
-    restitution: float,
-    v: np.ndarray,
-    v_old: np.ndarray,
-    inv_mass: np.ndarray,
-    n_rows: int,
-) -> np.ndarray:
-    """The impacts of the step (:func:`bounce_sweeps_numpy`), in place on v; returns their impulses."""
-    # resting: slower than twice what the step's forces added to a sphere touching either
-    # one (in a pile every grain gains g dt, though two grains falling together close at
-    # none and one on the floor is held at rest) ...
+def _step_change(i: np.ndarray, j: np.ndarray, v: np.ndarray, v_old: np.ndarray, n_rows: int) -> np.ndarray:
+    """:func:`animsim.particle_contacts.step_kernels.step_change`: per row, the largest change
+    of velocity the step made to it or to a sphere touching it."""
     dv = v - v_old
     added = np.sqrt((dv[:, 0] * dv[:, 0] + dv[:, 1] * dv[:, 1]) + dv[:, 2] * dv[:, 2])
     pair_added = np.maximum(added[i], added[j])
     near = np.zeros(n_rows)
     np.maximum.at(near, i, pair_added)
     np.maximum.at(near, j, pair_added)
-    # ... and an impact only where the bounce, e times the approach, would be faster than that
-    limit = (RESTING_STEPS * np.maximum(near[i], near[j]) + BOUNCE_FLOOR) / restitution
-    return bounce_sweeps_numpy(i, j, np.ascontiguousarray(n.T), w, limit, restitution, v, inv_mass)
+    return near
 
 
-def _velocity_passes(
-    s: _PairScratch, v: np.ndarray, n: np.ndarray, w: np.ndarray, relax: np.ndarray, iterations: int
-) -> np.ndarray:
-    """The Jacobi passes on the normal speeds, in place on v; returns each pair's normal impulse."""
-    p = s.i.size
-    # then the Jacobi passes: no pair left approaching (the target speed is 0)
-    lam = np.zeros(p)
-    new = np.empty(p)
-    vn = np.empty(p)
-    dl = np.empty(p)
-    for _ in range(iterations):
-        s.dot(s.gather_diff(v), n, vn)
-        np.subtract(0.0, vn, out=dl)
-        dl /= w
-        dl *= relax
-        np.add(lam, dl, out=new)
-        np.maximum(new, 0.0, out=new)
-        np.subtract(new, lam, out=dl)
-        lam, new = new, lam
-        if not dl.any():  # nothing changed: neither would any later pass
-            break
-        np.multiply(n, dl, out=s.q)
-        s.scatter_add(v)  # +J n on j, -J n on i: momentum kept
-    return lam
+def _cone(f: np.ndarray, cap: np.ndarray) -> np.ndarray:
+    """:func:`animsim.particle_contacts.step_kernels.cone` on (3, K) impulses, in place."""
+    m = np.sqrt((f[0] * f[0] + f[1] * f[1]) + f[2] * f[2])
+    over = m > cap
+    if over.any():
+        f[:, over] *= cap[over] / m[over]
+    return f
 
 
-def _friction_pass(
+def _tangential(f: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """f without its part along n ((3, K) both): f - (f.n) n."""
+    fn = (f[0] * n[0] + f[1] * n[1]) + f[2] * n[2]
+    return f - fn * n
+
+
+def _warm_start(
     s: _PairScratch,
     v: np.ndarray,
     n: np.ndarray,
-    w: np.ndarray,
-    count: np.ndarray,
+    pk: np.ndarray,
+    kept: Kept,
+    jb: np.ndarray,
     friction: float,
+    walls: WallContacts,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`animsim.particle_contacts.step_kernels.warm_start`: the impulses of the last step
+    applied again, in place on v (and on ``kept.wlam``, ``kept.wft``); returns the pairs' lam, ft."""
+    fresh = kept.stamp[pk] == kept.now - 1
+    lam = np.where(fresh, kept.lam[pk], 0.0)
+    ft = _cone(_tangential(np.ascontiguousarray(kept.ft[pk].T), n), friction * (lam + jb))
+    ft[:, ~fresh] = 0.0
+    wn = walls.normal.T
+    wft = _cone(_tangential(np.ascontiguousarray(kept.wft.T), wn), walls.friction * kept.wlam)
+    kept.wft[:] = wft.T
+    np.multiply(n, lam, out=s.q)
+    s.q += ft
+    np.multiply(wn, kept.wlam, out=s.qw)
+    s.qw += wft
+    s.scatter_add(v, walls=True)
+    return lam, ft
+
+
+def _updates(
+    r: np.ndarray, n: np.ndarray, rw: np.ndarray, lam: np.ndarray, f: np.ndarray, cap_mu, extra
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`animsim.particle_contacts.step_kernels.contact_update` for (3, K) relative
+    velocities r: returns the new lam and f and their changes."""
+    vn = (r[0] * n[0] + r[1] * n[1]) + r[2] * n[2]
+    new = np.maximum(lam - vn * rw, 0.0)
+    cap = cap_mu * (new + extra)
+    g = _cone(f - (r - vn * n) * rw, cap)
+    g[:, (cap == 0.0) & ~f.any(axis=0)] = 0.0  # no friction to give: none
+    return new, g, new - lam, g - f
+
+
+def _resting_passes(
+    s: _PairScratch,
+    v: np.ndarray,
+    n: np.ndarray,
+    relax: np.ndarray,
     lam: np.ndarray,
-    jb: np.ndarray | None,
+    ft: np.ndarray,
+    jb: np.ndarray,
+    friction: float,
+    walls: WallContacts,
+    kept: Kept,
+    wrel: np.ndarray,
+    iterations: int,
 ) -> None:
-    """Coulomb friction on the sliding speeds, in place on v."""
-    i, j = s.i, s.j
-    p = i.size
-    vn = np.empty(p)
-    # one pass, so averaged but not over-relaxed: a grain's contacts stop at most its sliding
-    share = np.minimum(1.0 / np.maximum(count[i], count[j]), 1.0)
-    dvel = s.gather_diff(v)
-    s.dot(dvel, n, vn)
-    vt = dvel - vn * n
-    speed = np.sqrt(s.dot(vt, vt, np.empty(p)))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        # Coulomb's bound on the whole normal impulse: the impact's and the resting one
-        jt = np.minimum(speed / w * share, friction * (lam if jb is None else lam + jb)) / speed
-    # pairs at no sliding speed add nothing (a 0.0 weight leaves every sum's bits alone);
-    # the numba kernel adds +jt vt on i and -jt vt on j: the scatter of -(jt vt)
-    jt = np.where(speed > 0, jt, 0.0)
-    np.negative(jt * vt, out=s.q)
-    s.scatter_add(v)
+    """:func:`animsim.particle_contacts.step_kernels.resting_passes`, in place on v, lam, ft
+    and the walls' ``kept.wlam``, ``kept.wft``."""
+    wr, wn, wu = walls.rows, walls.normal.T, walls.velocity.T
+    wlam, wft = kept.wlam, np.ascontiguousarray(kept.wft.T)
+    for _ in range(iterations):
+        lam_new, ft_new, dl, df = _updates(s.gather_diff(v), n, relax, lam, ft, friction, jb)
+        wlam_new, wft_new, dlw, dfw = _updates(v[wr].T - wu, wn, wrel, wlam, wft, walls.friction, 0.0)
+        lam[:], ft[:], wlam[:], wft[:] = lam_new, ft_new, wlam_new, wft_new
+        if not (dl.any() or df.any() or dlw.any() or dfw.any()):  # neither would any later pass
+            break
+        np.multiply(n, dl, out=s.q)
+        s.q += df
+        np.multiply(wn, dlw, out=s.qw)
+        s.qw += dfw
+        s.scatter_add(v, walls=True)  # +J n on j, -J n on i: momentum kept
+    kept.wft[:] = wft.T
+
+
+def _follow(x: np.ndarray, v: np.ndarray, v0: np.ndarray, allow: np.ndarray, dt: float) -> None:
+    """:func:`animsim.particle_contacts.step_kernels.follow`, in place on x (and v0)."""
+    d = np.subtract(v, v0, out=v0)
+    m = np.sqrt((d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]) + d[:, 2] * d[:, 2])
+    cut = m > allow
+    s = np.full(m.shape, dt)
+    s[cut] = dt * (allow[cut] / m[cut])
+    d *= s[:, None]
+    x += d
 
 
 def _overlap_passes(
-    s: _PairScratch, x: np.ndarray, radius: np.ndarray, w: np.ndarray, relax: np.ndarray, iterations: int
+    s: _PairScratch, x: np.ndarray, radius: np.ndarray, relax: np.ndarray, iterations: int
 ) -> None:
     """The Jacobi passes that remove the overlaps, in place on x."""
     i, j, d = s.i, s.j, s.d
@@ -301,8 +398,7 @@ def _overlap_passes(
         # the numba kernel skips a pair with over <= 0 (so a NaN one is not skipped); a skipped
         # pair's weight 0.0 leaves every sum's bits alone
         with np.errstate(divide="ignore", invalid="ignore"):
-            np.divide(over, w, out=c)
-            c *= relax
+            np.multiply(over, relax, out=c)
             c[over <= 0] = 0.0
             if not c.any():  # no overlap left to remove
                 break

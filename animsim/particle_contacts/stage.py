@@ -13,16 +13,23 @@ from animsim.particle_contacts.constants import (
     BOUNCE_SWEEPS,
     CONTACT_PAIR_BYTES,
     ITERATIONS,
+    OVERLAP_PASSES,
     RELAX,
     RESTING_STEPS,
     SKIN,
     SKIN_USE,
+    SLOP,
 )
 from animsim.particle_contacts.kernels import numba_kernels
 from animsim.particle_contacts.neighbours import EMPTY, candidates_numpy, count_pairs_numpy
-from animsim.particle_contacts.resolve import Buffers, dot3_into, gather_diff, resolve_pairs_numpy
+from animsim.particle_contacts.resolve import Buffers, Kept, dot3_into, gather_diff, resolve_pairs_numpy
+from animsim.particle_contacts.walls import NO_WALLS, WallContacts, Walls
 from animsim.system import State
 from animsim.vec import dot3
+
+#: touching: closer than the contact distance and the slop (a resting pair whose overlap was
+#: removed stays a contact, with its impulses); squared, as the distances are
+TOUCH2 = (1.0 + SLOP) ** 2
 
 
 class ParticleContacts(StepStage):
@@ -95,6 +102,12 @@ class ParticleContacts(StepStage):
         self._x_built: np.ndarray | None = None
         self._active_built: np.ndarray | None = None
         self._skin = 0.0
+        # the warm start's memory: each candidate's impulses and the step they were kept at,
+        # each (row, wall)'s likewise (built on first use: the walls are set after __init__)
+        self._lam_c, self._ft_c, self._stamp_c = np.zeros(0), np.zeros((0, 3)), EMPTY
+        self._stamp = 0
+        self._walls: Walls | None = None
+        self._wall_mem: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def reset(self, state: State) -> None:
         """A run starts: the candidate list of another run is not reused (it would be valid, but
@@ -127,7 +140,7 @@ class ParticleContacts(StepStage):
         if not np.array_equal(active, self._active_built):
             return True
         if self._kernels is not None:
-            spread = self._kernels.spread(x, self._x_built, active)
+            spread, far = self._kernels.spread(x, self._x_built, active)
         else:
             d = self._buffers.get("shift", x.shape)
             np.subtract(x, self._x_built, out=d)
@@ -136,14 +149,20 @@ class ParticleContacts(StepStage):
             if d.shape[0] == 0:
                 return False
             hi, lo = d.max(axis=0), d.min(axis=0)
+            corner = np.maximum(-lo, hi)
+            far = float(np.sqrt(corner @ corner))  # no row moved farther
             half = 0.5 * (hi - lo)
-            if 2.0 * float(np.sqrt(half @ half)) <= SKIN_USE * self._skin:
+            if 2.0 * float(np.sqrt(half @ half)) <= SKIN_USE * self._skin and not self._walls_stale(far):
                 return False  # even the corners of the displacements' box are near enough
             d -= 0.5 * (hi + lo)
             spread = float(np.sqrt(dot3(d, d).max()))
         # every displacement lies within ``spread`` of one common shift c (the centre of
         # their box), so any two particles have closed by at most |d_i - c| + |d_j - c| <= 2 spread
-        return not (2.0 * spread <= SKIN_USE * self._skin)
+        return not (2.0 * spread <= SKIN_USE * self._skin) or self._walls_stale(far)
+
+    def _walls_stale(self, far: float) -> bool:
+        """A grain may have reached a wall it was not within the skin of (walls do not fall with it)."""
+        return self._walls is not None and self._walls.count > 0 and not far <= SKIN_USE * self._skin
 
     def bound_memory(self, budget: int) -> None:
         """The candidate list may hold ``budget`` bytes (CONTACT_PAIR_BYTES a pair)."""
@@ -172,6 +191,7 @@ class ParticleContacts(StepStage):
                 ci, cj = candidates_numpy(x, active, self.exclude, reach)
         if 0 <= self.max_pairs < found:
             raise self._too_many(found, t)
+        self._carry_impulses(ci, cj, x.shape[0])
         self._ci, self._cj = ci, cj
         r = self.radius[ci] + self.radius[cj]
         self._reach2 = r * r
@@ -180,7 +200,40 @@ class ParticleContacts(StepStage):
         np.copyto(self._x_built, x)
         self._active_built = active.copy()
         self._all_active = bool(active.all())
+        if self._walls is not None:
+            self._walls.rebuild(x, self.radius, np.flatnonzero(active), self._skin, t)
         self.rebuilds += 1
+
+    def _carry_impulses(self, ci: np.ndarray, cj: np.ndarray, n: int) -> None:
+        """The kept impulses moved to the new list's candidates, pair by pair (keys i n + j,
+        ascending in both lists)."""
+        old = self._ci * n + self._cj
+        new = ci * n + cj
+        lam, ft, stamp = np.zeros(new.size), np.zeros((new.size, 3)), np.full(new.size, -1, dtype=np.int64)
+        if old.size and new.size:
+            at = np.minimum(np.searchsorted(old, new), old.size - 1)
+            hit = old[at] == new
+            lam[hit], ft[hit], stamp[hit] = self._lam_c[at[hit]], self._ft_c[at[hit]], self._stamp_c[at[hit]]
+        self._lam_c, self._ft_c, self._stamp_c = lam, ft, stamp
+
+    def _wall_contacts(
+        self, x: np.ndarray, inv_mass: np.ndarray, active: np.ndarray, t0: float, t1: float
+    ) -> tuple[WallContacts, np.ndarray, np.ndarray]:
+        """This step's wall contacts and their kept impulses (zero for one new this step)."""
+        if self._walls is None or self._walls.count == 0:
+            return NO_WALLS, np.zeros(0), np.zeros((0, 3))
+        size = x.shape[0] * self._walls.count
+        if self._wall_mem is None or self._wall_mem[0].size != size:
+            self._wall_mem = (np.zeros(size), np.zeros((size, 3)), np.full(size, -1, dtype=np.int64))
+        walls = self._walls.contacts(x, self.radius, active & (inv_mass > 0), t0, t1)
+        lam, ft, stamp = self._wall_mem
+        fresh = stamp[walls.key] == self._stamp - 1
+        return walls, np.where(fresh, lam[walls.key], 0.0), np.where(fresh[:, None], ft[walls.key], 0.0)
+
+    def _keep_walls(self, walls: WallContacts, wlam: np.ndarray, wft: np.ndarray) -> None:
+        if self._wall_mem is not None and walls.key.size:
+            lam, ft, stamp = self._wall_mem
+            lam[walls.key], ft[walls.key], stamp[walls.key] = wlam, wft, self._stamp
 
     def _apply(self, state: State, v_old: np.ndarray, t0: float, t1: float) -> bool:
         dt = t1 - t0
@@ -194,66 +247,60 @@ class ParticleContacts(StepStage):
                 self._inv_copy = np.array(inv_mass)
             inv_mass = self._inv_copy
         active = self.active if state.particle_alive is None else self.active & state.particle_alive
+        if self._walls is None and (self.colliders is not None or self.planes is not None):
+            self._walls = Walls(self.colliders, self.planes)
+            self._x_built = None  # found with the next list
         if self._list_is_stale(x, active):
             self._rebuild(x, active, t0)
-        ci, cj = self._ci, self._cj
+        self._stamp += 1
+        ci = self._ci
         if ci.size == 0:
             self.pairs_last = 0
             return False
+        walls, wlam, wft = self._wall_contacts(x, inv_mass, active, t0, t1)
         if self._kernels is not None:
-            p = ci.size
-            b = self._buffers
-            n_rows = x.shape[0]
-            found, changed = self._kernels.step(
-                ci,
-                cj,
-                self._reach2,
-                x,
-                v,
-                v_old,
-                inv_mass,
-                self.radius,
-                self.restitution,
-                self.friction,
-                self.iterations,
-                RELAX,
-                b.get("pi", (p,), np.int64),
-                b.get("pj", (p,), np.int64),
-                b.get("w", (p,)),
-                b.get("rel", (p,)),
-                b.get("nrm", (p, 3)),
-                b.get("limit", (p,)),
-                b.get("lam", (p,)),
-                b.get("jb", (p,)),
-                b.get("due", (p,), np.bool_),
-                b.get("dv", (n_rows, 3)),
-                b.get("count", (n_rows,), np.int64),
-                RESTING_STEPS,
-                BOUNCE_FLOOR,
-                BOUNCE_SWEEPS,
-            )
-            self.pairs_last = int(found)
-            return bool(changed)
+            found, changed = self._numba_step(x, v, v_old, inv_mass, dt, walls, wlam, wft)
+        else:
+            found, changed = self._numpy_step(x, v, v_old, inv_mass, dt, walls, wlam, wft)
+        self.pairs_last = int(found)
+        if changed:
+            self._keep_walls(walls, wlam, wft)
+        return changed
+
+    def _numba_step(self, x, v, v_old, inv_mass, dt, walls, wlam, wft) -> tuple[int, bool]:  # type: ignore[no-untyped-def]
+        assert self._kernels is not None
+        p = self._ci.size
+        nw = walls.rows.size
+        b = self._buffers
+        n_rows = x.shape[0]
+        found, changed = self._kernels.step(
+            self._ci, self._cj, self._reach2, TOUCH2, x, v, v_old, inv_mass, self.radius,
+            self.restitution, self.friction, self.iterations, OVERLAP_PASSES, RELAX, dt,
+            b.get("pi", (p,), np.int64), b.get("pj", (p,), np.int64), b.get("pk", (p,), np.int64),
+            b.get("w", (p,)), b.get("rel", (p,)), b.get("nrm", (p, 3)), b.get("limit", (p,)),
+            b.get("lam", (p,)), b.get("ft", (p, 3)), b.get("jb", (p,)), b.get("due", (p,), np.bool_),
+            self._lam_c, self._ft_c, self._stamp_c, self._stamp,
+            walls.rows, walls.normal, walls.velocity, walls.friction, b.get("wrel", (nw,)), wlam, wft,
+            b.get("dv", (n_rows, 3)), b.get("v0", (n_rows, 3)), b.get("added", (n_rows,)), b.get("near", (n_rows,)),
+            b.get("count", (n_rows,), np.int64),
+            RESTING_STEPS, BOUNCE_FLOOR, BOUNCE_SWEEPS,
+        )  # fmt: skip
+        return int(found), bool(changed)
+
+    def _numpy_step(self, x, v, v_old, inv_mass, dt, walls, wlam, wft) -> tuple[int, bool]:  # type: ignore[no-untyped-def]
         # the candidates that overlap now (the numba kernel's test)
+        ci, cj = self._ci, self._cj
         b = self._buffers
         p = ci.size
         d3 = gather_diff(x, ci, cj, b.get("d3", (p, 3)), b.get("t3", (p, 3)))
         d2 = dot3_into(d3, d3, b.get("s1", (p,)), b.get("s2", (p,)))
-        keep = d2 < self._reach2
-        i, j = ci[keep], cj[keep]
-        self.pairs_last = len(i)
-        if len(i) == 0:
-            return False
-        return resolve_pairs_numpy(
-            i,
-            j,
-            x,
-            v,
-            v_old,
-            inv_mass,
-            self.radius,
-            self.restitution,
-            self.friction,
-            self.iterations,
-            b,
-        )
+        found = int(np.count_nonzero(d2 < self._reach2))
+        pk = np.flatnonzero(d2 < np.multiply(self._reach2, TOUCH2, out=b.get("s2", (p,))))
+        if pk.size == 0:
+            return found, False
+        kept = Kept(self._lam_c, self._ft_c, self._stamp_c, self._stamp, wlam, wft)
+        changed = resolve_pairs_numpy(
+            ci[pk], cj[pk], pk, x, v, v_old, inv_mass, self.radius, self.restitution, self.friction,
+            dt, kept, walls, self.iterations, b,
+        )  # fmt: skip
+        return found, changed
