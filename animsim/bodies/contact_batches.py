@@ -1,6 +1,7 @@
 """Batches of a contact list in which no body appears twice and each body's contacts keep their
 order: a batch is then one vectorised update whose result is the sequential one (the NumPy
-contact solver, :mod:`animsim.bodies.contact_solve`, sweeps batch by batch)."""
+contact solver, :mod:`animsim.bodies.contact_solve`, sweeps batch by batch); and the islands
+of a contact list, whose sweeps converge each on its own."""
 
 from __future__ import annotations
 
@@ -41,3 +42,22 @@ def slot_batches(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     batch = np.empty(a.size, dtype=np.int64)
     batch[order] = rank
     return batch
+
+
+def islands(a: np.ndarray, b: np.ndarray, bodies: int) -> np.ndarray:
+    """The island of each contact (C,), numbered 0, 1, ... in order of first appearance: bodies
+    joined through contacts between them form one island; planes and colliders join nothing,
+    so a body that touches only them is an island of its own. Islands share no body, so the
+    sequential impulses of one never change another's velocities: each island's sweeps can
+    stop once its own have converged (:func:`animsim.bodies.contact_solve._sweeps`)."""
+    from scipy.sparse import coo_matrix  # scipy is imported where used (a heavy import)
+    from scipy.sparse.csgraph import connected_components
+
+    pair = b >= 0
+    graph = coo_matrix((np.ones(int(pair.sum())), (a[pair], b[pair])), shape=(bodies, bodies))
+    _, label = connected_components(graph, directed=False)
+    _, first, island = np.unique(label[a], return_index=True, return_inverse=True)
+    # number the islands by their first contact, whatever scipy's labels were
+    rank = np.empty(first.size, dtype=np.int64)
+    rank[np.argsort(first, kind="stable")] = np.arange(first.size)
+    return rank[island.reshape(-1)]

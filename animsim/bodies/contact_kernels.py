@@ -758,11 +758,17 @@ def _sweep(
     tgt: np.ndarray,
     jn: np.ndarray,
     jt: np.ndarray,
-) -> float:
+    island: np.ndarray,
+    live: np.ndarray,
+    change: np.ndarray,
+) -> None:
     """One sweep of the sequential impulses: each contact's normal impulse toward its target,
-    then its friction. Returns the largest change (mass times impulse) of the sweep."""
-    change = 0.0
+    then its friction; contacts of an island no longer ``live`` are passed over. Each island's
+    largest change (mass times impulse) of the sweep goes into ``change``."""
     for i in range(count):
+        k = island[i]
+        if not live[k]:
+            continue
         ai, bi = a[i], b[i]
         vn = _normal_speed(i, ai, bi, n, g, v, w)
         new = jn[i] + (tgt[i] - vn) * inv_kn[i]
@@ -777,9 +783,8 @@ def _sweep(
         ix, iy, iz = wx - jt[i, 0], wy - jt[i, 1], wz - jt[i, 2]
         jt[i, 0], jt[i, 1], jt[i, 2] = wx, wy, wz
         big = max(abs(dj), max(abs(ix), max(abs(iy), abs(iz))))
-        change = max(change, mt[i] * big)
+        change[k] = max(change[k], mt[i] * big)
         _push_friction(i, ai, bi, ix, iy, iz, ma, mb, gm, v, w)
-    return change
 
 
 @numba_helper
@@ -805,13 +810,27 @@ def _sweeps(
     jt: np.ndarray,
     least: int,
     most: int,
+    island: np.ndarray,
 ) -> None:
     """Sweeps, at least ``least``, then until one changes no velocity by more than
-    SWEEP_TOLERANCE, at most ``most`` (solve's _sweeps)."""
+    SWEEP_TOLERANCE, at most ``most``, island by island (``island`` (C,); solve's _sweeps)."""
+    size = 0
+    for i in range(count):
+        size = max(size, island[i] + 1)
+    live = np.ones(size, dtype=np.bool_)
+    change = np.empty(size)
     for sweep in range(max(least, most)):
-        change = _sweep(count, a, b, ra, rb, n, friction, v, w, g, gm, kt6, inv_kn, ma, mb, mt, tgt, jn, jt)
-        if sweep + 1 >= least and not change > SWEEP_TOLERANCE:
-            break
+        change[:] = 0.0
+        _sweep(
+            count, a, b, ra, rb, n, friction, v, w, g, gm, kt6, inv_kn, ma, mb, mt, tgt, jn, jt, island, live, change
+        )  # fmt: skip
+        if sweep + 1 >= least:
+            left = False
+            for k in range(size):
+                live[k] = live[k] and change[k] > SWEEP_TOLERANCE
+                left = left or live[k]
+            if not left:
+                break
 
 
 @numba_helper
@@ -831,6 +850,7 @@ def _shock_pass(
     dt: float,
     impact: np.ndarray,
     level: np.ndarray,
+    island: np.ndarray,
     jn: np.ndarray,
     jt: np.ndarray,
 ) -> None:
@@ -874,8 +894,9 @@ def _shock_pass(
             tgt[i] = min(depth[sel[i]], 0.0) / dt  # resting or speculative (as _bounce_targets)
         fr = friction[sel]
         _sweeps(
-            k, sa, sb, sra, srb, sn, fr, v, w, g, gm, kt6, inv_kn, ma, mb, mt, tgt, sjn, sjt, 1, SHOCK_SWEEPS
-        )
+            k, sa, sb, sra, srb, sn, fr, v, w, g, gm, kt6, inv_kn, ma, mb, mt, tgt, sjn, sjt, 1, SHOCK_SWEEPS,
+            island[sel],
+        )  # fmt: skip
         for i in range(k):
             jn[sel[i]] = sjn[i]
             for m in range(3):
@@ -985,11 +1006,13 @@ def _solve_list_loop(
     max_sweeps: int,
     cold: bool,
     level: np.ndarray,
+    island: np.ndarray,
 ) -> None:
     """Twin of :func:`solve`, :func:`shock_pass` then :func:`follow_impulses` (when h > 0): the
     first ``count`` contacts one after the other, ``iterations`` times (first without friction
     when ``cold``); the levels of a stack settled from the ground up (``level`` the bodies');
     then the bodies moved as the impulses moved them (the depths left into ``depth_out``).
+    ``island`` (C,): each contact's island (contact_batches.islands), swept until it converged.
     ``jn`` (C,), ``jt`` (C, 3): the impulses to start from (warm starting; applied first,
     contact by contact, except on impacts), in place the impulses each contact ended with."""
     v0 = v.copy()
@@ -1022,8 +1045,14 @@ def _solve_list_loop(
     least, most = iterations, max_sweeps
     if cold:  # as solve: the normal impulses first, without friction
         fr = np.zeros(count)
-        _sweeps(count, a, b, ra, rb, n, fr, v, w, g, gm, kt6, inv_kn, ma, mb, mt, tgt, jn, jt, least, most)
-    _sweeps(count, a, b, ra, rb, n, friction, v, w, g, gm, kt6, inv_kn, ma, mb, mt, tgt, jn, jt, least, most)
+        _sweeps(
+            count, a, b, ra, rb, n, fr, v, w, g, gm, kt6, inv_kn, ma, mb, mt, tgt, jn, jt, least, most, island
+        )
+    _sweeps(
+        count, a, b, ra, rb, n, friction, v, w, g, gm, kt6, inv_kn, ma, mb, mt, tgt, jn, jt, least, most, island
+    )  # fmt: skip
     body, forces = (q, inv_mass, inv_inertia), (resting_speed, dv, dx)
-    _shock_pass(count, a, b, ra, rb, n, depth, friction, v, w, body, forces, dt, impact, level, jn, jt)
+    _shock_pass(
+        count, a, b, ra, rb, n, depth, friction, v, w, body, forces, dt, impact, level, island, jn, jt
+    )
     _follow_impulses(count, a, b, ra, rb, n, depth, impact, x, q, v, w, v0, w0, h, depth_out)

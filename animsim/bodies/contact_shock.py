@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from animsim.bodies.contact_batches import islands
 from animsim.bodies.contact_constants import SHOCK_SWEEPS
 from animsim.bodies.contact_detection import Contacts
 from animsim.bodies.contact_solve import _contact_rows, _groups, _sweeps
@@ -71,6 +72,7 @@ def shock_pass(
     if not live.any():
         return
     vT, wT = v.T.copy(), w.T.copy()
+    island = islands(c.a, c.b, v.shape[0])  # each level's sweeps converge island by island
     for lv in np.unique(up[live]):
         sel = np.flatnonzero(live & (up == lv))
         still = level < lv
@@ -83,7 +85,7 @@ def shock_pass(
         target = np.minimum(r.depth, 0.0) / dt
         sv = None if surface is None else surface[rows].T
         sjn, sjt = jn[rows], jt[rows].T.copy()
-        _sweeps(r, _groups(r), sv, target, sjn, sjt, vT, wT, 1, SHOCK_SWEEPS)
+        _sweeps(r, _groups(r), sv, target, sjn, sjt, vT, wT, 1, SHOCK_SWEEPS, island[rows])
         jn[rows] = sjn
         jt[rows] = sjt.T
     v[:] = vT.T

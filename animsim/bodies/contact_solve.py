@@ -17,7 +17,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from animsim.bodies.contact_batches import batches, slot_batches
+from animsim.bodies.contact_batches import batches, islands, slot_batches
 from animsim.bodies.contact_constants import (
     IMPACT_SWEEPS,
     ITERATIONS,
@@ -197,6 +197,7 @@ def solve(
     warm: tuple[np.ndarray, np.ndarray] | None = None,
     max_sweeps: int = MAX_SWEEPS,
     cold: bool = False,
+    island: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Sequential impulses on v (B,3), w (B,3) in place; returns the restitution applied per contact,
     which contacts were impacts (approaching faster than resting; they bounce with it), and the
@@ -208,6 +209,8 @@ def solve(
     None: all still): every speed the contacts work with is relative to it.
     ``cold``: bodies rest on each other with no impulse to start from: the normal impulses are
     found first, without friction (:func:`_sweeps`), then both.
+    ``island``: (C,) the island of each contact (:func:`islands`; None: found here); each
+    island is swept until its own contacts have converged.
 
     The contacts are solved one after the other in list order, ``iterations`` times
     (Catto 2005). Contacts that share no body commute, so the list is cut into
@@ -237,11 +240,11 @@ def solve(
         jt = np.where(bounce | struck, 0.0, warm[1][r.order].T)
         _apply_warm(r.a, r.bb, r.has_b, r.ma, r.mb, r.n, r.gna, r.gnb, r.ga, r.gb, jn, jt, vT_rows, wT_rows)
     groups = _groups(r)
+    isl = (islands(c.a, c.b, v.shape[0]) if island is None else island)[r.order]
     if cold:
-        _sweeps(
-            replace(r, friction=np.zeros(count)), groups, sv, target, jn, jt, vT, wT, iterations, max_sweeps
-        )
-    _sweeps(r, groups, sv, target, jn, jt, vT, wT, iterations, max_sweeps)
+        unfree = replace(r, friction=np.zeros(count))
+        _sweeps(unfree, groups, sv, target, jn, jt, vT, wT, iterations, max_sweeps, isl)
+    _sweeps(r, groups, sv, target, jn, jt, vT, wT, iterations, max_sweeps, isl)
     v[:] = vT.T
     w[:] = wT.T
     e_out[r.order] = e_used
@@ -301,9 +304,15 @@ def _sweeps(
     wT: np.ndarray,
     least: int,
     most: int,
+    island: np.ndarray,
 ) -> int:
     """Sweeps over the batches, at least ``least``, then until one changes no velocity by more than
     SWEEP_TOLERANCE, at most ``most`` (in place, as :func:`_solve_batch`); returns how many.
+    The rule holds per island (``island`` (C,), in the solver's order; :func:`islands`): an
+    island whose sweep changed none of its velocities by more than the tolerance is left as it
+    is from then on, and the sweeps end when every island has converged or at ``most``. Islands
+    share no body, so each ends as it would alone: a thousand bodies lying apart on a floor
+    no longer all take the sweeps of the slowest one.
 
     Without friction (``r.friction`` zero) this is the first half of a cold step: from zero
     impulses, each corner of a box first pressed onto a floor slides out as the box turns, and
@@ -313,12 +322,17 @@ def _sweeps(
     the friction after (the staggered projections of Kaufman, Sueda, James and Pai, SIGGRAPH
     Asia 2008, one round of them) leaves the friction the little that is needed."""
     sweep = 0
+    live = np.ones(int(island.max(initial=-1)) + 1, dtype=bool)
     for sweep in range(max(least, most)):
-        change = 0.0
+        change = np.zeros(live.size)
         for g in groups:
-            change = max(change, _solve_batch(r, g, sv, target, jn, jt, vT, wT))
-        if sweep + 1 >= least and not change > SWEEP_TOLERANCE:
-            break
+            act = live[island[g[0]]]
+            if act.any():
+                _solve_batch(r, g, sv, target, jn, jt, vT, wT, act, island[g[0]], change)
+        if sweep + 1 >= least:
+            live &= change > SWEEP_TOLERANCE
+            if not live.any():
+                break
     return sweep + 1
 
 
@@ -341,15 +355,20 @@ def _solve_batch(
     jt: np.ndarray,
     vT: np.ndarray,
     wT: np.ndarray,
-) -> float:
+    act: np.ndarray,
+    island: np.ndarray,
+    change: np.ndarray,
+) -> None:
     """One batch of a sweep (no body twice in it), normal then friction; in place on the impulses
-    jn (C,), jt (3, C) and on vT, wT (3, B); returns the batch's largest change of velocity."""
+    jn (C,), jt (3, C) and on vT, wT (3, B). Rows not ``act`` (their island has converged) keep
+    their impulses (a change of zero, which leaves the velocities as they are); each island's
+    largest change of velocity goes into ``change`` (per island; ``island`` the rows')."""
     s, ai, hb, bi, sb = g
     va, wa = vT[:, ai], wT[:, ai]
     vb, wb = vT[:, bi], wT[:, bi]  # empty when no contact of the batch has a body b
-    dj = _normal_impulse(r, g, sv, target, jn, va, wa, vb, wb)
-    imp = _friction_impulse(r, g, sv, jn, jt, va, wa, vb, wb)
-    change = float(np.max(r.m_t[s] * np.maximum(np.abs(dj), np.abs(imp).max(axis=0))))
+    dj = _normal_impulse(r, g, sv, target, jn, va, wa, vb, wb, act)
+    imp = _friction_impulse(r, g, sv, jn, jt, va, wa, vb, wb, act)
+    np.maximum.at(change, island, r.m_t[s] * np.maximum(np.abs(dj), np.abs(imp).max(axis=0)))
     ga, gb = r.ga, r.gb
     va += r.ma[s] * imp
     wa += (ga[0][:, s] * imp[0] + ga[1][:, s] * imp[1]) + ga[2][:, s] * imp[2]
@@ -361,7 +380,6 @@ def _solve_batch(
         wb -= (gb[0][:, sb] * ib[0] + gb[1][:, sb] * ib[1]) + gb[2][:, sb] * ib[2]
         vT[:, bi] = vb
         wT[:, bi] = wb
-    return change
 
 
 def _normal_impulse(
@@ -374,6 +392,7 @@ def _normal_impulse(
     wa: np.ndarray,
     vb: np.ndarray,
     wb: np.ndarray,
+    act: np.ndarray,
 ) -> np.ndarray:
     """The batch's normal impulses: updates jn and the batch's velocities va, wa, vb, wb (3, k) in
     place; returns the change of each normal impulse."""
@@ -385,7 +404,7 @@ def _normal_impulse(
         vn[hb] = vn[hb] - (_dot3(vb, n[:, sb]) + _dot3(wb, r.rnb[:, sb]))
     if sv is not None:
         vn = vn - _dot3(sv[:, s], ns)
-    new = np.maximum(jn[s] + (target[s] - vn) * r.inv_kn[s], 0.0)
+    new = np.where(act, np.maximum(jn[s] + (target[s] - vn) * r.inv_kn[s], 0.0), jn[s])
     dj: np.ndarray = new - jn[s]
     jn[s] = new
     va += (r.ma[s] * dj) * ns
@@ -406,6 +425,7 @@ def _friction_impulse(
     wa: np.ndarray,
     vb: np.ndarray,
     wb: np.ndarray,
+    act: np.ndarray,
 ) -> np.ndarray:
     """The batch's friction impulses (3, k) from the velocities after its normal impulses; updates
     jt in place and returns the change, which the caller applies."""
@@ -431,6 +451,7 @@ def _friction_impulse(
     mag2 = _dot3(want, want)
     over = mag2 > cap * cap
     want = np.where(over, want * (cap / np.sqrt(np.where(over, mag2, 1.0))), want)
+    want = np.where(act, want, jts)
     imp: np.ndarray = want - jts
     jt[:, s] = want
     return imp

@@ -50,6 +50,7 @@ from typing import Any
 import numpy as np
 
 from animsim.bodies import projection
+from animsim.bodies.contact_batches import islands
 from animsim.bodies.contact_constants import (
     COLD_SWEEPS,
     ITERATIONS,
@@ -254,6 +255,7 @@ class BodyContacts(StepStage):
             (jn0, jt0),
             sweeps,
             cold,
+            islands(c.a, c.b, self.count),
         )
         level = projection.levels(c.a, c.b, self.inv_mass)
         shock_pass(c, impact, level, q, self.inv_mass, self.inv_inertia, surface, dt, jn, jt, v, w)
@@ -338,6 +340,7 @@ class BodyContacts(StepStage):
             sweeps,
             cold,
             projection.levels(c.a, c.b, self.inv_mass),
+            islands(c.a, c.b, self.count),
         )
         self.warm.keep(c.a, c.b, c.plane, c.n, local, jn, jt)
         push = projection.pushes(c.depth, depth_left, e_used)
