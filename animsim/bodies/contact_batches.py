@@ -45,19 +45,17 @@ def slot_batches(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def islands(a: np.ndarray, b: np.ndarray, bodies: int) -> np.ndarray:
-    """The island of each contact (C,), numbered 0, 1, ... in order of first appearance: bodies
-    joined through contacts between them form one island; planes and colliders join nothing,
-    so a body that touches only them is an island of its own. Islands share no body, so the
-    sequential impulses of one never change another's velocities: each island's sweeps can
-    stop once its own have converged (:func:`animsim.bodies.contact_solve._sweeps`)."""
+    """The island of each contact (C,), numbers below ``bodies``: bodies joined through contacts
+    between them form one island; planes and colliders join nothing, so a body that touches
+    only them is an island of its own. Islands share no body, so the sequential impulses of
+    one never change another's velocities: each island's sweeps can stop once its own have
+    converged (:func:`animsim.bodies.contact_solve._sweeps`). The numbers are the connected
+    components of the bodies (numbered from the lowest body up; not renumbered by first
+    contact: that sort took 0.9 ms a step for 4,000 contacts, six times the rest)."""
     from scipy.sparse import coo_matrix  # scipy is imported where used (a heavy import)
     from scipy.sparse.csgraph import connected_components
 
     pair = b >= 0
     graph = coo_matrix((np.ones(int(pair.sum())), (a[pair], b[pair])), shape=(bodies, bodies))
     _, label = connected_components(graph, directed=False)
-    _, first, island = np.unique(label[a], return_index=True, return_inverse=True)
-    # number the islands by their first contact, whatever scipy's labels were
-    rank = np.empty(first.size, dtype=np.int64)
-    rank[np.argsort(first, kind="stable")] = np.arange(first.size)
-    return rank[island.reshape(-1)]
+    return label[a].astype(np.int64)

@@ -67,5 +67,5 @@ def test_islands_are_joined_by_body_contacts_and_not_by_planes() -> None:
     # contacts: 0-plane, 1-2, 2-plane, 3-plane, 4-3 (b = -1: a plane or a collider)
     a = np.array([0, 1, 2, 3, 4, 5])
     b = np.array([-1, 2, -1, -1, 3, -1])
-    # bodies 0 | 1, 2 | 3, 4 | 5: numbered by first contact
+    # bodies 0 | 1, 2 | 3, 4 | 5: one island each, numbered from the lowest body up
     assert islands(a, b, 6).tolist() == [0, 1, 1, 2, 2, 3]
