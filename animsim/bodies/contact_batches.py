@@ -49,7 +49,7 @@ def islands(a: np.ndarray, b: np.ndarray, bodies: int) -> np.ndarray:
     between them form one island; planes and colliders join nothing, so a body that touches
     only them is an island of its own. Islands share no body, so the sequential impulses of
     one never change another's velocities: each island's sweeps can stop once its own have
-    converged (:func:`animsim.bodies.contact_solve._sweeps`). The numbers are the connected
+    converged (:func:`animsim.bodies.contact_solve.sweeps`). The numbers are the connected
     components of the bodies (numbered from the lowest body up; not renumbered by first
     contact: that sort took 0.9 ms a step for 4,000 contacts, six times the rest)."""
     from scipy.sparse import coo_matrix  # scipy is imported where used (a heavy import)

@@ -25,7 +25,7 @@ MAX_SWEEPS = 100
 #: needs about 2000 sweeps from zero before its four contacts per box agree; cut short at 300,
 #: the first step leaves its boxes turning by 1e-4 rad and the stack leans off within a minute.
 #: In such a step the normal impulses are found first, without friction (850 sweeps for ten
-#: boxes), then with it (contact_solve._sweeps)
+#: boxes), then with it (contact_solve.sweeps)
 COLD_SWEEPS = 2000
 #: sweeps of the shock propagation pass per level of a stack, at most (until a sweep changes no
 #: velocity by more than SWEEP_TOLERANCE; a box on the box below takes a few)

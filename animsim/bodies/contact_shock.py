@@ -36,7 +36,7 @@ import numpy as np
 from animsim.bodies.contact_batches import islands
 from animsim.bodies.contact_constants import SHOCK_SWEEPS
 from animsim.bodies.contact_detection import Contacts
-from animsim.bodies.contact_solve import _contact_rows, _groups, _sweeps
+from animsim.bodies.contact_solve import contact_groups, contact_rows, sweeps
 
 
 def contact_levels(a: np.ndarray, b: np.ndarray, level: np.ndarray) -> np.ndarray:
@@ -79,13 +79,13 @@ def shock_pass(
         im = np.where(still, 0.0, inv_mass)
         ii = np.where(still[:, None], 0.0, inv_inertia)
         sub = Contacts(*(getattr(c, f)[sel] for f in Contacts.__dataclass_fields__))
-        r = _contact_rows(sub, q, im, ii)
+        r = contact_rows(sub, q, im, ii)
         rows = sel[r.order]
         # only resting and speculative contacts: the speed that closes a gap within the step
         target = np.minimum(r.depth, 0.0) / dt
         sv = None if surface is None else surface[rows].T
         sjn, sjt = jn[rows], jt[rows].T.copy()
-        _sweeps(r, _groups(r), sv, target, sjn, sjt, vT, wT, 1, SHOCK_SWEEPS, island[rows])
+        sweeps(r, contact_groups(r), sv, target, sjn, sjt, vT, wT, 1, SHOCK_SWEEPS, island[rows])
         jn[rows] = sjn
         jt[rows] = sjt.T
     v[:] = vT.T

@@ -101,7 +101,7 @@ def inv_world_inertia(q: np.ndarray, inv_inertia: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class _ContactRows:
+class ContactRows:
     """The contacts in the solver's order (batch after batch, :func:`batches`) with what the
     solve needs of each, computed once per step. Vectors are (3, C), inertias (6, C) rows."""
 
@@ -137,8 +137,8 @@ class _ContactRows:
 _Group = tuple[slice, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
-def _contact_rows(c: Contacts, q: np.ndarray, inv_mass: np.ndarray, inv_inertia: np.ndarray) -> _ContactRows:
-    """Sort the contacts into batches and compute their effective masses (see :class:`_ContactRows`)."""
+def contact_rows(c: Contacts, q: np.ndarray, inv_mass: np.ndarray, inv_inertia: np.ndarray) -> ContactRows:
+    """Sort the contacts into batches and compute their effective masses (see :class:`ContactRows`)."""
     coupled = bool((c.b >= 0).any())
     batch = batches(c.a, c.b) if coupled else slot_batches(c.a, c.b)
     order = np.argsort(batch, kind="stable")
@@ -174,7 +174,7 @@ def _contact_rows(c: Contacts, q: np.ndarray, inv_mass: np.ndarray, inv_inertia:
         k_b, gb = _arm_inertia(mat_b, rb)
         k_t = np.where(has_b, k_t + k_b, k_t)
         m_t = np.where(has_b, ma + mb, ma)
-    return _ContactRows(
+    return ContactRows(
         coupled, order, batch[order], cuts, a, b, has_b, bb, n, ra, rb, restitution, friction, depth,
         ma, mb, rna, rnb, gna, gnb, inv_kn, k_t, m_t, ga, gb,
     )  # fmt: skip
@@ -208,7 +208,7 @@ def solve(
     ``surface``: (C, 3) the velocity of the surface each contact touches (a keyframed collider;
     None: all still): every speed the contacts work with is relative to it.
     ``cold``: bodies rest on each other with no impulse to start from: the normal impulses are
-    found first, without friction (:func:`_sweeps`), then both.
+    found first, without friction (:func:`sweeps`), then both.
     ``island``: (C,) the island of each contact (:func:`islands`; None: found here); each
     island is swept until its own contacts have converged.
 
@@ -224,7 +224,7 @@ def solve(
     e_out = np.zeros(count)
     if count == 0:
         return e_out, np.zeros(0, dtype=bool), np.zeros(0), np.zeros((0, 3))
-    r = _contact_rows(c, q, inv_mass, inv_inertia)
+    r = contact_rows(c, q, inv_mass, inv_inertia)
     vT, wT = v.T.copy(), w.T.copy()
     rest_b = np.where(r.has_b, resting_speed[r.bb], 0.0)
     limit = resting_speed[r.a] + rest_b + RESTING_FLOOR
@@ -239,12 +239,12 @@ def solve(
         jn = np.where(bounce | struck, 0.0, warm[0][r.order])
         jt = np.where(bounce | struck, 0.0, warm[1][r.order].T)
         _apply_warm(r.a, r.bb, r.has_b, r.ma, r.mb, r.n, r.gna, r.gnb, r.ga, r.gb, jn, jt, vT_rows, wT_rows)
-    groups = _groups(r)
+    groups = contact_groups(r)
     isl = (islands(c.a, c.b, v.shape[0]) if island is None else island)[r.order]
     if cold:
         unfree = replace(r, friction=np.zeros(count))
-        _sweeps(unfree, groups, sv, target, jn, jt, vT, wT, iterations, max_sweeps, isl)
-    _sweeps(r, groups, sv, target, jn, jt, vT, wT, iterations, max_sweeps, isl)
+        sweeps(unfree, groups, sv, target, jn, jt, vT, wT, iterations, max_sweeps, isl)
+    sweeps(r, groups, sv, target, jn, jt, vT, wT, iterations, max_sweeps, isl)
     v[:] = vT.T
     w[:] = wT.T
     e_out[r.order] = e_used
@@ -258,7 +258,7 @@ def solve(
 
 
 def _bounce_targets(
-    r: _ContactRows,
+    r: ContactRows,
     vT: np.ndarray,
     wT: np.ndarray,
     limit: np.ndarray,
@@ -293,8 +293,8 @@ def _bounce_targets(
     return bounce, target
 
 
-def _sweeps(
-    r: _ContactRows,
+def sweeps(
+    r: ContactRows,
     groups: list[_Group],
     sv: np.ndarray | None,
     target: np.ndarray,
@@ -336,7 +336,7 @@ def _sweeps(
     return sweep + 1
 
 
-def _groups(r: _ContactRows) -> list[_Group]:
+def contact_groups(r: ContactRows) -> list[_Group]:
     """The batches of the sweep (see :data:`_Group`), in order."""
     groups = []
     for k in range(r.cuts.size - 1):
@@ -347,7 +347,7 @@ def _groups(r: _ContactRows) -> list[_Group]:
 
 
 def _solve_batch(
-    r: _ContactRows,
+    r: ContactRows,
     g: _Group,
     sv: np.ndarray | None,
     target: np.ndarray,
@@ -383,7 +383,7 @@ def _solve_batch(
 
 
 def _normal_impulse(
-    r: _ContactRows,
+    r: ContactRows,
     g: _Group,
     sv: np.ndarray | None,
     target: np.ndarray,
@@ -416,7 +416,7 @@ def _normal_impulse(
 
 
 def _friction_impulse(
-    r: _ContactRows,
+    r: ContactRows,
     g: _Group,
     sv: np.ndarray | None,
     jn: np.ndarray,
@@ -458,7 +458,7 @@ def _friction_impulse(
 
 
 def _impact_pass(
-    r: _ContactRows,
+    r: ContactRows,
     limit: np.ndarray,
     dt: float,
     vT: np.ndarray,
