@@ -75,6 +75,85 @@ def numba_candidate_pairs() -> Any:
     return njit(cache=True)(_sweep_pairs_loop)
 
 
+@numba_inline_helper
+def _target_sdf(
+    kind: int, d0: float, d1: float, d2: float, lx: float, ly: float, lz: float
+) -> tuple[float, float, float, float]:
+    """Signed distance and outward normal at (lx, ly, lz) in a body's own frame, from its shape
+    (``kind``) and dimensions (half sizes of a box; radius and half length of a capsule;
+    radius of a sphere): :func:`animsim.bodies.contact_detection.local_sdf`, one point."""
+    if kind == SHAPE_BOX:
+        q0 = abs(lx) - d0
+        q1 = abs(ly) - d1
+        q2 = abs(lz) - d2
+        o0, o1, o2 = max(q0, 0.0), max(q1, 0.0), max(q2, 0.0)
+        out_len = np.sqrt((o0 * o0 + o1 * o1) + o2 * o2)
+        big = q0
+        axis = 0
+        if q1 > big:
+            big, axis = q1, 1
+        if q2 > big:
+            big, axis = q2, 2
+        d = out_len + min(big, 0.0)
+        if out_len > 0:
+            nx = (np.sign(lx) * o0) / out_len
+            ny = (np.sign(ly) * o1) / out_len
+            nz = (np.sign(lz) * o2) / out_len
+        else:
+            nx, ny, nz = 0.0, 0.0, 0.0
+            pa = lx if axis == 0 else (ly if axis == 1 else lz)
+            face = 1.0 if pa >= 0 else -1.0
+            if axis == 0:
+                nx = face
+            elif axis == 1:
+                ny = face
+            else:
+                nz = face
+    else:
+        half = d1 if kind == SHAPE_CAPSULE else 0.0
+        r0 = lx - 0.0
+        r1 = ly - min(max(ly, -half), half)
+        r2 = lz - 0.0
+        dist = np.sqrt((r0 * r0 + r1 * r1) + r2 * r2)
+        d = dist - d0
+        if dist > 0:
+            nx, ny, nz = r0 / dist, r1 / dist, r2 / dist
+        else:
+            nx, ny, nz = 0.0, 1.0, 0.0
+    return d, nx, ny, nz
+
+
+@numba_inline_helper
+def _emit(
+    c: int,
+    a: int,
+    b: int,
+    px: float,
+    py: float,
+    pz: float,
+    nx: float,
+    ny: float,
+    nz: float,
+    depth: float,
+    x: np.ndarray,
+    restitution: np.ndarray,
+    friction: np.ndarray,
+    out_i: np.ndarray,
+    out_v: np.ndarray,
+    out_s: np.ndarray,
+) -> None:
+    """Write contact ``c`` of :func:`_pair_contacts_loop`: bodies a and b, the point p (its
+    arms from both centres), the normal n, the depth, the mean restitution and the geometric
+    mean of the frictions (pair_contacts' rules)."""
+    out_i[0, c], out_i[1, c] = a, b
+    out_v[0, c, 0], out_v[0, c, 1], out_v[0, c, 2] = px - x[a, 0], py - x[a, 1], pz - x[a, 2]
+    out_v[1, c, 0], out_v[1, c, 1], out_v[1, c, 2] = px - x[b, 0], py - x[b, 1], pz - x[b, 2]
+    out_v[2, c, 0], out_v[2, c, 1], out_v[2, c, 2] = nx, ny, nz
+    out_s[0, c] = depth
+    out_s[1, c] = 0.5 * (restitution[a] + restitution[b])
+    out_s[2, c] = np.sqrt(friction[a] * friction[b])
+
+
 def _pair_contacts_loop(
     x: np.ndarray,
     q: np.ndarray,
@@ -93,14 +172,9 @@ def _pair_contacts_loop(
     spheres in order) and the same arithmetic (:func:`quaternion.rotate`, :func:`local_sdf`)."""
     kmax = points.shape[1]
     cap = 2 * ci.shape[0] * kmax
-    a_out = np.empty(cap, dtype=np.int64)
-    b_out = np.empty(cap, dtype=np.int64)
-    ra_out = np.empty((cap, 3))
-    rb_out = np.empty((cap, 3))
-    n_out = np.empty((cap, 3))
-    depth_out = np.empty(cap)
-    e_out = np.empty(cap)
-    mu_out = np.empty(cap)
+    out_i = np.empty((2, cap), dtype=np.int64)  # a, b
+    out_v = np.empty((3, cap, 3))  # ra, rb, n
+    out_s = np.empty((3, cap))  # depth, e, mu
     c = 0
     box_points = np.empty((MAX_BOX_POINTS, 3))
     box_depth = np.empty(MAX_BOX_POINTS)
@@ -119,14 +193,11 @@ def _pair_contacts_loop(
                     x[i], q[i], dims[i], x[j], q[j], dims[j], box_points, box_depth, box_normal
                 )
                 for m in range(k):
-                    px_, py_, pz_ = box_points[m, 0], box_points[m, 1], box_points[m, 2]
-                    a_out[c], b_out[c] = j, i
-                    ra_out[c, 0], ra_out[c, 1], ra_out[c, 2] = px_ - x[j, 0], py_ - x[j, 1], pz_ - x[j, 2]
-                    rb_out[c, 0], rb_out[c, 1], rb_out[c, 2] = px_ - x[i, 0], py_ - x[i, 1], pz_ - x[i, 2]
-                    n_out[c, 0], n_out[c, 1], n_out[c, 2] = box_normal[0], box_normal[1], box_normal[2]
-                    depth_out[c] = box_depth[m]
-                    e_out[c] = 0.5 * (restitution[j] + restitution[i])
-                    mu_out[c] = np.sqrt(friction[j] * friction[i])
+                    _emit(
+                        c, j, i, box_points[m, 0], box_points[m, 1], box_points[m, 2],
+                        box_normal[0], box_normal[1], box_normal[2], box_depth[m],
+                        x, restitution, friction, out_i, out_v, out_s,
+                    )  # fmt: skip
                     c += 1
                 continue
             else:
@@ -144,44 +215,7 @@ def _pair_contacts_loop(
                     tw, -tx_, -ty_, -tz_, cx - x[dst, 0], cy - x[dst, 1], cz - x[dst, 2]
                 )
                 # signed distance and outward normal in the target's frame (local_sdf)
-                if kind[dst] == SHAPE_BOX:
-                    q0 = abs(lx) - dims[dst, 0]
-                    q1 = abs(ly) - dims[dst, 1]
-                    q2 = abs(lz) - dims[dst, 2]
-                    o0, o1, o2 = max(q0, 0.0), max(q1, 0.0), max(q2, 0.0)
-                    out_len = np.sqrt((o0 * o0 + o1 * o1) + o2 * o2)
-                    big = q0
-                    axis = 0
-                    if q1 > big:
-                        big, axis = q1, 1
-                    if q2 > big:
-                        big, axis = q2, 2
-                    d = out_len + min(big, 0.0)
-                    if out_len > 0:
-                        nx = (np.sign(lx) * o0) / out_len
-                        ny = (np.sign(ly) * o1) / out_len
-                        nz = (np.sign(lz) * o2) / out_len
-                    else:
-                        nx, ny, nz = 0.0, 0.0, 0.0
-                        pa = lx if axis == 0 else (ly if axis == 1 else lz)
-                        face = 1.0 if pa >= 0 else -1.0
-                        if axis == 0:
-                            nx = face
-                        elif axis == 1:
-                            ny = face
-                        else:
-                            nz = face
-                else:
-                    half = dims[dst, 1] if kind[dst] == SHAPE_CAPSULE else 0.0
-                    r0 = lx - 0.0
-                    r1 = ly - min(max(ly, -half), half)
-                    r2 = lz - 0.0
-                    dist = np.sqrt((r0 * r0 + r1 * r1) + r2 * r2)
-                    d = dist - dims[dst, 0]
-                    if dist > 0:
-                        nx, ny, nz = r0 / dist, r1 / dist, r2 / dist
-                    else:
-                        nx, ny, nz = 0.0, 1.0, 0.0
+                d, nx, ny, nz = _target_sdf(kind[dst], dims[dst, 0], dims[dst, 1], dims[dst, 2], lx, ly, lz)
                 rr = radii[src, k]
                 d = d - rr
                 if not d < 0.0:
@@ -197,23 +231,19 @@ def _pair_contacts_loop(
                 px_ = (cx - rr * wx) + half_d * wx  # halfway between the two surfaces
                 py_ = (cy - rr * wy) + half_d * wy
                 pz_ = (cz - rr * wz) + half_d * wz
-                a_out[c], b_out[c] = src, dst
-                ra_out[c, 0], ra_out[c, 1], ra_out[c, 2] = px_ - x[src, 0], py_ - x[src, 1], pz_ - x[src, 2]
-                rb_out[c, 0], rb_out[c, 1], rb_out[c, 2] = px_ - x[dst, 0], py_ - x[dst, 1], pz_ - x[dst, 2]
-                n_out[c, 0], n_out[c, 1], n_out[c, 2] = wx, wy, wz
-                depth_out[c] = -d
-                e_out[c] = 0.5 * (restitution[src] + restitution[dst])
-                mu_out[c] = np.sqrt(friction[src] * friction[dst])
+                _emit(
+                    c, src, dst, px_, py_, pz_, wx, wy, wz, -d, x, restitution, friction, out_i, out_v, out_s
+                )
                 c += 1
     return (
-        a_out[:c],
-        b_out[:c],
-        ra_out[:c],
-        rb_out[:c],
-        n_out[:c],
-        depth_out[:c],
-        e_out[:c],
-        mu_out[:c],
+        out_i[0, :c],
+        out_i[1, :c],
+        out_v[0, :c],
+        out_v[1, :c],
+        out_v[2, :c],
+        out_s[0, :c],
+        out_s[1, :c],
+        out_s[2, :c],
     )
 
 
