@@ -263,7 +263,7 @@ class BodyContacts(StepStage):
         h = self.follow_weight * dt
         left = follow_impulses(c, impact, x, q, v - v_pre, w - w_pre, h) if h > 0.0 else c.depth
         push = projection.pushes(c.depth, left, e_used)
-        projection.project(c.a, c.b, c.n, push, c.plane, x, self.inv_mass)
+        projection.project(c.a, c.b, c.n, push, c.plane, x, self.inv_mass, level)
         return True
 
     def _apply_numba(
@@ -316,6 +316,7 @@ class BodyContacts(StepStage):
         depth_left = np.empty(count)
         jn, jt, local = self.warm.guess(c.a, c.b, c.plane, c.n, c.ra, q)
         sweeps, cold = self._sweep_limit(c, jn)
+        level = projection.levels(c.a, c.b, self.inv_mass)
         solver(
             count,
             *arrays,
@@ -339,12 +340,12 @@ class BodyContacts(StepStage):
             jt,
             sweeps,
             cold,
-            projection.levels(c.a, c.b, self.inv_mass),
+            level,
             islands(c.a, c.b, self.count),
         )
         self.warm.keep(c.a, c.b, c.plane, c.n, local, jn, jt)
         push = projection.pushes(c.depth, depth_left, e_used)
-        projection.project(c.a, c.b, c.n, push, c.plane, x, self.inv_mass, True)
+        projection.project(c.a, c.b, c.n, push, c.plane, x, self.inv_mass, level, True)
         return True
 
     @staticmethod

@@ -161,12 +161,13 @@ def project(
     plane: np.ndarray,
     x: np.ndarray,
     inv_mass: np.ndarray,
+    level: np.ndarray,
     compiled: bool = False,
 ) -> None:
-    """Move the bodies x (B, 3) by the contacts' ``pushes`` (module docstring), in place."""
+    """Move the bodies x (B, 3) by the contacts' ``pushes`` (module docstring), in place;
+    ``level``: the bodies' :func:`levels` for these contacts (the step's shock pass uses them too)."""
     if a.shape[0] == 0:
         return
-    level = levels(a, b, inv_mass)
     order, starts = groups(a, b, n, plane, level)
     run = numba_settle() if compiled else settle
     run(order, starts, a, b, np.ascontiguousarray(n), push, level, inv_mass, x, SWEEPS, TOLERANCE)
