@@ -210,6 +210,13 @@ class ParticleContacts(StepStage):
     def _carry_impulses(self, ci: np.ndarray, cj: np.ndarray, n: int) -> None:
         """The kept impulses moved to the new list's candidates, pair by pair (keys i n + j,
         ascending in both lists)."""
+        if self._kernels is not None:
+            lam, ft, stamp = np.empty(ci.size), np.empty((ci.size, 3)), np.empty(ci.size, dtype=np.int64)
+            self._kernels.carry(
+                self._ci, self._cj, self._lam_c, self._ft_c, self._stamp_c, ci, cj, lam, ft, stamp
+            )
+            self._lam_c, self._ft_c, self._stamp_c = lam, ft, stamp
+            return
         old = self._ci * n + self._cj
         new = ci * n + cj
         lam, ft, stamp = np.zeros(new.size), np.zeros((new.size, 3)), np.full(new.size, -1, dtype=np.int64)
