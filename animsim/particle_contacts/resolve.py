@@ -379,10 +379,9 @@ def _resting_passes(
 
 
 def _below(dl: np.ndarray, df: np.ndarray, w: np.ndarray, tol: float) -> bool:
-    """:func:`animsim.particle_contacts.step_kernels.largest` times ``w`` is at most ``tol`` for
-    every contact (changes (K,) and (3, K))."""
-    big = np.maximum(np.maximum(np.abs(dl), np.abs(df[0])), np.maximum(np.abs(df[1]), np.abs(df[2])))
-    return bool((big * w <= tol).all())
+    """:func:`animsim.particle_contacts.step_kernels.small` for every contact (changes (K,) and
+    (3, K))."""
+    return bool((np.abs(dl) * w <= tol).all() and (np.abs(df) * w <= tol).all())
 
 
 def _follow(x: np.ndarray, v: np.ndarray, v0: np.ndarray, allow: np.ndarray, dt: float) -> None:

@@ -250,9 +250,10 @@ def contact_update(r0, r1, r2, n0, n1, n2, rw, lam, f0, f1, f2, cap_mu, extra): 
 
 
 @numba_inline_helper
-def largest(a, b, c, d):  # pragma: no cover - compiled too
-    """The largest magnitude of a contact's four impulse changes (normal, friction vector)."""
-    return max(max(abs(a), abs(b)), max(abs(c), abs(d)))
+def small(a, b, c, d, w, tol):  # pragma: no cover - compiled too
+    """Each of a contact's four impulse changes (normal, friction vector) times ``w`` is at most
+    ``tol`` (a NaN is not)."""
+    return abs(a) * w <= tol and abs(b) * w <= tol and abs(c) * w <= tol and abs(d) * w <= tol
 
 
 @numba_helper
@@ -280,7 +281,7 @@ def resting_passes(
             )  # fmt: skip
             if dl != 0.0 or d0 != 0.0 or d1 != 0.0 or d2 != 0.0:
                 moved = True
-                big = big or not largest(dl, d0, d1, d2) * w[k] <= tol
+                big = big or not small(dl, d0, d1, d2, w[k], tol)
             c0, c1, c2 = dl * n0 + d0, dl * n1 + d1, dl * n2 + d2
             dv[i, 0] -= c0
             dv[i, 1] -= c1
@@ -297,7 +298,7 @@ def resting_passes(
             )  # fmt: skip
             if dl != 0.0 or d0 != 0.0 or d1 != 0.0 or d2 != 0.0:
                 moved = True
-                big = big or not largest(dl, d0, d1, d2) * inv_mass[r] <= tol
+                big = big or not small(dl, d0, d1, d2, inv_mass[r], tol)
             dv[r, 0] += dl * n0 + d0
             dv[r, 1] += dl * n1 + d1
             dv[r, 2] += dl * n2 + d2
