@@ -55,7 +55,10 @@ sum of their radii are found and resolved:
 
 A pass that changes nothing (every correction exactly zero, as for grains
 that touch and fall together) ends its iterations: the passes after it would
-change nothing either.
+change nothing either. The resting passes also end after a pass in which no
+contact's impulses changed by more than ``CONVERGED`` (1e-13 m/s, as the change
+of the contact's relative velocity): a warm-started pile at rest needs a pass or
+two a step, not ``ITERATIONS``. Both backends test the same bits the same way.
 
 Both backends do the same operations in the same order: every particle's
 corrections are summed from 0.0 in pair order (the numba kernel scatters pair

@@ -28,6 +28,9 @@ class NumbaKernels(NamedTuple):
     #: (x, x_built, active) -> (how far the displacements spread since the list was built,
     #: a bound on the farthest displacement)
     spread: Any
+    #: (old ci, cj, lam, ft, stamp, new ci, cj, lam, ft, stamp): the kept impulses moved to
+    #: the new list's candidates, as :meth:`ParticleContacts._carry_impulses` does on NumPy
+    carry: Any
 
 
 _KERNELS: NumbaKernels | None = None
@@ -254,6 +257,27 @@ def candidates(x, active, exclude, reach, limit):  # pragma: no cover - compiled
     return sort_pairs(raw_i, raw_j, npairs, n)
 
 
+@numba_helper
+def carry(oi, oj, lam_o, ft_o, stamp_o, ni, nj, lam, ft, stamp):  # pragma: no cover - compiled
+    """Each new candidate (``ni``, ``nj``) takes the impulses the old list kept for the same pair
+    (none: 0 and stamp -1); both lists sorted by (i, j), so one merge finds them."""
+    a = 0
+    m = oi.shape[0]
+    for k in range(ni.shape[0]):
+        i = ni[k]
+        j = nj[k]
+        while a < m and (oi[a] < i or (oi[a] == i and oj[a] < j)):
+            a += 1
+        if a < m and oi[a] == i and oj[a] == j:
+            lam[k] = lam_o[a]
+            ft[k, 0], ft[k, 1], ft[k, 2] = ft_o[a, 0], ft_o[a, 1], ft_o[a, 2]
+            stamp[k] = stamp_o[a]
+        else:
+            lam[k] = 0.0
+            ft[k, 0], ft[k, 1], ft[k, 2] = 0.0, 0.0, 0.0
+            stamp[k] = -1
+
+
 def numba_kernels() -> NumbaKernels:
     """The numba kernels (compiled, or loaded from numba's disk cache, on first use)."""
     global _KERNELS
@@ -312,5 +336,5 @@ def numba_kernels() -> NumbaKernels:
             far += max(-lo[a], hi[a]) ** 2
         return np.sqrt(s), np.sqrt(far)
 
-    _KERNELS = NumbaKernels(candidates, compiled_step(), find_pairs, spread)
+    _KERNELS = NumbaKernels(candidates, compiled_step(), find_pairs, spread, globals()["carry"])
     return _KERNELS

@@ -12,6 +12,7 @@ import numpy as np
 from animsim.particle_contacts.constants import (
     BOUNCE_FLOOR,
     BOUNCE_SWEEPS,
+    CONVERGED,
     ITERATIONS,
     OVERLAP_PASSES,
     RELAX,
@@ -191,7 +192,7 @@ def resolve_pairs_numpy(
     walls: WallContacts = NO_WALLS,
     iterations: int = ITERATIONS,
     buffers: Buffers | None = None,
-) -> bool:
+) -> tuple[bool, int]:
     """Impulses and overlap removal for the pairs (i, j) (sorted by (i, j); ``pk``: their
     candidates in the Verlet list) and the wall contacts, in place (NumPy kernel).
 
@@ -199,14 +200,15 @@ def resolve_pairs_numpy(
     (``(a - b) / w * r`` is not ``(a - b) * (r / w)`` in floating point), and
     contact quantities reach the particles in contact order (``np.add.at`` over
     interleaved bins, which adds its weights bin by bin in array order from 0.0, as the
-    numba kernel's per-particle sums do), so both backends give the same bits.
+    numba kernel's per-particle sums do), so both backends give the same bits. Returns whether
+    any pair was resolved and how many resting passes ran.
     """
     ok = inv_mass[i] + inv_mass[j] > 0
     if not ok.all():
         i, j, pk = i[ok], j[ok], pk[ok]
     p = i.size
     if p == 0:
-        return False
+        return False, 0
     buf = Buffers() if buffers is None else buffers
     n_rows = len(x)
     w = inv_mass[i] + inv_mass[j]
@@ -233,10 +235,11 @@ def resolve_pairs_numpy(
         jb = bounce_sweeps_numpy(i, j, np.ascontiguousarray(n.T), w, limit, restitution, v, inv_mass)
     v0 = v.copy()
     lam, ft = _warm_start(s, v, n, pk, kept, jb, friction, walls)
-    _resting_passes(
+    passes = _resting_passes(
         s,
         v,
         n,
+        w,
         relax,
         lam,
         ft,
@@ -252,7 +255,7 @@ def resolve_pairs_numpy(
     kept.lam[pk] = lam
     kept.ft[pk] = ft.T
     kept.stamp[pk] = kept.now
-    return True
+    return True, passes
 
 
 def _pair_normals(s: _PairScratch, x: np.ndarray, buf: Buffers) -> np.ndarray:
@@ -342,6 +345,7 @@ def _resting_passes(
     s: _PairScratch,
     v: np.ndarray,
     n: np.ndarray,
+    w: np.ndarray,
     relax: np.ndarray,
     lam: np.ndarray,
     ft: np.ndarray,
@@ -351,23 +355,33 @@ def _resting_passes(
     kept: Kept,
     wrel: np.ndarray,
     iterations: int,
-) -> None:
+) -> int:
     """:func:`animsim.particle_contacts.step_kernels.resting_passes`, in place on v, lam, ft
-    and the walls' ``kept.wlam``, ``kept.wft``."""
+    and the walls' ``kept.wlam``, ``kept.wft``; returns how many passes ran."""
     wr, wn, wu = walls.rows, walls.normal.T, walls.velocity.T
     wlam, wft = kept.wlam, np.ascontiguousarray(kept.wft.T)
+    passes = 0
     for _ in range(iterations):
+        passes += 1
         lam_new, ft_new, dl, df = _updates(s.gather_diff(v), n, relax, lam, ft, friction, jb)
         wlam_new, wft_new, dlw, dfw = _updates(v[wr].T - wu, wn, wrel, wlam, wft, walls.friction, 0.0)
         lam[:], ft[:], wlam[:], wft[:] = lam_new, ft_new, wlam_new, wft_new
-        if not (dl.any() or df.any() or dlw.any() or dfw.any()):  # neither would any later pass
-            break
-        np.multiply(n, dl, out=s.q)
-        s.q += df
-        np.multiply(wn, dlw, out=s.qw)
-        s.qw += dfw
-        s.scatter_add(v, walls=True)  # +J n on j, -J n on i: momentum kept
+        if dl.any() or df.any() or dlw.any() or dfw.any():  # else neither would any later pass
+            np.multiply(n, dl, out=s.q)
+            s.q += df
+            np.multiply(wn, dlw, out=s.qw)
+            s.qw += dfw
+            s.scatter_add(v, walls=True)  # +J n on j, -J n on i: momentum kept
+        if _below(dl, df, w, CONVERGED) and _below(dlw, dfw, s.inv_mass[wr], CONVERGED):
+            break  # converged: the last pass's changes are applied, and were all tiny
     kept.wft[:] = wft.T
+    return passes
+
+
+def _below(dl: np.ndarray, df: np.ndarray, w: np.ndarray, tol: float) -> bool:
+    """:func:`animsim.particle_contacts.step_kernels.small` for every contact (changes (K,) and
+    (3, K))."""
+    return bool((np.abs(dl) * w <= tol).all() and (np.abs(df) * w <= tol).all())
 
 
 def _follow(x: np.ndarray, v: np.ndarray, v0: np.ndarray, allow: np.ndarray, dt: float) -> None:

@@ -12,6 +12,7 @@ from animsim.particle_contacts.constants import (
     BOUNCE_FLOOR,
     BOUNCE_SWEEPS,
     CONTACT_PAIR_BYTES,
+    CONVERGED,
     ITERATIONS,
     OVERLAP_PASSES,
     RELAX,
@@ -64,6 +65,8 @@ class ParticleContacts(StepStage):
         self.dissipative = restitution < 1 or friction > 0
         self._kernels = numba_kernels() if backend == "numba" else None
         self.pairs_last = 0
+        #: how many resting passes the last step ran (a statistic, for tests and benchmarks)
+        self.passes_last = 0
         #: the most candidate pairs the list may hold (bound_memory: the memory budget's
         #: share after the rest of the run; -1 when nothing bounds it)
         self.max_pairs = -1
@@ -207,6 +210,13 @@ class ParticleContacts(StepStage):
     def _carry_impulses(self, ci: np.ndarray, cj: np.ndarray, n: int) -> None:
         """The kept impulses moved to the new list's candidates, pair by pair (keys i n + j,
         ascending in both lists)."""
+        if self._kernels is not None:
+            lam, ft, stamp = np.empty(ci.size), np.empty((ci.size, 3)), np.empty(ci.size, dtype=np.int64)
+            self._kernels.carry(
+                self._ci, self._cj, self._lam_c, self._ft_c, self._stamp_c, ci, cj, lam, ft, stamp
+            )
+            self._lam_c, self._ft_c, self._stamp_c = lam, ft, stamp
+            return
         old = self._ci * n + self._cj
         new = ci * n + cj
         lam, ft, stamp = np.zeros(new.size), np.zeros((new.size, 3)), np.full(new.size, -1, dtype=np.int64)
@@ -255,25 +265,26 @@ class ParticleContacts(StepStage):
         self._stamp += 1
         ci = self._ci
         if ci.size == 0:
-            self.pairs_last = 0
+            self.pairs_last = self.passes_last = 0
             return False
         walls, wlam, wft = self._wall_contacts(x, inv_mass, active, t0, t1)
         if self._kernels is not None:
-            found, changed = self._numba_step(x, v, v_old, inv_mass, dt, walls, wlam, wft)
+            found, changed, passes = self._numba_step(x, v, v_old, inv_mass, dt, walls, wlam, wft)
         else:
-            found, changed = self._numpy_step(x, v, v_old, inv_mass, dt, walls, wlam, wft)
+            found, changed, passes = self._numpy_step(x, v, v_old, inv_mass, dt, walls, wlam, wft)
         self.pairs_last = int(found)
+        self.passes_last = passes
         if changed:
             self._keep_walls(walls, wlam, wft)
         return changed
 
-    def _numba_step(self, x, v, v_old, inv_mass, dt, walls, wlam, wft) -> tuple[int, bool]:  # type: ignore[no-untyped-def]
+    def _numba_step(self, x, v, v_old, inv_mass, dt, walls, wlam, wft) -> tuple[int, bool, int]:  # type: ignore[no-untyped-def]
         assert self._kernels is not None
         p = self._ci.size
         nw = walls.rows.size
         b = self._buffers
         n_rows = x.shape[0]
-        found, changed = self._kernels.step(
+        found, changed, passes = self._kernels.step(
             self._ci, self._cj, self._reach2, TOUCH2, x, v, v_old, inv_mass, self.radius,
             self.restitution, self.friction, self.iterations, OVERLAP_PASSES, RELAX, dt,
             b.get("pi", (p,), np.int64), b.get("pj", (p,), np.int64), b.get("pk", (p,), np.int64),
@@ -283,11 +294,11 @@ class ParticleContacts(StepStage):
             walls.rows, walls.normal, walls.velocity, walls.friction, b.get("wrel", (nw,)), wlam, wft,
             b.get("dv", (n_rows, 3)), b.get("v0", (n_rows, 3)), b.get("added", (n_rows,)), b.get("near", (n_rows,)),
             b.get("count", (n_rows,), np.int64),
-            RESTING_STEPS, BOUNCE_FLOOR, BOUNCE_SWEEPS,
+            RESTING_STEPS, BOUNCE_FLOOR, BOUNCE_SWEEPS, CONVERGED,
         )  # fmt: skip
-        return int(found), bool(changed)
+        return int(found), bool(changed), int(passes)
 
-    def _numpy_step(self, x, v, v_old, inv_mass, dt, walls, wlam, wft) -> tuple[int, bool]:  # type: ignore[no-untyped-def]
+    def _numpy_step(self, x, v, v_old, inv_mass, dt, walls, wlam, wft) -> tuple[int, bool, int]:  # type: ignore[no-untyped-def]
         # the candidates that overlap now (the numba kernel's test)
         ci, cj = self._ci, self._cj
         b = self._buffers
@@ -297,10 +308,10 @@ class ParticleContacts(StepStage):
         found = int(np.count_nonzero(d2 < self._reach2))
         pk = np.flatnonzero(d2 < np.multiply(self._reach2, TOUCH2, out=b.get("s2", (p,))))
         if pk.size == 0:
-            return found, False
+            return found, False, 0
         kept = Kept(self._lam_c, self._ft_c, self._stamp_c, self._stamp, wlam, wft)
-        changed = resolve_pairs_numpy(
+        changed, passes = resolve_pairs_numpy(
             ci[pk], cj[pk], pk, x, v, v_old, inv_mass, self.radius, self.restitution, self.friction,
             dt, kept, walls, self.iterations, b,
         )  # fmt: skip
-        return found, changed
+        return found, changed, passes

@@ -249,16 +249,28 @@ def contact_update(r0, r1, r2, n0, n1, n2, rw, lam, f0, f1, f2, cap_mu, extra): 
     return new, g0, g1, g2, new - lam, g0 - f0, g1 - f1, g2 - f2
 
 
+@numba_inline_helper
+def small(a, b, c, d, w, tol):  # pragma: no cover - compiled too
+    """Each of a contact's four impulse changes (normal, friction vector) times ``w`` is at most
+    ``tol`` (a NaN is not)."""
+    return abs(a) * w <= tol and abs(b) * w <= tol and abs(c) * w <= tol and abs(d) * w <= tol
+
+
 @numba_helper
 def resting_passes(
-    pi, pj, p, nrm, rel, lam, ft, jb, mu, wr, wn, wu, wmu, wrel, wlam, wft, v, dv, inv_mass, iterations
-):  # pragma: no cover - compiled
+    pi, pj, p, nrm, w, rel, lam, ft, jb, mu, wr, wn, wu, wmu, wrel, wlam, wft, v, dv, inv_mass, iterations, tol
+):  # pragma: no cover - compiled  # fmt: skip
     """The Jacobi passes of the resting contacts (pairs, then walls): each scatters contact by
     contact into dv (every particle's sum in contact order, from 0.0), then adds dv / m; a
-    pass that changed nothing adds nothing."""
+    pass that changed nothing adds nothing. A pass in which no contact's change of impulse
+    times its summed inverse masses (``w``; a wall's: its grain's) exceeds ``tol`` is the last;
+    returns how many passes ran."""
+    passes = 0
     for _ in range(iterations):
+        passes += 1
         dv[:] = 0.0
         moved = False
+        big = False
         for k in range(p):
             i = pi[k]
             j = pj[k]
@@ -269,6 +281,7 @@ def resting_passes(
             )  # fmt: skip
             if dl != 0.0 or d0 != 0.0 or d1 != 0.0 or d2 != 0.0:
                 moved = True
+                big = big or not small(dl, d0, d1, d2, w[k], tol)
             c0, c1, c2 = dl * n0 + d0, dl * n1 + d1, dl * n2 + d2
             dv[i, 0] -= c0
             dv[i, 1] -= c1
@@ -285,12 +298,15 @@ def resting_passes(
             )  # fmt: skip
             if dl != 0.0 or d0 != 0.0 or d1 != 0.0 or d2 != 0.0:
                 moved = True
+                big = big or not small(dl, d0, d1, d2, inv_mass[r], tol)
             dv[r, 0] += dl * n0 + d0
             dv[r, 1] += dl * n1 + d1
             dv[r, 2] += dl * n2 + d2
-        if not moved:
+        if moved:
+            add_scaled(v, dv, inv_mass)
+        if not big:
             break
-        add_scaled(v, dv, inv_mass)
+    return passes
 
 
 @numba_helper
@@ -362,6 +378,7 @@ def contact_step(
     ci, cj, reach2, touch2, x, v, v_old, inv_mass, radius, e, mu, iterations, overlap_passes, relax_factor, dt,
     pi, pj, pk, w, rel, nrm, limit, lam, ft, jb, due, lam_c, ft_c, stamp_c, stamp,
     wr, wn, wu, wmu, wrel, wlam, wft, dv, v0, added, near, count, resting_steps, bounce_floor, bounce_limit,
+    converged,
 ):  # pragma: no cover - compiled  # fmt: skip
     """Keep the candidates that overlap, then the passes of :func:`resolve_pairs_numpy`.
 
@@ -370,11 +387,11 @@ def contact_step(
     ``wft``: the wall contacts (:class:`animsim.particle_contacts.walls.WallContacts`,
     their remembered impulses in ``wlam``, ``wft``, which end as this step's); ``dv``,
     ``v0`` (N, 3), ``added``, ``near`` and ``count`` (N,): per particle. Returns (overlapping pairs, whether
-    any pair was resolved).
+    any pair was resolved, how many resting passes ran).
     """
     found, p = overlapping(ci, cj, reach2, touch2, x, inv_mass, pi, pj, pk)
     if p == 0:
-        return found, False
+        return found, False, 0
     pair_setup(pi, pj, p, wr, x, inv_mass, relax_factor, w, rel, wrel, nrm, count)
     step_change(pi, pj, p, v, v_old, added, near)
     # impacts first, sequentially (see bounce_sweeps), when anything bounces at all
@@ -408,13 +425,14 @@ def contact_step(
         dv,
         inv_mass,
     )
-    resting_passes(
-        pi, pj, p, nrm, rel, lam, ft, jb, mu, wr, wn, wu, wmu, wrel, wlam, wft, v, dv, inv_mass, iterations
-    )
+    passes = resting_passes(
+        pi, pj, p, nrm, w, rel, lam, ft, jb, mu, wr, wn, wu, wmu, wrel, wlam, wft, v, dv, inv_mass, iterations,
+        converged,
+    )  # fmt: skip
     follow(x, v, v0, near, resting_steps, dt)
     position_passes(pi, pj, p, x, radius, rel, dv, inv_mass, overlap_passes)
     remember(pk, p, lam, ft, lam_c, ft_c, stamp_c, stamp)
-    return found, True
+    return found, True, passes
 
 
 _STEP = None

@@ -76,8 +76,10 @@ class Walls:
             off = self.colliders.offsets(t)[wall]
             grow = float(radius[rows].max()) * (1.0 + SLOP) + skin
             b = self.colliders.bounds[wall]
-            xr = x[rows]
-            near = rows[((xr >= b[:3] + off - grow) & (xr <= b[3:] + off + grow)).all(axis=1)]
+            lo, hi = b[:3] + off - grow, b[3:] + off + grow
+            for a in range(3):  # one axis at a time: a wall's slab leaves few rows for the next
+                c = x[near, a]
+                near = near[(c >= lo[a]) & (c <= hi[a])]
         if near.size:
             d, _ = self._distance(wall, x, radius, near, t)
             near = near[d <= skin + SLOP * radius[near]]
