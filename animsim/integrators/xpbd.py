@@ -128,7 +128,11 @@ class XPBD(Integrator):
         self._external = Dynamics(system, [t for t in dynamics.terms if not isinstance(t, Springs)])
         self._drivers = tuple(dynamics.drivers)
         self.groups = ConstraintGroups(
-            system.spring_index, system.spring_rest_length, system.spring_ks, system.spring_kd
+            system.spring_index,
+            system.spring_rest_length,
+            system.spring_ks,
+            system.spring_kd,
+            system.particle_count,
         )
         self.tethers = Tethers(
             system.spring_index, system.spring_rest_length, system.spring_ks, system.particle_pinned

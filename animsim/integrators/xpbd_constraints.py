@@ -96,16 +96,16 @@ def _flat_rows(rows: np.ndarray) -> np.ndarray:
     return 3 * rows[None, :] + np.arange(3)[:, None]
 
 
-#: a colour of the NumPy pass (ConstraintGroups.stacked): gather indices of both ends'
-#: coordinates, rest lengths, ks / den, (kd / h) / den (None: the colour does not damp),
+#: a colour of the NumPy pass (ConstraintGroups.stacked): the gather into its order, its
+#: size m, rest lengths, ks / den, (kd / h) / den (None: the colour does not damp),
 #: (w_a, -w_b) as (2, 1, m), and the view of the start separations (None with it)
-Colour = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, np.ndarray, np.ndarray | None]
+Colour = tuple[np.ndarray, int, np.ndarray, np.ndarray, np.ndarray | None, np.ndarray, np.ndarray | None]
 
 
 class ConstraintGroups:
     """The springs that are constraints, sorted by colour: one contiguous slice per colour."""
 
-    def __init__(self, index: np.ndarray, rest: np.ndarray, ks: np.ndarray, kd: np.ndarray):
+    def __init__(self, index: np.ndarray, rest: np.ndarray, ks: np.ndarray, kd: np.ndarray, n: int):
         active = np.flatnonzero((ks > 0) | (kd > 0))  # ks = kd = 0 is no constraint at all
         colour = colour_springs(index[active, 0], index[active, 1]) if len(active) else np.zeros(0, int)
         order = np.argsort(colour, kind="stable")
@@ -126,9 +126,9 @@ class ConstraintGroups:
         self.damped = [bool((self.kd[sl] > 0).any()) for sl in self.slices]
         self.any_damped = any(self.damped)
         # the NumPy pass's gathers: flat indices of both ends' coordinates, (2, 3, m) (a gather
-        # by them has their shape), of every constraint and of each colour's
+        # by them has their shape), of every constraint, and the colours' orders
         self._flat_ends = np.stack([_flat_rows(self.a), _flat_rows(self.b)])
-        self._flat_ab = [np.stack([_flat_rows(self.a[sl]), _flat_rows(self.b[sl])]) for sl in self.slices]
+        self._orders, self._back = _colour_orders(self.a, self.b, self.slices, n)
         self._rest = [self.rest[sl] for sl in self.slices]
         #: x_a - x_b at the substep's start, (3, count), filled by each pass (damped colours read it)
         self._d_old = np.empty((3, self.count))
@@ -176,7 +176,8 @@ class ConstraintGroups:
         wa, wb, k, e = factors
         return [
             (
-                self._flat_ab[c],
+                self._orders[c],
+                sl.stop - sl.start,
                 self._rest[c],
                 k[sl],
                 e[sl] if self.damped[c] else None,
@@ -188,37 +189,44 @@ class ConstraintGroups:
 
     def project(self, x: np.ndarray, p_old: np.ndarray, colours: list[Colour]) -> None:
         """One Gauss-Seidel pass over the distance constraints, a colour group at a time (the
-        constraints of a colour share no particle, so plain gathers and stores do).
+        constraints of a colour share no particle, so each is projected on its own ends only).
 
         Coincident ends have no direction and get no move. Rather than test every colour's
-        lengths for zero (a test per colour and substep, about 6 % of the pass on a cloth), the pass
-        divides by them as they are: a zero length leaves a non-finite position, which one
-        sum at the end finds, and the pass is then made again from the saved positions with
-        the test. A pass that ends finite divided by no zero, so it is the tested pass."""
+        lengths for zero (a test per colour and substep, about 6 % of the pass on a cloth),
+        the pass divides by them as they are: a zero length leaves a non-finite position,
+        which one sum at the end finds, and the pass is then made again with the test (it
+        works on copies: ``x`` is written once, at the end). A pass that ends finite divided
+        by no zero, so it is the tested pass."""
+        if not colours:
+            return
         xf = _flat(x)
         if self.any_damped:  # x_a - x_b at the substep's start, for every constraint at once
             start = _flat(p_old).take(self._flat_ends)
             np.subtract(start[0], start[1], out=self._d_old)
-        saved = x.copy()
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            _pass(xf, colours, False)
-        total = np.add.reduce(xf)
-        if not np.isfinite(total):  # coincident ends (or positions that were not finite already)
-            np.copyto(x, saved)
-            _pass(xf, colours, True)
+            moved = _pass(xf, colours, False)
+        if not np.isfinite(np.add.reduce(moved)):  # coincident ends (or x was not finite already)
+            moved = _pass(xf, colours, True)
+        xf[...] = moved.take(self._back)  # back to the particles' order
 
 
-def _pass(xf: np.ndarray, colours: list[Colour], guarded: bool) -> None:
-    """The colours one after the other on the flat positions ``xf``; ``guarded``: coincident
-    ends get no move (else their division is left to make a non-finite value).
+def _pass(xf: np.ndarray, colours: list[Colour], guarded: bool) -> np.ndarray:
+    """The colours one after the other, from the flat positions ``xf`` (left as they are);
+    returns the positions moved, in the last colour's order. ``guarded``: coincident ends get
+    no move (else their division is left to make a non-finite value).
+
+    Each colour first carries the positions into its own order (one gather of all of them),
+    in which its constraints' ends come first as (2, 3, m): both ends of every constraint are
+    then one contiguous block, moved in place, with no store back by index.
 
     With d = x_a - x_b and L = |d|: n = d / L, g = d.moved / L, so each end moves by
     w (k C + e g) n = w ((k C + e g) / L) d, computed on d (one division per constraint) and
-    on per-constraint numbers until the last two products, which make both ends' moves.
-    Both ends' coordinates are gathered at once as (2, 3, m) from the flat positions."""
+    on per-constraint numbers until the last two products, which make both ends' moves."""
     dot = np.add.reduce  # over the 3 coordinates, in the numba kernel's order: (x + y) + z
-    for ends, rest, k, e, w_ab, d_old in colours:
-        xab = xf.take(ends)
+    moved = xf
+    for order, m, rest, k, e, w_ab, d_old in colours:
+        moved = moved.take(order)
+        xab = moved[: 6 * m].reshape(2, 3, m)
         d = xab[0] - xab[1]
         sq = dot(d * d, 0)
         length = np.sqrt(sq)
@@ -237,7 +245,28 @@ def _pass(xf: np.ndarray, colours: list[Colour], guarded: bool) -> None:
             s += gdot  # + e g
         s *= inv
         xab -= (w_ab * s) * d
-        xf[ends] = xab
+    return moved
+
+
+def _colour_orders(
+    a: np.ndarray, b: np.ndarray, slices: list[slice], n: int
+) -> tuple[list[np.ndarray], np.ndarray]:
+    """The orders of the NumPy pass: per colour, the gather that carries the flat positions
+    (3 n) from the previous colour's order (the particles' own before the first) into its
+    own, where its constraints' a ends' coordinates come first as (3, m), then their b ends',
+    then every other coordinate; and the gather back to the particles' order after the last.
+    A colour shares no particle, so its block holds each coordinate once."""
+    natural = np.arange(3 * n)
+    where = natural  # where[i]: the position of flat coordinate i in the current order
+    orders = []
+    for sl in slices:
+        ends = np.concatenate([_flat_rows(a[sl]).ravel(), _flat_rows(b[sl]).ravel()])
+        others = np.setdiff1d(natural, ends, assume_unique=True)
+        order = np.concatenate([ends, others])  # the flat coordinate at each position
+        orders.append(where[order])
+        where = np.empty(3 * n, dtype=np.int64)
+        where[order] = natural
+    return orders, where
 
 
 def _flat(x: np.ndarray) -> np.ndarray:
