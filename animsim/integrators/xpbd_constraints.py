@@ -204,10 +204,10 @@ class ConstraintGroups:
             start = _flat(p_old).take(self._flat_ends)
             np.subtract(start[0], start[1], out=self._d_old)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            moved = _pass(xf, colours, False)
-        if not np.isfinite(np.add.reduce(moved)):  # coincident ends (or x was not finite already)
-            moved = _pass(xf, colours, True)
-        xf[...] = moved.take(self._back)  # back to the particles' order
+            pos = _pass(xf, colours, False)
+        if not np.isfinite(np.add.reduce(pos)):  # coincident ends (or x was not finite already)
+            pos = _pass(xf, colours, True)
+        xf[...] = pos.take(self._back)  # back to the particles' order
 
 
 def _pass(xf: np.ndarray, colours: list[Colour], guarded: bool) -> np.ndarray:
@@ -223,10 +223,10 @@ def _pass(xf: np.ndarray, colours: list[Colour], guarded: bool) -> np.ndarray:
     w (k C + e g) n = w ((k C + e g) / L) d, computed on d (one division per constraint) and
     on per-constraint numbers until the last two products, which make both ends' moves."""
     dot = np.add.reduce  # over the 3 coordinates, in the numba kernel's order: (x + y) + z
-    moved = xf
+    pos = xf
     for order, m, rest, k, e, w_ab, d_old in colours:
-        moved = moved.take(order)
-        xab = moved[: 6 * m].reshape(2, 3, m)
+        pos = pos.take(order)
+        xab = pos[: 6 * m].reshape(2, 3, m)
         d = xab[0] - xab[1]
         sq = dot(d * d, 0)
         length = np.sqrt(sq)
@@ -245,7 +245,7 @@ def _pass(xf: np.ndarray, colours: list[Colour], guarded: bool) -> np.ndarray:
             s += gdot  # + e g
         s *= inv
         xab -= (w_ab * s) * d
-    return moved
+    return pos
 
 
 def _colour_orders(
