@@ -125,13 +125,14 @@ class ConstraintGroups:
         #: per colour, whether any of its springs damps (the others skip the velocity term)
         self.damped = [bool((self.kd[sl] > 0).any()) for sl in self.slices]
         self.any_damped = any(self.damped)
-        # the NumPy pass's gathers: flat indices of both ends' coordinates, (2, 3, m) (a gather
-        # by them has their shape), of every constraint, and the colours' orders
-        self._flat_ends = np.stack([_flat_rows(self.a), _flat_rows(self.b)])
+        # the NumPy pass's gathers: the flat indices of both ends' coordinates, (2, 3 count),
+        # colour after colour as (3, m) blocks (so each colour's start separations are one
+        # contiguous block), and the colours' orders
+        self._flat_ends = np.stack([_colour_blocks(end, self.slices) for end in (self.a, self.b)])
         self._orders, self._back = _colour_orders(self.a, self.b, self.slices, n)
         self._rest = [self.rest[sl] for sl in self.slices]
-        #: x_a - x_b at the substep's start, (3, count), filled by each pass (damped colours read it)
-        self._d_old = np.empty((3, self.count))
+        #: x_a - x_b at the substep's start in those blocks, filled by each pass (damped colours)
+        self._d_old = np.empty(3 * self.count)
 
     @property
     def count(self) -> int:
@@ -182,7 +183,7 @@ class ConstraintGroups:
                 k[sl],
                 e[sl] if self.damped[c] else None,
                 np.stack([wa[sl], -wb[sl]])[:, None, :],
-                self._d_old[:, sl] if self.damped[c] else None,
+                self._d_old[3 * sl.start : 3 * sl.stop].reshape(3, -1) if self.damped[c] else None,
             )
             for c, sl in enumerate(self.slices)
         ]
@@ -246,6 +247,11 @@ def _pass(xf: np.ndarray, colours: list[Colour], guarded: bool) -> np.ndarray:
         s *= inv
         xab -= (w_ab * s) * d
     return pos
+
+
+def _colour_blocks(end: np.ndarray, slices: list[slice]) -> np.ndarray:
+    """The flat coordinates of one end of every constraint, colour after colour as (3, m)."""
+    return np.concatenate([_flat_rows(end[sl]).ravel() for sl in slices] + [np.zeros(0, np.int64)])
 
 
 def _colour_orders(
