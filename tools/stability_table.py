@@ -210,7 +210,12 @@ methods refuse). But one pass per substep cannot make a spring stiffer than
 about m / h^2: where ks (1/m_a + 1/m_b) h^2 is well below 1 xpbd converges to
 the force-based solution at first order in h (tested against the damped
 oscillator's closed form and an RK4 run of a small cloth), and where it is large
-the spring behaves as a softer one until the substeps grow.
+the spring behaves as a softer one until the substeps grow. At rest a lone
+spring is exact at any substep (its stretch is m g / ks); a chain or a cloth is
+not: the one Gauss-Seidel pass per substep leaves each constraint at rest, besides
+its own stretch, (1 + kd / (ks h)) w h^2 times the tension of each neighbour that
+shares a particle w = 1/m with it and that the pass projects after it. Without
+damping that part falls as h^2; its damping part, kd w h, falls only as h.
 
 The figures below are from `python benchmarks/xpbd_cloth.py`
 (benchmarks/RESULTS.md, simulated seconds per CPU second of stepping, on a
@@ -225,7 +230,7 @@ in its own plane with kd = 100 N s/m (settled by 1 s: the usual judge of a sag).
 | --- | --- | --- |
 | the motion of the springs as written | an explicit method at its stable step (`check` prints each one's largest dt) | the reference itself: symplectic Euler on numba, 1.63 simulated s per CPU s at 0.06 ms steps (swinging), 0.12 at 0.004 ms (hanging: the damping shortens the stable step) |
 | any step, springs as forces | `implicit_euler` | one step per frame on NumPy: swinging, 4.26 simulated s per CPU s, but its damping nearly stops the swing: sag 1251 % off, still 13 % at 0.065 ms steps; hanging, 6.6 and exact (0.002 % off): a settled sag is its fixed point |
-| any step and any stiffness, inextensible springs, a look that never blows up | `xpbd` | one step per frame, 10 substeps: 52.9 simulated s per CPU s on numba (12.4x implicit Euler), 8.06 on NumPy (1.9x); but its springs are far softer than ks (448 N/m for 1e5 at 10 substeps): sag 211 % off swinging (within 2 % at 2560 substeps, 0.22 simulated s per CPU s), 6470 % off hanging (still 10.8 % at 2560 substeps) |
+| any step and any stiffness, inextensible springs, a look that never blows up | `xpbd` | one step per frame, 10 substeps: 52.9 simulated s per CPU s on numba (12.4x implicit Euler), 8.06 on NumPy (1.9x); but one constraint pass per substep leaves the cloth far softer than its springs (a lone spring still rests at m g / ks; see above): sag 211 % off swinging (within 2 % at 2560 substeps, 0.22 simulated s per CPU s), 6470 % off hanging (still 10.8 % at 2560 substeps) |
 
 So `xpbd` is the better choice where the look matters more than the numbers:
 cloth, hair and ropes stepped once per frame that must never blow up, and

@@ -88,6 +88,7 @@ from animsim.forces.springs import Springs
 from animsim.integrators import xpbd_kernels as kernels
 from animsim.integrators.base import Integrator
 from animsim.integrators.xpbd_constraints import (  # colour_springs: the tests' entry too
+    Colour,
     ConstraintGroups,
     Tethers,
     colour_springs,
@@ -127,7 +128,11 @@ class XPBD(Integrator):
         self._external = Dynamics(system, [t for t in dynamics.terms if not isinstance(t, Springs)])
         self._drivers = tuple(dynamics.drivers)
         self.groups = ConstraintGroups(
-            system.spring_index, system.spring_rest_length, system.spring_ks, system.spring_kd
+            system.spring_index,
+            system.spring_rest_length,
+            system.spring_ks,
+            system.spring_kd,
+            system.particle_count,
         )
         self.tethers = Tethers(
             system.spring_index, system.spring_rest_length, system.spring_ks, system.particle_pinned
@@ -144,7 +149,7 @@ class XPBD(Integrator):
         self.numba = False
         self._coef: tuple[Any, tuple[np.ndarray, ...]] | None = None  # (what they were made for, them)
         self._coef_w: np.ndarray | None = None
-        self._stacked: list[tuple[np.ndarray, np.ndarray]] = []  # the NumPy pass's form of them
+        self._stacked: list[Colour] = []  # the NumPy pass's form of them
         self._describe()
 
     def _describe(self) -> None:
@@ -207,10 +212,11 @@ class XPBD(Integrator):
         the torn springs change."""
         key = (w.ctypes.data, h, None if intact is None else int(np.count_nonzero(intact)))
         if self._coef is None or self._coef[0] != key or self._coef_w is not w:
-            self._coef = (key, self.groups.coefficients(w, h, intact))
+            factors = self.groups.factors(w, h, intact)
+            self._coef = (key, self.groups.coefficients(factors))
             self._coef_w = w
             if not self.numba:
-                self._stacked = self.groups.stacked(self._coef[1])
+                self._stacked = self.groups.stacked(factors)
         return self._coef[1]
 
     def step(self, state: State, dt: float) -> None:
@@ -223,8 +229,11 @@ class XPBD(Integrator):
         if self.numba and a0 is not None and not self._drivers and not self.planes:
             self._whole_step(state, h, a0, coef)  # every external force constant: one compiled call
             return
+        if a0 is not None:  # every external force constant: h a_ext once a step, not each substep
+            np.multiply(a0, h, out=self._a)
+        movable = (state.particle_inv_mass > 0)[:, None]  # masses change between steps only
         for k in range(self.substeps):
-            self._substep(state, k, h, dt, coef)
+            self._substep(state, k, h, dt, coef, a0 is None, movable)
 
     def _whole_step(self, state: State, h: float, a0: np.ndarray, coef: tuple[np.ndarray, ...]) -> None:
         """The step's substeps in one call of the numba step kernel (``a0``: the constant
@@ -240,16 +249,28 @@ class XPBD(Integrator):
             g.bounds, g.a, g.b, g.rest, *coef, tethers, pins, ptr, rows, limits,
         )  # fmt: skip
 
-    def _substep(self, state: State, k: int, h: float, dt: float, coef: tuple[np.ndarray, ...]) -> None:
-        """Substep k of a step of dt (Small Steps, Algorithm 1; the module docstring)."""
+    def _substep(
+        self,
+        state: State,
+        k: int,
+        h: float,
+        dt: float,
+        coef: tuple[np.ndarray, ...],
+        evaluate: bool,
+        movable: np.ndarray,
+    ) -> None:
+        """Substep k of a step of dt (Small Steps, Algorithm 1; the module docstring).
+        ``evaluate``: the external forces are evaluated here (else ``self._a`` holds h a_ext
+        already); ``movable``: (n, 1), the rows whose velocity the constraints set."""
         x, v = state.particle_position, state.particle_velocity
         a, p_old, v_new = self._a, self._p_old, self._v_new
         w = state.particle_inv_mass
         t = state.time + k * h
         t_end = state.time + dt if k == self.substeps - 1 else t + h
-        self._external.acceleration(x, v, t, a)
+        if evaluate:
+            self._external.acceleration(x, v, t, a)
+            a *= h
         self._counted.evaluations += 1
-        a *= h
         v += a  # v += h a_ext
         np.copyto(p_old, x)
         np.multiply(v, h, out=v_new)
@@ -272,6 +293,6 @@ class XPBD(Integrator):
         contacts = project_planes(self.planes, x, p_old, w) if self.planes else None
         np.subtract(x, p_old, out=v_new)
         v_new /= h
-        np.copyto(v, v_new, where=(w > 0)[:, None])  # immovable rows keep their prescribed velocity
+        np.copyto(v, v_new, where=movable)  # immovable rows keep their prescribed velocity
         if contacts:
             plane_velocities(v, self._v_pre, a, h, contacts)

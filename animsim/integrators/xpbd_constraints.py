@@ -96,10 +96,16 @@ def _flat_rows(rows: np.ndarray) -> np.ndarray:
     return 3 * rows[None, :] + np.arange(3)[:, None]
 
 
+#: a colour of the NumPy pass (ConstraintGroups.stacked): the gather into its order, its
+#: size m, rest lengths, ks / den, (kd / h) / den (None: the colour does not damp),
+#: (w_a, -w_b) as (2, 1, m), and the view of the start separations (None with it)
+Colour = tuple[np.ndarray, int, np.ndarray, np.ndarray, np.ndarray | None, np.ndarray, np.ndarray | None]
+
+
 class ConstraintGroups:
     """The springs that are constraints, sorted by colour: one contiguous slice per colour."""
 
-    def __init__(self, index: np.ndarray, rest: np.ndarray, ks: np.ndarray, kd: np.ndarray):
+    def __init__(self, index: np.ndarray, rest: np.ndarray, ks: np.ndarray, kd: np.ndarray, n: int):
         active = np.flatnonzero((ks > 0) | (kd > 0))  # ks = kd = 0 is no constraint at all
         colour = colour_springs(index[active, 0], index[active, 1]) if len(active) else np.zeros(0, int)
         order = np.argsort(colour, kind="stable")
@@ -118,26 +124,29 @@ class ConstraintGroups:
         self.any_inextensible = bool(self.inextensible.any())
         #: per colour, whether any of its springs damps (the others skip the velocity term)
         self.damped = [bool((self.kd[sl] > 0).any()) for sl in self.slices]
-        # the NumPy pass's gathers: flat indices of both ends' coordinates, (2, 3, m) flattened,
-        # of every constraint and of each colour's
-        self._flat_ends = np.concatenate([_flat_rows(self.a), _flat_rows(self.b)]).ravel()
-        self._flat_ab = [
-            np.concatenate([_flat_rows(self.a[sl]), _flat_rows(self.b[sl])]).ravel() for sl in self.slices
-        ]
+        self.any_damped = any(self.damped)
+        # the NumPy pass's gathers: the flat indices of both ends' coordinates, (2, 3 count),
+        # colour after colour as (3, m) blocks (so each colour's start separations are one
+        # contiguous block), and the colours' orders
+        self._flat_ends = np.stack([_colour_blocks(end, self.slices) for end in (self.a, self.b)])
+        self._orders, self._back = _colour_orders(self.a, self.b, self.slices, n)
         self._rest = [self.rest[sl] for sl in self.slices]
+        #: x_a - x_b at the substep's start in those blocks, filled by each pass (damped colours)
+        self._d_old = np.empty(3 * self.count)
 
     @property
     def count(self) -> int:
         return len(self.spring)
 
-    def coefficients(self, w: np.ndarray, h: float, intact: Any) -> tuple[np.ndarray, ...]:
-        """Per constraint, what does not change within a step: with den = (ks + kd / h)
-        (w_a + w_b) + 1 / h^2 the update of :mod:`animsim.integrators.xpbd` is
+    def factors(self, w: np.ndarray, h: float, intact: Any) -> tuple[np.ndarray, ...]:
+        """Per constraint, what does not change within a step: (w_a, w_b, k, e) with, for
+        den = (ks + kd / h) (w_a + w_b) + 1 / h^2, k = ks / den and e = (kd / h) / den: the
+        update of :mod:`animsim.integrators.xpbd` is
 
-            p_a -= (ca C + da g) n,   p_b += (cb C + db g) n,
-            ca = w_a ks / den,  da = w_a (kd / h) / den  (cb, db with w_b),
+            p_a -= w_a (k C + e g) n,   p_b += w_b (k C + e g) n,
 
-        and for an inextensible spring ca = w_a / (w_a + w_b), da = 0. A torn spring's are 0."""
+        and for an inextensible spring k = 1 / (w_a + w_b), e = 0. A torn spring's k and e
+        are 0."""
         wa, wb = w[self.a], w[self.b]
         wsum = wa + wb
         kdh = self.kd / h
@@ -151,49 +160,119 @@ class ConstraintGroups:
             live = intact[self.spring]  # a torn spring is no constraint
             ks_den = ks_den * live
             kd_den = kd_den * live
-        return wa * ks_den, wb * ks_den, wa * kd_den, wb * kd_den
+        return wa, wb, ks_den, kd_den
 
-    def stacked(self, coef: tuple[np.ndarray, ...]) -> list[tuple[np.ndarray, np.ndarray]]:
-        """The NumPy pass's form of :meth:`coefficients`: per colour, (ca, -cb) and (da, -db)
-        as (2, 1, m) arrays, the moves of both ends in one product."""
-        ca, cb, da, db = coef
+    @staticmethod
+    def coefficients(factors: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
+        """The numba kernels' form of :meth:`factors`: p_a -= (ca C + da g) n,
+        p_b += (cb C + db g) n with ca = w_a k, da = w_a e (cb, db with w_b)."""
+        wa, wb, k, e = factors
+        return wa * k, wb * k, wa * e, wb * e
+
+    def stacked(self, factors: tuple[np.ndarray, ...]) -> list[Colour]:
+        """The NumPy pass's form of :meth:`factors`, per colour: its gather indices, rest
+        lengths, k, e (None when the colour does not damp), (w_a, -w_b) as (2, 1, m) (the moves
+        of both ends in one product) and its view of the start separations (None with e).
+        Made once per set of factors, so the pass does no lookups of its own."""
+        wa, wb, k, e = factors
         return [
-            (np.stack([ca[sl], -cb[sl]])[:, None, :], np.stack([da[sl], -db[sl]])[:, None, :])
-            for sl in self.slices
+            (
+                self._orders[c],
+                sl.stop - sl.start,
+                self._rest[c],
+                k[sl],
+                e[sl] if self.damped[c] else None,
+                np.stack([wa[sl], -wb[sl]])[:, None, :],
+                self._d_old[3 * sl.start : 3 * sl.stop].reshape(3, -1) if self.damped[c] else None,
+            )
+            for c, sl in enumerate(self.slices)
         ]
 
-    def project(self, x: np.ndarray, p_old: np.ndarray, stacked: list[tuple[np.ndarray, np.ndarray]]) -> None:
+    def project(self, x: np.ndarray, p_old: np.ndarray, colours: list[Colour]) -> None:
         """One Gauss-Seidel pass over the distance constraints, a colour group at a time (the
-        constraints of a colour share no particle, so plain gathers and stores do).
+        constraints of a colour share no particle, so each is projected on its own ends only).
 
-        With d = x_a - x_b and L = |d|: n = d / L, g = d.moved / L, so each end moves by
-        (c C + e g) n = ((c C + e g) / L) d, computed on d (one division per constraint).
-        Both ends' coordinates are gathered at once as (2, 3, m) from the flat positions."""
+        Coincident ends have no direction and get no move. Rather than test every colour's
+        lengths for zero (a test per colour and substep, about 6 % of the pass on a cloth),
+        the pass divides by them as they are: a zero length leaves a non-finite position,
+        which one sum at the end finds, and the pass is then made again with the test (it
+        works on copies: ``x`` is written once, at the end). A pass that ends finite divided
+        by no zero, so it is the tested pass."""
+        if not colours:
+            return
         xf = _flat(x)
-        if any(self.damped):  # x_a - x_b at the substep's start, for every constraint at once
-            start = _flat(p_old).take(self._flat_ends).reshape(2, 3, -1)
-            d_old = start[0] - start[1]
-        for k, sl in enumerate(self.slices):
-            ends = self._flat_ab[k]
-            xab = xf.take(ends).reshape(2, 3, -1)
-            d = xab[0] - xab[1]
-            sq = np.einsum("ij,ij->j", d, d)
-            length = np.sqrt(sq)
-            if length.all():
-                inv = 1.0 / length
-            else:  # coincident ends: no direction, no move
-                inv = np.divide(1.0, length, out=np.zeros_like(length), where=length > 0.0)
-            c_ab, d_ab = stacked[k]
-            f = c_ab * (length - self._rest[k])  # (ca C, -cb C)
-            if self.damped[k]:
-                # d.moved = d.d - d.d_old, moved = (x_a - p_a) - (x_b - p_b): one product less;
-                # its cancellation costs eps |d|^2 against a term that only damps
-                gdot = sq - np.einsum("ij,ij->j", d, d_old[:, sl])
-                gdot *= inv
-                f += d_ab * gdot
-            f *= inv
-            xab -= f * d
-            xf[ends] = xab.reshape(-1)
+        if self.any_damped:  # x_a - x_b at the substep's start, for every constraint at once
+            start = _flat(p_old).take(self._flat_ends)
+            np.subtract(start[0], start[1], out=self._d_old)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            pos = _pass(xf, colours, False)
+        if not np.isfinite(np.add.reduce(pos)):  # coincident ends (or x was not finite already)
+            pos = _pass(xf, colours, True)
+        xf[...] = pos.take(self._back)  # back to the particles' order
+
+
+def _pass(xf: np.ndarray, colours: list[Colour], guarded: bool) -> np.ndarray:
+    """The colours one after the other, from the flat positions ``xf`` (left as they are);
+    returns the positions moved, in the last colour's order. ``guarded``: coincident ends get
+    no move (else their division is left to make a non-finite value).
+
+    Each colour first carries the positions into its own order (one gather of all of them),
+    in which its constraints' ends come first as (2, 3, m): both ends of every constraint are
+    then one contiguous block, moved in place, with no store back by index.
+
+    With d = x_a - x_b and L = |d|: n = d / L, g = d.moved / L, so each end moves by
+    w (k C + e g) n = w ((k C + e g) / L) d, computed on d (one division per constraint) and
+    on per-constraint numbers until the last two products, which make both ends' moves."""
+    dot = np.add.reduce  # over the 3 coordinates, in the numba kernel's order: (x + y) + z
+    pos = xf
+    for order, m, rest, k, e, w_ab, d_old in colours:
+        pos = pos.take(order)
+        xab = pos[: 6 * m].reshape(2, 3, m)
+        d = xab[0] - xab[1]
+        sq = dot(d * d, 0)
+        length = np.sqrt(sq)
+        if guarded:  # coincident ends: no direction, no move
+            inv = np.divide(1.0, length, out=np.zeros_like(length), where=length > 0.0)
+        else:
+            inv = 1.0 / length
+        length -= rest
+        s = k * length  # k C
+        if d_old is not None and e is not None:
+            # d.moved = d.d - d.d_old, moved = (x_a - p_a) - (x_b - p_b): one product less;
+            # its cancellation costs eps |d|^2 against a term that only damps
+            gdot = sq - dot(d * d_old, 0)
+            gdot *= inv
+            gdot *= e
+            s += gdot  # + e g
+        s *= inv
+        xab -= (w_ab * s) * d
+    return pos
+
+
+def _colour_blocks(end: np.ndarray, slices: list[slice]) -> np.ndarray:
+    """The flat coordinates of one end of every constraint, colour after colour as (3, m)."""
+    return np.concatenate([_flat_rows(end[sl]).ravel() for sl in slices] + [np.zeros(0, np.int64)])
+
+
+def _colour_orders(
+    a: np.ndarray, b: np.ndarray, slices: list[slice], n: int
+) -> tuple[list[np.ndarray], np.ndarray]:
+    """The orders of the NumPy pass: per colour, the gather that carries the flat positions
+    (3 n) from the previous colour's order (the particles' own before the first) into its
+    own, where its constraints' a ends' coordinates come first as (3, m), then their b ends',
+    then every other coordinate; and the gather back to the particles' order after the last.
+    A colour shares no particle, so its block holds each coordinate once."""
+    natural = np.arange(3 * n)
+    where = natural  # where[i]: the position of flat coordinate i in the current order
+    orders = []
+    for sl in slices:
+        ends = np.concatenate([_flat_rows(a[sl]).ravel(), _flat_rows(b[sl]).ravel()])
+        others = np.setdiff1d(natural, ends, assume_unique=True)
+        order = np.concatenate([ends, others])  # the flat coordinate at each position
+        orders.append(where[order])
+        where = np.empty(3 * n, dtype=np.int64)
+        where[order] = natural
+    return orders, where
 
 
 def _flat(x: np.ndarray) -> np.ndarray:

@@ -101,6 +101,52 @@ def test_cloth_converges_linearly_to_the_rk4_solution_with_springs_as_forces():
     assert errors[-1] < 0.02
 
 
+CHAIN = """
+duration: 3.0
+dt: 0.03333333333333333
+integrator: {{method: xpbd, substeps: 10}}
+record: {{every: 90}}
+particles:
+  - {{id: pin, pinned: true, position: [0, 0, 0]}}
+  - {{id: p1, mass: 0.01, position: [0, -0.1, 0]}}
+  - {{id: p2, mass: 0.01, position: [0, -0.2, 0]}}
+springs:
+{springs}
+forces:
+  - {{type: gravity, g: [0, -9.81, 0]}}
+  - {{type: drag, k: 0.3}}
+"""
+
+
+@pytest.mark.parametrize("kd", [0.0, 100.0])
+@pytest.mark.parametrize("order", ["lone", "top first", "bottom first"])
+def test_at_rest_a_spring_keeps_the_stretch_of_the_neighbour_projected_after_it(kd, order):
+    # The fixed point of one Gauss-Seidel pass a substep (lambda from 0), derived: at rest a
+    # constraint's stretch is its tension T / ks, plus (1 + gamma) w h^2 T' for a neighbour
+    # of tension T' projected after it that shares a particle of inverse mass w with it
+    # (gamma = kd / (ks h)). So a spring with no such neighbour rests at exactly T / ks
+    # however large ks w h^2 is (111 here): not as a spring of ks / (1 + ks w h^2) would.
+    ks, m, g, h = 1e5, 0.01, 9.81, 1 / 300
+    spring = "  - {{between: [{}, {}], ks: 1e5, kd: {}, rest: 0.1}}"
+    top, bottom = spring.format("pin", "p1", kd), spring.format("p1", "p2", kd)
+    springs = {"lone": [top], "top first": [top, bottom], "bottom first": [bottom, top]}[order]
+    text = CHAIN.format(springs="\n".join(springs))
+    if order == "lone":
+        text = text.replace("  - {id: p2, mass: 0.01, position: [0, -0.2, 0]}\n", "")
+    _, r, sink = simulate_text(text)
+    assert r.status == STATUS_OK
+    y = sink.positions()[-1, :, 1]
+    stretch = -np.diff(y) - 0.1  # top spring, then bottom
+    tension = m * g * np.arange(len(stretch), 0, -1)  # 2 m g above 1 m g (lone: m g)
+    lag = (1 + kd / (ks * h)) * (1 / m) * h * h
+    want = tension / ks
+    if order == "top first":
+        want[0] += lag * tension[1]
+    elif order == "bottom first":
+        want[1] += lag * tension[0]
+    np.testing.assert_allclose(stretch, want, rtol=1e-6)
+
+
 HANGING = """
 duration: {duration}
 dt: 0.03333333333333333
