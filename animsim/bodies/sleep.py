@@ -42,12 +42,14 @@ def body_islands(a: np.ndarray, b: np.ndarray, still: np.ndarray) -> np.ndarray:
     neither of which is ``still`` (B,) (pinned, or asleep) share a number; the others are
     islands of their own. Connected components (the solver's islands,
     :func:`animsim.bodies.contact_batches.islands`, are the same graph)."""
-    from scipy.sparse import coo_matrix  # scipy is imported where used (a heavy import)
-    from scipy.sparse.csgraph import connected_components
-
     count = still.shape[0]
     bb = np.maximum(b, 0)
     joins = (b >= 0) & ~still[a] & ~still[bb]
+    if not joins.any():  # bodies apart (landed apart, or on planes only): each its own island
+        return np.arange(count, dtype=np.int64)
+    from scipy.sparse import coo_matrix  # scipy is imported where used (a heavy import)
+    from scipy.sparse.csgraph import connected_components
+
     graph = coo_matrix((np.ones(int(joins.sum())), (a[joins], b[joins])), shape=(count, count))
     _, label = connected_components(graph, directed=False)
     return label.astype(np.int64)
