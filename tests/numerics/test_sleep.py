@@ -21,6 +21,7 @@ import pytest
 
 from animsim import api
 from animsim.compile import compile_scene
+from animsim.errors import SceneError
 
 BACKENDS = ["numpy"] + (["numba"] if importlib.util.find_spec("numba") else [])
 G = 9.81
@@ -224,3 +225,10 @@ bodies:
     x = traj.body_positions
     assert np.linalg.norm(x - x[0], axis=2).max() < 1e-6  # measured 3e-10 m
     assert all(_asleep(traj, b)[-1] for b in range(10))
+
+
+def test_sleep_without_bodies_is_an_error_at_its_key():
+    text = "duration: 0.1\nsleep: {}\nparticles: [{id: p, mass: 1, position: [0, 0, 0]}]\n"
+    with pytest.raises(SceneError, match=r"sleep.*no bodies") as err:
+        api.loads(text)
+    assert ":2:" in str(err.value)  # line 2, where the key is
