@@ -332,6 +332,7 @@ def add_bodies(
         solids.colliders,
         solids.radius,
         planes_stage,
+        dynamics.terms,
     )
     post_step.extend(body_stages)
     left_out.extend(body_left_out)

@@ -132,6 +132,12 @@ class ForceElement:
     contact_stiffness: float = 0.0
     #: body-aware forces (springs to points of rigid bodies) set this
     acts_on_bodies: bool = False
+    #: a body at rest under this force may sleep (:mod:`animsim.bodies.sleep`): on a body that
+    #: stands still the force never changes (gravity, a steady uniform wind), is zero (drag),
+    #: or is not applied to bodies at all (springs between particles). False (the default, so
+    #: a new force is safe until it says otherwise) keeps every body awake: a force that
+    #: changes in time or in space could start a sleeping body moving
+    lets_bodies_sleep: ClassVar[bool] = False
     #: accumulate(x[lo:hi], v[lo:hi], t, out[lo:hi]) adds rows lo:hi of the whole evaluation
     #: (row i reads only row i and the element holds no per-particle array), so the NumPy
     #: integrator may evaluate it a block of rows at a time (Dynamics.blocks)
@@ -159,6 +165,11 @@ class ForceElement:
         """(dF/dx, dF/dv) as sparse (3N, 3N) matrices, None where it contributes nothing, for
         implicit Euler; an element without them enters implicit Euler explicitly."""
         raise NotImplementedError
+
+    def bodies_kept_awake(self, count: int) -> np.ndarray:
+        """(count,) bool: the bodies this force keeps from sleeping (every one or none, by
+        ``lets_bodies_sleep``; a force on some bodies only, such as springs to bodies, names them)."""
+        return np.full(count, not self.lets_bodies_sleep)
 
     @property
     def offers_jacobians(self) -> bool:

@@ -114,6 +114,11 @@ def _body_colors(scene: Scene) -> Iterator[Path_]:
             yield ("bodies", i, "color")
 
 
+def _sleep(scene: Scene) -> Iterator[Path_]:
+    if scene.sleep is not None and scene.bodies:
+        yield ("sleep",)
+
+
 def _radii(scene: Scene) -> Iterator[Path_]:
     for i, p in enumerate(scene.particles):
         if p.radius is not None:
@@ -177,6 +182,7 @@ THINGS: tuple[Thing, ...] = (
     Thing("body_box", "a box body", "`bodies:` with `shape: {type: box}`", _bodies("box")),
     Thing("body_capsule", "a capsule body", "`bodies:` with `shape: {type: capsule}`", _bodies("capsule")),
     Thing("body_color", "a body's colour", "`color` of a body", _body_colors, part_of="body_box"),
+    Thing("body_sleep", "bodies that sleep", "`sleep:` with `bodies:`", _sleep, part_of="body_box"),
     Thing(
         "plane_impulse",
         "an impulse plane",

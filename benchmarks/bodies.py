@@ -17,7 +17,14 @@ lattice of 100 columns of ten boxes, the columns 2 cm apart, set down at rest on
 (the first step finds the stack's impulses from nothing, then they start warm) and the same
 timing; the columns stand still through it.
 
-Run from the project root: ``python benchmarks/bodies.py [--steps N] [--repeat R] [--piled]``.
+With ``--sleep``: each variant runs twice, as above and with ``sleep: {speed: 0.005, after: 0.5}``
+(bodies at rest sleep, :mod:`animsim.bodies.sleep`), and both rates are printed. The piled
+columns stand still from the start, so they fall asleep at 0.5 s, where timing starts; the
+dropped bodies land by 0.5 s and rest, so they fall asleep during the timed stretch (time a
+later one with ``--warmup``).
+
+Run from the project root:
+``python benchmarks/bodies.py [--steps N] [--repeat R] [--piled] [--sleep] [--warmup S]``.
 Goal: >= 1 000 steps/s on numba, >= 100 on NumPy (dropped); >= 1 000 on numba (piled).
 """
 
@@ -46,6 +53,10 @@ SHAPES = (
 
 #: the piled variant: boxes of this edge, this far apart sideways, PILE along x, y and z
 CUBE, GAP, PILE = 0.1, 0.02, (10, 10, 10)
+
+
+#: the ``sleep`` key of ``--sleep`` (the defaults)
+SLEEP = "sleep: {speed: 0.005, after: 0.5}"
 
 
 def _header() -> list[str]:
@@ -93,10 +104,15 @@ def scene_text() -> str:
     return "\n".join(lines) + "\n"
 
 
-def steps_per_second(backend: str, steps: int, piled: bool = False) -> tuple[float, float]:
+def steps_per_second(
+    backend: str, steps: int, piled: bool = False, sleep: bool = False, warmup: float = WARMUP
+) -> tuple[float, float]:
     """(steps per wall-clock second, steps per CPU second) over the timed stretch."""
-    warm_steps = round(WARMUP / DT)
-    loaded = load_scene_text(piled_text() if piled else scene_text(), "bodies.yaml")
+    warm_steps = round(warmup / DT)
+    text = piled_text() if piled else scene_text()
+    if sleep:
+        text = text.replace("bodies:\n", SLEEP + "\nbodies:\n", 1)
+    loaded = load_scene_text(text, "bodies.yaml")
     scene = with_overrides(loaded.scene, duration=(warm_steps + steps) * DT)
     compiled = compile_scene(scene, loaded.name, backend=backend)
     marks: dict[int, tuple[float, float]] = {}
@@ -119,13 +135,22 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=1, help="runs per backend (best counts)")
     ap.add_argument("--backend", action="append", choices=("numpy", "numba"), help="default: both")
     ap.add_argument("--piled", action="store_true", help="1 000 boxes piled in columns, not dropped apart")
+    ap.add_argument("--sleep", action="store_true", help="run each variant also with bodies at rest asleep")
+    ap.add_argument("--warmup", type=float, default=WARMUP, help="simulated seconds before timing starts")
     args = ap.parse_args()
     what = "piled boxes" if args.piled else "bodies"
     for backend in args.backend or ("numba", "numpy"):
-        rates = [steps_per_second(backend, args.steps, args.piled) for _ in range(args.repeat)]
-        wall, cpu = max(r[0] for r in rates), max(r[1] for r in rates)
-        goal = 1000 if backend == "numba" else 100
-        print(f"{backend:6s} 1000 {what}: {wall:8.1f} steps/s wall, {cpu:8.1f} steps/s CPU (goal {goal})")
+        for sleep in (False, True) if args.sleep else (False,):
+            rates = [
+                steps_per_second(backend, args.steps, args.piled, sleep, args.warmup)
+                for _ in range(args.repeat)
+            ]
+            wall, cpu = max(r[0] for r in rates), max(r[1] for r in rates)
+            goal = 1000 if backend == "numba" else 100
+            label = f"{what}, sleep on" if sleep else what
+            print(
+                f"{backend:6s} 1000 {label}: {wall:8.1f} steps/s wall, {cpu:8.1f} steps/s CPU (goal {goal})"
+            )
 
 
 if __name__ == "__main__":

@@ -18,8 +18,9 @@ from animsim.bodies.contact_detection import PlaneTable
 from animsim.bodies.contacts import BodyContacts
 from animsim.bodies.dynamics import BodyDynamics
 from animsim.bodies.particles import ParticleBodyContacts
+from animsim.bodies.sleep import Sleep
 from animsim.bodies.springs import BodySprings
-from animsim.elements import PlaneProjector, StepStage
+from animsim.elements import ForceElement, PlaneProjector, StepStage
 from animsim.scene import models as m
 from animsim.system import System
 
@@ -127,13 +128,15 @@ def build_body_elements(
     solid: SolidColliders | None = None,
     radius: np.ndarray | None = None,
     planes_stage: PlaneProjector | None = None,
+    forces: Sequence[ForceElement] = (),
 ) -> tuple[BodyDynamics, list[StepStage], list[str], list[str]]:
     """(rotational dynamics, post-step stages, labels for explain, left-out notes for explain).
 
     ``solid``: the scene's colliders stage (animsim.colliders.Colliders), whose shapes and
     keyframed motion the bodies meet as the particles do. ``radius``: every row's contact
     radius (animsim.contact_stages); ``planes_stage``: the impulse planes, which particles
-    pushed out of a body are kept in front of."""
+    pushed out of a body are kept in front of; ``forces``: the scene's force elements (which
+    of them let bodies sleep, when the scene has ``sleep``)."""
     body_index = {bid: b for b, bid in enumerate(system.body_ids)}
     labels: list[str] = []
     left_out: list[str] = []
@@ -150,6 +153,7 @@ def build_body_elements(
         + "); omega' = I_w^-1 (tau - omega x I_w omega), q' = 1/2 (0, omega) q, q renormalised each step"
     )
     stages: list[StepStage] = []
+    sleep: Sleep | None = None
     planes = list(scene.planes)
     solids = list(solid.shapes) if solid is not None else []
     if planes or solids or system.body_count > 1:
@@ -176,8 +180,13 @@ def build_body_elements(
         )
         stages.append(contact)
         left_out.extend(contact.left_out)
+        if scene.sleep is not None:
+            contact.sleep = sleep = _sleep(scene.sleep, system, contact.bound, [*forces, *terms])
+            labels.append(sleep.label())
     else:
         left_out.append("body contacts: no planes and a single body")
+        if scene.sleep is not None:
+            left_out.append("sleeping: a single body with nothing to touch never sleeps")
     point_rows = system.point_rows
     if point_rows.any():
         joined: set[tuple[int, int]] = set()
@@ -201,10 +210,21 @@ def build_body_elements(
             joined,
         )
         touch.planes = planes_stage
+        touch.sleep = sleep  # a particle wakes a sleeping body
         stages.append(touch)
     else:
         left_out.append("particle-body contacts: no particles")
     return dyn, stages, labels, left_out
+
+
+def _sleep(spec: m.Sleep, system: System, bound: np.ndarray, forces: Sequence[ForceElement]) -> Sleep:
+    """The scene's ``sleep`` rule: pinned bodies, and those a force keeps awake, never sleep."""
+    count = system.body_count
+    pinned = system.particle_inv_mass[system.body_rows] == 0.0
+    kept = np.zeros(count, dtype=bool)
+    for force in forces:
+        kept |= force.bodies_kept_awake(count)
+    return Sleep(spec.speed, spec.after, bound, ~kept, pinned)
 
 
 def counts_text(system: System, body_dynamics: BodyDynamics | None) -> str:

@@ -76,6 +76,7 @@ from animsim.bodies.contact_kernels import numba_candidate_pairs, numba_kernels,
 from animsim.bodies.contact_shock import shock_pass
 from animsim.bodies.contact_solve import solve
 from animsim.bodies.shapes import BodyShape, contact_table
+from animsim.bodies.sleep import Sleep
 from animsim.bodies.warm import WarmStart
 from animsim.collisions import energy_shift
 from animsim.elements import StepStage
@@ -139,6 +140,14 @@ class BodyContacts(StepStage):
         self.numba_broadphase = backend == "numba"
         #: the last step's impulses, where each step's sweeps start (warm starting)
         self.warm = WarmStart(self.bound, planes.count)
+        #: bodies at rest sleep (animsim.bodies.sleep); None: the scene has no ``sleep``
+        self.sleep: Sleep | None = None
+        #: how many times the candidate list was built, and the list less the sleepers' pairs
+        self._builds = 0
+        self._awake_key: tuple[int, int] | None = None
+        self._awake_pairs = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
+        #: the bodies (a, b) of the contacts the last step solved (the islands that may sleep)
+        self._solved = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
         kinds = sorted({s.kind for s in shapes})
         parts = []
         if planes.count:
@@ -191,7 +200,11 @@ class BodyContacts(StepStage):
     def reset(self, state: Any) -> None:
         self._built_at = None
         self._candidates = None
+        self._awake_key = None
         self.warm.forget()
+        if self.sleep is not None:
+            rows = slice(self.first, self.first + self.count)
+            self.sleep.reset(state.particle_velocity[rows], state.body_angular_velocity)
 
     def apply(
         self, state: Any, x_old: np.ndarray, v_old: np.ndarray, t0: float, t1: float, dt: float = 0.0
@@ -203,13 +216,26 @@ class BodyContacts(StepStage):
         v = state.particle_velocity[rows]
         q = state.body_orientation
         w = state.body_angular_velocity
+        sleep = self.sleep
+        if sleep is not None:  # the sleeping bodies did not move (animsim.bodies.sleep)
+            sleep.freeze(x, v, q, w)
+        pairs = self.find_pairs(x, q)
+        while sleep is not None and (woken := sleep.wake_touched(pairs.a, pairs.b, None)) is not None:
+            sleep.unfreeze(woken, x, v, q, w)
+            pairs = self.find_pairs(x, q)  # the woken bodies' own contacts too
         dv = v - v_old[rows]
         dx = x - x_old[rows]
         resting = RESTING_FACTOR * np.linalg.norm(dv, axis=1)
-        pairs = self.find_pairs(x, q)
+        self._old = (x_old[rows], v_old[rows])
+        self._solved = (pairs.a[:0], pairs.b[:0])
         if not self.use_numba:
-            return self._apply_numpy(x, v, q, w, dv, dx, resting, pairs, t0, t1, dt)
-        return self._apply_numba(x, v, q, w, dv, dx, resting, pairs, dt)
+            changed = self._apply_numpy(x, v, q, w, dv, dx, resting, pairs, t0, t1, dt)
+        else:
+            changed = self._apply_numba(x, v, q, w, dv, dx, resting, pairs, dt)
+        if sleep is None:
+            return changed
+        sleep.settle(x, v, q, w, *self._solved, dt)
+        return changed or sleep.any_asleep
 
     def _apply_numpy(
         self,
@@ -232,9 +258,18 @@ class BodyContacts(StepStage):
             before, offsets = self.collider_offsets(t0), self.collider_offsets(t1)
             velocities = (offsets - before) / dt
         contacts, surface = self.find(x, q, pairs, offsets, velocities)
+        if self.sleep is not None:  # a moving collider wakes what it touches; sleepers sit out
+            while (woken := self.sleep.wake_touched(contacts.a, contacts.b, surface)) is not None:
+                self.sleep.unfreeze(woken, x, v, q, w)
+                x_old, v_old = self._old
+                dv[woken], dx[woken] = v[woken] - v_old[woken], x[woken] - x_old[woken]
+                resting[woken] = RESTING_FACTOR * np.linalg.norm(dv[woken], axis=1)
+                contacts, surface = self.find(x, q, None, offsets, velocities)
+            contacts, surface = solved_part(contacts, surface, self.sleep.to_solve(contacts.a, contacts.b))
         if contacts.count == 0:
             return False
         c = contacts
+        self._solved = (c.a, c.b)
         jn0, jt0, local = self.warm.guess(c.a, c.b, c.plane, c.n, c.ra, q)
         v_pre, w_pre = v.copy(), w.copy()
         sweeps, cold = self._sweep_limit(c, jn0)
@@ -259,7 +294,7 @@ class BodyContacts(StepStage):
         )
         level = projection.levels(c.a, c.b, self.inv_mass)
         shock_pass(c, impact, level, q, self.inv_mass, self.inv_inertia, surface, dt, jn, jt, v, w)
-        self.warm.keep(c.a, c.b, c.plane, c.n, local, jn, jt)
+        self.warm.keep(c.a, c.b, c.plane, c.n, local, jn, jt, self._held())
         h = self.follow_weight * dt
         left = follow_impulses(c, impact, x, q, v - v_pre, w - w_pre, h) if h > 0.0 else c.depth
         push = projection.pushes(c.depth, left, e_used)
@@ -288,7 +323,7 @@ class BodyContacts(StepStage):
             q,
             self.points,
             self.radii,
-            self.counts,
+            self._awake_counts(),
             self.planes.point,
             self.planes.normal,
             self.planes.restitution,
@@ -309,6 +344,11 @@ class BodyContacts(StepStage):
             buf[6][:found],
         )
         c = concat([planes_found, pairs])
+        if self.sleep is not None:
+            c, _ = solved_part(c, None, self.sleep.to_solve(c.a, c.b))
+        if c.count == 0:
+            return False
+        self._solved = (c.a, c.b)
         arrays = [np.ascontiguousarray(getattr(c, f)) for f in Contacts.__dataclass_fields__]
         count = c.count
         e_used = np.empty(count)
@@ -343,10 +383,33 @@ class BodyContacts(StepStage):
             level,
             islands(c.a, c.b, self.count),
         )
-        self.warm.keep(c.a, c.b, c.plane, c.n, local, jn, jt)
+        self.warm.keep(c.a, c.b, c.plane, c.n, local, jn, jt, self._held())
         push = projection.pushes(c.depth, depth_left, e_used)
         projection.project(c.a, c.b, c.n, push, c.plane, x, self.inv_mass, level, True)
         return True
+
+    def _awake_candidates(self) -> tuple[np.ndarray, np.ndarray]:
+        """The candidate pairs, less those the sleeping bodies leave out (kept while neither the
+        list nor who sleeps changes)."""
+        assert self._candidates is not None
+        if self.sleep is None or not self.sleep.any_asleep:
+            return self._candidates
+        key = (self._builds, self.sleep.version)
+        if self._awake_key != key:
+            i, j = self._candidates
+            keep = self.sleep.pairs_to_find(i, j)
+            self._awake_pairs, self._awake_key = (i[keep], j[keep]), key
+        return self._awake_pairs
+
+    def _held(self) -> np.ndarray | None:
+        """The sleeping bodies, whose last impulses the warm start keeps (None: none sleep)."""
+        return self.sleep.asleep if self.sleep is not None and self.sleep.any_asleep else None
+
+    def _awake_counts(self) -> np.ndarray:
+        """Contact spheres per body for the plane detection: none for a sleeping body."""
+        if self.sleep is None or not self.sleep.any_asleep:
+            return self.counts
+        return np.where(self.sleep.asleep, 0, self.counts)
 
     @staticmethod
     def _sweep_limit(c: Contacts, start: np.ndarray) -> tuple[int, bool]:
@@ -388,7 +451,10 @@ class BodyContacts(StepStage):
         of the surface each contact touches (None: every surface is still)."""
         parts = []
         if self.planes.count:
-            parts.append(plane_contacts(x, q, self.points, self.radii, self.valid, self.planes))
+            valid = self.valid
+            if self.sleep is not None and self.sleep.any_asleep:  # a sleeper's stay out of the solve
+                valid = valid & ~self.sleep.asleep[:, None]
+            parts.append(plane_contacts(x, q, self.points, self.radii, valid, self.planes))
         moving: list[tuple[int, int]] = []  # (collider, its contacts) in list order
         for c, (sdf, e, mu) in enumerate(self.colliders):
             where = None if offsets is None else offsets[c]
@@ -420,7 +486,8 @@ class BodyContacts(StepStage):
             else:
                 self._candidates = candidate_pairs(x, grown)
             self._built_at = x.copy()
-        i, j = self._candidates
+            self._builds += 1
+        i, j = self._awake_candidates()
         if i.size == 0:
             return empty_contacts()
         # the list holds pairs within a skin of touching; only pairs whose bounding spheres overlap
@@ -458,3 +525,13 @@ class BodyContacts(StepStage):
             self.friction,
             (i[close], j[close]),
         )
+
+
+def solved_part(
+    c: Contacts, surface: np.ndarray | None, keep: np.ndarray
+) -> tuple[Contacts, np.ndarray | None]:
+    """The contacts ``keep`` (C,) picks, and their surface velocities."""
+    if keep.all():
+        return c, surface
+    part = Contacts(*(getattr(c, f)[keep] for f in Contacts.__dataclass_fields__))
+    return part, None if surface is None else surface[keep]

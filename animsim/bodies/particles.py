@@ -34,6 +34,7 @@ import numpy as np
 from animsim.bodies import quaternion as quat
 from animsim.bodies.contact_detection import local_sdf, shape_arrays
 from animsim.bodies.shapes import BodyShape
+from animsim.bodies.sleep import Sleep
 from animsim.elements import PlaneProjector, StepStage
 from animsim.system import State
 
@@ -76,6 +77,8 @@ class ParticleBodyContacts(StepStage):
         self.dissipative = bool((self.restitution < 1.0).any() or (self.friction > 0.0).any())
         #: the impulse planes (compile sets it): a particle pushed out of a body stays in front of them
         self.planes: PlaneProjector | None = None
+        #: the bodies' sleep (animsim.bodies.sleep): a particle that touches a sleeping body wakes it
+        self.sleep: Sleep | None = None
         self.label = (
             f"particle-body contacts: every particle against {self.count} rigid bod"
             f"{'y' if self.count == 1 else 'ies'}; impulses with the body's restitution and Coulomb "
@@ -137,6 +140,8 @@ class ParticleBodyContacts(StepStage):
         if found is None:
             return False
         rows, body, n, arm, depth = found
+        if self.sleep is not None:  # woken now, it answers the particle in this step
+            self.sleep.wake(np.unique(body))
         x, v = state.particle_position, state.particle_velocity
         brow = self.first + body
         w_body = state.body_angular_velocity

@@ -32,6 +32,14 @@ class BodySprings(ForceElement):
     acts_on_bodies = True
     no_closed_form = "springs to bodies have no closed form here"
 
+    def bodies_kept_awake(self, count: int) -> np.ndarray:
+        """The bodies a spring is fixed in never sleep (animsim.bodies.sleep): the other end
+        moves them, and a spring at rest pulls as hard as one that stretches."""
+        kept = np.zeros(count, dtype=bool)
+        kept[self.body_a[self.body_a >= 0]] = True
+        kept[self.body_b[self.body_b >= 0]] = True
+        return kept
+
     def __init__(
         self,
         rows_a: np.ndarray,

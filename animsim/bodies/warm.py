@@ -85,10 +85,18 @@ class WarmStart:
         local: np.ndarray,
         jn: np.ndarray,
         jt: np.ndarray,
+        held: np.ndarray | None = None,
     ) -> None:
         """Remember this step's contacts (points in body a's frame, from :meth:`guess`) and the
-        impulses they ended with."""
+        impulses they ended with; and, for the bodies ``held`` (B,) bool (asleep, their contacts
+        not solved: :mod:`animsim.bodies.sleep`), the impulses they were remembered with."""
         key = self._keys(a, b, plane, n)
+        if held is not None and self._key.size:
+            carry = held[self._key // 6 // self._others]
+            key = np.concatenate([key, self._key[carry]])
+            local = np.concatenate([local, self._local[carry]])
+            jn = np.concatenate([jn, self._jn[carry]])
+            jt = np.concatenate([jt, self._jt[carry]])
         order = np.argsort(key, kind="stable")
         self._key = key[order]
         self._local = local[order]

@@ -46,6 +46,8 @@ class Drag(ForceElement):
     #: accumulate on row slices x[lo:hi], v[lo:hi], out[lo:hi] gives those rows of the whole
     #: evaluation (it reads no per-particle array of its own), so it may run a block at a time
     row_blocks = True
+    #: zero on a body at rest, so it may sleep
+    lets_bodies_sleep = True
     watch_role = DISSIPATIVE
     has_damping = True
 
@@ -80,6 +82,8 @@ class Drag(ForceElement):
 class QuadraticDrag(ForceElement):
     #: row i of its force reads only row i (the numba backend may evaluate it on a few rows)
     pointwise = True
+    #: zero on a body at rest, so it may sleep
+    lets_bodies_sleep = True
     watch_role = DISSIPATIVE
     has_damping = True
 

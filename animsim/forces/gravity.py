@@ -62,6 +62,8 @@ class Gravity(ForceElement):
     pointwise = True
     #: its force reads neither positions, velocities nor time (only the masses)
     constant_force = True
+    #: uniform and constant: a body at rest on a floor feels the same pull every step, so it may sleep
+    lets_bodies_sleep = True
     watch_role = RELEASING
     energy_part = "gravitational"
     #: released from x - x_ref directly: its per-particle reference potential stays zero

@@ -148,6 +148,8 @@ class Springs(ForceElement):
             self._fp[ns : 2 * ns] = self.ks
             self._fp[2 * ns : 3 * ns] = self.kd
 
+    #: between particles only (springs to bodies are animsim.bodies.springs): no body feels them
+    lets_bodies_sleep = True
     watch_role = ELASTIC
     energy_part = "spring"
     #: springs take part in closed forms through the system's spring arrays (no uniform part)

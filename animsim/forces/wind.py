@@ -40,6 +40,9 @@ class Wind(ForceElement):
     pointwise = True
     #: accumulate on row slices gives those rows of the whole evaluation (see Drag)
     row_blocks = True
+    #: the steady part k (w - v) is the same push on a body standing still, step after step (the
+    #: turbulent part is its own element, which keeps bodies awake), so a body may sleep under it
+    lets_bodies_sleep = True
     watch_role = INJECTING
     has_damping = True
 

@@ -137,6 +137,10 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
     structure_of = functools.partial(_structure_of, structures)
     particle_ids = _check_particles(scene, structure_of, out)
     body_ids = _check_bodies(scene.bodies or [], particle_ids, structure_of, out)
+    if getattr(scene, "sleep", None) is not None and not scene.bodies:  # nothing silently ignored
+        out.append(
+            (("sleep",), "sleep puts rigid bodies at rest to sleep, but the scene has no bodies", False)
+        )
     for i, c in enumerate(scene.colliders or []):
         if c is not None and hasattr(c, "orientation"):
             _check_orientation(("colliders", i, "orientation"), c.orientation, out)

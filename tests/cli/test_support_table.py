@@ -338,6 +338,20 @@ THING_SCENES["body_color"] = {
     "planes": THING_SCENES["body_box"]["planes"],
 }
 
+# a box set down at rest on the floor: it falls asleep 0.02 s later, within the 0.1 s run
+THING_SCENES["body_sleep"] = {
+    "bodies": [
+        {
+            **THING_SCENES["body_box"]["bodies"][0],
+            "position": [0, -4.95, 0],
+            "velocity": [0, 0, 0],
+            "orientation": [1, 0, 0, 0],
+        }
+    ],
+    "planes": THING_SCENES["body_box"]["planes"],
+    "sleep": {"after": 0.02},
+}
+
 # the mesh of the contact cases has a radius (for particle contacts); a radius is its own row
 THING_SCENES["mesh"] = {
     "structures": [{k: v for k, v in MOVERS["mesh"]["structures"][0].items() if k != "radius"}]
@@ -400,6 +414,7 @@ def _show(consumer: str, thing: str, path: Path, tmp: Path) -> None:
             "particle_contacts": "contact",
             "tearing": "tear",
             "keyframed_particle": "keyframe",
+            "body_sleep": "sleeping",
         }
         for prefix, w in word.items():
             if thing.startswith(prefix):
@@ -447,6 +462,7 @@ def _show(consumer: str, thing: str, path: Path, tmp: Path) -> None:
             "body_sphere": "Sphere",
             "body_box": "Cube",
             "body_color": "Cube",
+            "body_sleep": "Cube",
             "body_capsule": "Capsule",
             "tearing": "Mesh",
         }.get(thing, "Points")
@@ -512,7 +528,8 @@ def _show(consumer: str, thing: str, path: Path, tmp: Path) -> None:
         imageio = pytest.importorskip("imageio.v3")
         frames = _gif(consumer, path, tmp)
         # the element changes the picture: the same scene without it draws other pixels
-        if thing not in ("particle", "particle_contacts"):
+        # (a body asleep is drawn where it rests, as it would be drawn awake: no pixel shows it)
+        if thing not in ("particle", "particle_contacts", "body_sleep"):
             bare = _write(tmp, f"{thing}_without", _without(thing))
             assert not np.array_equal(frames, _gif(consumer, bare, tmp / "bare")), "drawn as if absent"
         assert imageio is not None and frames.shape[0] > 1

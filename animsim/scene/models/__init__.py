@@ -22,7 +22,15 @@ from __future__ import annotations
 
 from typing import Any
 
-from animsim.scene.models.bodies import BODY_SHAPE_TYPES, Body, BodyBox, BodyCapsule, BodyShape, BodySphere
+from animsim.scene.models.bodies import (
+    BODY_SHAPE_TYPES,
+    Body,
+    BodyBox,
+    BodyCapsule,
+    BodyShape,
+    BodySphere,
+    Sleep,
+)
 from animsim.scene.models.colliders import (
     COLLIDER_TYPES,
     BoxCollider,
@@ -195,6 +203,7 @@ __all__ = [
     "Scene",
     "Shape",
     "SizeOverLife",
+    "Sleep",
     "SoftBox",
     "SphereCollider",
     "SphereShape",

@@ -101,3 +101,28 @@ class Body(Model):
         if (self.mass is None) == (self.density is None):
             raise ValueError("give exactly one of mass and density")
         return self
+
+
+# --- sleeping ------------------------------------------------------------------
+
+#: a body slower than this (m/s) counts as at rest (Box2D's linear sleep tolerance is 0.01 m/s)
+DEFAULT_SLEEP_SPEED = 0.005
+#: a group of touching bodies sleeps after this long at rest (Box2D's time to sleep, 0.5 s)
+DEFAULT_SLEEP_AFTER = 0.5
+
+
+class Sleep(Model):
+    """Bodies at rest stop being stepped until something touches them (off unless given)."""
+
+    speed: Positive = Doc(
+        DEFAULT_SLEEP_SPEED,
+        "a body is at rest while its speed, and its angular speed times its bounding radius, stay below this",
+        unit="m/s",
+        example=0.005,
+    )
+    after: Positive = Doc(
+        DEFAULT_SLEEP_AFTER,
+        "a group of touching bodies sleeps once every one of them has been at rest this long",
+        unit="s",
+        example=0.5,
+    )

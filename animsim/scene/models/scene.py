@@ -17,7 +17,7 @@ from pydantic_core import PydanticCustomError, core_schema
 
 from animsim import methods
 from animsim.errors import Diagnostic, SceneError
-from animsim.scene.models.bodies import Body
+from animsim.scene.models.bodies import Body, Sleep
 from animsim.scene.models.colliders import Collider, ParticleCollisions, Plane
 from animsim.scene.models.common import Doc, Model, Positive
 from animsim.scene.models.emitters import Emitter
@@ -238,6 +238,12 @@ class Scene(Model, metaclass=_SceneType):
         [],
         "rigid bodies: boxes, spheres and capsules with an orientation",
         example=[{"id": "die", "shape": {"type": "box", "size": [0.1, 0.1, 0.1]}, "mass": 0.2}],
+    )
+    sleep: Sleep | None = Doc(
+        None,
+        "bodies at rest sleep (are no longer stepped) until something awake touches them; "
+        "{} for the defaults",
+        example={"speed": 0.005, "after": 0.5},
     )
 
     # A scene built in Python gets the loader's diagnostics (key path and
