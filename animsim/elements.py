@@ -245,8 +245,9 @@ class StepStage:
     #: its numba stage changes row i from row i of its arguments alone (and says whether it
     #: changed any), its parameters holding nothing per row: it may run on any block of rows
     pointwise: bool = False
-    #: a random stage that keeps what it draws in ``snapshot``/``restore``, so a run with it
-    #: can be replayed from a checked state (births)
+    #: a stage with memory between steps (what births draw; the bodies' warm starts and sleep)
+    #: that keeps it in ``snapshot``/``restore``, so a run with it can be replayed from a
+    #: checked state and makes the same steps again
     replays: ClassVar[bool] = False
     #: the numba backend calls it from Python between one-step compiled calls (births)
     fused_between_steps: ClassVar[bool] = False

@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -196,6 +196,22 @@ class BodyContacts(StepStage):
         if self.between_bodies and int((self.kind == SHAPE_CAPSULE).sum()) > 1:
             out.append("capsule-capsule side-on-side contact (only end spheres are detected)")
         return out
+
+    #: its memory between steps (warm starting, sleeping, the candidate list) is kept by
+    #: snapshot/restore, so a replay (the watchdog tracing a failure to its first step) makes
+    #: the same steps the run made
+    replays = True
+
+    def snapshot(self) -> object:
+        sleep = None if self.sleep is None else self.sleep.snapshot()
+        return (self.warm.snapshot(), sleep, self._built_at, self._candidates, self._builds)
+
+    def restore(self, snap: object) -> None:
+        warm, sleep, self._built_at, self._candidates, self._builds = cast(tuple[Any, ...], snap)
+        self.warm.restore(warm)
+        if self.sleep is not None:
+            self.sleep.restore(sleep)
+        self._awake_key = None
 
     def reset(self, state: Any) -> None:
         self._built_at = None

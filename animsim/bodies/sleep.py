@@ -110,6 +110,19 @@ class Sleep:
         self.version += 1
         self.moving_pinned = self.pinned & ((v != 0.0).any(axis=1) | (w != 0.0).any(axis=1))
 
+    def snapshot(self) -> tuple[object, ...]:
+        """Who sleeps, since when and where, for :meth:`restore` (a replay from a kept state)."""
+        arrays = (self.asleep, self.rested, self.group, self.pose_x, self.pose_q, self.moving_pinned)
+        return (*(a.copy() for a in arrays), self._next_group)
+
+    def restore(self, snap: tuple[object, ...]) -> None:
+        *arrays, self._next_group = snap  # type: ignore[assignment]
+        self.asleep, self.rested, self.group, self.pose_x, self.pose_q, self.moving_pinned = (
+            np.array(a, copy=True) for a in arrays
+        )
+        self.version += 1  # what was derived from who sleeps is stale
+        self._sleepers_at = -1
+
     @property
     def any_asleep(self) -> bool:
         return bool(self.asleep.any())

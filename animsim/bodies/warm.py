@@ -38,6 +38,13 @@ class WarmStart:
         self._jn = np.zeros(0)
         self._jt = np.zeros((0, 3))
 
+    def snapshot(self) -> tuple[np.ndarray, ...]:
+        """What :meth:`restore` puts back (the arrays are replaced, never changed in place)."""
+        return (self._key, self._local, self._jn, self._jt)
+
+    def restore(self, snap: tuple[np.ndarray, ...]) -> None:
+        self._key, self._local, self._jn, self._jt = snap
+
     def _keys(self, a: np.ndarray, b: np.ndarray, plane: np.ndarray, n: np.ndarray) -> np.ndarray:
         """One integer per (body a, body b or plane, side of a collider by normal)."""
         nb = self.bound.shape[0]

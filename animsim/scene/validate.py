@@ -141,6 +141,15 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
         out.append(
             (("sleep",), "sleep puts rigid bodies at rest to sleep, but the scene has no bodies", False)
         )
+    elif getattr(scene, "sleep", None) is not None and _adaptive(scene):
+        out.append(
+            (
+                ("sleep",),
+                "sleep does not work with adaptive steps (a rejected trial step would count as time at"
+                " rest and could put bodies to sleep); remove `adaptive` from the integrator or `sleep`",
+                False,
+            )
+        )
     for i, c in enumerate(scene.colliders or []):
         if c is not None and hasattr(c, "orientation"):
             _check_orientation(("colliders", i, "orientation"), c.orientation, out)
@@ -150,6 +159,12 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
     if not partial:  # a partial scene does not carry its integrator (it may not have validated)
         out.extend(method_problems(scene))
     return out
+
+
+def _adaptive(scene: Scene) -> bool:
+    """Whether the scene steps adaptively (``integrator: {method, adaptive}``)."""
+    integrator = getattr(scene, "integrator", None)
+    return getattr(integrator, "adaptive", None) is not None
 
 
 def _check_run(scene: Scene, partial: bool, out: list[Problem]) -> None:

@@ -232,3 +232,46 @@ def test_sleep_without_bodies_is_an_error_at_its_key():
     with pytest.raises(SceneError, match=r"sleep.*no bodies") as err:
         api.loads(text)
     assert ":2:" in str(err.value)  # line 2, where the key is
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_replay_from_a_kept_state_makes_the_steps_the_run_made(backend):
+    """The watchdog traces a failure by replaying from a state kept before it (at step 0 here);
+    the bodies' memory (warm starts, who sleeps and since when) is restored with that state, so
+    the replayed step equals the step the run made, bit for bit: the box landed at about step
+    202, the state is kept at step 256, the run fails at step 288, and the box would fall asleep
+    at about step 302 (in a replay that kept step 288's clocks, at about step 270)."""
+    from animsim.engine import STATUS_UNSTABLE, Failure, Guard, run
+    from animsim.scene.loader import load_scene_text
+    from animsim.steppers.base import CHECK_STRIDE
+
+    fail_at = 18 * CHECK_STRIDE
+    seen: dict[int, list[np.ndarray]] = {}
+
+    class FailsLate(Guard):
+        def check(self, state):
+            if state.step == fail_at:
+                seen.setdefault(state.step, []).append(
+                    np.concatenate(
+                        [state.particle_position, state.particle_velocity, state.body_angular_velocity]
+                    )
+                )
+                return Failure(step=state.step, time=state.time, particle="box", reason="test")
+            return None
+
+    text = _drop(0.2, 1.0, sleep="sleep: {speed: 0.005, after: 0.1}\n")
+    loaded = load_scene_text(text, "replay.yaml")
+    compiled = compile_scene(loaded.scene, loaded.name, backend=backend)
+    result = run(compiled, [], guard=FailsLate(compiled))
+    assert result.status == STATUS_UNSTABLE and result.failure.step == fail_at
+    first, replayed = seen[fail_at]  # checked once by the run, once by the replay
+    np.testing.assert_array_equal(replayed, first)
+
+
+def test_sleep_with_adaptive_steps_is_refused_at_its_key():
+    text = _drop(0.2, 0.5).replace(
+        "dt: 0.001", "dt: 0.001\nintegrator: {method: rk4, adaptive: {tolerance: 1e-6}}"
+    )
+    with pytest.raises(SceneError) as err:
+        api.loads(text, name="sleep")
+    assert "sleep" in str(err.value) and "adaptive" in str(err.value)
