@@ -36,23 +36,16 @@ from __future__ import annotations
 
 import numpy as np
 
+from animsim.bodies.contact_batches import components
+
 
 def body_islands(a: np.ndarray, b: np.ndarray, still: np.ndarray) -> np.ndarray:
     """(B,) island number of each body: bodies joined by contacts (a, b) between two bodies
     neither of which is ``still`` (B,) (pinned, or asleep) share a number; the others are
     islands of their own. Connected components (the solver's islands,
     :func:`animsim.bodies.contact_batches.islands`, are the same graph)."""
-    count = still.shape[0]
     bb = np.maximum(b, 0)
-    joins = (b >= 0) & ~still[a] & ~still[bb]
-    if not joins.any():  # bodies apart (landed apart, or on planes only): each its own island
-        return np.arange(count, dtype=np.int64)
-    from scipy.sparse import coo_matrix  # scipy is imported where used (a heavy import)
-    from scipy.sparse.csgraph import connected_components
-
-    graph = coo_matrix((np.ones(int(joins.sum())), (a[joins], b[joins])), shape=(count, count))
-    _, label = connected_components(graph, directed=False)
-    return label.astype(np.int64)
+    return components(a, b, still.shape[0], (b >= 0) & ~still[a] & ~still[bb])
 
 
 class Sleep:

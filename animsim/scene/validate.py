@@ -141,7 +141,7 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
         out.append(
             (("sleep",), "sleep puts rigid bodies at rest to sleep, but the scene has no bodies", False)
         )
-    elif getattr(scene, "sleep", None) is not None and _adaptive(scene):
+    elif getattr(scene, "sleep", None) is not None and getattr(scene, "adaptive", None) is not None:
         out.append(
             (
                 ("sleep",),
@@ -159,12 +159,6 @@ def check_scene(scene: Scene, *, ids_complete: bool = True, partial: bool = Fals
     if not partial:  # a partial scene does not carry its integrator (it may not have validated)
         out.extend(method_problems(scene))
     return out
-
-
-def _adaptive(scene: Scene) -> bool:
-    """Whether the scene steps adaptively (``integrator: {method, adaptive}``)."""
-    integrator = getattr(scene, "integrator", None)
-    return getattr(integrator, "adaptive", None) is not None
 
 
 def _check_run(scene: Scene, partial: bool, out: list[Problem]) -> None:
