@@ -473,6 +473,15 @@ def numba_inline_helper(fn: FunctionT) -> FunctionT:
     return numba_helper(fn)
 
 
+def numba_parallel_helper(fn: FunctionT) -> FunctionT:
+    """:func:`numba_helper` compiled with numba's parallel loops: its ``prange`` loops (a
+    module-level ``prange = range`` until compiled) are shared among numba's threads. Its
+    results must not depend on how many there are (each iteration writes only its own
+    entries; integer counts as the only reductions)."""
+    fn._numba_parallel = True  # type: ignore[attr-defined]
+    return numba_helper(fn)
+
+
 def live_array(a: np.ndarray, cache: dict[int, np.ndarray]) -> np.ndarray:
     """``a`` as numba's signature wants it: the model's read-only arrays never change, so a
     writable copy made once stands for them; a state's own (writable) arrays pass as they are."""
@@ -495,7 +504,10 @@ def compile_helpers(namespace: dict[str, object]) -> None:
             and not isinstance(obj, numba.core.dispatcher.Dispatcher)
         ):
             inline: Literal["always", "never"] = "always" if getattr(obj, "_numba_inline", False) else "never"
-            namespace[name] = numba.njit(cache=True, inline=inline)(obj)
+            parallel = bool(getattr(obj, "_numba_parallel", False))
+            if parallel:
+                namespace["prange"] = numba.prange
+            namespace[name] = numba.njit(cache=True, inline=inline, parallel=parallel)(obj)
 
 
 _JITTED: dict[tuple[Callable[..., object], bool, bool, bool, bool], Dispatcher[Callable[..., object]]] = {}

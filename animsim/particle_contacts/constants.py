@@ -33,10 +33,11 @@ SKIN = 0.3
 # tree's or the grid's output before sorting (16), and the per-step arrays of a pair that
 # overlaps (gathered differences and normals, distances, normal speeds, impulses and the
 # Jacobi work arrays: about 20 float64) and the impulses kept for the next step's warm start
-# (normal, friction vector, the step they were kept at, the pair's candidate: 6 more), so a
-# list where everything touches costs this much (the pre-flight counts the list at the start
-# with it; bound_memory bounds it later).
-CONTACT_PAIR_BYTES = 16 + 16 + 26 * 8
+# (normal, friction vector, the step they were kept at, the pair's candidate: 6 more), and on
+# numba the two slots its changes are summed in when the passes are shared among threads
+# (two indices and two 3-vectors: 64), so a list where everything touches costs this much
+# (the pre-flight counts the list at the start with it; bound_memory bounds it later).
+CONTACT_PAIR_BYTES = 16 + 16 + 26 * 8 + 64
 #: the list is rebuilt once two particles may have closed by this fraction of the skin
 #: (the rest is margin for rounding in the distances)
 SKIN_USE = 0.9

@@ -3,6 +3,8 @@ passes on NumPy (:mod:`animsim.particle_contacts.resolve`) or numba (:mod:`anims
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from animsim.console import format_bytes
@@ -26,11 +28,16 @@ from animsim.particle_contacts.neighbours import EMPTY, candidates_numpy, count_
 from animsim.particle_contacts.resolve import Buffers, Kept, dot3_into, gather_diff, resolve_pairs_numpy
 from animsim.particle_contacts.walls import NO_WALLS, WallContacts, Walls
 from animsim.system import State
+from animsim.thread_choice import BuildChooser
 from animsim.vec import dot3
 
 #: touching: closer than the contact distance and the slop (a resting pair whose overlap was
 #: removed stays a contact, with its impulses); squared, as the distances are
 TOUCH2 = (1.0 + SLOP) ** 2
+#: the numba passes are shared among threads from this many overlapping pairs on (fewer: one
+#: thread; a shared pass starts and joins the threads some 40 times a step, tens of
+#: microseconds each)
+SHARED_MIN_PAIRS = 16_384
 
 
 class ParticleContacts(StepStage):
@@ -77,6 +84,8 @@ class ParticleContacts(StepStage):
         self.colliders = None
         self.planes = None
         self._buffers = Buffers()
+        #: whether the numba passes run shared among threads or on one: the faster, timed
+        self._chooser = BuildChooser()
         self._forget()
         finder = (
             "a uniform grid (counting sort by cell)" if backend == "numba" else "a k-d tree (scipy cKDTree)"
@@ -279,23 +288,40 @@ class ParticleContacts(StepStage):
         return changed
 
     def _numba_step(self, x, v, v_old, inv_mass, dt, walls, wlam, wft) -> tuple[int, bool, int]:  # type: ignore[no-untyped-def]
+        import numba  # the numba backend's path: numba is installed
+
         assert self._kernels is not None
         p = self._ci.size
         nw = walls.rows.size
         b = self._buffers
         n_rows = x.shape[0]
-        found, changed, passes = self._kernels.step(
-            self._ci, self._cj, self._reach2, TOUCH2, x, v, v_old, inv_mass, self.radius,
-            self.restitution, self.friction, self.iterations, OVERLAP_PASSES, RELAX, dt,
-            b.get("pi", (p,), np.int64), b.get("pj", (p,), np.int64), b.get("pk", (p,), np.int64),
-            b.get("w", (p,)), b.get("rel", (p,)), b.get("nrm", (p, 3)), b.get("limit", (p,)),
-            b.get("lam", (p,)), b.get("ft", (p, 3)), b.get("jb", (p,)), b.get("due", (p,), np.bool_),
-            self._lam_c, self._ft_c, self._stamp_c, self._stamp,
-            walls.rows, walls.normal, walls.velocity, walls.friction, b.get("wrel", (nw,)), wlam, wft,
-            b.get("dv", (n_rows, 3)), b.get("v0", (n_rows, 3)), b.get("added", (n_rows,)), b.get("near", (n_rows,)),
-            b.get("count", (n_rows,), np.int64),
-            RESTING_STEPS, BOUNCE_FLOOR, BOUNCE_SWEEPS, CONVERGED,
+        sums = (
+            b.get("si", (p,), np.int64), b.get("sj", (p,), np.int64), b.get("slots", (2 * p, 3)),
+            b.get("wc", (nw, 3)), b.get("start", (n_rows + 1,), np.int64),
+            b.get("wstart", (n_rows + 1,), np.int64), b.get("wlist", (nw,), np.int64), b.get("dv", (n_rows, 3)),
         )  # fmt: skip
+        threads = numba.get_num_threads()
+        # share the passes among threads only where a list is long enough to pay for it, and
+        # only while that is the faster (the chooser times both ways; the bits are the same)
+        shared = threads > 1 and p >= SHARED_MIN_PAIRS and self._chooser.pick()
+        numba.set_num_threads(threads if shared else 1)
+        start = time.perf_counter()
+        try:
+            found, changed, passes = self._kernels.step(
+                self._ci, self._cj, self._reach2, TOUCH2, x, v, v_old, inv_mass, self.radius,
+                self.restitution, self.friction, self.iterations, OVERLAP_PASSES, RELAX, dt,
+                b.get("pi", (p,), np.int64), b.get("pj", (p,), np.int64), b.get("pk", (p,), np.int64),
+                b.get("w", (p,)), b.get("rel", (p,)), b.get("nrm", (p, 3)), b.get("limit", (p,)),
+                b.get("lam", (p,)), b.get("ft", (p, 3)), b.get("jb", (p,)), b.get("due", (p,), np.bool_),
+                self._lam_c, self._ft_c, self._stamp_c, self._stamp,
+                walls.rows, walls.normal, walls.velocity, walls.friction, b.get("wrel", (nw,)), wlam, wft,
+                b.get("v0", (n_rows, 3)), b.get("added", (n_rows,)), b.get("near", (n_rows,)),
+                RESTING_STEPS, BOUNCE_FLOOR, BOUNCE_SWEEPS, CONVERGED, shared, sums,
+            )  # fmt: skip
+        finally:
+            numba.set_num_threads(threads)
+        if threads > 1 and p >= SHARED_MIN_PAIRS:
+            self._chooser.record(shared, time.perf_counter() - start, 1)
         return int(found), bool(changed), int(passes)
 
     def _numpy_step(self, x, v, v_old, inv_mass, dt, walls, wlam, wft) -> tuple[int, bool, int]:  # type: ignore[no-untyped-def]

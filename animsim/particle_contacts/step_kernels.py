@@ -6,13 +6,23 @@ The kernel and every helper it calls live in this one module: numba's disk cache
 the file of the function it cached, so a helper in another file could go stale in the cache
 after an edit. ``contact_step`` runs the step's passes, one helper each; they share the
 per-pair buffers ``pair_setup`` fills once.
+
+**Threads.** The passes over every contact are shared among numba's threads without
+changing a bit: a contact's change is written to one *slot* of each of its two particles
+(``incidence``: a particle's slots hold first the pairs where it is the second sphere,
+then those where it is the first, each in pair order, then its walls), and each particle
+sums its own slots from 0.0 (``gather``). Pairs are sorted by (i, j) with i < j, so that
+is the order in which a scatter pair by pair adds them: the sums are the same to the last
+bit on any number of threads, and the same as the NumPy backend's ``np.add.at``.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from animsim.elements import compile_helpers, numba_helper, numba_inline_helper
+from animsim.elements import compile_helpers, numba_helper, numba_inline_helper, numba_parallel_helper
+
+prange = range  # numba's prange once compiled (compile_helpers sets it for parallel helpers)
 
 
 @numba_inline_helper
@@ -116,26 +126,135 @@ def overlapping(ci, cj, reach2, touch2, x, inv_mass, pi, pj, pk):  # pragma: no 
 
 
 @numba_helper
+def incidence(shared, pi, pj, p, wr, sums):  # pragma: no cover - compiled
+    """Each particle's contacts counted: ``start[r + 1] - start[r]`` pairs and ``wstart[r + 1]
+    - wstart[r]`` walls (``sums``: :func:`sums_of`). When the passes are ``shared`` among
+    threads, also each particle's slots (see the module's "Threads"): pair k's change goes to
+    slot ``sj[k]`` of its second sphere and, negated, to slot ``si[k]`` of its first;
+    particle r's are ``start[r]`` to ``start[r + 1]`` (those where it is the second sphere
+    first), its walls ``wlist[wstart[r]:wstart[r + 1]]``. A counting sort, in pair (and wall)
+    order."""
+    si, sj, slots, wc, start, wstart, wlist, dv = sums
+    n = start.shape[0] - 1
+    start[:] = 0
+    wstart[:] = 0
+    for k in range(p):
+        start[pi[k] + 1] += 1
+        start[pj[k] + 1] += 1
+    for k in range(wr.shape[0]):
+        wstart[wr[k] + 1] += 1
+    for r in range(n):
+        start[r + 1] += start[r]
+        wstart[r + 1] += wstart[r]
+    if not shared:
+        return
+    # the second-sphere slots come first: fill them from the start of each particle's
+    # slots, the first-sphere ones from the end of its second-sphere ones (counted first)
+    fill_i = start[:-1].copy()
+    for k in range(p):
+        fill_i[pj[k]] += 1
+    fill_j = start[:-1].copy()
+    for k in range(p):
+        j = pj[k]
+        sj[k] = fill_j[j]
+        fill_j[j] += 1
+        i = pi[k]
+        si[k] = fill_i[i]
+        fill_i[i] += 1
+    fill_w = wstart[:-1].copy()
+    for k in range(wr.shape[0]):
+        r = wr[k]
+        wlist[fill_w[r]] = k
+        fill_w[r] += 1
+
+
+@numba_inline_helper
+def store(shared, si, sj, slots, dv, k, i, j, c0, c1, c2):  # pragma: no cover - compiled too
+    """Pair k's change c, -c for its first sphere i and +c for its second j: into their slots
+    when ``shared``, else added to their sums ``dv`` at once (one thread only).
+
+    The arrays come one by one, not as the tuple ``sums``: numba (0.68) loses the writes
+    through an array unpacked from a tuple inside a ``prange`` loop."""
+    if shared:
+        a = sj[k]
+        slots[a, 0] = c0
+        slots[a, 1] = c1
+        slots[a, 2] = c2
+        b = si[k]
+        slots[b, 0] = -c0
+        slots[b, 1] = -c1
+        slots[b, 2] = -c2
+    else:
+        dv[i, 0] -= c0
+        dv[i, 1] -= c1
+        dv[i, 2] -= c2
+        dv[j, 0] += c0
+        dv[j, 1] += c1
+        dv[j, 2] += c2
+
+
+@numba_parallel_helper
+def gather(out, slots, wc, start, wstart, wlist, inv_mass):  # pragma: no cover - compiled
+    """out[r] += (the sum of r's slots, then of its walls' changes ``wc``, from 0.0) / m_r for
+    every row, each on its own thread's share: the bits a scatter pair by pair and then wall
+    by wall gives (a - c is a + (-c) in IEEE arithmetic)."""
+    for r in prange(out.shape[0]):
+        a0 = 0.0
+        a1 = 0.0
+        a2 = 0.0
+        for q in range(start[r], start[r + 1]):
+            a0 += slots[q, 0]
+            a1 += slots[q, 1]
+            a2 += slots[q, 2]
+        for q in range(wstart[r], wstart[r + 1]):
+            k = wlist[q]
+            a0 += wc[k, 0]
+            a1 += wc[k, 1]
+            a2 += wc[k, 2]
+        w_r = inv_mass[r]
+        out[r, 0] += a0 * w_r
+        out[r, 1] += a1 * w_r
+        out[r, 2] += a2 * w_r
+
+
+@numba_helper
+def apply(shared, sums, out, wr, inv_mass):  # pragma: no cover - compiled
+    """out += the pass's sums (pairs, then the walls' ``wc``) / m, for every row."""
+    si, sj, slots, wc, start, wstart, wlist, dv = sums
+    if shared:
+        gather(out, slots, wc, start, wstart, wlist, inv_mass)
+        return
+    for k in range(wr.shape[0]):
+        r = wr[k]
+        dv[r, 0] += wc[k, 0]
+        dv[r, 1] += wc[k, 1]
+        dv[r, 2] += wc[k, 2]
+    for r in range(out.shape[0]):
+        w_r = inv_mass[r]
+        for a in range(3):
+            out[r, a] += dv[r, a] * w_r
+
+
+@numba_parallel_helper
 def pair_setup(
-    pi, pj, p, wr, x, inv_mass, relax_factor, w, rel, wrel, nrm, count
+    pi, pj, p, wr, x, inv_mass, relax_factor, w, rel, wrel, nrm, sums
 ):  # pragma: no cover - compiled
     """Per pair: ``w`` the summed inverse masses, ``rel`` the relaxation (averaged over the
-    contacts per particle, ``count``, the walls' among them; ``wrel`` a wall contact's) over
-    ``w`` (what turns a change of relative velocity or position into the pair's share of it)
-    and ``nrm`` the unit line of centres."""
-    count[:] = 0
-    for k in range(p):
-        count[pi[k]] += 1
-        count[pj[k]] += 1
+    contacts per particle, its slots and walls, :func:`incidence`; ``wrel`` a wall contact's)
+    over ``w`` (what turns a change of relative velocity or position into the pair's share of
+    it) and ``nrm`` the unit line of centres."""
+    start, wstart = sums[4], sums[5]
     for k in range(wr.shape[0]):
-        count[wr[k]] += 1
-    for k in range(wr.shape[0]):
-        wrel[k] = min(relax_factor / count[wr[k]], 1.0) / inv_mass[wr[k]]
-    for k in range(p):
+        r = wr[k]
+        count = (start[r + 1] - start[r]) + (wstart[r + 1] - wstart[r])
+        wrel[k] = min(relax_factor / count, 1.0) / inv_mass[r]
+    for k in prange(p):
         i = pi[k]
         j = pj[k]
+        count_i = (start[i + 1] - start[i]) + (wstart[i + 1] - wstart[i])
+        count_j = (start[j + 1] - start[j]) + (wstart[j + 1] - wstart[j])
         w[k] = inv_mass[i] + inv_mass[j]
-        rel[k] = min(relax_factor / max(count[i], count[j]), 1.0) / w[k]
+        rel[k] = min(relax_factor / max(count_i, count_j), 1.0) / w[k]
         d2 = 0.0
         for a in range(3):
             t = x[j, a] - x[i, a]
@@ -174,15 +293,6 @@ def bounce_limits(pi, pj, p, limit, near, e, resting_steps, bounce_floor):  # pr
         limit[k] = (resting_steps * max(near[pi[k]], near[pj[k]]) + bounce_floor) / e
 
 
-@numba_helper
-def add_scaled(out, dv, inv_mass):  # pragma: no cover - compiled
-    """out += dv / m, row by row."""
-    for r in range(out.shape[0]):
-        w_r = inv_mass[r]
-        for a in range(3):
-            out[r, a] += dv[r, a] * w_r
-
-
 @numba_inline_helper
 def cone(f0, f1, f2, cap):  # pragma: no cover - compiled too
     """The friction impulse f cut to Coulomb's bound |f| <= cap (cap = mu times the normal one)."""
@@ -193,15 +303,18 @@ def cone(f0, f1, f2, cap):  # pragma: no cover - compiled too
     return f0, f1, f2
 
 
-@numba_helper
+@numba_parallel_helper
 def warm_start(
-    pi, pj, pk, p, nrm, lam_c, ft_c, stamp_c, stamp, lam, ft, jb, mu, wr, wn, wmu, wlam, wft, v, dv, inv_mass
-):  # pragma: no cover - compiled
+    pi, pj, pk, p, nrm, lam_c, ft_c, stamp_c, stamp, lam, ft, jb, mu, wr, wn, wmu, wlam, wft, v, inv_mass,
+    shared, sums,
+):  # pragma: no cover - compiled  # fmt: skip
     """Every contact's impulses of the last step applied again (a pair that overlapped then,
     ``stamp_c == stamp - 1``; the walls' ``wlam``, ``wft`` as the caller found them): the
     friction impulse without its part along the new normal, cut to the cone."""
-    dv[:] = 0.0
-    for k in range(p):
+    si, sj, slots, wc, start, wstart, wlist, dv = sums
+    if not shared:
+        dv[:] = 0.0
+    for k in prange(p):
         c = pk[k]
         n0, n1, n2 = nrm[k, 0], nrm[k, 1], nrm[k, 2]
         if stamp_c[c] == stamp - 1:
@@ -213,25 +326,18 @@ def warm_start(
         else:
             lam[k], f0, f1, f2 = 0.0, 0.0, 0.0, 0.0
         ft[k, 0], ft[k, 1], ft[k, 2] = f0, f1, f2
-        i = pi[k]
-        j = pj[k]
-        c0, c1, c2 = lam[k] * n0 + f0, lam[k] * n1 + f1, lam[k] * n2 + f2
-        dv[i, 0] -= c0
-        dv[i, 1] -= c1
-        dv[i, 2] -= c2
-        dv[j, 0] += c0
-        dv[j, 1] += c1
-        dv[j, 2] += c2
+        store(
+            shared, si, sj, slots, dv, k, pi[k], pj[k], lam[k] * n0 + f0, lam[k] * n1 + f1, lam[k] * n2 + f2
+        )
     for k in range(wr.shape[0]):
-        r = wr[k]
         n0, n1, n2 = wn[k, 0], wn[k, 1], wn[k, 2]
         fn = (wft[k, 0] * n0 + wft[k, 1] * n1) + wft[k, 2] * n2
         f0, f1, f2 = cone(wft[k, 0] - fn * n0, wft[k, 1] - fn * n1, wft[k, 2] - fn * n2, wmu[k] * wlam[k])
         wft[k, 0], wft[k, 1], wft[k, 2] = f0, f1, f2
-        dv[r, 0] += wlam[k] * n0 + f0
-        dv[r, 1] += wlam[k] * n1 + f1
-        dv[r, 2] += wlam[k] * n2 + f2
-    add_scaled(v, dv, inv_mass)
+        wc[k, 0] = wlam[k] * n0 + f0
+        wc[k, 1] = wlam[k] * n1 + f1
+        wc[k, 2] = wlam[k] * n2 + f2
+    apply(shared, sums, v, wr, inv_mass)
 
 
 @numba_inline_helper
@@ -256,39 +362,46 @@ def small(a, b, c, d, w, tol):  # pragma: no cover - compiled too
     return abs(a) * w <= tol and abs(b) * w <= tol and abs(c) * w <= tol and abs(d) * w <= tol
 
 
+@numba_parallel_helper
+def pair_pass(pi, pj, p, nrm, w, rel, lam, ft, jb, mu, v, tol, shared, sums):  # pragma: no cover - compiled
+    """One resting pass's pair updates from the velocities before it, each change stored
+    (:func:`store`); returns (how many contacts changed, how many by more than ``tol``)."""
+    si, sj, slots, wc, start, wstart, wlist, dv = sums
+    moved = 0
+    big = 0
+    for k in prange(p):
+        i = pi[k]
+        j = pj[k]
+        n0, n1, n2 = nrm[k, 0], nrm[k, 1], nrm[k, 2]
+        lam[k], ft[k, 0], ft[k, 1], ft[k, 2], dl, d0, d1, d2 = contact_update(
+            v[j, 0] - v[i, 0], v[j, 1] - v[i, 1], v[j, 2] - v[i, 2],
+            n0, n1, n2, rel[k], lam[k], ft[k, 0], ft[k, 1], ft[k, 2], mu, jb[k],
+        )  # fmt: skip
+        if dl != 0.0 or d0 != 0.0 or d1 != 0.0 or d2 != 0.0:
+            moved += 1
+            if not small(dl, d0, d1, d2, w[k], tol):
+                big += 1
+        store(shared, si, sj, slots, dv, k, i, j, dl * n0 + d0, dl * n1 + d1, dl * n2 + d2)
+    return moved, big
+
+
 @numba_helper
 def resting_passes(
-    pi, pj, p, nrm, w, rel, lam, ft, jb, mu, wr, wn, wu, wmu, wrel, wlam, wft, v, dv, inv_mass, iterations, tol
+    pi, pj, p, nrm, w, rel, lam, ft, jb, mu, wr, wn, wu, wmu, wrel, wlam, wft, v, inv_mass, iterations, tol,
+    shared, sums,
 ):  # pragma: no cover - compiled  # fmt: skip
-    """The Jacobi passes of the resting contacts (pairs, then walls): each scatters contact by
-    contact into dv (every particle's sum in contact order, from 0.0), then adds dv / m; a
-    pass that changed nothing adds nothing. A pass in which no contact's change of impulse
-    times its summed inverse masses (``w``; a wall's: its grain's) exceeds ``tol`` is the last;
-    returns how many passes ran."""
+    """The Jacobi passes of the resting contacts (pairs, then walls): each stores every
+    contact's change, then every particle adds its sum / m (:func:`apply`); a pass that
+    changed nothing adds nothing. A pass in which no contact's change of impulse times its
+    summed inverse masses (``w``; a wall's: its grain's) exceeds ``tol`` is the last; returns
+    how many passes ran."""
+    wc, dv = sums[3], sums[7]
     passes = 0
     for _ in range(iterations):
         passes += 1
-        dv[:] = 0.0
-        moved = False
-        big = False
-        for k in range(p):
-            i = pi[k]
-            j = pj[k]
-            n0, n1, n2 = nrm[k, 0], nrm[k, 1], nrm[k, 2]
-            lam[k], ft[k, 0], ft[k, 1], ft[k, 2], dl, d0, d1, d2 = contact_update(
-                v[j, 0] - v[i, 0], v[j, 1] - v[i, 1], v[j, 2] - v[i, 2],
-                n0, n1, n2, rel[k], lam[k], ft[k, 0], ft[k, 1], ft[k, 2], mu, jb[k],
-            )  # fmt: skip
-            if dl != 0.0 or d0 != 0.0 or d1 != 0.0 or d2 != 0.0:
-                moved = True
-                big = big or not small(dl, d0, d1, d2, w[k], tol)
-            c0, c1, c2 = dl * n0 + d0, dl * n1 + d1, dl * n2 + d2
-            dv[i, 0] -= c0
-            dv[i, 1] -= c1
-            dv[i, 2] -= c2
-            dv[j, 0] += c0
-            dv[j, 1] += c1
-            dv[j, 2] += c2
+        if not shared:
+            dv[:] = 0.0
+        moved, big = pair_pass(pi, pj, p, nrm, w, rel, lam, ft, jb, mu, v, tol, shared, sums)
         for k in range(wr.shape[0]):
             r = wr[k]
             n0, n1, n2 = wn[k, 0], wn[k, 1], wn[k, 2]
@@ -297,26 +410,27 @@ def resting_passes(
                 n0, n1, n2, wrel[k], wlam[k], wft[k, 0], wft[k, 1], wft[k, 2], wmu[k], 0.0,
             )  # fmt: skip
             if dl != 0.0 or d0 != 0.0 or d1 != 0.0 or d2 != 0.0:
-                moved = True
-                big = big or not small(dl, d0, d1, d2, inv_mass[r], tol)
-            dv[r, 0] += dl * n0 + d0
-            dv[r, 1] += dl * n1 + d1
-            dv[r, 2] += dl * n2 + d2
-        if moved:
-            add_scaled(v, dv, inv_mass)
-        if not big:
+                moved += 1
+                if not small(dl, d0, d1, d2, inv_mass[r], tol):
+                    big += 1
+            wc[k, 0] = dl * n0 + d0
+            wc[k, 1] = dl * n1 + d1
+            wc[k, 2] = dl * n2 + d2
+        if moved > 0:
+            apply(shared, sums, v, wr, inv_mass)
+        if big == 0:
             break
     return passes
 
 
-@numba_helper
+@numba_parallel_helper
 def follow(x, v, v0, near, resting_steps, dt):  # pragma: no cover - compiled
     """x += (v - v0) dt, the step's position as if the resting impulses had acted before it, for
     as much of the change as resting contact may make (``resting_steps * near``): what held a
     resting grain against gravity moves it back by g dt^2, but a grain stopped from a fast
     approach keeps its position (the overlap passes part it) instead of being put back where
     it was."""
-    for r in range(x.shape[0]):
+    for r in prange(x.shape[0]):
         allow = resting_steps * near[r]
         d0 = v[r, 0] - v0[r, 0]
         d1 = v[r, 1] - v0[r, 1]
@@ -328,71 +442,93 @@ def follow(x, v, v0, near, resting_steps, dt):  # pragma: no cover - compiled
         x[r, 2] += d2 * s
 
 
+@numba_parallel_helper
+def overlap_pass(pi, pj, p, x, radius, rel, shared, sums):  # pragma: no cover - compiled
+    """One overlap pass's pair corrections from the positions before it, stored (a pair that
+    does not overlap stores -0.0, which adds nothing to any sum); returns how many pairs
+    moved."""
+    si, sj, slots, wc, start, wstart, wlist, dv = sums
+    moved = 0
+    for k in prange(p):
+        i = pi[k]
+        j = pj[k]
+        d0 = x[j, 0] - x[i, 0]
+        d1 = x[j, 1] - x[i, 1]
+        d2 = x[j, 2] - x[i, 2]
+        dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        over = radius[i] + radius[j] - dist
+        if over <= 0:
+            store(shared, si, sj, slots, dv, k, i, j, -0.0, -0.0, -0.0)
+            continue
+        if dist > 0:
+            d0, d1, d2 = d0 / dist, d1 / dist, d2 / dist
+        else:
+            d0, d1, d2 = 0.0, 1.0, 0.0
+        c = over * rel[k]
+        if c != 0.0:
+            moved += 1
+        store(shared, si, sj, slots, dv, k, i, j, c * d0, c * d1, c * d2)
+    return moved
+
+
 @numba_helper
-def position_passes(pi, pj, p, x, radius, rel, dv, inv_mass, iterations):  # pragma: no cover - compiled
+def position_passes(
+    pi, pj, p, x, radius, rel, inv_mass, iterations, wr, shared, sums
+):  # pragma: no cover - compiled
     """The Jacobi passes on position: each pair's overlap pushed apart along its current line
-    of centres, as :func:`resting_passes` does velocities."""
+    of centres, as :func:`resting_passes` does velocities (the walls take no part: their
+    changes are -0.0)."""
+    wc, dv = sums[3], sums[7]
+    wc[:] = -0.0
     for _ in range(iterations):
-        dv[:] = 0.0
-        moved = False
-        for k in range(p):
-            i = pi[k]
-            j = pj[k]
-            d0 = x[j, 0] - x[i, 0]
-            d1 = x[j, 1] - x[i, 1]
-            d2 = x[j, 2] - x[i, 2]
-            dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-            over = radius[i] + radius[j] - dist
-            if over <= 0:
-                continue
-            if dist > 0:
-                d0, d1, d2 = d0 / dist, d1 / dist, d2 / dist
-            else:
-                d0, d1, d2 = 0.0, 1.0, 0.0
-            c = over * rel[k]
-            if c != 0.0:
-                moved = True
-            dv[i, 0] -= c * d0
-            dv[i, 1] -= c * d1
-            dv[i, 2] -= c * d2
-            dv[j, 0] += c * d0
-            dv[j, 1] += c * d1
-            dv[j, 2] += c * d2
-        if not moved:
+        if not shared:
+            dv[:] = 0.0
+        if overlap_pass(pi, pj, p, x, radius, rel, shared, sums) == 0:
             break
-        add_scaled(x, dv, inv_mass)
+        apply(shared, sums, x, wr, inv_mass)
 
 
-@numba_helper
+@numba_parallel_helper
 def remember(pk, p, lam, ft, lam_c, ft_c, stamp_c, stamp):  # pragma: no cover - compiled
     """Each overlapping pair's impulses kept under its candidate for the next step's warm start."""
-    for k in range(p):
+    for k in prange(p):
         c = pk[k]
         lam_c[c] = lam[k]
         ft_c[c, 0], ft_c[c, 1], ft_c[c, 2] = ft[k, 0], ft[k, 1], ft[k, 2]
         stamp_c[c] = stamp
 
 
+def sums_of(si, sj, slots, wc, start, wstart, wlist, dv):  # type: ignore[no-untyped-def]
+    """The arrays the passes sum the contacts' changes in, one tuple: ``si``, ``sj`` (P,) each
+    pair's slots and ``slots`` (2 P, 3) (used when shared among threads), ``wc`` (W, 3) the
+    walls' changes, ``start`` and ``wstart`` (N + 1,) each particle's first slot and wall,
+    ``wlist`` (W,) the walls by particle, ``dv`` (N, 3) the sums (one thread); see
+    :func:`incidence`."""
+    return si, sj, slots, wc, start, wstart, wlist, dv
+
+
 @numba_helper
 def contact_step(
     ci, cj, reach2, touch2, x, v, v_old, inv_mass, radius, e, mu, iterations, overlap_passes, relax_factor, dt,
     pi, pj, pk, w, rel, nrm, limit, lam, ft, jb, due, lam_c, ft_c, stamp_c, stamp,
-    wr, wn, wu, wmu, wrel, wlam, wft, dv, v0, added, near, count, resting_steps, bounce_floor, bounce_limit,
-    converged,
+    wr, wn, wu, wmu, wrel, wlam, wft, v0, added, near, resting_steps, bounce_floor, bounce_limit, converged,
+    shared, sums,
 ):  # pragma: no cover - compiled  # fmt: skip
     """Keep the candidates that overlap, then the passes of :func:`resolve_pairs_numpy`.
 
     ``pi`` .. ``jb``: buffers of at least the candidates' length; ``lam_c``, ``ft_c``,
-    ``stamp_c``: the candidates' impulses and the step they were kept at; ``wr`` ..
-    ``wft``: the wall contacts (:class:`animsim.particle_contacts.walls.WallContacts`,
-    their remembered impulses in ``wlam``, ``wft``, which end as this step's); ``dv``,
-    ``v0`` (N, 3), ``added``, ``near`` and ``count`` (N,): per particle. Returns (overlapping pairs, whether
-    any pair was resolved, how many resting passes ran).
+    ``stamp_c``: the candidates' impulses and the step they were kept at; ``wr`` .. ``wft``:
+    the wall contacts (:class:`animsim.particle_contacts.walls.WallContacts`, their
+    remembered impulses in ``wlam``, ``wft``, which end as this step's); ``v0`` (N, 3),
+    ``added``, ``near`` (N,): per particle; ``sums``: :func:`sums_of`. ``shared``: the passes
+    share their contacts among numba's threads (else the caller runs it on one thread).
+    Returns (overlapping pairs, whether any pair was resolved, how many resting passes ran).
     """
     found, p = overlapping(ci, cj, reach2, touch2, x, inv_mass, pi, pj, pk)
     if p == 0:
         return found, False, 0
-    pair_setup(pi, pj, p, wr, x, inv_mass, relax_factor, w, rel, wrel, nrm, count)
+    incidence(shared, pi, pj, p, wr, sums)
+    pair_setup(pi, pj, p, wr, x, inv_mass, relax_factor, w, rel, wrel, nrm, sums)
     step_change(pi, pj, p, v, v_old, added, near)
     # impacts first, sequentially (see bounce_sweeps), when anything bounces at all
     if e > 0:
@@ -403,34 +539,15 @@ def contact_step(
             jb[k] = 0.0
     v0[:] = v
     warm_start(
-        pi,
-        pj,
-        pk,
-        p,
-        nrm,
-        lam_c,
-        ft_c,
-        stamp_c,
-        stamp,
-        lam,
-        ft,
-        jb,
-        mu,
-        wr,
-        wn,
-        wmu,
-        wlam,
-        wft,
-        v,
-        dv,
-        inv_mass,
-    )
+        pi, pj, pk, p, nrm, lam_c, ft_c, stamp_c, stamp, lam, ft, jb, mu, wr, wn, wmu, wlam, wft, v, inv_mass,
+        shared, sums,
+    )  # fmt: skip
     passes = resting_passes(
-        pi, pj, p, nrm, w, rel, lam, ft, jb, mu, wr, wn, wu, wmu, wrel, wlam, wft, v, dv, inv_mass, iterations,
-        converged,
+        pi, pj, p, nrm, w, rel, lam, ft, jb, mu, wr, wn, wu, wmu, wrel, wlam, wft, v, inv_mass, iterations,
+        converged, shared, sums,
     )  # fmt: skip
     follow(x, v, v0, near, resting_steps, dt)
-    position_passes(pi, pj, p, x, radius, rel, dv, inv_mass, overlap_passes)
+    position_passes(pi, pj, p, x, radius, rel, inv_mass, overlap_passes, wr, shared, sums)
     remember(pk, p, lam, ft, lam_c, ft_c, stamp_c, stamp)
     return found, True, passes
 

@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 import animsim.backends
+from animsim import thread_choice
 from animsim.compile import compile_scene
 from animsim.engine import run
 from animsim.integrators import FIXED_STEP
@@ -464,9 +465,9 @@ def test_the_chooser_keeps_the_faster_build_and_follows_a_change_of_load(monkeyp
     """Both builds are timed first; the one with the lower time per step is kept; every
     RETRY_EVERY calls (these calls are long enough for RETRY_SECONDS) the other is tried
     again, and kept once it is faster."""
-    monkeypatch.setattr(fused_module, "RETRY_SECONDS", 0.0)
-    chooser = fused_module.BuildChooser()
-    trial = fused_module.TRIAL_CALLS
+    monkeypatch.setattr(thread_choice, "RETRY_SECONDS", 0.0)
+    chooser = thread_choice.BuildChooser()
+    trial = thread_choice.TRIAL_CALLS
     picks = []
     for _ in range(2 * trial):  # the trials alternate, threads first
         parallel = chooser.pick()
@@ -475,7 +476,7 @@ def test_the_chooser_keeps_the_faster_build_and_follows_a_change_of_load(monkeyp
     assert picks == [True, False] * trial
     assert chooser.parallel is False
     tried = []
-    for _ in range(3 * (fused_module.RETRY_EVERY + 1)):
+    for _ in range(3 * (thread_choice.RETRY_EVERY + 1)):
         parallel = chooser.pick()
         tried.append(parallel)
         chooser.record(parallel, 8e-3 if parallel else 1e-3, 4)
@@ -485,7 +486,7 @@ def test_the_chooser_keeps_the_faster_build_and_follows_a_change_of_load(monkeyp
     chooser.record(True, 0.0, 0)  # a call that took no step is not a timing
     assert (chooser.recent[True], chooser.calls) == booked
     # the other jobs end: the threads are now twice as fast; after enough retries they win
-    for _ in range(trial * fused_module.RETRY_EVERY + 1):
+    for _ in range(trial * thread_choice.RETRY_EVERY + 1):
         parallel = chooser.pick()
         chooser.record(parallel, 0.5e-3 if parallel else 1e-3, 4)
     assert chooser.parallel is True and chooser.pick() is True
@@ -522,19 +523,19 @@ def test_both_builds_load_before_the_run_and_switching_keeps_the_bits(threads, m
 def test_the_chooser_switches_only_for_a_clear_margin(monkeypatch):
     """Timings of single calls scatter: after the trials a build close to the kept one's
     speed (within SWITCH_MARGIN) does not take over; a clearly faster one does."""
-    monkeypatch.setattr(fused_module, "RETRY_SECONDS", 0.0)
-    chooser = fused_module.BuildChooser()
-    for _ in range(2 * fused_module.TRIAL_CALLS):
+    monkeypatch.setattr(thread_choice, "RETRY_SECONDS", 0.0)
+    chooser = thread_choice.BuildChooser()
+    for _ in range(2 * thread_choice.TRIAL_CALLS):
         parallel = chooser.pick()
         chooser.record(parallel, 1.1e-3 if parallel else 1e-3, 1)
     assert chooser.parallel is False  # the trials: the faster, however close
-    near = 1e-3 / (0.9 * fused_module.SWITCH_MARGIN)  # faster, but not by the margin
-    for _ in range(4 * fused_module.RETRY_EVERY):
+    near = 1e-3 / (0.9 * thread_choice.SWITCH_MARGIN)  # faster, but not by the margin
+    for _ in range(4 * thread_choice.RETRY_EVERY):
         parallel = chooser.pick()
         chooser.record(parallel, near if parallel else 1e-3, 1)
     assert chooser.parallel is False
-    clear = 1e-3 / (1.1 * fused_module.SWITCH_MARGIN)
-    for _ in range(4 * fused_module.RETRY_EVERY):
+    clear = 1e-3 / (1.1 * thread_choice.SWITCH_MARGIN)
+    for _ in range(4 * thread_choice.RETRY_EVERY):
         parallel = chooser.pick()
         chooser.record(parallel, clear if parallel else 1e-3, 1)
     assert chooser.parallel is True
@@ -553,17 +554,17 @@ def test_the_chooser_tries_the_other_build_once_both_calls_and_time_have_passed(
             chooser.record(parallel, threaded if parallel else 2 * threaded, 1)
         return [i for i, p in enumerate(picks) if not p]
 
-    every = fused_module.RETRY_EVERY
-    short = fused_module.RETRY_SECONDS / (4 * every)  # 4 x RETRY_EVERY calls a trial
-    chooser = fused_module.BuildChooser()
-    one_thread_calls(chooser, 2 * fused_module.TRIAL_CALLS, short)
+    every = thread_choice.RETRY_EVERY
+    short = thread_choice.RETRY_SECONDS / (4 * every)  # 4 x RETRY_EVERY calls a trial
+    chooser = thread_choice.BuildChooser()
+    one_thread_calls(chooser, 2 * thread_choice.TRIAL_CALLS, short)
     assert chooser.parallel is True
     tried = one_thread_calls(chooser, 13 * every, short)
     assert len(tried) == 3
     assert np.diff(tried).tolist() == [4 * every + 1] * 2
-    long = 2 * fused_module.RETRY_SECONDS  # each call alone is long enough: RETRY_EVERY counts
-    chooser = fused_module.BuildChooser()
-    one_thread_calls(chooser, 2 * fused_module.TRIAL_CALLS, long)
+    long = 2 * thread_choice.RETRY_SECONDS  # each call alone is long enough: RETRY_EVERY counts
+    chooser = thread_choice.BuildChooser()
+    one_thread_calls(chooser, 2 * thread_choice.TRIAL_CALLS, long)
     assert one_thread_calls(chooser, 4 * every, long) == [every + (every + 1) * j for j in range(3)]
 
 

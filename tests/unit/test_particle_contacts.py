@@ -163,12 +163,10 @@ def test_spring_neighbours_and_dead_or_pinned_rows(backend: str) -> None:
     np.testing.assert_allclose(x[3:], [[5.0, 0, 0], [5.1, 0, 0]])
 
 
-@pytest.mark.parametrize("backend", _backends())
-def test_a_pile_of_500_settles_without_overlaps(backend: str) -> None:
-    """500 grains dropped into a box come to rest, no overlap above 10 % of a radius."""
+def _pile(backend: str, n: int = 500, r: float = 0.02, side: float = 0.6, spacing: float = 2.3):
+    """n grains in a jittered lattice (``spacing`` radii apart) above a box of five colliders:
+    (x, v, the box's stage, the contacts' stage)."""
     rng = np.random.default_rng(21)
-    n, r = 500, 0.02
-    side = 0.6
     walls = [
         Shape(BOX, np.array([0.0, -0.5, 0.0]), half=np.array([1.0, 0.5, 1.0]), restitution=0.0, friction=0.5),
         Shape(BOX, np.array([-side / 2 - 0.5, 0.5, 0.0]), half=np.array([0.5, 1.0, 1.0]), restitution=0.0),
@@ -176,11 +174,10 @@ def test_a_pile_of_500_settles_without_overlaps(backend: str) -> None:
         Shape(BOX, np.array([0.0, 0.5, -side / 2 - 0.5]), half=np.array([1.0, 1.0, 0.5]), restitution=0.0),
         Shape(BOX, np.array([0.0, 0.5, side / 2 + 0.5]), half=np.array([1.0, 1.0, 0.5]), restitution=0.0),
     ]
-    # a loose lattice above the box with a little jitter
     g3 = np.stack(np.meshgrid(np.arange(12), np.arange(4), np.arange(12), indexing="ij"), -1).reshape(-1, 3)[
         :n
     ]
-    x = (g3 - [5.5, 0, 5.5]) * 2.3 * r + np.array([0.0, 0.1, 0.0]) + rng.uniform(-0.002, 0.002, (n, 3))
+    x = (g3 - [5.5, 0, 5.5]) * spacing * r + np.array([0.0, 0.1, 0.0]) + rng.uniform(-0.002, 0.002, (n, 3))
     v = np.zeros((n, 3))
     radius = np.full(n, r)
     walls_stage = Colliders(walls, np.ones(n), radius=radius, backend=backend)
@@ -188,6 +185,14 @@ def test_a_pile_of_500_settles_without_overlaps(backend: str) -> None:
         radius, 0.1, 0.3, np.ones(n), np.ones(n, dtype=bool), np.zeros(0, np.int64), backend
     )
     contacts.colliders = walls_stage
+    return x, v, walls_stage, contacts
+
+
+@pytest.mark.parametrize("backend", _backends())
+def test_a_pile_of_500_settles_without_overlaps(backend: str) -> None:
+    """500 grains dropped into a box come to rest, no overlap above 10 % of a radius."""
+    n, r, side = 500, 0.02, 0.6
+    x, v, walls_stage, contacts = _pile(backend, n, r, side)
     g = np.array([0.0, -9.81, 0.0])
     dt = 0.002
     history = []
@@ -213,3 +218,43 @@ def test_a_pile_of_500_settles_without_overlaps(backend: str) -> None:
     assert np.linalg.norm(v, axis=1).mean() < 2 * 9.81 * dt
     # inside the box: on the floor, within the walls (grown by the radius)
     assert x[:, 1].min() >= r - 1e-9 and np.abs(x[:, [0, 2]]).max() <= side / 2 - r + 1e-9
+
+
+def test_passes_shared_among_threads_give_the_bits_of_one_thread_and_of_numpy(monkeypatch) -> None:
+    """The numba passes shared among two threads (each particle sums its contacts' slots) and
+    on one (a scatter pair by pair) end every step of a falling, landing pile with the bits
+    of the NumPy passes."""
+    numba = pytest.importorskip("numba")
+    if numba.config.NUMBA_NUM_THREADS < 2:  # pragma: no cover - a one-core machine
+        pytest.skip("needs two threads")
+    from animsim.particle_contacts import stage as stage_module
+    from animsim.thread_choice import BuildChooser
+
+    monkeypatch.setattr(stage_module, "SHARED_MIN_PAIRS", 0)
+    g, dt = np.array([0.0, -9.81, 0.0]), 0.002
+    ends = {}
+    for mode in ("numpy", "one thread", "shared"):
+        monkeypatch.setattr(BuildChooser, "pick", lambda self, m=mode: m == "shared")
+        # touching neighbours (2.01 radii apart, less the jitter): most grains are the first
+        # sphere of some pairs and the second of others, so the order of their sums shows
+        x, v, walls_stage, contacts = _pile("numpy" if mode == "numpy" else "numba", spacing=2.01)
+        before = numba.get_num_threads()
+        numba.set_num_threads(2)
+        pairs = passes = 0
+        try:
+            for step in range(250):  # the lattice falls, lands and spreads
+                x_old, v_old = x.copy(), v.copy()
+                v += g * dt
+                x += v * dt
+                st = _state(x, v)
+                walls_stage.apply(st, x_old, v_old, step * dt, (step + 1) * dt)
+                contacts.apply(st, x_old, v_old, step * dt, (step + 1) * dt)
+                pairs += contacts.pairs_last
+                passes += contacts.passes_last
+        finally:
+            numba.set_num_threads(before)
+        assert pairs > 5000 and passes > 500, (pairs, passes)
+        ends[mode] = (x, v)
+    for mode in ("one thread", "shared"):
+        np.testing.assert_array_equal(ends[mode][0], ends["numpy"][0])
+        np.testing.assert_array_equal(ends[mode][1], ends["numpy"][1])
