@@ -40,6 +40,7 @@ module registered is a compile error, never a silent omission.
 from __future__ import annotations
 
 import functools
+import types as pytypes
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -477,9 +478,22 @@ def numba_parallel_helper(fn: FunctionT) -> FunctionT:
     """:func:`numba_helper` compiled with numba's parallel loops: its ``prange`` loops (a
     module-level ``prange = range`` until compiled) are shared among numba's threads. Its
     results must not depend on how many there are (each iteration writes only its own
-    entries; integer counts as the only reductions)."""
+    entries; integer counts as the only reductions). :func:`one_thread` makes its twin for
+    calls that should not start threads."""
     fn._numba_parallel = True  # type: ignore[attr-defined]
     return numba_helper(fn)
+
+
+def one_thread(fn: FunctionT) -> FunctionT:
+    """The one-thread build of the :func:`numba_parallel_helper` ``fn``: the same code compiled
+    without parallel loops (numba runs ``prange`` as ``range`` there), for calls too small to
+    pay for starting threads or that must not share (a twin function, so numba's disk cache
+    keeps its own entry). Bind it to a module-level name beside ``fn``."""
+    twin = pytypes.FunctionType(fn.__code__, fn.__globals__, fn.__name__ + "_one")
+    twin.__qualname__ = fn.__qualname__ + "_one"
+    twin.__module__ = fn.__module__
+    twin.__doc__ = fn.__doc__
+    return numba_helper(twin)  # type: ignore[return-value]
 
 
 def live_array(a: np.ndarray, cache: dict[int, np.ndarray]) -> np.ndarray:

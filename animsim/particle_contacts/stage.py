@@ -300,27 +300,23 @@ class ParticleContacts(StepStage):
             b.get("wc", (nw, 3)), b.get("start", (n_rows + 1,), np.int64),
             b.get("wstart", (n_rows + 1,), np.int64), b.get("wlist", (nw,), np.int64), b.get("dv", (n_rows, 3)),
         )  # fmt: skip
-        threads = numba.get_num_threads()
         # share the passes among threads only where a list is long enough to pay for it, and
         # only while that is the faster (the chooser times both ways; the bits are the same)
-        shared = threads > 1 and p >= SHARED_MIN_PAIRS and self._chooser.pick()
-        numba.set_num_threads(threads if shared else 1)
+        can_share = numba.get_num_threads() > 1 and p >= SHARED_MIN_PAIRS
+        shared = can_share and self._chooser.pick()
         start = time.perf_counter()
-        try:
-            found, changed, passes = self._kernels.step(
-                self._ci, self._cj, self._reach2, TOUCH2, x, v, v_old, inv_mass, self.radius,
-                self.restitution, self.friction, self.iterations, OVERLAP_PASSES, RELAX, dt,
-                b.get("pi", (p,), np.int64), b.get("pj", (p,), np.int64), b.get("pk", (p,), np.int64),
-                b.get("w", (p,)), b.get("rel", (p,)), b.get("nrm", (p, 3)), b.get("limit", (p,)),
-                b.get("lam", (p,)), b.get("ft", (p, 3)), b.get("jb", (p,)), b.get("due", (p,), np.bool_),
-                self._lam_c, self._ft_c, self._stamp_c, self._stamp,
-                walls.rows, walls.normal, walls.velocity, walls.friction, b.get("wrel", (nw,)), wlam, wft,
-                b.get("v0", (n_rows, 3)), b.get("added", (n_rows,)), b.get("near", (n_rows,)),
-                RESTING_STEPS, BOUNCE_FLOOR, BOUNCE_SWEEPS, CONVERGED, shared, sums,
-            )  # fmt: skip
-        finally:
-            numba.set_num_threads(threads)
-        if threads > 1 and p >= SHARED_MIN_PAIRS:
+        found, changed, passes = self._kernels.step(
+            self._ci, self._cj, self._reach2, TOUCH2, x, v, v_old, inv_mass, self.radius,
+            self.restitution, self.friction, self.iterations, OVERLAP_PASSES, RELAX, dt,
+            b.get("pi", (p,), np.int64), b.get("pj", (p,), np.int64), b.get("pk", (p,), np.int64),
+            b.get("w", (p,)), b.get("rel", (p,)), b.get("nrm", (p, 3)), b.get("limit", (p,)),
+            b.get("lam", (p,)), b.get("ft", (p, 3)), b.get("jb", (p,)), b.get("due", (p,), np.bool_),
+            self._lam_c, self._ft_c, self._stamp_c, self._stamp,
+            walls.rows, walls.normal, walls.velocity, walls.friction, b.get("wrel", (nw,)), wlam, wft,
+            b.get("v0", (n_rows, 3)), b.get("added", (n_rows,)), b.get("near", (n_rows,)),
+            RESTING_STEPS, BOUNCE_FLOOR, BOUNCE_SWEEPS, CONVERGED, shared, sums,
+        )  # fmt: skip
+        if can_share:
             self._chooser.record(shared, time.perf_counter() - start, 1)
         return int(found), bool(changed), int(passes)
 

@@ -20,7 +20,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from animsim.elements import compile_helpers, numba_helper, numba_inline_helper, numba_parallel_helper
+from animsim.elements import (
+    compile_helpers,
+    numba_helper,
+    numba_inline_helper,
+    numba_parallel_helper,
+    one_thread,
+)
 
 prange = range  # numba's prange once compiled (compile_helpers sets it for parallel helpers)
 
@@ -128,7 +134,7 @@ def overlapping(ci, cj, reach2, touch2, x, inv_mass, pi, pj, pk):  # pragma: no 
 @numba_helper
 def incidence(shared, pi, pj, p, wr, sums):  # pragma: no cover - compiled
     """Each particle's contacts counted: ``start[r + 1] - start[r]`` pairs and ``wstart[r + 1]
-    - wstart[r]`` walls (``sums``: :func:`sums_of`). When the passes are ``shared`` among
+    - wstart[r]`` walls (``sums``: see :func:`contact_step`). When the passes are ``shared`` among
     threads, also each particle's slots (see the module's "Threads"): pair k's change goes to
     slot ``sj[k]`` of its second sphere and, negated, to slot ``si[k]`` of its first;
     particle r's are ``start[r]`` to ``start[r + 1]`` (those where it is the second sphere
@@ -401,7 +407,10 @@ def resting_passes(
         passes += 1
         if not shared:
             dv[:] = 0.0
-        moved, big = pair_pass(pi, pj, p, nrm, w, rel, lam, ft, jb, mu, v, tol, shared, sums)
+        if shared:
+            moved, big = pair_pass(pi, pj, p, nrm, w, rel, lam, ft, jb, mu, v, tol, shared, sums)
+        else:
+            moved, big = pair_pass_one(pi, pj, p, nrm, w, rel, lam, ft, jb, mu, v, tol, shared, sums)
         for k in range(wr.shape[0]):
             r = wr[k]
             n0, n1, n2 = wn[k, 0], wn[k, 1], wn[k, 2]
@@ -483,7 +492,11 @@ def position_passes(
     for _ in range(iterations):
         if not shared:
             dv[:] = 0.0
-        if overlap_pass(pi, pj, p, x, radius, rel, shared, sums) == 0:
+        if shared:
+            moved = overlap_pass(pi, pj, p, x, radius, rel, shared, sums)
+        else:
+            moved = overlap_pass_one(pi, pj, p, x, radius, rel, shared, sums)
+        if moved == 0:
             break
         apply(shared, sums, x, wr, inv_mass)
 
@@ -498,13 +511,14 @@ def remember(pk, p, lam, ft, lam_c, ft_c, stamp_c, stamp):  # pragma: no cover -
         stamp_c[c] = stamp
 
 
-def sums_of(si, sj, slots, wc, start, wstart, wlist, dv):  # type: ignore[no-untyped-def]
-    """The arrays the passes sum the contacts' changes in, one tuple: ``si``, ``sj`` (P,) each
-    pair's slots and ``slots`` (2 P, 3) (used when shared among threads), ``wc`` (W, 3) the
-    walls' changes, ``start`` and ``wstart`` (N + 1,) each particle's first slot and wall,
-    ``wlist`` (W,) the walls by particle, ``dv`` (N, 3) the sums (one thread); see
-    :func:`incidence`."""
-    return si, sj, slots, wc, start, wstart, wlist, dv
+# The one-thread builds of the shared helpers (the same code, no threads started): what
+# contact_step calls when it is not shared.
+pair_setup_one = one_thread(pair_setup)
+warm_start_one = one_thread(warm_start)
+pair_pass_one = one_thread(pair_pass)
+follow_one = one_thread(follow)
+overlap_pass_one = one_thread(overlap_pass)
+remember_one = one_thread(remember)
 
 
 @numba_helper
@@ -520,15 +534,21 @@ def contact_step(
     ``stamp_c``: the candidates' impulses and the step they were kept at; ``wr`` .. ``wft``:
     the wall contacts (:class:`animsim.particle_contacts.walls.WallContacts`, their
     remembered impulses in ``wlam``, ``wft``, which end as this step's); ``v0`` (N, 3),
-    ``added``, ``near`` (N,): per particle; ``sums``: :func:`sums_of`. ``shared``: the passes
-    share their contacts among numba's threads (else the caller runs it on one thread).
+    ``added``, ``near`` (N,): per particle. ``sums`` = (``si``, ``sj`` (P,) each pair's slots,
+    ``slots`` (2 P, 3), ``wc`` (W, 3) the walls' changes, ``start``, ``wstart`` (N + 1,) each
+    particle's first slot and wall, ``wlist`` (W,) the walls by particle, ``dv`` (N, 3)): the
+    arrays the passes sum the contacts' changes in (:func:`incidence`); ``shared``: the passes
+    share their contacts among numba's threads (slots), else run on this one (``dv``).
     Returns (overlapping pairs, whether any pair was resolved, how many resting passes ran).
     """
     found, p = overlapping(ci, cj, reach2, touch2, x, inv_mass, pi, pj, pk)
     if p == 0:
         return found, False, 0
     incidence(shared, pi, pj, p, wr, sums)
-    pair_setup(pi, pj, p, wr, x, inv_mass, relax_factor, w, rel, wrel, nrm, sums)
+    if shared:
+        pair_setup(pi, pj, p, wr, x, inv_mass, relax_factor, w, rel, wrel, nrm, sums)
+    else:
+        pair_setup_one(pi, pj, p, wr, x, inv_mass, relax_factor, w, rel, wrel, nrm, sums)
     step_change(pi, pj, p, v, v_old, added, near)
     # impacts first, sequentially (see bounce_sweeps), when anything bounces at all
     if e > 0:
@@ -538,17 +558,29 @@ def contact_step(
         for k in range(p):
             jb[k] = 0.0
     v0[:] = v
-    warm_start(
-        pi, pj, pk, p, nrm, lam_c, ft_c, stamp_c, stamp, lam, ft, jb, mu, wr, wn, wmu, wlam, wft, v, inv_mass,
-        shared, sums,
-    )  # fmt: skip
+    if shared:
+        warm_start(
+            pi, pj, pk, p, nrm, lam_c, ft_c, stamp_c, stamp, lam, ft, jb, mu, wr, wn, wmu, wlam, wft, v, inv_mass,
+            shared, sums,
+        )  # fmt: skip
+    else:
+        warm_start_one(
+            pi, pj, pk, p, nrm, lam_c, ft_c, stamp_c, stamp, lam, ft, jb, mu, wr, wn, wmu, wlam, wft, v, inv_mass,
+            shared, sums,
+        )  # fmt: skip
     passes = resting_passes(
         pi, pj, p, nrm, w, rel, lam, ft, jb, mu, wr, wn, wu, wmu, wrel, wlam, wft, v, inv_mass, iterations,
         converged, shared, sums,
     )  # fmt: skip
-    follow(x, v, v0, near, resting_steps, dt)
+    if shared:
+        follow(x, v, v0, near, resting_steps, dt)
+    else:
+        follow_one(x, v, v0, near, resting_steps, dt)
     position_passes(pi, pj, p, x, radius, rel, inv_mass, overlap_passes, wr, shared, sums)
-    remember(pk, p, lam, ft, lam_c, ft_c, stamp_c, stamp)
+    if shared:
+        remember(pk, p, lam, ft, lam_c, ft_c, stamp_c, stamp)
+    else:
+        remember_one(pk, p, lam, ft, lam_c, ft_c, stamp_c, stamp)
     return found, True, passes
 
 
