@@ -175,28 +175,36 @@ def incidence(shared, pi, pj, p, wr, sums):  # pragma: no cover - compiled
 
 
 @numba_inline_helper
-def store(shared, si, sj, slots, dv, k, i, j, c0, c1, c2):  # pragma: no cover - compiled too
-    """Pair k's change c, -c for its first sphere i and +c for its second j: into their slots
-    when ``shared``, else added to their sums ``dv`` at once (one thread only).
+def put(slots, si, sj, k, c0, c1, c2):  # pragma: no cover - compiled too
+    """Pair k's change c into its slots (shared among threads): +c for its second sphere, -c
+    for its first."""
+    a = sj[k]
+    slots[a, 0] = c0
+    slots[a, 1] = c1
+    slots[a, 2] = c2
+    b = si[k]
+    slots[b, 0] = -c0
+    slots[b, 1] = -c1
+    slots[b, 2] = -c2
 
-    The arrays come one by one, not as the tuple ``sums``: numba (0.68) loses the writes
-    through an array unpacked from a tuple inside a ``prange`` loop."""
-    if shared:
-        a = sj[k]
-        slots[a, 0] = c0
-        slots[a, 1] = c1
-        slots[a, 2] = c2
-        b = si[k]
-        slots[b, 0] = -c0
-        slots[b, 1] = -c1
-        slots[b, 2] = -c2
-    else:
-        dv[i, 0] -= c0
-        dv[i, 1] -= c1
-        dv[i, 2] -= c2
-        dv[j, 0] += c0
-        dv[j, 1] += c1
-        dv[j, 2] += c2
+
+@numba_inline_helper
+def scatter(dv, i, j, c0, c1, c2):  # pragma: no cover - compiled too
+    """Pair (i, j)'s change c added to its spheres' sums at once (one thread): -c to i, +c to j."""
+    dv[i, 0] -= c0
+    dv[i, 1] -= c1
+    dv[i, 2] -= c2
+    dv[j, 0] += c0
+    dv[j, 1] += c1
+    dv[j, 2] += c2
+
+
+@numba_helper
+def clear(a, value):  # pragma: no cover - compiled
+    """a[:] = value, as a plain loop (in a parallel helper ``a[:] = value`` would start threads)."""
+    for r in range(a.shape[0]):
+        for c in range(a.shape[1]):
+            a[r, c] = value
 
 
 @numba_parallel_helper
@@ -309,32 +317,42 @@ def cone(f0, f1, f2, cap):  # pragma: no cover - compiled too
     return f0, f1, f2
 
 
+@numba_inline_helper
+def warm_pair(k, pk, nrm, lam_c, ft_c, stamp_c, stamp, lam, ft, jb, mu):  # pragma: no cover - compiled too
+    """Pair k's impulses of the last step, if it overlapped then (``stamp_c == stamp - 1``),
+    into ``lam``, ``ft`` (the friction impulse without its part along the new normal, cut to
+    the cone); returns the change of velocity times mass they make, n lam + f."""
+    c = pk[k]
+    n0, n1, n2 = nrm[k, 0], nrm[k, 1], nrm[k, 2]
+    if stamp_c[c] == stamp - 1:
+        lam[k] = lam_c[c]
+        fn = (ft_c[c, 0] * n0 + ft_c[c, 1] * n1) + ft_c[c, 2] * n2
+        f0, f1, f2 = cone(
+            ft_c[c, 0] - fn * n0, ft_c[c, 1] - fn * n1, ft_c[c, 2] - fn * n2, mu * (lam[k] + jb[k])
+        )
+    else:
+        lam[k], f0, f1, f2 = 0.0, 0.0, 0.0, 0.0
+    ft[k, 0], ft[k, 1], ft[k, 2] = f0, f1, f2
+    return lam[k] * n0 + f0, lam[k] * n1 + f1, lam[k] * n2 + f2
+
+
 @numba_parallel_helper
 def warm_start(
     pi, pj, pk, p, nrm, lam_c, ft_c, stamp_c, stamp, lam, ft, jb, mu, wr, wn, wmu, wlam, wft, v, inv_mass,
     shared, sums,
 ):  # pragma: no cover - compiled  # fmt: skip
-    """Every contact's impulses of the last step applied again (a pair that overlapped then,
-    ``stamp_c == stamp - 1``; the walls' ``wlam``, ``wft`` as the caller found them): the
-    friction impulse without its part along the new normal, cut to the cone."""
+    """Every contact's impulses of the last step applied again (:func:`warm_pair`; the walls'
+    ``wlam``, ``wft`` as the caller found them, their friction likewise cut to the cone)."""
     si, sj, slots, wc, start, wstart, wlist, dv = sums
-    if not shared:
-        dv[:] = 0.0
-    for k in prange(p):
-        c = pk[k]
-        n0, n1, n2 = nrm[k, 0], nrm[k, 1], nrm[k, 2]
-        if stamp_c[c] == stamp - 1:
-            lam[k] = lam_c[c]
-            fn = (ft_c[c, 0] * n0 + ft_c[c, 1] * n1) + ft_c[c, 2] * n2
-            f0, f1, f2 = cone(
-                ft_c[c, 0] - fn * n0, ft_c[c, 1] - fn * n1, ft_c[c, 2] - fn * n2, mu * (lam[k] + jb[k])
-            )
-        else:
-            lam[k], f0, f1, f2 = 0.0, 0.0, 0.0, 0.0
-        ft[k, 0], ft[k, 1], ft[k, 2] = f0, f1, f2
-        store(
-            shared, si, sj, slots, dv, k, pi[k], pj[k], lam[k] * n0 + f0, lam[k] * n1 + f1, lam[k] * n2 + f2
-        )
+    if shared:
+        for k in prange(p):
+            c0, c1, c2 = warm_pair(k, pk, nrm, lam_c, ft_c, stamp_c, stamp, lam, ft, jb, mu)
+            put(slots, si, sj, k, c0, c1, c2)
+    else:
+        clear(dv, 0.0)
+        for k in range(p):
+            c0, c1, c2 = warm_pair(k, pk, nrm, lam_c, ft_c, stamp_c, stamp, lam, ft, jb, mu)
+            scatter(dv, pi[k], pj[k], c0, c1, c2)
     for k in range(wr.shape[0]):
         n0, n1, n2 = wn[k, 0], wn[k, 1], wn[k, 2]
         fn = (wft[k, 0] * n0 + wft[k, 1] * n1) + wft[k, 2] * n2
@@ -368,26 +386,47 @@ def small(a, b, c, d, w, tol):  # pragma: no cover - compiled too
     return abs(a) * w <= tol and abs(b) * w <= tol and abs(c) * w <= tol and abs(d) * w <= tol
 
 
+@numba_inline_helper
+def rest_pair(k, pi, pj, nrm, w, rel, lam, ft, jb, mu, v, tol):  # pragma: no cover - compiled too
+    """Pair k's resting update from the velocities before the pass (:func:`contact_update`),
+    in place on ``lam``, ``ft``; returns its change c and whether it changed at all and by
+    more than ``tol`` (1 or 0 each)."""
+    i = pi[k]
+    j = pj[k]
+    n0, n1, n2 = nrm[k, 0], nrm[k, 1], nrm[k, 2]
+    lam[k], ft[k, 0], ft[k, 1], ft[k, 2], dl, d0, d1, d2 = contact_update(
+        v[j, 0] - v[i, 0], v[j, 1] - v[i, 1], v[j, 2] - v[i, 2],
+        n0, n1, n2, rel[k], lam[k], ft[k, 0], ft[k, 1], ft[k, 2], mu, jb[k],
+    )  # fmt: skip
+    moved = 0
+    big = 0
+    if dl != 0.0 or d0 != 0.0 or d1 != 0.0 or d2 != 0.0:
+        moved = 1
+        if not small(dl, d0, d1, d2, w[k], tol):
+            big = 1
+    return dl * n0 + d0, dl * n1 + d1, dl * n2 + d2, moved, big
+
+
 @numba_parallel_helper
 def pair_pass(pi, pj, p, nrm, w, rel, lam, ft, jb, mu, v, tol, shared, sums):  # pragma: no cover - compiled
-    """One resting pass's pair updates from the velocities before it, each change stored
-    (:func:`store`); returns (how many contacts changed, how many by more than ``tol``)."""
+    """One resting pass's pair updates (:func:`rest_pair`), each change into its slots when
+    ``shared``, else into ``dv``; returns (how many contacts changed, how many by more than
+    ``tol``)."""
     si, sj, slots, wc, start, wstart, wlist, dv = sums
     moved = 0
     big = 0
-    for k in prange(p):
-        i = pi[k]
-        j = pj[k]
-        n0, n1, n2 = nrm[k, 0], nrm[k, 1], nrm[k, 2]
-        lam[k], ft[k, 0], ft[k, 1], ft[k, 2], dl, d0, d1, d2 = contact_update(
-            v[j, 0] - v[i, 0], v[j, 1] - v[i, 1], v[j, 2] - v[i, 2],
-            n0, n1, n2, rel[k], lam[k], ft[k, 0], ft[k, 1], ft[k, 2], mu, jb[k],
-        )  # fmt: skip
-        if dl != 0.0 or d0 != 0.0 or d1 != 0.0 or d2 != 0.0:
-            moved += 1
-            if not small(dl, d0, d1, d2, w[k], tol):
-                big += 1
-        store(shared, si, sj, slots, dv, k, i, j, dl * n0 + d0, dl * n1 + d1, dl * n2 + d2)
+    if shared:
+        for k in prange(p):
+            c0, c1, c2, m, g = rest_pair(k, pi, pj, nrm, w, rel, lam, ft, jb, mu, v, tol)
+            moved += m
+            big += g
+            put(slots, si, sj, k, c0, c1, c2)
+    else:
+        for k in range(p):
+            c0, c1, c2, m, g = rest_pair(k, pi, pj, nrm, w, rel, lam, ft, jb, mu, v, tol)
+            moved += m
+            big += g
+            scatter(dv, pi[k], pj[k], c0, c1, c2)
     return moved, big
 
 
@@ -407,10 +446,7 @@ def resting_passes(
         passes += 1
         if not shared:
             dv[:] = 0.0
-        if shared:
-            moved, big = pair_pass(pi, pj, p, nrm, w, rel, lam, ft, jb, mu, v, tol, shared, sums)
-        else:
-            moved, big = pair_pass_one(pi, pj, p, nrm, w, rel, lam, ft, jb, mu, v, tol, shared, sums)
+        moved, big = pair_pass(pi, pj, p, nrm, w, rel, lam, ft, jb, mu, v, tol, shared, sums)
         for k in range(wr.shape[0]):
             r = wr[k]
             n0, n1, n2 = wn[k, 0], wn[k, 1], wn[k, 2]
@@ -451,32 +487,48 @@ def follow(x, v, v0, near, resting_steps, dt):  # pragma: no cover - compiled
         x[r, 2] += d2 * s
 
 
+@numba_inline_helper
+def overlap_pair(k, pi, pj, x, radius, rel):  # pragma: no cover - compiled too
+    """Pair k's overlap correction from the positions before the pass, along its line of
+    centres: (c, whether it overlaps, whether c is not zero)."""
+    i = pi[k]
+    j = pj[k]
+    d0 = x[j, 0] - x[i, 0]
+    d1 = x[j, 1] - x[i, 1]
+    d2 = x[j, 2] - x[i, 2]
+    dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    over = radius[i] + radius[j] - dist
+    if over <= 0:
+        return 0.0, 0.0, 0.0, False, 0
+    if dist > 0:
+        d0, d1, d2 = d0 / dist, d1 / dist, d2 / dist
+    else:
+        d0, d1, d2 = 0.0, 1.0, 0.0
+    c = over * rel[k]
+    return c * d0, c * d1, c * d2, True, 1 if c != 0.0 else 0
+
+
 @numba_parallel_helper
 def overlap_pass(pi, pj, p, x, radius, rel, shared, sums):  # pragma: no cover - compiled
-    """One overlap pass's pair corrections from the positions before it, stored (a pair that
-    does not overlap stores -0.0, which adds nothing to any sum); returns how many pairs
-    moved."""
+    """One overlap pass's pair corrections (:func:`overlap_pair`), into their slots when
+    ``shared`` (a pair that does not overlap puts -0.0, which adds nothing to any sum), else
+    into ``dv`` (it adds nothing); returns how many pairs moved."""
     si, sj, slots, wc, start, wstart, wlist, dv = sums
     moved = 0
-    for k in prange(p):
-        i = pi[k]
-        j = pj[k]
-        d0 = x[j, 0] - x[i, 0]
-        d1 = x[j, 1] - x[i, 1]
-        d2 = x[j, 2] - x[i, 2]
-        dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        over = radius[i] + radius[j] - dist
-        if over <= 0:
-            store(shared, si, sj, slots, dv, k, i, j, -0.0, -0.0, -0.0)
-            continue
-        if dist > 0:
-            d0, d1, d2 = d0 / dist, d1 / dist, d2 / dist
-        else:
-            d0, d1, d2 = 0.0, 1.0, 0.0
-        c = over * rel[k]
-        if c != 0.0:
-            moved += 1
-        store(shared, si, sj, slots, dv, k, i, j, c * d0, c * d1, c * d2)
+    if shared:
+        for k in prange(p):
+            c0, c1, c2, over, m = overlap_pair(k, pi, pj, x, radius, rel)
+            moved += m
+            if over:
+                put(slots, si, sj, k, c0, c1, c2)
+            else:
+                put(slots, si, sj, k, -0.0, -0.0, -0.0)
+    else:
+        for k in range(p):
+            c0, c1, c2, over, m = overlap_pair(k, pi, pj, x, radius, rel)
+            moved += m
+            if over:
+                scatter(dv, pi[k], pj[k], c0, c1, c2)
     return moved
 
 
@@ -492,11 +544,7 @@ def position_passes(
     for _ in range(iterations):
         if not shared:
             dv[:] = 0.0
-        if shared:
-            moved = overlap_pass(pi, pj, p, x, radius, rel, shared, sums)
-        else:
-            moved = overlap_pass_one(pi, pj, p, x, radius, rel, shared, sums)
-        if moved == 0:
+        if overlap_pass(pi, pj, p, x, radius, rel, shared, sums) == 0:
             break
         apply(shared, sums, x, wr, inv_mass)
 
@@ -511,13 +559,12 @@ def remember(pk, p, lam, ft, lam_c, ft_c, stamp_c, stamp):  # pragma: no cover -
         stamp_c[c] = stamp
 
 
-# The one-thread builds of the shared helpers (the same code, no threads started): what
-# contact_step calls when it is not shared.
+# The one-thread builds of the shared helpers that only loop over their rows (the same code,
+# no threads started): what contact_step calls when it is not shared. The passes that sum
+# contacts into particles instead keep a loop of each kind (slots or a scatter): a test of
+# ``shared`` inside one loop cost a quarter of the one-thread passes' time.
 pair_setup_one = one_thread(pair_setup)
-warm_start_one = one_thread(warm_start)
-pair_pass_one = one_thread(pair_pass)
 follow_one = one_thread(follow)
-overlap_pass_one = one_thread(overlap_pass)
 remember_one = one_thread(remember)
 
 
@@ -558,16 +605,10 @@ def contact_step(
         for k in range(p):
             jb[k] = 0.0
     v0[:] = v
-    if shared:
-        warm_start(
-            pi, pj, pk, p, nrm, lam_c, ft_c, stamp_c, stamp, lam, ft, jb, mu, wr, wn, wmu, wlam, wft, v, inv_mass,
-            shared, sums,
-        )  # fmt: skip
-    else:
-        warm_start_one(
-            pi, pj, pk, p, nrm, lam_c, ft_c, stamp_c, stamp, lam, ft, jb, mu, wr, wn, wmu, wlam, wft, v, inv_mass,
-            shared, sums,
-        )  # fmt: skip
+    warm_start(
+        pi, pj, pk, p, nrm, lam_c, ft_c, stamp_c, stamp, lam, ft, jb, mu, wr, wn, wmu, wlam, wft, v, inv_mass,
+        shared, sums,
+    )  # fmt: skip
     passes = resting_passes(
         pi, pj, p, nrm, w, rel, lam, ft, jb, mu, wr, wn, wu, wmu, wrel, wlam, wft, v, inv_mass, iterations,
         converged, shared, sums,
