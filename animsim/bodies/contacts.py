@@ -65,6 +65,7 @@ from animsim.bodies.contact_detection import (
     PlaneTable,
     candidate_pairs,
     concat,
+    contact_rolling,
     empty_contacts,
     pair_contacts,
     plane_contacts,
@@ -105,8 +106,12 @@ class BodyContacts(StepStage):
         iterations: int = ITERATIONS,
         collider_thickness: float = math.inf,
         collider_offsets: Callable[[float], np.ndarray] | None = None,
+        rolling: np.ndarray | None = None,
     ) -> None:
         self.first = first
+        #: (B,) each body's rolling resistance (m), None when no body has one (the solve then
+        #: runs exactly as without the key)
+        self.rolling = None if rolling is None or not (rolling > 0.0).any() else np.asarray(rolling, float)
         #: t -> (C, 3) every collider's displacement from where it was given (keyframed ones
         #: move; None: all static): the bodies meet them where they are, at their velocity
         self.collider_offsets = collider_offsets
@@ -158,9 +163,15 @@ class BodyContacts(StepStage):
             parts.append(
                 "each other (sphere-sphere, sphere-box, capsule ends; box-box faces, edges and corners)"
             )
+        rolls = (
+            ""
+            if self.rolling is None
+            else f" and rolling resistance on {int((self.rolling > 0).sum())} bodies (a torque up to "
+            "rolling_friction times the normal force against their turning)"
+        )
         self.label = (
             f"body contacts: {self.count} {'/'.join(kinds)} bodies against {', '.join(parts)}; "
-            f"impulses with restitution and Coulomb friction, {iterations} to {MAX_SWEEPS} sweeps ({COLD_SWEEPS} from rest; until a sweep "
+            f"impulses with restitution and Coulomb friction{rolls}, {iterations} to {MAX_SWEEPS} sweeps ({COLD_SWEEPS} from rest; until a sweep "
             f"changes no velocity by {SWEEP_TOLERANCE:g} m/s), resting below "
             f"{RESTING_FACTOR:g}x the speed forces add per step, velocities settled and positions projected "
             "out from the ground up (shock propagation)"
@@ -286,10 +297,11 @@ class BodyContacts(StepStage):
             return False
         c = contacts
         self._solved = (c.a, c.b)
-        jn0, jt0, local = self.warm.guess(c.a, c.b, c.plane, c.n, c.ra, q)
+        jn0, jt0, jr0, local = self.warm.guess(c.a, c.b, c.plane, c.n, c.ra, q)
         v_pre, w_pre = v.copy(), w.copy()
         sweeps, cold = self._sweep_limit(c, jn0)
-        e_used, impact, jn, jt = solve(
+        mu_r = None if self.rolling is None else contact_rolling(c, self.rolling, self.kind)
+        e_used, impact, jn, jt, jr = solve(
             contacts,
             v,
             w,
@@ -303,14 +315,15 @@ class BodyContacts(StepStage):
             energy_shift(self.follow_weight) * dt,
             dt,
             surface,
-            (jn0, jt0),
+            (jn0, jt0, jr0),
             sweeps,
             cold,
             islands(c.a, c.b, self.count),
+            mu_r,
         )
         level = projection.levels(c.a, c.b, self.inv_mass)
-        shock_pass(c, impact, level, q, self.inv_mass, self.inv_inertia, surface, dt, jn, jt, v, w)
-        self.warm.keep(c.a, c.b, c.plane, c.n, local, jn, jt, self._held())
+        shock_pass(c, impact, level, q, self.inv_mass, self.inv_inertia, surface, dt, jn, jt, v, w, jr, mu_r)
+        self.warm.keep(c.a, c.b, c.plane, c.n, local, jn, jt, jr, self._held())
         h = self.follow_weight * dt
         left = follow_impulses(c, impact, x, q, v - v_pre, w - w_pre, h) if h > 0.0 else c.depth
         push = projection.pushes(c.depth, left, e_used)
@@ -370,8 +383,9 @@ class BodyContacts(StepStage):
         e_used = np.empty(count)
         impact = np.empty(count, dtype=np.bool_)
         depth_left = np.empty(count)
-        jn, jt, local = self.warm.guess(c.a, c.b, c.plane, c.n, c.ra, q)
+        jn, jt, jr, local = self.warm.guess(c.a, c.b, c.plane, c.n, c.ra, q)
         sweeps, cold = self._sweep_limit(c, jn)
+        mu_r = np.zeros(count) if self.rolling is None else contact_rolling(c, self.rolling, self.kind)
         level = projection.levels(c.a, c.b, self.inv_mass)
         solver(
             count,
@@ -398,8 +412,10 @@ class BodyContacts(StepStage):
             cold,
             level,
             islands(c.a, c.b, self.count),
+            mu_r,
+            jr,
         )
-        self.warm.keep(c.a, c.b, c.plane, c.n, local, jn, jt, self._held())
+        self.warm.keep(c.a, c.b, c.plane, c.n, local, jn, jt, jr, self._held())
         push = projection.pushes(c.depth, depth_left, e_used)
         projection.project(c.a, c.b, c.n, push, c.plane, x, self.inv_mass, level, True)
         return True
