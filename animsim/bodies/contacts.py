@@ -166,8 +166,8 @@ class BodyContacts(StepStage):
         rolls = (
             ""
             if self.rolling is None
-            else f" and rolling resistance on {int((self.rolling > 0).sum())} bodies (a torque up to "
-            "rolling_friction times the normal force against their turning)"
+            else " and rolling resistance where a sphere or a capsule touches (a torque up to "
+            "rolling_friction times the normal force against its rolling)"
         )
         self.label = (
             f"body contacts: {self.count} {'/'.join(kinds)} bodies against {', '.join(parts)}; "
