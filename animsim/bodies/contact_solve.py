@@ -1,6 +1,7 @@
 """The contact solver of rigid bodies: sequential impulses on the contact list, with
 restitution, resting contacts, Coulomb friction and rolling resistance, warm starting, the time
-of impact inside the step; the move of the bodies by the impulses is :func:`animsim.bodies.contact_follow.follow_impulses`.
+of impact inside the step; the move of the bodies by the impulses is
+:func:`animsim.bodies.contact_follow.follow_impulses`.
 
 Baraff 1997, "Rigid Body Simulation", section 8 (colliding contact; the effective mass along
 the normal), solved as sequential impulses (Catto 2005): the contacts one after the other,
@@ -9,7 +10,8 @@ the normal), solved as sequential impulses (Catto 2005): the contacts one after 
 batch being one vectorised update whose result is the sequential one. Every sum is written in
 the order of the numba twin (:mod:`animsim.bodies.contact_kernels`; the arithmetic in
 :mod:`animsim.bodies.contact_algebra`), so the backends agree to the bit; the rolling
-resistance is one rule both call (:func:`animsim.bodies.contact_kernels.rolling_total`). The model as a whole is described in :mod:`animsim.bodies.contacts`.
+resistance is one rule both call (:func:`animsim.bodies.contact_kernels.rolling_total`).
+The model as a whole is described in :mod:`animsim.bodies.contacts`.
 """
 
 from __future__ import annotations

@@ -16,7 +16,10 @@ Model (after each integrator step, as a step stage):
    that is what gravity alone gives a body lying on a floor, so a resting body
    gets no bounce and does not jitter. Accumulated normal impulses stay >= 0
    (contacts push, never pull); the tangential (Coulomb) impulse stops sliding,
-   capped at mu times the normal impulse. The contacts are solved one after the
+   capped at mu times the normal impulse; where a sphere or a capsule has a
+   ``rolling_friction`` mu_r, an angular impulse stops its rolling, capped at mu_r
+   times the normal impulse (rolling resistance as Bullet's and MuJoCo's;
+   :func:`animsim.bodies.contact_kernels.rolling_total`). The contacts are solved one after the
    other, ``iterations`` times: on NumPy in batches in which no body appears
    twice (a batch is one vectorised update, and the result is the sequential
    one), on numba by a kernel that walks the list. Both write every sum in the
