@@ -114,6 +114,12 @@ def _body_colors(scene: Scene) -> Iterator[Path_]:
             yield ("bodies", i, "color")
 
 
+def _rolling(scene: Scene) -> Iterator[Path_]:
+    for i, b in enumerate(scene.bodies):
+        if b.rolling_friction > 0.0:
+            yield ("bodies", i, "rolling_friction")
+
+
 def _sleep(scene: Scene) -> Iterator[Path_]:
     if scene.sleep is not None and scene.bodies:
         yield ("sleep",)
@@ -183,6 +189,13 @@ THINGS: tuple[Thing, ...] = (
     Thing("body_capsule", "a capsule body", "`bodies:` with `shape: {type: capsule}`", _bodies("capsule")),
     Thing("body_color", "a body's colour", "`color` of a body", _body_colors, part_of="body_box"),
     Thing("body_sleep", "bodies that sleep", "`sleep:` with `bodies:`", _sleep, part_of="body_box"),
+    Thing(
+        "body_rolling",
+        "rolling resistance",
+        "`rolling_friction` of a body",
+        _rolling,
+        part_of="body_sphere",
+    ),
     Thing(
         "plane_impulse",
         "an impulse plane",

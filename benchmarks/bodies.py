@@ -23,8 +23,14 @@ columns stand still from the start, so they fall asleep at 0.5 s, where timing s
 dropped bodies land by 0.5 s and rest, so they fall asleep during the timed stretch (time a
 later one with ``--warmup``).
 
+With ``--rolling M``: every dropped body gets ``rolling_friction: M`` (m; default 0, none, the
+scene measured before rolling resistance existed). Only the spheres and the capsules feel it (a
+box's corners get none): a ball or a capsule on its side rolling on the floor then slows at
+(5/7) M g / r and stops, so with ``--sleep`` it can fall asleep; without it, it rolls on and
+stays awake. The piled boxes are left as they are.
+
 Run from the project root:
-``python benchmarks/bodies.py [--steps N] [--repeat R] [--piled] [--sleep] [--warmup S]``.
+``python benchmarks/bodies.py [--steps N] [--repeat R] [--piled] [--sleep] [--warmup S] [--rolling M]``.
 Goal: >= 1 000 steps/s on numba, >= 100 on NumPy (dropped); >= 1 000 on numba (piled).
 """
 
@@ -89,8 +95,9 @@ def piled_text() -> str:
     return "\n".join(lines) + "\n"
 
 
-def scene_text() -> str:
+def scene_text(rolling: float = 0.0) -> str:
     lines = _header()
+    key = f", rolling_friction: {rolling!r}" if rolling else ""
     k = 0
     for i in range(GRID[0]):
         for m in range(GRID[1]):
@@ -98,18 +105,23 @@ def scene_text() -> str:
             lines.append(
                 f"  - {{id: b{k}, shape: {SHAPES[k % 3]}, density: 800, position: [{x:.2f}, {y:.2f}, {z:.2f}],"
                 f" orientation: {{axis: [{1 + i % 3}, 1, {m % 2}], angle: {7 * k % 90}}},"
-                f" angular_velocity: [{0.2 * ((k % 5) - 2):.1f}, {0.5 * ((k % 3) - 1):.1f}, {0.2 * ((k % 7) - 3):.1f}]}}"
+                f" angular_velocity: [{0.2 * ((k % 5) - 2):.1f}, {0.5 * ((k % 3) - 1):.1f}, {0.2 * ((k % 7) - 3):.1f}]{key}}}"
             )
             k += 1
     return "\n".join(lines) + "\n"
 
 
 def steps_per_second(
-    backend: str, steps: int, piled: bool = False, sleep: bool = False, warmup: float = WARMUP
+    backend: str,
+    steps: int,
+    piled: bool = False,
+    sleep: bool = False,
+    warmup: float = WARMUP,
+    rolling: float = 0.0,
 ) -> tuple[float, float]:
     """(steps per wall-clock second, steps per CPU second) over the timed stretch."""
     warm_steps = round(warmup / DT)
-    text = piled_text() if piled else scene_text()
+    text = piled_text() if piled else scene_text(rolling)
     if sleep:
         text = text.replace("bodies:\n", SLEEP + "\nbodies:\n", 1)
     loaded = load_scene_text(text, "bodies.yaml")
@@ -137,12 +149,15 @@ def main() -> None:
     ap.add_argument("--piled", action="store_true", help="1 000 boxes piled in columns, not dropped apart")
     ap.add_argument("--sleep", action="store_true", help="run each variant also with bodies at rest asleep")
     ap.add_argument("--warmup", type=float, default=WARMUP, help="simulated seconds before timing starts")
+    ap.add_argument("--rolling", type=float, default=0.0, help="rolling_friction of the dropped bodies, m")
     args = ap.parse_args()
     what = "piled boxes" if args.piled else "bodies"
+    if args.rolling and not args.piled:
+        what += f", rolling_friction {args.rolling:g}"
     for backend in args.backend or ("numba", "numpy"):
         for sleep in (False, True) if args.sleep else (False,):
             rates = [
-                steps_per_second(backend, args.steps, args.piled, sleep, args.warmup)
+                steps_per_second(backend, args.steps, args.piled, sleep, args.warmup, args.rolling)
                 for _ in range(args.repeat)
             ]
             wall, cpu = max(r[0] for r in rates), max(r[1] for r in rates)

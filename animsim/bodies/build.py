@@ -177,6 +177,7 @@ def build_body_elements(
             colliders=tuple((shape.signed_distance, shape.restitution, shape.friction) for shape in solids),
             collider_thickness=min((shape.thickness for shape in solids), default=math.inf),
             collider_offsets=solid.offsets if solid is not None and solid.injects else None,
+            rolling=np.array([b.rolling_friction for b in scene.bodies], dtype=np.float64),
         )
         stages.append(contact)
         left_out.extend(contact.left_out)

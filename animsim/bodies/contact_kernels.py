@@ -151,7 +151,68 @@ def _emit(
     out_v[2, c, 0], out_v[2, c, 1], out_v[2, c, 2] = nx, ny, nz
     out_s[0, c] = depth
     out_s[1, c] = 0.5 * (restitution[a] + restitution[b])
-    out_s[2, c] = np.sqrt(friction[a] * friction[b])
+    out_s[2, c] = pair_coefficient(friction[a], friction[b])
+
+
+@numba_inline_helper
+def pair_coefficient(mu_a: Any, mu_b: Any) -> Any:
+    """The coefficient of a contact between two bodies from theirs, the geometric mean
+    sqrt(mu_a mu_b) (Coulomb friction and rolling resistance alike): one body with 0 makes the
+    pair's 0. One number each in the kernels, or arrays of them on NumPy."""
+    return np.sqrt(mu_a * mu_b)
+
+
+@numba_inline_helper
+def rolling_total(
+    w0: Any,
+    w1: Any,
+    w2: Any,
+    n0: Any,
+    n1: Any,
+    n2: Any,
+    k0: Any,
+    k1: Any,
+    k2: Any,
+    k3: Any,
+    k4: Any,
+    k5: Any,
+    j0: Any,
+    j1: Any,
+    j2: Any,
+    cap: Any,
+) -> tuple[Any, Any, Any]:
+    """A contact's new total rolling impulse (an angular impulse, N m s): its old one (j0, j1,
+    j2) plus the one that stops the relative turning tangential to the normal n (w minus its
+    part along n), held inside ``cap`` = mu_r times the normal impulse.
+
+    Rolling resistance as Bullet's sequential-impulse solver has it
+    (``btSequentialImpulseConstraintSolver``: angular-only rows per contact, each limited to
+    +-mu_r times the contact's normal impulse) and MuJoCo's condim 6 (the rolling rows of the
+    contact's friction cone), solved as the Coulomb friction here is (Catto 2005): the angular
+    impulse that stops the tangential relative angular velocity t is -t |t|^2 / (t . K t),
+    K = I_a^-1 + I_b^-1 in world axes (``k0..k5``, the rows (k00, k01, k02, k11, k12, k22));
+    the total is kept in the disc |L| <= mu_r j_n, as the tangential impulse is kept in
+    mu j_n (Bullet clamps its two rolling rows one by one, a square, so its resistance depends
+    on the direction of rolling; the disc does not). Only the turning about axes in the
+    contact's plane is resisted (rolling); the spin about n is left free.
+
+    The one rule of both backends: each kernel calls it with one contact's numbers, the NumPy
+    solver with arrays of a batch's; written without branches (comparisons as 0 or 1) so that
+    the two do the same operations. Here rather than in the NumPy module, for numba's disk cache
+    (module docstring)."""
+    wn = (w0 * n0 + w1 * n1) + w2 * n2
+    t0, t1, t2 = w0 - wn * n0, w1 - wn * n1, w2 - wn * n2
+    s2 = (t0 * t0 + t1 * t1) + t2 * t2
+    kq = (t0 * ((k0 * t0 + k1 * t1) + k2 * t2) + t1 * ((k1 * t0 + k3 * t1) + k4 * t2)) + t2 * (
+        (k2 * t0 + k4 * t1) + k5 * t2
+    )
+    # s2 / kq where kq > 0 (no turning, or two immovable ends: nothing to stop)
+    f = (s2 * (kq > 0.0)) / (kq + (kq <= 0.0))
+    u0, u1, u2 = j0 - f * t0, j1 - f * t1, j2 - f * t2
+    mag2 = (u0 * u0 + u1 * u1) + u2 * u2
+    # scaled back onto the disc |L| <= cap (cap / |u| >= 1 inside it: left as it is)
+    scale = np.minimum(1.0, cap / np.sqrt(mag2 + (mag2 <= 0.0)))
+    return u0 * scale, u1 * scale, u2 * scale
 
 
 def _pair_contacts_loop(
@@ -356,7 +417,7 @@ def _arm_inertia(
 ) -> None:
     """G = I^-1 [r]x of one end column by column into ``gm``, K = [r]x^T I^-1 [r]x into ``kt6``
     (the first end sets it, the second adds to it). K_ij = c_i . M c_j, c_j the columns of [r]x
-    (as _arm_inertia)."""
+    (as contact_algebra.arm_inertia)."""
     o = 6 * side
     cols[0, 0], cols[0, 1], cols[0, 2] = 0.0, rz, -ry
     cols[1, 0], cols[1, 1], cols[1, 2] = -rz, 0.0, rx
@@ -714,19 +775,24 @@ def _warm_start(
     impact: np.ndarray,
     jn: np.ndarray,
     jt: np.ndarray,
+    jr: np.ndarray,
+    mat: np.ndarray,
 ) -> None:
     """Warm start (solve's _apply_warm): the impulses each contact starts from (none on an
-    impact), normal impulse on a, on b, then friction on a, on b."""
+    impact), normal impulse on a, on b, then friction on a, on b, then rolling on a, on b."""
     for i in range(count):
         if impact[i]:
             jn[i] = 0.0
             jt[i, 0], jt[i, 1], jt[i, 2] = 0.0, 0.0, 0.0
+            jr[i, 0], jr[i, 1], jr[i, 2] = 0.0, 0.0, 0.0
         dj = jn[i]
         ix, iy, iz = jt[i, 0], jt[i, 1], jt[i, 2]
         if dj == 0.0 and ix == 0.0 and iy == 0.0 and iz == 0.0:
             continue
         _push_normal(i, a[i], b[i], dj, ma, mb, n, g, v, w)
         _push_friction(i, a[i], b[i], ix, iy, iz, ma, mb, gm, v, w)
+        if jr[i, 0] != 0.0 or jr[i, 1] != 0.0 or jr[i, 2] != 0.0:
+            _push_rolling(i, a[i], b[i], jr[i, 0], jr[i, 1], jr[i, 2], mat, w)
 
 
 @numba_inline_helper
@@ -767,6 +833,54 @@ def _friction_total(
     return wx, wy, wz
 
 
+@numba_inline_helper
+def _push_rolling(
+    i: int, ai: int, bi: int, ix: float, iy: float, iz: float, mat: np.ndarray, w: np.ndarray
+) -> None:
+    """The rolling impulse (ix, iy, iz) of contact ``i`` applied to a, its opposite to b:
+    w += I^-1 L (``mat[i]``: I_a^-1 then I_b^-1, rows (m00, m01, m02, m11, m12, m22))."""
+    w[ai, 0] += (mat[i, 0] * ix + mat[i, 1] * iy) + mat[i, 2] * iz
+    w[ai, 1] += (mat[i, 1] * ix + mat[i, 3] * iy) + mat[i, 4] * iz
+    w[ai, 2] += (mat[i, 2] * ix + mat[i, 4] * iy) + mat[i, 5] * iz
+    if bi >= 0:
+        w[bi, 0] -= (mat[i, 6] * ix + mat[i, 7] * iy) + mat[i, 8] * iz
+        w[bi, 1] -= (mat[i, 7] * ix + mat[i, 9] * iy) + mat[i, 10] * iz
+        w[bi, 2] -= (mat[i, 8] * ix + mat[i, 10] * iy) + mat[i, 11] * iz
+
+
+@numba_inline_helper
+def _rolling_row(
+    i: int,
+    ai: int,
+    bi: int,
+    n: np.ndarray,
+    ra: np.ndarray,
+    rolling: np.ndarray,
+    jr: np.ndarray,
+    mat: np.ndarray,
+    jn: np.ndarray,
+    w: np.ndarray,
+) -> float:
+    """Contact ``i``'s rolling impulse (:func:`rolling_total`, solve's _rolling_impulse) from
+    the angular velocities now, applied; returns its change as a velocity at the contact point,
+    tr(K) |r_a| times the change's largest component."""
+    w0, w1, w2 = w[ai, 0], w[ai, 1], w[ai, 2]
+    if bi >= 0:
+        w0, w1, w2 = w0 - w[bi, 0], w1 - w[bi, 1], w2 - w[bi, 2]
+    k0, k1, k2 = mat[i, 0] + mat[i, 6], mat[i, 1] + mat[i, 7], mat[i, 2] + mat[i, 8]
+    k3, k4, k5 = mat[i, 3] + mat[i, 9], mat[i, 4] + mat[i, 10], mat[i, 5] + mat[i, 11]
+    u0, u1, u2 = rolling_total(
+        w0, w1, w2, n[i, 0], n[i, 1], n[i, 2], k0, k1, k2, k3, k4, k5,
+        jr[i, 0], jr[i, 1], jr[i, 2], rolling[i] * jn[i],
+    )  # fmt: skip
+    ix, iy, iz = u0 - jr[i, 0], u1 - jr[i, 1], u2 - jr[i, 2]
+    jr[i, 0], jr[i, 1], jr[i, 2] = u0, u1, u2
+    _push_rolling(i, ai, bi, ix, iy, iz, mat, w)
+    arm = np.sqrt((ra[i, 0] * ra[i, 0] + ra[i, 1] * ra[i, 1]) + ra[i, 2] * ra[i, 2])
+    rate = ((k0 + k3) + k5) * arm
+    return rate * max(abs(ix), max(abs(iy), abs(iz)))
+
+
 @numba_helper
 def _sweep(
     count: int,
@@ -791,10 +905,14 @@ def _sweep(
     island: np.ndarray,
     live: np.ndarray,
     change: np.ndarray,
+    roll: tuple[np.ndarray, np.ndarray, np.ndarray],
 ) -> None:
     """One sweep of the sequential impulses: each contact's normal impulse toward its target,
-    then its friction; contacts of an island no longer ``live`` are passed over. Each island's
-    largest change (mass times impulse) of the sweep goes into ``change``."""
+    then its friction, then its rolling impulse (``roll``: mu_r (C,), the rolling impulses
+    (C, 3), the inverse inertias (C, 12); where mu_r > 0); contacts of an island no longer
+    ``live`` are passed over. Each island's largest change (mass times impulse) of the sweep
+    goes into ``change``."""
+    rolling, jr, mat = roll
     for i in range(count):
         k = island[i]
         if not live[k]:
@@ -815,6 +933,8 @@ def _sweep(
         big = max(abs(dj), max(abs(ix), max(abs(iy), abs(iz))))
         change[k] = max(change[k], mt[i] * big)
         _push_friction(i, ai, bi, ix, iy, iz, ma, mb, gm, v, w)
+        if rolling[i] > 0.0:
+            change[k] = max(change[k], _rolling_row(i, ai, bi, n, ra, rolling, jr, mat, jn, w))
 
 
 @numba_helper
@@ -841,9 +961,11 @@ def _sweeps(
     least: int,
     most: int,
     island: np.ndarray,
+    roll: tuple[np.ndarray, np.ndarray, np.ndarray],
 ) -> None:
     """Sweeps, at least ``least``, then until one changes no velocity by more than
-    SWEEP_TOLERANCE, at most ``most``, island by island (``island`` (C,); solve's _sweeps)."""
+    SWEEP_TOLERANCE, at most ``most``, island by island (``island`` (C,); solve's _sweeps);
+    ``roll`` as :func:`_sweep`'s."""
     size = 0
     for i in range(count):
         size = max(size, island[i] + 1)
@@ -852,7 +974,8 @@ def _sweeps(
     for sweep in range(max(least, most)):
         change[:] = 0.0
         _sweep(
-            count, a, b, ra, rb, n, friction, v, w, g, gm, kt6, inv_kn, ma, mb, mt, tgt, jn, jt, island, live, change
+            count, a, b, ra, rb, n, friction, v, w, g, gm, kt6, inv_kn, ma, mb, mt, tgt, jn, jt, island, live, change,
+            roll,
         )  # fmt: skip
         if sweep + 1 >= least:
             left = False
@@ -883,11 +1006,13 @@ def _shock_pass(
     island: np.ndarray,
     jn: np.ndarray,
     jt: np.ndarray,
+    rolling: np.ndarray,
+    jr: np.ndarray,
 ) -> None:
     """Twin of :func:`animsim.bodies.contact_shock.shock_pass`: level by level from level 1 up,
     that level's contacts (no impacts; in list order) swept with the bodies below held still.
     ``body``: (q, inverse masses, inverse inertias); ``forces``: (resting speeds, dv, dx) as
-    the solve's."""
+    the solve's; ``rolling`` (C,), ``jr`` (C, 3): rolling resistances and impulses."""
     q, inv_mass, inv_inertia = body
     rest, dv, dx = forces
     nb = inv_mass.shape[0]
@@ -911,7 +1036,7 @@ def _shock_pass(
             for m in range(3):
                 ii[bi, m] = 0.0 if still else inv_inertia[bi, m]
         sa, sb, sra, srb, sn = a[sel], b[sel], ra[sel], rb[sel], n[sel]
-        sjn, sjt = jn[sel], jt[sel]
+        sjn, sjt, sjr = jn[sel], jt[sel], jr[sel]
         mat, g, gm, kt6 = np.empty((k, 12)), np.empty((k, 12)), np.zeros((k, 18)), np.zeros((k, 6))
         inv_kn, ma, mb, mt, tgt = np.empty(k), np.empty(k), np.empty(k), np.empty(k), np.empty(k)
         limit, dvn, dxn = np.empty(k), np.empty(k), np.empty(k)
@@ -925,12 +1050,13 @@ def _shock_pass(
         fr = friction[sel]
         _sweeps(
             k, sa, sb, sra, srb, sn, fr, v, w, g, gm, kt6, inv_kn, ma, mb, mt, tgt, sjn, sjt, 1, SHOCK_SWEEPS,
-            island[sel],
+            island[sel], (rolling[sel], sjr, mat),
         )  # fmt: skip
         for i in range(k):
             jn[sel[i]] = sjn[i]
             for m in range(3):
                 jt[sel[i], m] = sjt[i, m]
+                jr[sel[i], m] = sjr[i, m]
 
 
 @numba_inline_helper
@@ -1037,6 +1163,8 @@ def _solve_list_loop(
     cold: bool,
     level: np.ndarray,
     island: np.ndarray,
+    rolling: np.ndarray,
+    jr: np.ndarray,
 ) -> None:
     """Twin of :func:`solve`, :func:`shock_pass` then :func:`follow_impulses` (when h > 0): the
     first ``count`` contacts one after the other, ``iterations`` times (first without friction
@@ -1044,7 +1172,9 @@ def _solve_list_loop(
     then the bodies moved as the impulses moved them (the depths left into ``depth_out``).
     ``island`` (C,): each contact's island (contact_batches.islands), swept until it converged.
     ``jn`` (C,), ``jt`` (C, 3): the impulses to start from (warm starting; applied first,
-    contact by contact, except on impacts), in place the impulses each contact ended with."""
+    contact by contact, except on impacts), in place the impulses each contact ended with;
+    ``rolling`` (C,), ``jr`` (C, 3): each contact's rolling resistance and rolling impulse (the
+    same)."""
     v0 = v.copy()
     w0 = w.copy()
     mat = np.empty((count, 12))  # per contact: I_a^-1 (6), I_b^-1 (6)
@@ -1071,18 +1201,21 @@ def _solve_list_loop(
     _bounce_targets(
         count, a, b, ra, rb, n, depth, restitution, v, w, limit, struck, dvn, dxn, kh, dt, e_used, impact, tgt
     )
-    _warm_start(count, a, b, n, v, w, g, gm, ma, mb, impact, jn, jt)
+    _warm_start(count, a, b, n, v, w, g, gm, ma, mb, impact, jn, jt, jr, mat)
     least, most = iterations, max_sweeps
-    if cold:  # as solve: the normal impulses first, without friction
+    if cold:  # as solve: the normal impulses first, without friction (or rolling resistance)
         fr = np.zeros(count)
         _sweeps(
-            count, a, b, ra, rb, n, fr, v, w, g, gm, kt6, inv_kn, ma, mb, mt, tgt, jn, jt, least, most, island
-        )
+            count, a, b, ra, rb, n, fr, v, w, g, gm, kt6, inv_kn, ma, mb, mt, tgt, jn, jt, least, most, island,
+            (fr, jr, mat),
+        )  # fmt: skip
     _sweeps(
-        count, a, b, ra, rb, n, friction, v, w, g, gm, kt6, inv_kn, ma, mb, mt, tgt, jn, jt, least, most, island
+        count, a, b, ra, rb, n, friction, v, w, g, gm, kt6, inv_kn, ma, mb, mt, tgt, jn, jt, least, most, island,
+        (rolling, jr, mat),
     )  # fmt: skip
     body, forces = (q, inv_mass, inv_inertia), (resting_speed, dv, dx)
     _shock_pass(
-        count, a, b, ra, rb, n, depth, friction, v, w, body, forces, dt, impact, level, island, jn, jt
-    )
+        count, a, b, ra, rb, n, depth, friction, v, w, body, forces, dt, impact, level, island, jn, jt,
+        rolling, jr,
+    )  # fmt: skip
     _follow_impulses(count, a, b, ra, rb, n, depth, impact, x, q, v, w, v0, w0, h, depth_out)

@@ -59,10 +59,13 @@ def shock_pass(
     jt: np.ndarray,
     v: np.ndarray,
     w: np.ndarray,
+    jr: np.ndarray | None = None,
+    rolling: np.ndarray | None = None,
 ) -> None:
     """Sweep the contacts level by level from level 1 up, the bodies below each level held
     still (module docstring). In place on v, w (B, 3) and on the impulses jn (C,), jt (C, 3)
-    the solve ended with; ``hit`` (C,) the impacts, ``level`` (B,) the bodies' levels.
+    and jr (C, 3) the solve ended with; ``hit`` (C,) the impacts, ``level`` (B,) the bodies'
+    levels, ``rolling`` (C,) the contacts' rolling resistance (None: none).
 
     The contacts of a level are taken in list order (in batches, as the solve takes them), so
     the numba twin, walking them one by one, does the same operations."""
@@ -79,14 +82,17 @@ def shock_pass(
         im = np.where(still, 0.0, inv_mass)
         ii = np.where(still[:, None], 0.0, inv_inertia)
         sub = Contacts(*(getattr(c, f)[sel] for f in Contacts.__dataclass_fields__))
-        r = contact_rows(sub, q, im, ii)
+        r = contact_rows(sub, q, im, ii, None if rolling is None else rolling[sel])
         rows = sel[r.order]
         # only resting and speculative contacts: the speed that closes a gap within the step
         target = np.minimum(r.depth, 0.0) / dt
         sv = None if surface is None else surface[rows].T
         sjn, sjt = jn[rows], jt[rows].T.copy()
-        sweeps(r, contact_groups(r), sv, target, sjn, sjt, vT, wT, 1, SHOCK_SWEEPS, island[rows])
+        sjr = np.zeros_like(sjt) if jr is None else jr[rows].T.copy()
+        sweeps(r, contact_groups(r), sv, target, sjn, sjt, sjr, vT, wT, 1, SHOCK_SWEEPS, island[rows])
         jn[rows] = sjn
         jt[rows] = sjt.T
+        if jr is not None:
+            jr[rows] = sjr.T
     v[:] = vT.T
     w[:] = wT.T

@@ -1,14 +1,17 @@
 """The contact solver of rigid bodies: sequential impulses on the contact list, with
-restitution, resting contacts and Coulomb friction, warm starting, the time of impact inside
-the step; the move of the bodies by the impulses is :func:`animsim.bodies.contact_follow.follow_impulses`.
+restitution, resting contacts, Coulomb friction and rolling resistance, warm starting, the time
+of impact inside the step; the move of the bodies by the impulses is
+:func:`animsim.bodies.contact_follow.follow_impulses`.
 
 Baraff 1997, "Rigid Body Simulation", section 8 (colliding contact; the effective mass along
 the normal), solved as sequential impulses (Catto 2005): the contacts one after the other,
 ``iterations`` times, on NumPy in batches in which no body appears twice
 (:func:`animsim.bodies.contact_batches.batches`), a
 batch being one vectorised update whose result is the sequential one. Every sum is written in
-the order of the numba twin (:mod:`animsim.bodies.contact_kernels`), so the backends agree to
-the bit. The model as a whole is described in :mod:`animsim.bodies.contacts`.
+the order of the numba twin (:mod:`animsim.bodies.contact_kernels`; the arithmetic in
+:mod:`animsim.bodies.contact_algebra`), so the backends agree to the bit; the rolling
+resistance is one rule both call (:func:`animsim.bodies.contact_kernels.rolling_total`).
+The model as a whole is described in :mod:`animsim.bodies.contacts`.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from animsim.bodies.contact_algebra import arm_inertia, cross3, dot3, inv_world_inertia, sym_matvec
 from animsim.bodies.contact_batches import batches, islands, slot_batches
 from animsim.bodies.contact_constants import (
     IMPACT_SWEEPS,
@@ -26,78 +30,8 @@ from animsim.bodies.contact_constants import (
     SWEEP_TOLERANCE,
 )
 from animsim.bodies.contact_detection import Contacts
+from animsim.bodies.contact_kernels import rolling_total
 from animsim.collisions import kept_end_speed
-
-# --- fixed-order arithmetic shared by the NumPy solver and its numba twins ---------------
-#
-# Vectors of the NumPy solver are (3, k) arrays, one row per component, and every sum is
-# written out in the order the numba kernels use (x, then y, then z; a matrix row as
-# (m0 u0 + m1 u1) + m2 u2): the two backends then round alike, contact by contact.
-
-
-def _cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a x b of (3, k) arrays."""
-    return np.stack((a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]))
-
-
-def _dot3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a . b of (3, k) arrays, (k,): (a0 b0 + a1 b1) + a2 b2."""
-    return (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2]
-
-
-def _sym_matvec(m: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """M u for symmetric M given as (6, k) rows (m00, m01, m02, m11, m12, m22) and u (3, k)."""
-    return np.stack(
-        (
-            (m[0] * u[0] + m[1] * u[1]) + m[2] * u[2],
-            (m[1] * u[0] + m[3] * u[1]) + m[4] * u[2],
-            (m[2] * u[0] + m[4] * u[1]) + m[5] * u[2],
-        )
-    )
-
-
-def _arm_inertia(m: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
-    """(K, G) for symmetric M (6, k) and lever arms r (3, k): K = [r]x^T M [r]x as (6, k) rows
-    (k00, k01, k02, k11, k12, k22), K_ij = c_i . M c_j with c_j the columns of [r]x; and
-    G = M [r]x as its three columns M c_j, (3, k) each, so that M (r x f) = sum_j G_j f_j."""
-    zero = np.zeros_like(r[0])
-    cols = (np.stack((zero, r[2], -r[1])), np.stack((-r[2], zero, r[0])), np.stack((r[1], -r[0], zero)))
-    mc = [_sym_matvec(m, c) for c in cols]
-    return np.stack(
-        (
-            _dot3(cols[0], mc[0]),
-            _dot3(cols[0], mc[1]),
-            _dot3(cols[0], mc[2]),
-            _dot3(cols[1], mc[1]),
-            _dot3(cols[1], mc[2]),
-            _dot3(cols[2], mc[2]),
-        )
-    ), mc
-
-
-def inv_world_inertia(q: np.ndarray, inv_inertia: np.ndarray) -> np.ndarray:
-    """R diag(I^-1) R^T of every body as (6, B) rows (m00, m01, m02, m11, m12, m22)."""
-    qw, qx, qy, qz = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-    r00 = 1 - 2 * (qy * qy + qz * qz)
-    r01 = 2 * (qx * qy - qw * qz)
-    r02 = 2 * (qx * qz + qw * qy)
-    r10 = 2 * (qx * qy + qw * qz)
-    r11 = 1 - 2 * (qx * qx + qz * qz)
-    r12 = 2 * (qy * qz - qw * qx)
-    r20 = 2 * (qx * qz - qw * qy)
-    r21 = 2 * (qy * qz + qw * qx)
-    r22 = 1 - 2 * (qx * qx + qy * qy)
-    i0, i1, i2 = inv_inertia[:, 0], inv_inertia[:, 1], inv_inertia[:, 2]
-    return np.stack(
-        (
-            r00 * i0 * r00 + r01 * i1 * r01 + r02 * i2 * r02,
-            r00 * i0 * r10 + r01 * i1 * r11 + r02 * i2 * r12,
-            r00 * i0 * r20 + r01 * i1 * r21 + r02 * i2 * r22,
-            r10 * i0 * r10 + r11 * i1 * r11 + r12 * i2 * r12,
-            r10 * i0 * r20 + r11 * i1 * r21 + r12 * i2 * r22,
-            r20 * i0 * r20 + r21 * i1 * r21 + r22 * i2 * r22,
-        )
-    )
 
 
 @dataclass(frozen=True)
@@ -130,6 +64,15 @@ class ContactRows:
     m_t: np.ndarray
     ga: list[np.ndarray]
     gb: list[np.ndarray]
+    # rolling resistance (rolling_total): mu_r per contact, whether any contact has one, the
+    # world inverse inertias of a and b (b's zero without one), their sum K, and the rate that
+    # turns a change of rolling impulse into a velocity at the contact point, tr(K) |r_a|
+    rolling: np.ndarray
+    rolls: bool
+    ia: np.ndarray
+    ib: np.ndarray
+    k_r: np.ndarray
+    r_rate: np.ndarray
 
 
 # one batch of the sweep: its rows, their bodies a, which rows have a body b (within the
@@ -137,8 +80,15 @@ class ContactRows:
 _Group = tuple[slice, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
-def contact_rows(c: Contacts, q: np.ndarray, inv_mass: np.ndarray, inv_inertia: np.ndarray) -> ContactRows:
-    """Sort the contacts into batches and compute their effective masses (see :class:`ContactRows`)."""
+def contact_rows(
+    c: Contacts,
+    q: np.ndarray,
+    inv_mass: np.ndarray,
+    inv_inertia: np.ndarray,
+    rolling: np.ndarray | None = None,
+) -> ContactRows:
+    """Sort the contacts into batches and compute their effective masses (see :class:`ContactRows`);
+    ``rolling`` (C,): each contact's rolling resistance (None: none has any)."""
     coupled = bool((c.b >= 0).any())
     batch = batches(c.a, c.b) if coupled else slot_batches(c.a, c.b)
     order = np.argsort(batch, kind="stable")
@@ -154,29 +104,35 @@ def contact_rows(c: Contacts, q: np.ndarray, inv_mass: np.ndarray, inv_inertia: 
     m_body = inv_world_inertia(q, inv_inertia)
     ma = inv_mass[a]
     mat_a = m_body[:, a]
-    rna = _cross3(ra, n)
-    gna = _sym_matvec(mat_a, rna)
-    kn = ma + _dot3(rna, gna)
+    rna = cross3(ra, n)
+    gna = sym_matvec(mat_a, rna)
+    kn = ma + dot3(rna, gna)
     mb = np.where(has_b, inv_mass[bb], 0.0)
     mat_b = np.where(has_b, m_body[:, bb], 0.0)
-    rnb = _cross3(rb, n)
-    gnb = _sym_matvec(mat_b, rnb)
+    rnb = cross3(rb, n)
+    gnb = sym_matvec(mat_b, rnb)
     if coupled:
-        kn = np.where(has_b, (ma + mb) + (_dot3(rna, gna) + _dot3(rnb, gnb)), kn)
+        kn = np.where(has_b, (ma + mb) + (dot3(rna, gna) + dot3(rnb, gnb)), kn)
     # two immovable things (a pinned body on a floor) exchange no impulse
     inv_kn = np.where(kn > 0, 1.0 / np.where(kn > 0, kn, 1.0), 0.0)
     # tangential response: along a unit direction e the effective mass is 1/(m_t + e . K e) with
     # K = [r]x^T I^-1 [r]x (the angular part, r x e = [r]x e), summed over both bodies
-    k_t, ga = _arm_inertia(mat_a, ra)
+    k_t, ga = arm_inertia(mat_a, ra)
     m_t = ma
     gb = ga
     if coupled:
-        k_b, gb = _arm_inertia(mat_b, rb)
+        k_b, gb = arm_inertia(mat_b, rb)
         k_t = np.where(has_b, k_t + k_b, k_t)
         m_t = np.where(has_b, ma + mb, ma)
+    mu_r = np.zeros(a.size) if rolling is None else rolling[order]
+    rolls = bool((mu_r > 0.0).any())
+    k_r = r_rate = mu_r
+    if rolls:
+        k_r = mat_a + mat_b
+        r_rate = ((k_r[0] + k_r[3]) + k_r[5]) * np.sqrt(dot3(ra, ra))
     return ContactRows(
         coupled, order, batch[order], cuts, a, b, has_b, bb, n, ra, rb, restitution, friction, depth,
-        ma, mb, rna, rnb, gna, gnb, inv_kn, k_t, m_t, ga, gb,
+        ma, mb, rna, rnb, gna, gnb, inv_kn, k_t, m_t, ga, gb, mu_r, rolls, mat_a, mat_b, k_r, r_rate,
     )  # fmt: skip
 
 
@@ -194,16 +150,19 @@ def solve(
     kh: float = 0.0,
     dt: float = 1.0,
     surface: np.ndarray | None = None,
-    warm: tuple[np.ndarray, np.ndarray] | None = None,
+    warm: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     max_sweeps: int = MAX_SWEEPS,
     cold: bool = False,
     island: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    rolling: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Sequential impulses on v (B,3), w (B,3) in place; returns the restitution applied per contact,
     which contacts were impacts (approaching faster than resting; they bounce with it), and the
-    normal (C,) and friction (C, 3) impulses each contact ended with.
-    ``warm``: impulses (C,), (C, 3) to start from (warm starting, :mod:`animsim.bodies.warm`);
-    applied first, contact by contact, except on impacts.
+    normal (C,), friction (C, 3) and rolling (C, 3) impulses each contact ended with.
+    ``warm``: impulses (C,), (C, 3), (C, 3) to start from (warm starting,
+    :mod:`animsim.bodies.warm`); applied first, contact by contact, except on impacts.
+    ``rolling``: (C,) each contact's rolling resistance mu_r, a length (None: none), which
+    limits its rolling impulse to mu_r times its normal impulse (:func:`rolling_total`).
     ``kh``: the method's energy shift times the step ``dt`` (:func:`_impact_target`).
     ``surface``: (C, 3) the velocity of the surface each contact touches (a keyframed collider;
     None: all still): every speed the contacts work with is relative to it.
@@ -223,8 +182,8 @@ def solve(
     count = c.count
     e_out = np.zeros(count)
     if count == 0:
-        return e_out, np.zeros(0, dtype=bool), np.zeros(0), np.zeros((0, 3))
-    r = contact_rows(c, q, inv_mass, inv_inertia)
+        return e_out, np.zeros(0, dtype=bool), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3))
+    r = contact_rows(c, q, inv_mass, inv_inertia, rolling)
     vT, wT = v.T.copy(), w.T.copy()
     rest_b = np.where(r.has_b, resting_speed[r.bb], 0.0)
     limit = resting_speed[r.a] + rest_b + RESTING_FLOOR
@@ -234,17 +193,19 @@ def solve(
     e_used = np.where(bounce | struck, r.restitution, 0.0)
     jn = np.zeros(count)
     jt = np.zeros((3, count))
+    jr = np.zeros((3, count))
     vT_rows, wT_rows = vT.T, wT.T  # (B, 3) views
     if warm is not None:
         jn = np.where(bounce | struck, 0.0, warm[0][r.order])
         jt = np.where(bounce | struck, 0.0, warm[1][r.order].T)
-        _apply_warm(r.a, r.bb, r.has_b, r.ma, r.mb, r.n, r.gna, r.gnb, r.ga, r.gb, jn, jt, vT_rows, wT_rows)
+        jr = np.where(bounce | struck, 0.0, warm[2][r.order].T)
+        _apply_warm(r, jn, jt, jr, vT_rows, wT_rows)
     groups = contact_groups(r)
     isl = (islands(c.a, c.b, v.shape[0]) if island is None else island)[r.order]
     if cold:
-        unfree = replace(r, friction=np.zeros(count))
-        sweeps(unfree, groups, sv, target, jn, jt, vT, wT, iterations, max_sweeps, isl)
-    sweeps(r, groups, sv, target, jn, jt, vT, wT, iterations, max_sweeps, isl)
+        unfree = replace(r, friction=np.zeros(count), rolls=False)
+        sweeps(unfree, groups, sv, target, jn, jt, jr, vT, wT, iterations, max_sweeps, isl)
+    sweeps(r, groups, sv, target, jn, jt, jr, vT, wT, iterations, max_sweeps, isl)
     v[:] = vT.T
     w[:] = wT.T
     e_out[r.order] = e_used
@@ -254,7 +215,9 @@ def solve(
     jn_out[r.order] = jn
     jt_out = np.empty((count, 3))
     jt_out[r.order] = jt.T
-    return e_out, hit_out, jn_out, jt_out
+    jr_out = np.empty((count, 3))
+    jr_out[r.order] = jr.T
+    return e_out, hit_out, jn_out, jt_out, jr_out
 
 
 def _bounce_targets(
@@ -272,12 +235,12 @@ def _bounce_targets(
     the approach for a bounce (at the time of impact, :func:`_impact_target`, given ``dv`` and
     ``dx``), else the speed that closes a gap within the step (0 for a touching contact)."""
     a, bb, has_b, n = r.a, r.bb, r.has_b, r.n
-    vel = vT[:, a] + _cross3(wT[:, a], r.ra)
+    vel = vT[:, a] + cross3(wT[:, a], r.ra)
     if r.coupled:
-        vel = np.where(has_b, vel - (vT[:, bb] + _cross3(wT[:, bb], r.rb)), vel)
+        vel = np.where(has_b, vel - (vT[:, bb] + cross3(wT[:, bb], r.rb)), vel)
     if sv is not None:
         vel = vel - sv
-    vn0 = _dot3(vel, n)
+    vn0 = dot3(vel, n)
     # a speculative contact (a gap, depth < 0) never bounces: it may close its gap in the step
     bounce = (vn0 < -limit) & (r.depth >= 0.0)
     target = np.where(bounce, -r.restitution * vn0, np.minimum(r.depth, 0.0) / dt)
@@ -300,6 +263,7 @@ def sweeps(
     target: np.ndarray,
     jn: np.ndarray,
     jt: np.ndarray,
+    jr: np.ndarray,
     vT: np.ndarray,
     wT: np.ndarray,
     least: int,
@@ -314,7 +278,9 @@ def sweeps(
     share no body, so each ends as it would alone: a thousand bodies lying apart on a floor
     no longer all take the sweeps of the slowest one.
 
-    Without friction (``r.friction`` zero) this is the first half of a cold step: from zero
+    ``jr`` (3, C): the rolling impulses, swept with the rest where ``r.rolls``.
+
+    Without friction (``r.friction`` zero, ``r.rolls`` False) this is the first half of a cold step: from zero
     impulses, each corner of a box first pressed onto a floor slides out as the box turns, and
     friction stopping it there sets up a squeeze of the floor friction that the other corners'
     pushes never undo (measured: a ten-box stack ended its first step with two of its floor
@@ -328,7 +294,7 @@ def sweeps(
         for g in groups:
             act = live[island[g[0]]]
             if act.any():
-                _solve_batch(r, g, sv, target, jn, jt, vT, wT, act, island[g[0]], change)
+                _solve_batch(r, g, sv, target, (jn, jt, jr), vT, wT, act, island[g[0]], change)
         if sweep + 1 >= least:
             live &= change > SWEEP_TOLERANCE
             if not live.any():
@@ -351,33 +317,38 @@ def _solve_batch(
     g: _Group,
     sv: np.ndarray | None,
     target: np.ndarray,
-    jn: np.ndarray,
-    jt: np.ndarray,
+    impulses: tuple[np.ndarray, np.ndarray, np.ndarray],
     vT: np.ndarray,
     wT: np.ndarray,
     act: np.ndarray,
     island: np.ndarray,
     change: np.ndarray,
 ) -> None:
-    """One batch of a sweep (no body twice in it), normal then friction; in place on the impulses
-    jn (C,), jt (3, C) and on vT, wT (3, B). Rows not ``act`` (their island has converged) keep
-    their impulses (a change of zero, which leaves the velocities as they are); each island's
-    largest change of velocity goes into ``change`` (per island; ``island`` the rows')."""
+    """One batch of a sweep (no body twice in it), normal, friction, then rolling; in place on the
+    ``impulses`` jn (C,), jt (3, C), jr (3, C) and on vT, wT (3, B). Rows not ``act`` (their
+    island has converged) keep their impulses (a change of zero, which leaves the velocities as
+    they are); each island's largest change of velocity goes into ``change`` (per island;
+    ``island`` the rows')."""
+    jn, jt, jr = impulses
     s, ai, hb, bi, sb = g
     va, wa = vT[:, ai], wT[:, ai]
     vb, wb = vT[:, bi], wT[:, bi]  # empty when no contact of the batch has a body b
     dj = _normal_impulse(r, g, sv, target, jn, va, wa, vb, wb, act)
     imp = _friction_impulse(r, g, sv, jn, jt, va, wa, vb, wb, act)
-    np.maximum.at(change, island, r.m_t[s] * np.maximum(np.abs(dj), np.abs(imp).max(axis=0)))
+    big = r.m_t[s] * np.maximum(np.abs(dj), np.abs(imp).max(axis=0))
     ga, gb = r.ga, r.gb
     va += r.ma[s] * imp
     wa += (ga[0][:, s] * imp[0] + ga[1][:, s] * imp[1]) + ga[2][:, s] * imp[2]
-    vT[:, ai] = va
-    wT[:, ai] = wa
     if hb.size:
         ib = imp[:, hb]
         vb -= r.mb[sb] * ib
         wb -= (gb[0][:, sb] * ib[0] + gb[1][:, sb] * ib[1]) + gb[2][:, sb] * ib[2]
+    if r.rolls:
+        big = np.maximum(big, _rolling_impulse(r, g, jn, jr, wa, wb, act))
+    np.maximum.at(change, island, big)
+    vT[:, ai] = va
+    wT[:, ai] = wa
+    if hb.size:
         vT[:, bi] = vb
         wT[:, bi] = wb
 
@@ -399,11 +370,11 @@ def _normal_impulse(
     s, _, hb, _, sb = g
     n, ns = r.n, r.n[:, s]
     # normal: push (never pull) toward the target approach speed
-    vn = _dot3(va, ns) + _dot3(wa, r.rna[:, s])
+    vn = dot3(va, ns) + dot3(wa, r.rna[:, s])
     if hb.size:
-        vn[hb] = vn[hb] - (_dot3(vb, n[:, sb]) + _dot3(wb, r.rnb[:, sb]))
+        vn[hb] = vn[hb] - (dot3(vb, n[:, sb]) + dot3(wb, r.rnb[:, sb]))
     if sv is not None:
-        vn = vn - _dot3(sv[:, s], ns)
+        vn = vn - dot3(sv[:, s], ns)
     new = np.where(act, np.maximum(jn[s] + (target[s] - vn) * r.inv_kn[s], 0.0), jn[s])
     dj: np.ndarray = new - jn[s]
     jn[s] = new
@@ -432,29 +403,65 @@ def _friction_impulse(
     s, _, hb, _, sb = g
     ns = r.n[:, s]
     # Coulomb friction: stop the sliding, within mu * (normal impulse so far)
-    vel = va + _cross3(wa, r.ra[:, s])
+    vel = va + cross3(wa, r.ra[:, s])
     if hb.size:
-        vel[:, hb] = vel[:, hb] - (vb + _cross3(wb, r.rb[:, sb]))
+        vel[:, hb] = vel[:, hb] - (vb + cross3(wb, r.rb[:, sb]))
     if sv is not None:
         vel = vel - sv[:, s]
-    vt = vel - _dot3(vel, ns) * ns
+    vt = vel - dot3(vel, ns) * ns
     # the impulse that stops the sliding: -vt / (m_t + e.K e), e = vt/|vt|, written
     # without the square root as -vt |vt|^2 / (m_t |vt|^2 + vt.K vt)
-    s2 = _dot3(vt, vt)
-    den = r.m_t[s] * s2 + _dot3(vt, _sym_matvec(r.k_t[:, s], vt))
+    s2 = dot3(vt, vt)
+    den = r.m_t[s] * s2 + dot3(vt, sym_matvec(r.k_t[:, s], vt))
     live = (s2 > 0.0) & (den > 0.0)
     f = np.where(live, s2 / np.where(live, den, 1.0), 0.0)
     jts = jt[:, s]
     want = jts - f * vt
     # ... within mu * (normal impulse so far)
     cap = r.friction[s] * jn[s]
-    mag2 = _dot3(want, want)
+    mag2 = dot3(want, want)
     over = mag2 > cap * cap
     want = np.where(over, want * (cap / np.sqrt(np.where(over, mag2, 1.0))), want)
     want = np.where(act, want, jts)
     imp: np.ndarray = want - jts
     jt[:, s] = want
     return imp
+
+
+def _rolling_impulse(
+    r: ContactRows,
+    g: _Group,
+    jn: np.ndarray,
+    jr: np.ndarray,
+    wa: np.ndarray,
+    wb: np.ndarray,
+    act: np.ndarray,
+) -> np.ndarray:
+    """The batch's rolling impulses (:func:`rolling_total`, the rule the numba twin calls) from
+    the angular velocities after its friction: updates jr (3, C) and wa, wb (3, k) in place on
+    the rows with a rolling resistance; returns each row's change as a velocity at the contact
+    point (tr(K) |r_a| times the largest component of the impulse's change), 0 elsewhere."""
+    s, _, hb, _, sb = g
+    rel = wa.copy()
+    if hb.size:
+        rel[:, hb] = rel[:, hb] - wb
+    n, k, old = r.n[:, s], r.k_r[:, s], jr[:, s]
+    mu_r = r.rolling[s]
+    new = np.stack(
+        rolling_total(
+            rel[0], rel[1], rel[2], n[0], n[1], n[2], k[0], k[1], k[2], k[3], k[4], k[5],
+            old[0], old[1], old[2], mu_r * jn[s],
+        )
+    )  # fmt: skip
+    live = act & (mu_r > 0.0)
+    new = np.where(live, new, old)
+    imp = new - old
+    jr[:, s] = new
+    wa[:] = np.where(live, wa + sym_matvec(r.ia[:, s], imp), wa)
+    if hb.size:
+        wb[:] = np.where(live[hb], wb - sym_matvec(r.ib[:, sb], imp[:, hb]), wb)
+    out: np.ndarray = np.where(live, r.r_rate[s] * np.abs(imp).max(axis=0), 0.0)
+    return out
 
 
 def _impact_pass(
@@ -502,8 +509,8 @@ def _impact_pass(
         for s in groups if sweep % 2 == 0 else groups[::-1]:
             ai, bi = a[s], bb[s]
             ns = n[:, s]
-            vn = _dot3(vT[:, ai], ns) + _dot3(wT[:, ai], r.rna[:, s])
-            vn = vn - (_dot3(vT[:, bi], ns) + _dot3(wT[:, bi], r.rnb[:, s]))
+            vn = dot3(vT[:, ai], ns) + dot3(wT[:, ai], r.rna[:, s])
+            vn = vn - (dot3(vT[:, bi], ns) + dot3(wT[:, bi], r.rnb[:, s]))
             go = (vn < -limit[s]) & ((depth[s] >= 0.0) | (depth[s] - vn * dt >= 0.0))
             if not go.any():
                 continue
@@ -520,25 +527,14 @@ def _impact_pass(
 
 
 def _apply_warm(
-    a: np.ndarray,
-    bb: np.ndarray,
-    has_b: np.ndarray,
-    ma: np.ndarray,
-    mb: np.ndarray,
-    n: np.ndarray,
-    gna: np.ndarray,
-    gnb: np.ndarray,
-    ga: list[np.ndarray],
-    gb: list[np.ndarray],
-    jn: np.ndarray,
-    jt: np.ndarray,
-    v: np.ndarray,
-    w: np.ndarray,
+    r: ContactRows, jn: np.ndarray, jt: np.ndarray, jr: np.ndarray, v: np.ndarray, w: np.ndarray
 ) -> None:
-    """Apply the starting impulses jn (C,), jt (3, C) to v, w (B, 3) in place: per contact (in the
-    solver's order, which keeps each body's contacts in list order) its normal impulse on a,
-    on b, then its friction impulse on a, on b; ``np.add.at`` adds in index order, so every body
-    sums as the numba twin's loop does."""
+    """Apply the starting impulses jn (C,), jt (3, C), jr (3, C) to v, w (B, 3) in place: per
+    contact (in the solver's order, which keeps each body's contacts in list order) its normal
+    impulse on a, on b, then its friction impulse on a, on b, then its rolling impulse on a, on
+    b (where it has one); ``np.add.at`` adds in index order, so every body sums as the numba
+    twin's loop does."""
+    a, bb, has_b, ma, mb, n, ga, gb = r.a, r.bb, r.has_b, r.ma, r.mb, r.n, r.ga, r.gb
     sn = ma * jn
     sbn = mb * jn
     rot_a = (ga[0] * jt[0] + ga[1] * jt[1]) + ga[2] * jt[2]
@@ -547,8 +543,14 @@ def _apply_warm(
     body = np.stack([a, bb, a, bb], axis=1).reshape(-1)
     live = np.stack([np.ones_like(has_b), has_b, np.ones_like(has_b), has_b], axis=1).reshape(-1)
     dvel = np.stack([(sn * n).T, -(sbn * n).T, (ma * jt).T, -(mb * jt).T], axis=1).reshape(-1, 3)
-    dw = np.stack([(jn * gna).T, -(jn * gnb).T, rot_a.T, -rot_b.T], axis=1).reshape(-1, 3)
     np.add.at(v, body[live], dvel[live])
+    turns = [(jn * r.gna).T, -(jn * r.gnb).T, rot_a.T, -rot_b.T]
+    if r.rolls:  # and (a, rolling), (b, rolling) for the angular velocities
+        rolled = (jr != 0.0).any(axis=0)
+        body = np.stack([a, bb, a, bb, a, bb], axis=1).reshape(-1)
+        live = np.stack([np.ones_like(has_b), has_b] * 2 + [rolled, has_b & rolled], axis=1).reshape(-1)
+        turns += [sym_matvec(r.ia, jr).T, -sym_matvec(r.ib, jr).T]
+    dw = np.stack(turns, axis=1).reshape(-1, 3)
     np.add.at(w, body[live], dw[live])
 
 
@@ -587,8 +589,8 @@ def _impact_target(
     rel_dx = dx[a].T - np.where(has_b, dx[bb].T, 0.0)
     if moved is not None:  # (3, C) how far the touched surface moved in the step
         rel_dx = rel_dx - moved
-    dvn = _dot3(rel_dv, n)
-    dxn = _dot3(rel_dx, n)
+    dvn = dot3(rel_dv, n)
+    dxn = dot3(rel_dx, n)
     d0 = -dxn - depth
     span = d0 + depth
     s = np.clip(np.divide(d0, span, out=np.zeros_like(d0), where=span > 0), 0.0, 1.0)

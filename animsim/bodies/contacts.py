@@ -16,7 +16,10 @@ Model (after each integrator step, as a step stage):
    that is what gravity alone gives a body lying on a floor, so a resting body
    gets no bounce and does not jitter. Accumulated normal impulses stay >= 0
    (contacts push, never pull); the tangential (Coulomb) impulse stops sliding,
-   capped at mu times the normal impulse. The contacts are solved one after the
+   capped at mu times the normal impulse; where a sphere or a capsule has a
+   ``rolling_friction`` mu_r, an angular impulse stops its rolling, capped at mu_r
+   times the normal impulse (rolling resistance as Bullet's and MuJoCo's;
+   :func:`animsim.bodies.contact_kernels.rolling_total`). The contacts are solved one after the
    other, ``iterations`` times: on NumPy in batches in which no body appears
    twice (a batch is one vectorised update, and the result is the sequential
    one), on numba by a kernel that walks the list. Both write every sum in the
@@ -65,6 +68,7 @@ from animsim.bodies.contact_detection import (
     PlaneTable,
     candidate_pairs,
     concat,
+    contact_rolling,
     empty_contacts,
     pair_contacts,
     plane_contacts,
@@ -105,8 +109,12 @@ class BodyContacts(StepStage):
         iterations: int = ITERATIONS,
         collider_thickness: float = math.inf,
         collider_offsets: Callable[[float], np.ndarray] | None = None,
+        rolling: np.ndarray | None = None,
     ) -> None:
         self.first = first
+        #: (B,) each body's rolling resistance (m), None when no body has one (the solve then
+        #: runs exactly as without the key)
+        self.rolling = None if rolling is None or not (rolling > 0.0).any() else np.asarray(rolling, float)
         #: t -> (C, 3) every collider's displacement from where it was given (keyframed ones
         #: move; None: all static): the bodies meet them where they are, at their velocity
         self.collider_offsets = collider_offsets
@@ -158,9 +166,15 @@ class BodyContacts(StepStage):
             parts.append(
                 "each other (sphere-sphere, sphere-box, capsule ends; box-box faces, edges and corners)"
             )
+        rolls = (
+            ""
+            if self.rolling is None
+            else " and rolling resistance where a sphere or a capsule touches (a torque up to "
+            "rolling_friction times the normal force against its rolling)"
+        )
         self.label = (
             f"body contacts: {self.count} {'/'.join(kinds)} bodies against {', '.join(parts)}; "
-            f"impulses with restitution and Coulomb friction, {iterations} to {MAX_SWEEPS} sweeps ({COLD_SWEEPS} from rest; until a sweep "
+            f"impulses with restitution and Coulomb friction{rolls}, {iterations} to {MAX_SWEEPS} sweeps ({COLD_SWEEPS} from rest; until a sweep "
             f"changes no velocity by {SWEEP_TOLERANCE:g} m/s), resting below "
             f"{RESTING_FACTOR:g}x the speed forces add per step, velocities settled and positions projected "
             "out from the ground up (shock propagation)"
@@ -286,10 +300,11 @@ class BodyContacts(StepStage):
             return False
         c = contacts
         self._solved = (c.a, c.b)
-        jn0, jt0, local = self.warm.guess(c.a, c.b, c.plane, c.n, c.ra, q)
+        jn0, jt0, jr0, local = self.warm.guess(c.a, c.b, c.plane, c.n, c.ra, q)
         v_pre, w_pre = v.copy(), w.copy()
         sweeps, cold = self._sweep_limit(c, jn0)
-        e_used, impact, jn, jt = solve(
+        mu_r = None if self.rolling is None else contact_rolling(c, self.rolling, self.kind)
+        e_used, impact, jn, jt, jr = solve(
             contacts,
             v,
             w,
@@ -303,14 +318,15 @@ class BodyContacts(StepStage):
             energy_shift(self.follow_weight) * dt,
             dt,
             surface,
-            (jn0, jt0),
+            (jn0, jt0, jr0),
             sweeps,
             cold,
             islands(c.a, c.b, self.count),
+            mu_r,
         )
         level = projection.levels(c.a, c.b, self.inv_mass)
-        shock_pass(c, impact, level, q, self.inv_mass, self.inv_inertia, surface, dt, jn, jt, v, w)
-        self.warm.keep(c.a, c.b, c.plane, c.n, local, jn, jt, self._held())
+        shock_pass(c, impact, level, q, self.inv_mass, self.inv_inertia, surface, dt, jn, jt, v, w, jr, mu_r)
+        self.warm.keep(c.a, c.b, c.plane, c.n, local, jn, jt, jr, self._held())
         h = self.follow_weight * dt
         left = follow_impulses(c, impact, x, q, v - v_pre, w - w_pre, h) if h > 0.0 else c.depth
         push = projection.pushes(c.depth, left, e_used)
@@ -370,8 +386,9 @@ class BodyContacts(StepStage):
         e_used = np.empty(count)
         impact = np.empty(count, dtype=np.bool_)
         depth_left = np.empty(count)
-        jn, jt, local = self.warm.guess(c.a, c.b, c.plane, c.n, c.ra, q)
+        jn, jt, jr, local = self.warm.guess(c.a, c.b, c.plane, c.n, c.ra, q)
         sweeps, cold = self._sweep_limit(c, jn)
+        mu_r = np.zeros(count) if self.rolling is None else contact_rolling(c, self.rolling, self.kind)
         level = projection.levels(c.a, c.b, self.inv_mass)
         solver(
             count,
@@ -398,8 +415,10 @@ class BodyContacts(StepStage):
             cold,
             level,
             islands(c.a, c.b, self.count),
+            mu_r,
+            jr,
         )
-        self.warm.keep(c.a, c.b, c.plane, c.n, local, jn, jt, self._held())
+        self.warm.keep(c.a, c.b, c.plane, c.n, local, jn, jt, jr, self._held())
         push = projection.pushes(c.depth, depth_left, e_used)
         projection.project(c.a, c.b, c.n, push, c.plane, x, self.inv_mass, level, True)
         return True

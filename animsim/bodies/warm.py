@@ -37,13 +37,14 @@ class WarmStart:
         self._local = np.zeros((0, 3))
         self._jn = np.zeros(0)
         self._jt = np.zeros((0, 3))
+        self._jr = np.zeros((0, 3))
 
     def snapshot(self) -> tuple[np.ndarray, ...]:
         """What :meth:`restore` puts back (the arrays are replaced, never changed in place)."""
-        return (self._key, self._local, self._jn, self._jt)
+        return (self._key, self._local, self._jn, self._jt, self._jr)
 
     def restore(self, snap: tuple[np.ndarray, ...]) -> None:
-        self._key, self._local, self._jn, self._jt = snap
+        self._key, self._local, self._jn, self._jt, self._jr = snap
 
     def _keys(self, a: np.ndarray, b: np.ndarray, plane: np.ndarray, n: np.ndarray) -> np.ndarray:
         """One integer per (body a, body b or plane, side of a collider by normal)."""
@@ -55,14 +56,15 @@ class WarmStart:
 
     def guess(
         self, a: np.ndarray, b: np.ndarray, plane: np.ndarray, n: np.ndarray, ra: np.ndarray, q: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Starting impulses (C,), (C, 3) for this step's contacts (zero where none matches), and
-        the contact points in body a's frame (C, 3), for :meth:`keep`."""
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Starting impulses, normal (C,), friction (C, 3) and rolling (C, 3), for this step's
+        contacts (zero where none matches), and the contact points in body a's frame (C, 3), for
+        :meth:`keep`."""
         count = a.shape[0]
-        jn, jt = np.zeros(count), np.zeros((count, 3))
+        jn, jt, jr = np.zeros(count), np.zeros((count, 3)), np.zeros((count, 3))
         local = quat.rotate_inverse(q[a], ra) if count else np.zeros((0, 3))
         if count == 0 or self._key.size == 0:
-            return jn, jt, local
+            return jn, jt, jr, local
         key = self._keys(a, b, plane, n)
         lo = np.searchsorted(self._key, key, side="left")
         hi = np.searchsorted(self._key, key, side="right")
@@ -81,7 +83,8 @@ class WarmStart:
         hit = pick >= 0
         jn[hit] = self._jn[pick[hit]]
         jt[hit] = self._jt[pick[hit]]
-        return jn, jt, local
+        jr[hit] = self._jr[pick[hit]]
+        return jn, jt, jr, local
 
     def keep(
         self,
@@ -92,6 +95,7 @@ class WarmStart:
         local: np.ndarray,
         jn: np.ndarray,
         jt: np.ndarray,
+        jr: np.ndarray,
         held: np.ndarray | None = None,
     ) -> None:
         """Remember this step's contacts (points in body a's frame, from :meth:`guess`) and the
@@ -104,8 +108,10 @@ class WarmStart:
             local = np.concatenate([local, self._local[carry]])
             jn = np.concatenate([jn, self._jn[carry]])
             jt = np.concatenate([jt, self._jt[carry]])
+            jr = np.concatenate([jr, self._jr[carry]])
         order = np.argsort(key, kind="stable")
         self._key = key[order]
         self._local = local[order]
         self._jn = jn[order].copy()
         self._jt = jt[order].copy()
+        self._jr = jr[order].copy()

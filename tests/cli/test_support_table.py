@@ -352,6 +352,21 @@ THING_SCENES["body_sleep"] = {
     "sleep": {"after": 0.02},
 }
 
+# a ball rolling on the floor, slowed by its rolling resistance
+THING_SCENES["body_rolling"] = {
+    "bodies": [
+        {
+            **THING_SCENES["body_sphere"]["bodies"][0],
+            "position": [0, -4.95, 0],
+            "velocity": [1, 0, 0],
+            "angular_velocity": [0, 0, -20],
+            "orientation": [1, 0, 0, 0],
+            "rolling_friction": 0.005,
+        }
+    ],
+    "planes": THING_SCENES["body_sphere"]["planes"],
+}
+
 # the mesh of the contact cases has a radius (for particle contacts); a radius is its own row
 THING_SCENES["mesh"] = {
     "structures": [{k: v for k, v in MOVERS["mesh"]["structures"][0].items() if k != "radius"}]
@@ -415,6 +430,7 @@ def _show(consumer: str, thing: str, path: Path, tmp: Path) -> None:
             "tearing": "tear",
             "keyframed_particle": "keyframe",
             "body_sleep": "sleeping",
+            "body_rolling": "rolling resistance",
         }
         for prefix, w in word.items():
             if thing.startswith(prefix):
@@ -463,6 +479,7 @@ def _show(consumer: str, thing: str, path: Path, tmp: Path) -> None:
             "body_box": "Cube",
             "body_color": "Cube",
             "body_sleep": "Cube",
+            "body_rolling": "Sphere",
             "body_capsule": "Capsule",
             "tearing": "Mesh",
         }.get(thing, "Points")
@@ -528,8 +545,9 @@ def _show(consumer: str, thing: str, path: Path, tmp: Path) -> None:
         imageio = pytest.importorskip("imageio.v3")
         frames = _gif(consumer, path, tmp)
         # the element changes the picture: the same scene without it draws other pixels
-        # (a body asleep is drawn where it rests, as it would be drawn awake: no pixel shows it)
-        if thing not in ("particle", "particle_contacts", "body_sleep"):
+        # (a body asleep is drawn where it rests, as it would be drawn awake: no pixel shows it;
+        # a rolling resistance is drawn as the ball it slows, a few mm behind in the 0.1 s run)
+        if thing not in ("particle", "particle_contacts", "body_sleep", "body_rolling"):
             bare = _write(tmp, f"{thing}_without", _without(thing))
             assert not np.array_equal(frames, _gif(consumer, bare, tmp / "bare")), "drawn as if absent"
         assert imageio is not None and frames.shape[0] > 1

@@ -78,6 +78,15 @@ class Body(Model):
     friction: NonNegative = Field(
         0.5, description="Coulomb coefficient against other bodies (geometric mean of the two)"
     )
+    rolling_friction: NonNegative = Doc(
+        0.0,
+        "rolling resistance, a length: where a sphere or a capsule touches, a torque of at most this "
+        "times the normal force resists its rolling (against another body the geometric mean of the "
+        "two, against planes and colliders its own; a box's counts where a round body rolls on it); "
+        "0: none",
+        unit="m",
+        example=0.001,
+    )
     color: Annotated[str, Field(pattern=OPAQUE_COLOR_PATTERN)] | None = Field(
         None, examples=["#3070d0"], description="for rendering, #rrggbb (a body is opaque)"
     )
