@@ -13,7 +13,13 @@ changing a bit: a contact's change is written to one *slot* of each of its two p
 then those where it is the first, each in pair order, then its walls), and each particle
 sums its own slots from 0.0 (``gather``). Pairs are sorted by (i, j) with i < j, so that
 is the order in which a scatter pair by pair adds them: the sums are the same to the last
-bit on any number of threads, and the same as the NumPy backend's ``np.add.at``.
+bit on any number of threads, and the same as the NumPy backend's ``np.add.at``. Not
+shared (``shared`` false: a short list, or a busy machine, see
+:mod:`animsim.thread_choice`), the same passes scatter pair by pair into ``dv`` on the
+calling thread, through one-thread builds of the helpers (:func:`animsim.elements.one_thread`)
+or a loop of their own: a test of ``shared`` inside one loop cost the one-thread passes a
+quarter of their time. The helpers take the tuple ``sums`` apart before their ``prange``
+loops: numba (0.68) loses the writes through an array unpacked from a tuple inside one.
 """
 
 from __future__ import annotations
