@@ -90,11 +90,16 @@ class ParticleContacts(StepStage):
         finder = (
             "a uniform grid (counting sort by cell)" if backend == "numba" else "a k-d tree (scipy cKDTree)"
         )
+        shared = (
+            f" (shared among numba's threads from {SHARED_MIN_PAIRS:,} touching pairs, while that is the faster)"
+            if backend == "numba"
+            else ""
+        )
         self.label = (
             f"particle contacts: {int(self.active.sum())} particle(s) as spheres "
             f"(radius {self.radius[self.active].min():.3g}-{self.radius[self.active].max():.3g} m), "
             f"restitution {restitution:g}, friction {friction:g}, neighbours by {finder} "
-            f"kept in a Verlet list, {iterations} Jacobi passes; "
+            f"kept in a Verlet list, {iterations} Jacobi passes{shared}; "
             f"{self.exclude.size} spring-joined pair(s) left out"
             if self.active.any()
             else "particle contacts: no particle takes part"
