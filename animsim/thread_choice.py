@@ -11,7 +11,7 @@ and keeps the faster. Used by the fused stepper's blocked particle steps
 
 from __future__ import annotations
 
-#: calls timed on each blocked build before the faster one is kept
+#: calls timed on each build before the faster one is kept
 TRIAL_CALLS = 3
 #: calls between two trials of the build not kept, so a change of the machine's load is followed
 RETRY_EVERY = 64
@@ -34,13 +34,14 @@ def _median(values: list[float]) -> float:
 
 
 class BuildChooser:
-    """Which blocked build (one thread or numba's threads) runs the next call: the faster.
+    """Which build (one thread or numba's threads) runs the next call: the faster.
 
     A parallel call waits for its slowest thread. On idle cores two threads halve a
     call's time; on cores busy with other work the wait for a descheduled thread can
     cost milliseconds a call: the 4,500-particle fountain (one step per call) ran in
-    0.25 s on one thread and 1.9 s on two while another job kept both cores busy. Both
-    builds give the same bits, so the stepper times them (wall clock, what the user
+    0.25 s on one thread and 1.9 s on two while another job kept both cores busy, and a
+    step of 100,000 grains' contact passes about 285 ms shared against 140 on one thread
+    at a load average of 3.5. Both builds give the same bits, so the caller times them (wall clock, what the user
     waits for): the first calls alternate until each build has TRIAL_CALLS timings, the
     build with the lower time per step (the median of its last TRIAL_CALLS calls) is
     kept, and once RETRY_EVERY calls and RETRY_SECONDS have passed on the kept build, one

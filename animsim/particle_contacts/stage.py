@@ -300,15 +300,17 @@ class ParticleContacts(StepStage):
         nw = walls.rows.size
         b = self._buffers
         n_rows = x.shape[0]
-        sums = (
-            b.get("si", (p,), np.int64), b.get("sj", (p,), np.int64), b.get("slots", (2 * p, 3)),
-            b.get("wc", (nw, 3)), b.get("start", (n_rows + 1,), np.int64),
-            b.get("wstart", (n_rows + 1,), np.int64), b.get("wlist", (nw,), np.int64), b.get("dv", (n_rows, 3)),
-        )  # fmt: skip
         # share the passes among threads only where a list is long enough to pay for it, and
         # only while that is the faster (the chooser times both ways; the bits are the same)
         can_share = numba.get_num_threads() > 1 and p >= SHARED_MIN_PAIRS
         shared = can_share and self._chooser.pick()
+        # the slots are only ever written when shared: a run that cannot share holds none
+        ps, ws = (p, nw) if can_share else (0, 0)
+        sums = (
+            b.get("si", (ps,), np.int64), b.get("sj", (ps,), np.int64), b.get("slots", (2 * ps, 3)),
+            b.get("wc", (nw, 3)), b.get("start", (n_rows + 1,), np.int64),
+            b.get("wstart", (n_rows + 1,), np.int64), b.get("wlist", (ws,), np.int64), b.get("dv", (n_rows, 3)),
+        )  # fmt: skip
         start = time.perf_counter()
         found, changed, passes = self._kernels.step(
             self._ci, self._cj, self._reach2, TOUCH2, x, v, v_old, inv_mass, self.radius,

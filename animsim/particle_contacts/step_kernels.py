@@ -207,7 +207,8 @@ def scatter(dv, i, j, c0, c1, c2):  # pragma: no cover - compiled too
 
 @numba_helper
 def clear(a, value):  # pragma: no cover - compiled
-    """a[:] = value, as a plain loop (in a parallel helper ``a[:] = value`` would start threads)."""
+    """a[:] = value, as a plain loop: a one-thread pass's sums start from it (in a parallel
+    helper ``a[:] = value`` would start threads)."""
     for r in range(a.shape[0]):
         for c in range(a.shape[1]):
             a[r, c] = value
@@ -255,6 +256,12 @@ def apply(shared, sums, out, wr, inv_mass):  # pragma: no cover - compiled
             out[r, a] += dv[r, a] * w_r
 
 
+@numba_inline_helper
+def contacts_of(r, start, wstart):  # pragma: no cover - compiled too
+    """How many contacts particle r has this step, pairs and walls (:func:`incidence`)."""
+    return (start[r + 1] - start[r]) + (wstart[r + 1] - wstart[r])
+
+
 @numba_parallel_helper
 def pair_setup(
     pi, pj, p, wr, x, inv_mass, relax_factor, w, rel, wrel, nrm, sums
@@ -266,15 +273,14 @@ def pair_setup(
     start, wstart = sums[4], sums[5]
     for k in range(wr.shape[0]):
         r = wr[k]
-        count = (start[r + 1] - start[r]) + (wstart[r + 1] - wstart[r])
-        wrel[k] = min(relax_factor / count, 1.0) / inv_mass[r]
+        wrel[k] = min(relax_factor / contacts_of(r, start, wstart), 1.0) / inv_mass[r]
     for k in prange(p):
         i = pi[k]
         j = pj[k]
-        count_i = (start[i + 1] - start[i]) + (wstart[i + 1] - wstart[i])
-        count_j = (start[j + 1] - start[j]) + (wstart[j + 1] - wstart[j])
         w[k] = inv_mass[i] + inv_mass[j]
-        rel[k] = min(relax_factor / max(count_i, count_j), 1.0) / w[k]
+        rel[k] = (
+            min(relax_factor / max(contacts_of(i, start, wstart), contacts_of(j, start, wstart)), 1.0) / w[k]
+        )
         d2 = 0.0
         for a in range(3):
             t = x[j, a] - x[i, a]
@@ -428,6 +434,7 @@ def pair_pass(pi, pj, p, nrm, w, rel, lam, ft, jb, mu, v, tol, shared, sums):  #
             big += g
             put(slots, si, sj, k, c0, c1, c2)
     else:
+        clear(dv, 0.0)
         for k in range(p):
             c0, c1, c2, m, g = rest_pair(k, pi, pj, nrm, w, rel, lam, ft, jb, mu, v, tol)
             moved += m
@@ -446,12 +453,10 @@ def resting_passes(
     changed nothing adds nothing. A pass in which no contact's change of impulse times its
     summed inverse masses (``w``; a wall's: its grain's) exceeds ``tol`` is the last; returns
     how many passes ran."""
-    wc, dv = sums[3], sums[7]
+    wc = sums[3]
     passes = 0
     for _ in range(iterations):
         passes += 1
-        if not shared:
-            dv[:] = 0.0
         moved, big = pair_pass(pi, pj, p, nrm, w, rel, lam, ft, jb, mu, v, tol, shared, sums)
         for k in range(wr.shape[0]):
             r = wr[k]
@@ -530,6 +535,7 @@ def overlap_pass(pi, pj, p, x, radius, rel, shared, sums):  # pragma: no cover -
             else:
                 put(slots, si, sj, k, -0.0, -0.0, -0.0)
     else:
+        clear(dv, 0.0)
         for k in range(p):
             c0, c1, c2, over, m = overlap_pair(k, pi, pj, x, radius, rel)
             moved += m
@@ -545,11 +551,9 @@ def position_passes(
     """The Jacobi passes on position: each pair's overlap pushed apart along its current line
     of centres, as :func:`resting_passes` does velocities (the walls take no part: their
     changes are -0.0)."""
-    wc, dv = sums[3], sums[7]
+    wc = sums[3]
     wc[:] = -0.0
     for _ in range(iterations):
-        if not shared:
-            dv[:] = 0.0
         if overlap_pass(pi, pj, p, x, radius, rel, shared, sums) == 0:
             break
         apply(shared, sums, x, wr, inv_mass)
