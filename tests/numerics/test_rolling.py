@@ -10,29 +10,15 @@ computed here from these formulas, never read back from the code.
 
 from __future__ import annotations
 
-import importlib.util
 import math
 
 import numpy as np
 import pytest
 
 import animsim
+from tests.numerics.test_bodies import BACKENDS, G, _run
 
-G = 9.81
 R = 0.1
-BACKENDS = [
-    "numpy",
-    pytest.param(
-        "numba",
-        marks=pytest.mark.skipif(importlib.util.find_spec("numba") is None, reason="numba not installed"),
-    ),
-]
-
-
-def _run(text: str, **kw: object) -> animsim.Trajectory:
-    traj = animsim.simulate(animsim.loads(text, name="t"), **kw)  # type: ignore[arg-type]
-    assert traj.status == "ok", traj.failure
-    return traj
 
 
 def _floor(friction: float = 0.5) -> str:
